@@ -1,0 +1,7 @@
+"""``python -m phantomtouch`` runs the command line."""
+
+import sys
+
+from phantomtouch.cli import main
+
+sys.exit(main())

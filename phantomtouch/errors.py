@@ -1,0 +1,36 @@
+"""The exception tree of phantomtouch.
+
+::
+
+    PhantomTouchError              root: every error the package raises on purpose
+    ├── ParameterError(ValueError) a value is outside its allowed range
+    ├── DeviceError                a device profile or the sound card is unusable
+    ├── EngineBusyError            the engine's bounded command queue is full
+    └── ProtocolError              a client broke the WebSocket protocol
+
+Messages name the parameter, the value and what is allowed, for example
+``ParameterError("speed_cm_s=0.0 must be > 0 and <= 1000")``. The server maps each class
+to one HTTP status and one WebSocket close code, in one place.
+"""
+
+from __future__ import annotations
+
+
+class PhantomTouchError(Exception):
+    """Root of every error raised on purpose by phantomtouch."""
+
+
+class ParameterError(PhantomTouchError, ValueError):
+    """A parameter is outside its allowed range; the message names it and its value."""
+
+
+class DeviceError(PhantomTouchError):
+    """A device profile is degenerate, or the sound card cannot be opened or used."""
+
+
+class EngineBusyError(PhantomTouchError):
+    """The engine's command queue is full; the command was not accepted."""
+
+
+class ProtocolError(PhantomTouchError):
+    """A client sent a message that the protocol does not allow in its state."""

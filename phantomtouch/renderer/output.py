@@ -1,0 +1,56 @@
+"""The output stage after the mix: calibration, FIR correction, NaN guard, ceiling.
+
+Calibration is linear, so it is applied once to the summed signal. The engine puts a
+smooth limiter before :meth:`OutputStage.process`; the hard clip here is the last line.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+from phantomtouch.schema.device import DeviceProfile
+
+
+class OutputStage:
+    """Per-channel calibration gain and FIR, then the safety ceiling.
+
+    Attributes
+    ----------
+    muted_blocks : int
+        Blocks that carried NaN or Inf and were replaced by silence.
+    """
+
+    def __init__(self, device: DeviceProfile) -> None:
+        cal = device.calibration
+        self.ceiling = np.float32(device.safety.ceiling)
+        self.muted_blocks = 0
+        gains = self.channel_gains(device)
+        self._gains = gains.astype(np.float32) if np.any(gains != 1.0) else None
+        self._fir: list[tuple[np.ndarray, np.ndarray]] | None = None
+        if cal.fir_taps is not None:
+            self._fir = [
+                (np.array(taps, dtype=np.float64), np.zeros(len(taps) - 1)) for taps in cal.fir_taps
+            ]
+
+    @staticmethod
+    def channel_gains(device: DeviceProfile) -> np.ndarray:
+        """Calibration gain per output channel, shape (channels,), float64."""
+        cal = device.calibration
+        if cal.channel_level_db is None:
+            return np.ones(device.channels)
+        levels = np.array(cal.channel_level_db, dtype=np.float64)
+        return np.asarray(10.0 ** ((cal.reference_level_db - levels) / 20.0))
+
+    def process(self, block: np.ndarray) -> None:
+        """Calibrate and limit ``block`` in place, shape (frames, channels), float32."""
+        if self._gains is not None:
+            block *= self._gains
+        if self._fir is not None:
+            for ch, (taps, state) in enumerate(self._fir):
+                filtered, state[:] = signal.lfilter(taps, 1.0, block[:, ch], zi=state)
+                block[:, ch] = filtered
+        if not np.isfinite(block.sum()):  # NaN or Inf anywhere makes the sum non-finite
+            block[:] = 0.0
+            self.muted_blocks += 1
+        np.clip(block, -self.ceiling, self.ceiling, out=block)

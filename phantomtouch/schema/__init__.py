@@ -1,0 +1,39 @@
+"""The one contract: pydantic models for patterns, device profiles and messages."""
+
+from phantomtouch.schema.device import Actuator, Calibration, DeviceProfile, SafetyLimits
+from phantomtouch.schema.pattern import (
+    AmplitudeModulation,
+    ArcPath,
+    Carrier,
+    CombinedCarrier,
+    Keyframe,
+    KeyframePath,
+    NoiseCarrier,
+    PathSpec,
+    PolylinePath,
+    SineCarrier,
+    SplinePath,
+    TouchPattern,
+)
+from phantomtouch.schema.validation import describe_validation_error, error_items
+
+__all__ = [
+    "Actuator",
+    "AmplitudeModulation",
+    "ArcPath",
+    "Calibration",
+    "Carrier",
+    "CombinedCarrier",
+    "DeviceProfile",
+    "Keyframe",
+    "KeyframePath",
+    "NoiseCarrier",
+    "PathSpec",
+    "PolylinePath",
+    "SafetyLimits",
+    "SineCarrier",
+    "SplinePath",
+    "TouchPattern",
+    "describe_validation_error",
+    "error_items",
+]
