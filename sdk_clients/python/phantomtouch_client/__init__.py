@@ -1,0 +1,96 @@
+"""phantomtouch_client: talk to a phantomtouch service from Python.
+
+::
+
+    from phantomtouch_client import Client, Session
+
+    with Client("http://127.0.0.1:8000") as pt:           # REST, blocking
+        job = pt.touch(preset="exp2/curved")
+        wav = pt.render(preset="exp2/curved")
+
+    with Session("ws://127.0.0.1:8000/ws") as ws:         # WebSocket, blocking
+        finger = ws.contact("index")
+        finger.down(1.9, 2.0)
+        finger.move(1.9, 6.0)                             # newest position, once per frame
+        finger.up()
+
+:class:`AsyncClient` and :class:`AsyncSession` are the asyncio twins. Patterns are
+:class:`phantomtouch.TouchPattern`; errors derive from :class:`ClientError`.
+"""
+
+from phantomtouch import TouchPattern
+
+from phantomtouch_client.contact import Contact
+from phantomtouch_client.errors import (
+    ApiError,
+    Busy,
+    ClientError,
+    ConnectionLost,
+    InvalidRequest,
+    MalformedMessage,
+    NotFound,
+    RateLimited,
+    ReplyTimeout,
+    TooLarge,
+    TransportError,
+    Unauthorized,
+)
+from phantomtouch_client.models import (
+    Clock,
+    ContactState,
+    DeviceInfo,
+    Health,
+    Job,
+    JobStatus,
+    Released,
+    RenderCurves,
+    RenderPlan,
+    State,
+    Summary,
+    Welcome,
+    touch_request,
+)
+from phantomtouch_client.rest import AsyncClient, Client, ws_url
+from phantomtouch_client.session import AsyncSession, Backoff, SessionState
+from phantomtouch_client.sync_session import Session, SyncContact
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ApiError",
+    "AsyncClient",
+    "AsyncSession",
+    "Backoff",
+    "Busy",
+    "Client",
+    "ClientError",
+    "Clock",
+    "ConnectionLost",
+    "Contact",
+    "ContactState",
+    "DeviceInfo",
+    "Health",
+    "InvalidRequest",
+    "Job",
+    "JobStatus",
+    "MalformedMessage",
+    "NotFound",
+    "RateLimited",
+    "Released",
+    "RenderCurves",
+    "RenderPlan",
+    "ReplyTimeout",
+    "Session",
+    "SessionState",
+    "State",
+    "Summary",
+    "SyncContact",
+    "TooLarge",
+    "TouchPattern",
+    "TransportError",
+    "Unauthorized",
+    "Welcome",
+    "__version__",
+    "touch_request",
+    "ws_url",
+]

@@ -1,0 +1,175 @@
+"""Every REST route as a plain description of one HTTP call, free of I/O.
+
+:class:`~phantomtouch_client.Client` and :class:`~phantomtouch_client.AsyncClient` only
+send these and hand the response to ``parse``, so both speak the routes the same way.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+from urllib.parse import quote
+
+import httpx
+from phantomtouch import TouchPattern
+from pydantic import BaseModel, TypeAdapter, ValidationError
+
+from phantomtouch_client.errors import TransportError, error_from_response
+from phantomtouch_client.models import (
+    Clock,
+    DeviceInfo,
+    Health,
+    Job,
+    JobId,
+    JobStatus,
+    RenderPlan,
+    Summary,
+    pattern_json,
+    timing,
+)
+
+T = TypeVar("T")
+M = TypeVar("M", bound=BaseModel)
+
+
+@dataclass(frozen=True)
+class Call(Generic[T]):
+    """One HTTP request and how to read its answer."""
+
+    method: str
+    path: str
+    parse: Callable[[httpx.Response], T]
+    body: Any = None
+    accept: str = "application/json"
+
+
+def checked(response: httpx.Response) -> httpx.Response:
+    """The response itself when it is a success, else the :class:`ApiError` it carries."""
+    if response.is_success:
+        return response
+    try:
+        body = response.json()
+    except ValueError:
+        body = None
+    raise error_from_response(response.status_code, body, response.text)
+
+
+def _decode(response: httpx.Response) -> Any:
+    try:
+        return checked(response).json()
+    except json.JSONDecodeError as exc:
+        raise TransportError(
+            f"{response.request.method} {response.request.url.path}: the answer is not JSON"
+        ) from exc
+
+
+def _model(model: type[M]) -> Callable[[httpx.Response], M]:
+    def parse(response: httpx.Response) -> M:
+        data = _decode(response)
+        try:
+            return model.model_validate(data)
+        except ValidationError as exc:
+            raise TransportError(
+                f"{response.request.url.path}: unexpected answer for {model.__name__}: {exc}"
+            ) from exc
+
+    return parse
+
+
+_SUMMARIES = TypeAdapter(list[Summary])
+
+
+def _summaries(response: httpx.Response) -> list[Summary]:
+    try:
+        return _SUMMARIES.validate_python(_decode(response))
+    except ValidationError as exc:
+        raise TransportError(f"{response.request.url.path}: unexpected answer: {exc}") from exc
+
+
+def _json(response: httpx.Response) -> Any:
+    return _decode(response)
+
+
+def _nothing(response: httpx.Response) -> None:
+    checked(response)
+
+
+def _bytes(response: httpx.Response) -> bytes:
+    return checked(response).content
+
+
+def _text(response: httpx.Response) -> str:
+    return checked(response).text
+
+
+def _segment(value: JobId) -> str:
+    return quote(str(value), safe="")
+
+
+def touch(body: dict[str, Any]) -> Call[Job]:
+    return Call("POST", "/touch", _model(Job), body)
+
+
+def render_wav(body: dict[str, Any]) -> Call[bytes]:
+    return Call("POST", "/render", _bytes, body, accept="audio/wav")
+
+
+def render_plan(body: dict[str, Any]) -> Call[RenderPlan]:
+    return Call("POST", "/render", _model(RenderPlan), body)
+
+
+def job(job_id: JobId) -> Call[JobStatus]:
+    return Call("GET", f"/jobs/{_segment(job_id)}", _model(JobStatus))
+
+
+def cancel_job(job_id: JobId) -> Call[JobStatus]:
+    return Call("DELETE", f"/jobs/{_segment(job_id)}", _model(JobStatus))
+
+
+def stop() -> Call[Any]:
+    return Call("POST", "/stop", _json)
+
+
+def patterns() -> Call[list[Summary]]:
+    return Call("GET", "/patterns", _summaries)
+
+
+def get_pattern(name: str) -> Call[TouchPattern]:
+    return Call("GET", f"/patterns/{_segment(name)}", _model(TouchPattern))
+
+
+def put_pattern(name: str, pattern: TouchPattern | Mapping[str, Any]) -> Call[None]:
+    return Call("PUT", f"/patterns/{_segment(name)}", _nothing, pattern_json(pattern))
+
+
+def delete_pattern(name: str) -> Call[None]:
+    return Call("DELETE", f"/patterns/{_segment(name)}", _nothing)
+
+
+def play_pattern(
+    name: str, *, start_in_ms: float | None = None, start_at_s: float | None = None
+) -> Call[Job]:
+    body = timing(start_in_ms=start_in_ms, start_at_s=start_at_s) or None
+    return Call("POST", f"/patterns/{_segment(name)}/play", _model(Job), body)
+
+
+def device() -> Call[DeviceInfo]:
+    return Call("GET", "/device", _model(DeviceInfo))
+
+
+def presets() -> Call[list[Summary]]:
+    return Call("GET", "/presets", _summaries)
+
+
+def clock() -> Call[Clock]:
+    return Call("GET", "/clock", _model(Clock))
+
+
+def health() -> Call[Health]:
+    return Call("GET", "/health", _model(Health))
+
+
+def metrics() -> Call[str]:
+    return Call("GET", "/metrics", _text, accept="text/plain")

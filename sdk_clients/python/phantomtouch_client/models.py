@@ -1,0 +1,203 @@
+"""What the server answers, and the one builder of touch requests.
+
+Patterns are :class:`phantomtouch.TouchPattern` itself, validated here before they are
+sent, so a bad pattern fails in the caller's process with the message the server would
+give. Answers are parsed into the small models below; they accept fields a newer server
+adds (``extra="allow"``), so a client keeps working across server versions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, Literal, TypeAlias
+
+from phantomtouch import ParameterError, TouchPattern
+from phantomtouch.schema import describe_validation_error, error_items
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from phantomtouch_client.errors import InvalidRequest
+
+JobState = Literal["scheduled", "playing", "finished", "stopped"]
+JobId: TypeAlias = str | int
+PatternArg: TypeAlias = TouchPattern | Mapping[str, Any] | None
+"""A pattern argument: a :class:`TouchPattern`, its JSON, or ``None``."""
+
+
+class _Answer(BaseModel):
+    model_config = ConfigDict(extra="allow", frozen=True)
+
+
+class Job(_Answer):
+    """A scheduled touch: the answer to ``POST /touch``, a pattern's play and WS ``play``."""
+
+    job_id: JobId
+    start_at_s: float = Field(description="Start on the server clock, s.")
+    start_frame: int | None = None
+    duration_s: float
+    path_length_cm: float | None = None
+    speed_cm_s: float | None = None
+    frames: int | None = None
+
+
+class JobStatus(_Answer):
+    """``GET /jobs/{id}`` and ``DELETE /jobs/{id}``."""
+
+    job_id: JobId
+    state: JobState
+    start_at_s: float | None = None
+    duration_s: float | None = None
+
+
+class Summary(_Answer):
+    """One stored pattern or preset: ``{name, summary}``."""
+
+    name: str
+    summary: str = ""
+
+
+class RenderCurves(_Answer):
+    """At most 500 points of a rendered touch; ``gains`` include the envelope."""
+
+    times_s: list[float]
+    positions_cm: list[tuple[float, float]]
+    gains: list[list[float]]
+
+
+class RenderPlan(_Answer):
+    """``POST /render`` with ``Accept: application/json``: the plan and its curves."""
+
+    duration_s: float
+    path_length_cm: float | None = None
+    speed_cm_s: float | None = None
+    frames: int | None = None
+    channels: int | None = None
+    curves: RenderCurves
+
+
+class Clock(_Answer):
+    """``GET /clock``: the server's sample clock and wall clock."""
+
+    server_time_s: float
+    frames: int
+    sample_rate_hz: float
+    unix_time_s: float
+
+
+class Health(_Answer):
+    """``GET /health``."""
+
+    status: str
+    backend: str | None = None
+
+
+class DeviceInfo(_Answer):
+    """``GET /device``: layout, channels, sample rate, block size, backend, output device."""
+
+    channels: int | None = None
+    sample_rate_hz: float | None = None
+    block_frames: int | None = None
+    backend: str | None = None
+
+
+class Welcome(_Answer):
+    """The server's answer to ``hello``."""
+
+    protocol: int
+    server_time_s: float
+    watchdog_s: float
+    device: dict[str, Any] = Field(default_factory=dict)
+
+
+class ContactState(_Answer):
+    """One live contact in a ``state`` message."""
+
+    contact: str
+    x_cm: float
+    y_cm: float
+
+
+class State(_Answer):
+    """A ``state`` message, pushed at the rate asked for with ``subscribe``."""
+
+    server_time_s: float
+    levels: list[float] = Field(default_factory=list)
+    contacts: list[ContactState] = Field(default_factory=list)
+    active_voices: int = 0
+    underruns: int = 0
+    output_latency_s: float | None = None
+
+
+class Released(_Answer):
+    """Contacts the server released because this client went silent (its watchdog)."""
+
+    reason: str
+    contacts: list[str] = Field(default_factory=list)
+
+
+def pattern_json(pattern: TouchPattern | Mapping[str, Any]) -> dict[str, Any]:
+    """A pattern as the JSON object the server reads, validated on the way.
+
+    Raises :class:`InvalidRequest` (a ``ValueError``) naming each bad field.
+    """
+    if not isinstance(pattern, TouchPattern):
+        try:
+            pattern = TouchPattern.model_validate(pattern)
+        except ValidationError as exc:
+            raise InvalidRequest(
+                describe_validation_error(exc), code="invalid", fields=error_items(exc)
+            ) from exc
+    body: dict[str, Any] = pattern.model_dump(mode="json", exclude_unset=True)
+    return body
+
+
+def touch_request(
+    pattern: TouchPattern | Mapping[str, Any] | None = None,
+    *,
+    preset: str | None = None,
+    stored: str | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    start_in_ms: float | None = None,
+    start_at_s: float | None = None,
+) -> dict[str, Any]:
+    """The body of ``POST /touch``, ``POST /render`` and the WebSocket ``play``.
+
+    Exactly one of ``pattern`` (a :class:`TouchPattern` or its JSON), ``preset`` (a preset
+    name, with optional ``overrides`` of pattern fields) or ``stored`` (the name of a pattern
+    stored with ``PUT /patterns/{name}``). At most one of ``start_in_ms`` (0-60000, from now)
+    or ``start_at_s`` (on the server clock); neither means as soon as possible.
+    """
+    given = [
+        name
+        for name, value in (("pattern", pattern), ("preset", preset), ("stored", stored))
+        if value is not None
+    ]
+    if len(given) != 1:
+        raise ParameterError(
+            f"give exactly one of pattern, preset or stored (got {', '.join(given) or 'none'})"
+        )
+    if overrides is not None and preset is None:
+        raise ParameterError("overrides apply to a preset only")
+    when = timing(start_in_ms=start_in_ms, start_at_s=start_at_s)
+    if pattern is not None:
+        body = pattern_json(pattern)
+    elif preset is not None:
+        body = {"preset": preset}
+        if overrides:
+            body["overrides"] = dict(overrides)
+    else:
+        body = {"pattern": stored}
+    body.update(when)
+    return body
+
+
+def timing(*, start_in_ms: float | None = None, start_at_s: float | None = None) -> dict[str, Any]:
+    """The optional timing fields of a request."""
+    if start_in_ms is not None and start_at_s is not None:
+        raise ParameterError(
+            f"give at most one of start_in_ms={start_in_ms!r} or start_at_s={start_at_s!r}"
+        )
+    if start_in_ms is not None:
+        return {"start_in_ms": start_in_ms}
+    if start_at_s is not None:
+        return {"start_at_s": start_at_s}
+    return {}

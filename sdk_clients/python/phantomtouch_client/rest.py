@@ -1,0 +1,382 @@
+"""REST clients: :class:`Client` (blocking) and :class:`AsyncClient` (asyncio), over httpx.
+
+Both cover every route of the service with the same method names and answers; the routes
+themselves are described once, in :mod:`phantomtouch_client._calls`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Self, TypeVar
+
+import httpx
+from phantomtouch import TouchPattern
+
+from phantomtouch_client import _calls
+from phantomtouch_client.errors import ReplyTimeout, TransportError
+from phantomtouch_client.models import (
+    Clock,
+    DeviceInfo,
+    Health,
+    Job,
+    JobId,
+    JobStatus,
+    PatternArg,
+    RenderPlan,
+    Summary,
+    touch_request,
+)
+
+if TYPE_CHECKING:
+    from phantomtouch_client.session import AsyncSession
+    from phantomtouch_client.sync_session import Session
+
+T = TypeVar("T")
+
+DEFAULT_URL = "http://127.0.0.1:8000"
+
+
+def ws_url(base_url: str) -> str:
+    """The WebSocket address ``/ws`` of a service at ``base_url`` (http -> ws, https -> wss)."""
+    url = httpx.URL(base_url)
+    scheme = {"http": "ws", "https": "wss"}.get(url.scheme, url.scheme)
+    return str(url.copy_with(scheme=scheme, path=url.path.rstrip("/") + "/ws"))
+
+
+def auth_headers(token: str | None) -> dict[str, str]:
+    """The header that carries the service token, if there is one."""
+    return {"Authorization": f"Bearer {token}"} if token else {}
+
+
+class _Base:
+    def __init__(self, base_url: str, token: str | None, timeout_s: float) -> None:
+        self.base_url = base_url.rstrip("/")
+        self.token = token
+        self.timeout_s = timeout_s
+
+    def _request_args(self, call: _calls.Call[Any]) -> dict[str, Any]:
+        args: dict[str, Any] = {"headers": {"Accept": call.accept}}
+        if call.body is not None:
+            args["json"] = call.body
+        return args
+
+    @staticmethod
+    def _failed(call: _calls.Call[Any], exc: httpx.HTTPError) -> Exception:
+        what = f"{call.method} {call.path}"
+        if isinstance(exc, httpx.TimeoutException):
+            return ReplyTimeout(f"{what}: no answer in time ({exc})")
+        return TransportError(f"{what}: {exc}")
+
+
+class Client(_Base):
+    """A blocking client of the REST API.
+
+    >>> with Client("http://127.0.0.1:8000") as pt:          # doctest: +SKIP
+    ...     job = pt.touch(preset="exp2/curved", start_in_ms=20)
+    ...     pt.job(job.job_id).state
+    'scheduled'
+
+    ``token`` is the service token (required when the service listens off loopback);
+    ``timeout_s`` bounds every request. ``transport`` is handed to httpx (for tests).
+    """
+
+    def __init__(
+        self,
+        base_url: str = DEFAULT_URL,
+        *,
+        token: str | None = None,
+        timeout_s: float = 10.0,
+        transport: httpx.BaseTransport | None = None,
+    ) -> None:
+        super().__init__(base_url, token, timeout_s)
+        self._http = httpx.Client(
+            base_url=self.base_url,
+            headers=auth_headers(token),
+            timeout=timeout_s,
+            transport=transport,
+        )
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._http.close()
+
+    def _run(self, call: _calls.Call[T]) -> T:
+        try:
+            response = self._http.request(call.method, call.path, **self._request_args(call))
+        except httpx.HTTPError as exc:
+            raise self._failed(call, exc) from exc
+        return call.parse(response)
+
+    def session(self, **options: Any) -> Session:
+        """A WebSocket session with this client's address and token (not yet connected).
+
+        ``options`` are those of :class:`~phantomtouch_client.Session`.
+        """
+        from phantomtouch_client.sync_session import Session
+
+        return Session(ws_url(self.base_url), token=self.token, **options)
+
+    def touch(
+        self,
+        pattern: PatternArg = None,
+        *,
+        preset: str | None = None,
+        stored: str | None = None,
+        overrides: Mapping[str, Any] | None = None,
+        start_in_ms: float | None = None,
+        start_at_s: float | None = None,
+    ) -> Job:
+        """``POST /touch``: schedule a touch; see :func:`~phantomtouch_client.touch_request`."""
+        body = touch_request(
+            pattern,
+            preset=preset,
+            stored=stored,
+            overrides=overrides,
+            start_in_ms=start_in_ms,
+            start_at_s=start_at_s,
+        )
+        return self._run(_calls.touch(body))
+
+    def render(
+        self,
+        pattern: PatternArg = None,
+        *,
+        preset: str | None = None,
+        stored: str | None = None,
+        overrides: Mapping[str, Any] | None = None,
+    ) -> bytes:
+        """``POST /render``: the touch as a WAV file (float32, one channel per actuator)."""
+        body = touch_request(pattern, preset=preset, stored=stored, overrides=overrides)
+        return self._run(_calls.render_wav(body))
+
+    def render_plan(
+        self,
+        pattern: PatternArg = None,
+        *,
+        preset: str | None = None,
+        stored: str | None = None,
+        overrides: Mapping[str, Any] | None = None,
+    ) -> RenderPlan:
+        """``POST /render`` as JSON: the plan and its curves (times, positions, gains)."""
+        body = touch_request(pattern, preset=preset, stored=stored, overrides=overrides)
+        return self._run(_calls.render_plan(body))
+
+    def job(self, job_id: JobId) -> JobStatus:
+        """``GET /jobs/{id}``."""
+        return self._run(_calls.job(job_id))
+
+    def cancel_job(self, job_id: JobId) -> JobStatus:
+        """``DELETE /jobs/{id}``: stop that job with its release ramp."""
+        return self._run(_calls.cancel_job(job_id))
+
+    def stop(self) -> Any:
+        """``POST /stop``: every job and contact of every client off at once."""
+        return self._run(_calls.stop())
+
+    def patterns(self) -> list[Summary]:
+        """``GET /patterns``: the stored patterns."""
+        return self._run(_calls.patterns())
+
+    def get_pattern(self, name: str) -> TouchPattern:
+        """``GET /patterns/{name}``."""
+        return self._run(_calls.get_pattern(name))
+
+    def put_pattern(self, name: str, pattern: TouchPattern | Mapping[str, Any]) -> None:
+        """``PUT /patterns/{name}``: store (or replace) a pattern under ``name``."""
+        self._run(_calls.put_pattern(name, pattern))
+
+    def delete_pattern(self, name: str) -> None:
+        """``DELETE /patterns/{name}``."""
+        self._run(_calls.delete_pattern(name))
+
+    def play_pattern(
+        self, name: str, *, start_in_ms: float | None = None, start_at_s: float | None = None
+    ) -> Job:
+        """``POST /patterns/{name}/play``."""
+        return self._run(_calls.play_pattern(name, start_in_ms=start_in_ms, start_at_s=start_at_s))
+
+    def device(self) -> DeviceInfo:
+        """``GET /device``."""
+        return self._run(_calls.device())
+
+    def presets(self) -> list[Summary]:
+        """``GET /presets``."""
+        return self._run(_calls.presets())
+
+    def clock(self) -> Clock:
+        """``GET /clock``: the server clock, for ``start_at_s``."""
+        return self._run(_calls.clock())
+
+    def health(self) -> Health:
+        """``GET /health``."""
+        return self._run(_calls.health())
+
+    def metrics(self) -> str:
+        """``GET /metrics``: Prometheus text."""
+        return self._run(_calls.metrics())
+
+
+class AsyncClient(_Base):
+    """The asyncio twin of :class:`Client`: the same methods, awaited.
+
+    >>> async with AsyncClient() as pt:                        # doctest: +SKIP
+    ...     job = await pt.touch(preset="exp2/curved")
+    """
+
+    def __init__(
+        self,
+        base_url: str = DEFAULT_URL,
+        *,
+        token: str | None = None,
+        timeout_s: float = 10.0,
+        transport: httpx.AsyncBaseTransport | None = None,
+    ) -> None:
+        super().__init__(base_url, token, timeout_s)
+        self._http = httpx.AsyncClient(
+            base_url=self.base_url,
+            headers=auth_headers(token),
+            timeout=timeout_s,
+            transport=transport,
+        )
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.aclose()
+
+    async def aclose(self) -> None:
+        await self._http.aclose()
+
+    async def _run(self, call: _calls.Call[T]) -> T:
+        try:
+            response = await self._http.request(call.method, call.path, **self._request_args(call))
+        except httpx.HTTPError as exc:
+            raise self._failed(call, exc) from exc
+        return call.parse(response)
+
+    def session(self, **options: Any) -> AsyncSession:
+        """A WebSocket session with this client's address and token (not yet connected).
+
+        ``options`` are those of :class:`~phantomtouch_client.AsyncSession`.
+        """
+        from phantomtouch_client.session import AsyncSession
+
+        return AsyncSession(ws_url(self.base_url), token=self.token, **options)
+
+    async def touch(
+        self,
+        pattern: PatternArg = None,
+        *,
+        preset: str | None = None,
+        stored: str | None = None,
+        overrides: Mapping[str, Any] | None = None,
+        start_in_ms: float | None = None,
+        start_at_s: float | None = None,
+    ) -> Job:
+        """``POST /touch``: schedule a touch; see :func:`~phantomtouch_client.touch_request`."""
+        body = touch_request(
+            pattern,
+            preset=preset,
+            stored=stored,
+            overrides=overrides,
+            start_in_ms=start_in_ms,
+            start_at_s=start_at_s,
+        )
+        return await self._run(_calls.touch(body))
+
+    async def render(
+        self,
+        pattern: PatternArg = None,
+        *,
+        preset: str | None = None,
+        stored: str | None = None,
+        overrides: Mapping[str, Any] | None = None,
+    ) -> bytes:
+        """``POST /render``: the touch as a WAV file (float32, one channel per actuator)."""
+        body = touch_request(pattern, preset=preset, stored=stored, overrides=overrides)
+        return await self._run(_calls.render_wav(body))
+
+    async def render_plan(
+        self,
+        pattern: PatternArg = None,
+        *,
+        preset: str | None = None,
+        stored: str | None = None,
+        overrides: Mapping[str, Any] | None = None,
+    ) -> RenderPlan:
+        """``POST /render`` as JSON: the plan and its curves (times, positions, gains)."""
+        body = touch_request(pattern, preset=preset, stored=stored, overrides=overrides)
+        return await self._run(_calls.render_plan(body))
+
+    async def job(self, job_id: JobId) -> JobStatus:
+        """``GET /jobs/{id}``."""
+        return await self._run(_calls.job(job_id))
+
+    async def cancel_job(self, job_id: JobId) -> JobStatus:
+        """``DELETE /jobs/{id}``: stop that job with its release ramp."""
+        return await self._run(_calls.cancel_job(job_id))
+
+    async def stop(self) -> Any:
+        """``POST /stop``: every job and contact of every client off at once."""
+        return await self._run(_calls.stop())
+
+    async def patterns(self) -> list[Summary]:
+        """``GET /patterns``: the stored patterns."""
+        return await self._run(_calls.patterns())
+
+    async def get_pattern(self, name: str) -> TouchPattern:
+        """``GET /patterns/{name}``."""
+        return await self._run(_calls.get_pattern(name))
+
+    async def put_pattern(self, name: str, pattern: TouchPattern | Mapping[str, Any]) -> None:
+        """``PUT /patterns/{name}``: store (or replace) a pattern under ``name``."""
+        await self._run(_calls.put_pattern(name, pattern))
+
+    async def delete_pattern(self, name: str) -> None:
+        """``DELETE /patterns/{name}``."""
+        await self._run(_calls.delete_pattern(name))
+
+    async def play_pattern(
+        self, name: str, *, start_in_ms: float | None = None, start_at_s: float | None = None
+    ) -> Job:
+        """``POST /patterns/{name}/play``."""
+        return await self._run(
+            _calls.play_pattern(name, start_in_ms=start_in_ms, start_at_s=start_at_s)
+        )
+
+    async def device(self) -> DeviceInfo:
+        """``GET /device``."""
+        return await self._run(_calls.device())
+
+    async def presets(self) -> list[Summary]:
+        """``GET /presets``."""
+        return await self._run(_calls.presets())
+
+    async def clock(self) -> Clock:
+        """``GET /clock``: the server clock, for ``start_at_s``."""
+        return await self._run(_calls.clock())
+
+    async def health(self) -> Health:
+        """``GET /health``."""
+        return await self._run(_calls.health())
+
+    async def metrics(self) -> str:
+        """``GET /metrics``: Prometheus text."""
+        return await self._run(_calls.metrics())
