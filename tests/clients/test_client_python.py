@@ -1,0 +1,318 @@
+"""The Python client (sdk_clients/python) against the real service.
+
+Every REST route and WebSocket message goes to a ``phantomtouch serve`` subprocess; what
+the server did is checked from the server's side (job state, a second client's ``state``
+stream). Two tests need no server: local validation, and the per-frame coalescing of
+moves, which is measured on a recording WebSocket server in the test.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import json
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+import soundfile
+from clients_live import LiveServer, Observer, wait_until
+from phantomtouch_client import (
+    AsyncClient,
+    AsyncSession,
+    Client,
+    InvalidRequest,
+    Job,
+    MalformedMessage,
+    NotFound,
+    Session,
+    SessionState,
+)
+from websockets.asyncio.server import ServerConnection, serve
+
+from phantomtouch import ParameterError, TouchPattern
+
+STROKE = TouchPattern.model_validate(
+    {
+        "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
+        "speed_cm_s": 20.0,
+        "fade_in_s": 0.05,
+        "fade_out_s": 0.05,
+    }
+)
+JOB_STATES = {"scheduled", "playing", "finished", "stopped"}
+
+
+@pytest.fixture
+def client(server: LiveServer) -> Iterator[Client]:
+    with Client(server.url) as pt:
+        yield pt
+
+
+def test_health_clock_device_presets(client: Client) -> None:
+    assert client.health().status == "ok"
+    first = client.clock()
+    second = client.clock()
+    assert second.server_time_s >= first.server_time_s
+    assert first.sample_rate_hz > 0
+    device = client.device()
+    assert device.model_dump(exclude_none=True)
+    names = {p.name for p in client.presets()}
+    assert "exp2/curved" in names
+
+
+def test_touch_with_preset_then_job_and_cancel(client: Client) -> None:
+    job = client.touch(preset="exp2/curved", start_in_ms=50)
+    assert job.duration_s > 0
+    status = client.job(job.job_id)
+    assert status.job_id == job.job_id
+    assert status.state in JOB_STATES
+    cancelled = client.cancel_job(job.job_id)
+    assert cancelled.state in {"stopped", "finished"}
+
+
+def test_touch_with_pattern_at_a_server_time(client: Client) -> None:
+    start_at_s = client.clock().server_time_s + 0.2
+    job = client.touch(STROKE, start_at_s=start_at_s)
+    assert job.start_at_s == pytest.approx(start_at_s, abs=0.05)
+    # Path 9.6 cm at 20 cm/s plus the fades (eq. 1).
+    assert job.duration_s == pytest.approx(0.05 + 9.6 / 20.0 + 0.05, rel=1e-3)
+    assert job.path_length_cm == pytest.approx(9.6, rel=1e-6)
+
+
+def test_render_answers_an_eight_channel_float_wav(client: Client) -> None:
+    wav = client.render(STROKE)
+    samples, rate_hz = soundfile.read(io.BytesIO(wav), dtype="float32", always_2d=True)
+    assert samples.shape[1] == 8
+    assert samples.shape[0] == pytest.approx(0.58 * rate_hz, abs=2)
+    assert soundfile.info(io.BytesIO(wav)).subtype == "FLOAT"
+    assert np.isfinite(samples).all()
+
+
+def test_render_plan_answers_curves(client: Client) -> None:
+    plan = client.render_plan(preset="exp2/curved")
+    curves = plan.curves
+    assert 0 < len(curves.times_s) <= 500
+    assert len(curves.positions_cm) == len(curves.times_s) == len(curves.gains)
+    assert all(len(g) == 8 for g in curves.gains)
+
+
+def test_patterns_put_list_get_play_delete(client: Client) -> None:
+    name = "client-test.stroke"
+    client.put_pattern(name, STROKE)
+    assert name in {p.name for p in client.patterns()}
+    assert client.get_pattern(name) == STROKE
+    job = client.play_pattern(name, start_in_ms=10)
+    assert client.job(job.job_id).state in JOB_STATES
+    assert isinstance(client.touch(stored=name), Job)
+    client.delete_pattern(name)
+    with pytest.raises(NotFound):
+        client.get_pattern(name)
+
+
+def test_stop_and_metrics(client: Client) -> None:
+    job = client.touch(preset="exp2/curved")
+    client.stop()
+    wait_until(
+        lambda: client.job(job.job_id).state in {"stopped", "finished"},
+        timeout_s=5,
+        what="the job to stop",
+    )
+    text = client.metrics()
+    assert "# TYPE" in text
+
+
+def test_refusals_raise_the_exception_of_their_code(client: Client) -> None:
+    with pytest.raises(InvalidRequest) as refused:
+        client.touch(preset="exp2/curved", overrides={"speed_cm_s": -1})
+    assert refused.value.status in (400, 422)
+    assert "speed_cm_s" in str(refused.value)
+    with pytest.raises(NotFound):
+        client.touch(preset="no/such-preset")
+    with pytest.raises(NotFound):
+        client.job("no-such-job")
+
+
+def test_a_bad_pattern_is_refused_before_it_is_sent() -> None:
+    # Nothing listens on this address: the error must come from local validation.
+    with Client("http://127.0.0.1:9") as pt:
+        with pytest.raises(InvalidRequest) as refused:
+            pt.touch({"path": {"kind": "polyline", "points_cm": [[0, 0]]}, "speed_cm_s": 0})
+        assert refused.value.fields[0]["field"] == "speed_cm_s"
+        with pytest.raises(ParameterError):
+            pt.touch(STROKE, preset="exp2/curved")
+
+
+def test_async_client(server: LiveServer) -> None:
+    async def main() -> None:
+        async with AsyncClient(server.url) as pt:
+            assert (await pt.health()).status == "ok"
+            job = await pt.touch(STROKE, start_in_ms=10)
+            assert (await pt.job(job.job_id)).state in JOB_STATES
+            assert "exp2/curved" in {p.name for p in await pt.presets()}
+
+    asyncio.run(main())
+
+
+def test_session_welcome_ping_play_stop(server: LiveServer) -> None:
+    with Client(server.url) as pt, pt.session(client_name="pytest") as ws:
+        assert ws.welcome is not None
+        assert ws.welcome.protocol == 1
+        assert ws.welcome.watchdog_s > 0
+        before = pt.clock().server_time_s
+        assert ws.ping() >= before
+        assert ws.rtt_s is not None and ws.rtt_s < 1.0
+        job = ws.play(preset="exp2/curved", start_in_ms=20)
+        assert pt.job(job.job_id).state in JOB_STATES
+        ws.stop(job.job_id)
+        wait_until(
+            lambda: pt.job(job.job_id).state in {"stopped", "finished"},
+            timeout_s=5,
+            what="the job to stop",
+        )
+
+
+def test_session_errors_raise(server: LiveServer) -> None:
+    with Session(server.ws_url) as ws:
+        with pytest.raises(InvalidRequest):
+            ws.down("finger", 1.9, 2.0, intensity=7.0)
+        with pytest.raises(MalformedMessage):
+            ws.request({"type": "no-such-type"})
+        assert ws.ping() > 0  # the session survives both
+
+
+def test_contact_stroke_arrives_and_moves(
+    server: LiveServer, observe: Callable[[LiveServer], Observer]
+) -> None:
+    observer = observe(server)
+    with Session(server.ws_url, client_name="stroker") as ws:
+        finger = ws.contact("py-stroke")
+        finger.down(1.9, 2.0, intensity=0.5)
+        observer.wait_for("py-stroke", lambda p: p[1] == pytest.approx(2.0), timeout_s=5)
+        for i in range(1, 41):
+            finger.move(1.9, 2.0 + i * 0.25)
+            time.sleep(1 / 90)
+        observer.wait_for("py-stroke", lambda p: p[1] == pytest.approx(12.0), timeout_s=5)
+        ys = [y for _, y in observer.positions("py-stroke")]
+        assert ys == sorted(ys), "the contact only moves towards the elbow"
+        assert len(set(ys)) >= 3, "the server saw the contact move, not jump"
+        finger.up()
+        observer.wait_gone("py-stroke", timeout_s=5)
+
+
+def test_ping_loop_keeps_an_idle_contact(
+    server: LiveServer, observe: Callable[[LiveServer], Observer]
+) -> None:
+    observer = observe(server)
+    released: list[Any] = []
+    with Session(server.ws_url, on_released=released.append) as ws:
+        assert ws.welcome is not None
+        ws.down("idle-finger", 1.0, 5.0)
+        time.sleep(ws.welcome.watchdog_s * 1.5)
+        assert released == []
+        observer.wait_for("idle-finger", lambda p: True, timeout_s=2)
+        ws.up("idle-finger")
+
+
+def test_without_pings_the_watchdog_releases(server: LiveServer) -> None:
+    released: list[Any] = []
+    with Session(server.ws_url, ping_interval_s=60.0, on_released=released.append) as ws:
+        assert ws.welcome is not None
+        finger = ws.contact("silent-finger")
+        finger.down(1.0, 5.0)
+        wait_until(lambda: released, timeout_s=ws.welcome.watchdog_s * 3, what="released")
+        assert released[0].contacts == ["silent-finger"]
+        assert not finger.active
+
+
+def test_async_session_stroke(
+    server: LiveServer, observe: Callable[[LiveServer], Observer]
+) -> None:
+    observer = observe(server)
+
+    async def main() -> None:
+        async with AsyncClient(server.url) as pt, pt.session() as ws:
+            finger = ws.contact("async-stroke")
+            await finger.down(3.8, 0.0)
+            for i in range(1, 21):
+                finger.move(3.8, i * 0.5)
+                await asyncio.sleep(1 / 90)
+            await asyncio.sleep(0.05)
+            await finger.up()
+
+    asyncio.run(main())
+    observer.wait_for("async-stroke", lambda p: p[1] == pytest.approx(10.0), timeout_s=5)
+
+
+def test_reconnect_after_the_server_restarts(
+    restartable_server: LiveServer, observe: Callable[[LiveServer], Observer]
+) -> None:
+    live = restartable_server
+    connection: list[bool] = []
+    with Client(live.url) as pt, pt.session(on_connection=connection.append) as ws:
+        finger = ws.contact("survivor")
+        finger.down(1.9, 3.0)
+        live.stop()
+        wait_until(lambda: ws.state is SessionState.RECONNECTING, timeout_s=5, what="loss")
+        finger.move(1.9, 9.0)  # made while the server is down: restored on return
+        live.start()
+        wait_until(lambda: ws.reconnects == 1, timeout_s=15, what="the reconnection")
+        assert connection == [True, False, True]
+        observer = observe(live)
+        observer.wait_for("survivor", lambda p: p == pytest.approx((1.9, 9.0)), timeout_s=5)
+        job = ws.play(preset="exp2/curved")
+        assert pt.job(job.job_id).state in JOB_STATES
+        finger.up()
+        observer.wait_gone("survivor", timeout_s=5)
+
+
+class _Recorder:
+    """A WebSocket server that speaks just enough protocol and records what it receives."""
+
+    def __init__(self) -> None:
+        self.received: list[dict[str, Any]] = []
+
+    async def handler(self, ws: ServerConnection) -> None:
+        async for frame in ws:
+            message = json.loads(frame)
+            self.received.append(message)
+            kind = message["type"]
+            if kind == "hello":
+                welcome = {"type": "welcome", "protocol": 1, "server_time_s": 0.0}
+                await ws.send(json.dumps({**welcome, "watchdog_s": 2.0, "device": {}}))
+            elif kind == "ping":
+                await ws.send(json.dumps({"type": "pong", "id": message["id"], "server_time_s": 1}))
+            elif "id" in message:
+                await ws.send(json.dumps({"type": "ok", "id": message["id"]}))
+
+
+def test_contact_sends_at_most_one_move_per_frame_the_newest() -> None:
+    recorder = _Recorder()
+    frame_hz = 50.0
+
+    async def main() -> float:
+        async with serve(recorder.handler, "127.0.0.1", 0) as server:
+            port = server.sockets[0].getsockname()[1]
+            async with AsyncSession(f"ws://127.0.0.1:{port}/ws", move_rate_hz=frame_hz) as ws:
+                finger = ws.contact("burst")
+                await finger.down(0.0, 0.0)
+                started = time.monotonic()
+                for i in range(1, 501):  # 500 updates in about 0.25 s: a bursty tracker
+                    finger.move(0.0, i * 0.01)
+                    if i % 10 == 0:
+                        await asyncio.sleep(0.005)
+                await asyncio.sleep(2 / frame_hz)
+                elapsed_s = time.monotonic() - started
+                await finger.up()
+        return elapsed_s
+
+    elapsed_s = asyncio.run(main())
+    moves = [m for m in recorder.received if m["type"] == "move"]
+    # One move per frame at most (+1: the frame in progress when the burst began).
+    assert 1 <= len(moves) <= elapsed_s * frame_hz + 1
+    assert moves[-1]["y_cm"] == pytest.approx(5.0), "the newest position is the one sent"
+    ys = [m["y_cm"] for m in moves]
+    assert ys == sorted(ys)
+    assert [m["type"] for m in recorder.received][-1] == "up"
