@@ -11,10 +11,12 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import os
+import queue
 import shutil
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -214,3 +216,56 @@ class Observer:
 
     def close(self) -> None:
         self.session.close()
+
+
+class LineProcess:
+    """A child process spoken to by lines: ``tell`` writes stdin, ``expect`` reads stdout."""
+
+    def __init__(self, command: list[str]) -> None:
+        self.process = subprocess.Popen(
+            command,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        self._lines: queue.Queue[str | None] = queue.Queue()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            self._lines.put(line.rstrip("\n"))
+        self._lines.put(None)
+
+    def expect(self, key: str, *, timeout_s: float = 30.0) -> str:
+        """The next stdout line, which must start with ``key``; answers the rest of it."""
+        try:
+            line = self._lines.get(timeout=timeout_s)
+        except queue.Empty:
+            pytest.fail(f"no {key} within {timeout_s} s\n{self.stderr()}")
+        if line is None or not line.startswith(key):
+            pytest.fail(f"expected {key}, got {line!r}\n{self.stderr()}")
+        return line[len(key) :].strip()
+
+    def tell(self, line: str) -> None:
+        assert self.process.stdin is not None
+        self.process.stdin.write(line + "\n")
+        self.process.stdin.flush()
+
+    def stderr(self) -> str:
+        if self.process.poll() is None:
+            return "(still running)"
+        return self.process.stderr.read() if self.process.stderr else ""
+
+    def finish(self, *, timeout_s: float = 30.0) -> int:
+        try:
+            return self.process.wait(timeout=timeout_s)
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()

@@ -1,0 +1,136 @@
+"""The Unity scripts (sdk_clients/unity), compiled with mcs and run against the service.
+
+No Unity editor runs here. The scripts are compiled as C# 7.2 (the newest mcs takes)
+against a stub of the UnityEngine members they use (tests/clients/unity_stub); the
+transport core, which has no UnityEngine dependency, is compiled with a console harness
+(tests/clients/unity_harness) and run with mono against the live service: REST routes, a
+WebSocket stroke and a reconnect across a server restart, each checked from the server's
+side.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from clients_live import ROOT, LineProcess, LiveServer, Observer, require_tool
+
+UNITY = ROOT / "sdk_clients" / "unity"
+STUB = Path(__file__).parent / "unity_stub"
+HARNESS = Path(__file__).parent / "unity_harness"
+MCS_FLAGS = ["-langversion:7.2", "-warnaserror+", "-nologo"]
+
+
+def sources(folder: Path) -> list[str]:
+    return sorted(str(p) for p in folder.rglob("*.cs"))
+
+
+def compile_cs(args: list[str]) -> None:
+    mcs = require_tool("mcs")
+    done = subprocess.run([mcs, *MCS_FLAGS, *args], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, f"mcs failed:\n{done.stdout}\n{done.stderr}"
+
+
+@pytest.fixture(scope="module")
+def harness(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
+    """The console harness, built from the Unity client's core and run with mono."""
+    mono = require_tool("mono")
+    exe = tmp_path_factory.mktemp("unity-harness") / "harness.exe"
+    core = sources(UNITY / "Runtime" / "Core")
+    compile_cs(["-r:System.Net.Http.dll", f"-out:{exe}", *core, *sources(HARNESS)])
+    return [mono, "--debug", str(exe)]
+
+
+def run(harness: list[str], *args: str, timeout_s: float = 60) -> dict[str, str]:
+    done = subprocess.run([*harness, *args], capture_output=True, text=True, timeout=timeout_s)
+    assert done.returncode == 0, f"harness {args[0]} failed:\n{done.stdout}\n{done.stderr}"
+    return parse(done.stdout)
+
+
+def parse(stdout: str) -> dict[str, str]:
+    lines = dict(line.partition(" ")[::2] for line in stdout.splitlines() if line)
+    assert "DONE" in lines, stdout
+    return lines
+
+
+def test_unity_scripts_compile_against_the_unity_stub(tmp_path: Path) -> None:
+    engine = tmp_path / "UnityEngine.dll"
+    compile_cs(["-target:library", f"-out:{engine}", *sources(STUB)])
+    scripts = tmp_path / "PhantomTouch.dll"
+    compile_cs(["-target:library", f"-r:{engine}", f"-out:{scripts}", *sources(UNITY)])
+
+
+def test_unity_core_json_and_forearm_mapping(harness: list[str]) -> None:
+    out = run(harness, "selftest")
+    # Run under a comma-decimal culture: numbers must still be written with a point.
+    assert out["JSON"] == '{"type":"move","contact":"finger","x_cm":1.5,"y_cm":12.25}'
+    assert out["MAP_WRIST"] == "1.9,0"  # centre of the band's width, wrist end
+    assert out["MAP_ELBOW"] == "1.9,14.4"
+    assert out["MAP_EDGE"] == "3.8,7.2"  # half the width off the axis: the band's edge
+    assert out["MAP_BEYOND"] == "0,14.4"  # clamped onto the band
+    assert '"intensity":1,' in out["TAP"]  # clamped to 0-1
+
+
+def test_unity_client_rest_routes(harness: list[str], server: LiveServer) -> None:
+    out = run(harness, "rest", server.url)
+    assert out["HEALTH"] == "ok"
+    job = server.get(f"/jobs/{out['JOB']}")
+    assert job.status_code == 200, "the harness's touch is a job on the server"
+    assert job.json()["state"] in {"scheduled", "playing", "finished", "stopped"}
+    assert out["CANCELLED"] in {"stopped", "finished"}
+    assert out["WAV"] == "RIFFWAVE"
+    assert 0 < int(out["PLAN_POINTS"]) <= 500
+    assert float(out["STORED"]) == 20.0
+    assert out["DELETED"] == "not_found 404"
+    assert out["REFUSED"].split()[0] == "invalid"
+    assert int(out["METRICS_LINES"]) > 1
+
+
+def test_unity_client_websocket_stroke(
+    harness: list[str], server: LiveServer, observe: Callable[[LiveServer], Observer]
+) -> None:
+    observer = observe(server)
+    out = run(harness, "stroke", server.url, "unity-stroke")
+    assert float(out["PING"]) > 0
+    assert out["WS_REFUSED"] == "unknown_type"
+    assert server.get(f"/jobs/{out['WS_JOB']}").status_code == 200
+    positions = observer.positions("unity-stroke")
+    assert positions, "the server never showed the harness's contact"
+    assert positions[0] == pytest.approx((1.9, 2.0), abs=0.3)
+    assert positions[-1] == pytest.approx((1.9, 12.0))
+    ys = [y for _, y in positions]
+    assert ys == sorted(ys) and len(set(ys)) >= 3, "the contact moved along the forearm"
+    observer.wait_gone("unity-stroke", timeout_s=5)
+
+
+def test_unity_client_reconnects_after_a_server_restart(
+    harness: list[str],
+    restartable_server: LiveServer,
+    observe: Callable[[LiveServer], Observer],
+) -> None:
+    live = restartable_server
+    child = LineProcess([*harness, "reconnect", live.url, "unity-survivor"])
+    try:
+        child.expect("WELCOME")
+        child.expect("DOWN")
+        live.stop()
+        child.tell("stopped")
+        child.expect("LOST")
+        live.start()
+        child.tell("started")
+        child.expect("RECONNECTED")
+        observer = observe(live)
+        # Put back down at the position it was moved to while the server was away.
+        observer.wait_for("unity-survivor", lambda p: p == pytest.approx((1.9, 6.0)), timeout_s=5)
+        child.tell("move")
+        child.expect("MOVED")
+        observer.wait_for("unity-survivor", lambda p: p == pytest.approx((1.9, 9.0)), timeout_s=5)
+        child.tell("up")
+        child.expect("UP")
+        observer.wait_gone("unity-survivor", timeout_s=5)
+        child.expect("DONE")
+        assert child.finish() == 0, child.stderr()
+    finally:
+        child.close()
