@@ -1,0 +1,341 @@
+class_name PhantomTouchClient
+extends Node
+## The phantomtouch service for a Godot 4 scene; the plugin adds it as the autoload
+## [code]PhantomTouch[/code].
+##
+## The WebSocket ([WebSocketPeer]) is polled every frame in [method _process]: that is where
+## messages are read, the newest [method move] of each contact is sent (at most one per
+## contact per frame, latest wins), a ping goes out whenever nothing was sent for a quarter
+## of the service's [code]watchdog_s[/code], and a lost connection is retried with
+## exponential back-off. After each (re)connection the client says hello again, puts every
+## contact that is still down back where it is now, and re-subscribes.
+## REST goes through [member rest] ([PhantomTouchRest], HTTPRequest nodes).
+## [member server_url], [member token] and [member client_name] are read from the project
+## settings "phantomtouch/..." (the plugin adds them) when the node enters the tree.
+##
+## Positions are cm on the armband: x around the forearm (0-3.8 cm on the default band),
+## y along it (0 cm at the wrist end, 14.4 cm at the elbow end).
+
+signal connection_changed(connected: bool)
+signal state_received(state: Dictionary)
+signal contacts_released(contacts: Array)
+signal error_received(error: Dictionary)
+signal reply_received(id: int, reply: Dictionary)
+
+enum Phase { IDLE, CONNECTING, WAITING_WELCOME, CONNECTED, BACKING_OFF }
+
+const PROTOCOL := 1
+
+@export var server_url := "http://127.0.0.1:8000"
+## The service token; needed when the service listens off loopback.
+@export var token := ""
+@export var client_name := "godot"
+@export var auto_connect := true
+@export var reply_timeout_s := 5.0
+@export var reconnect_initial_s := 0.1
+@export var reconnect_max_s := 5.0
+
+var rest: PhantomTouchRest
+var phase := Phase.IDLE
+## The newest welcome: protocol, server_time_s, watchdog_s, device.
+var welcome: Dictionary = {}
+## How many times the client reconnected after losing the socket.
+var reconnects := 0
+
+var _ws := WebSocketPeer.new()
+var _contacts := {}
+var _moves := {}
+var _pending := {}
+var _next_id := 1
+var _subscribed_hz := 0.0
+var _attempt := 0
+var _deadline_msec := 0
+var _last_send_msec := 0
+var _last_receive_msec := 0
+var _ever_connected := false
+var _clock_offset_s := 0.0
+
+
+func _ready() -> void:
+	server_url = ProjectSettings.get_setting("phantomtouch/server_url", server_url)
+	token = ProjectSettings.get_setting("phantomtouch/token", token)
+	client_name = ProjectSettings.get_setting("phantomtouch/client_name", client_name)
+	rest = PhantomTouchRest.new()
+	rest.name = "Rest"
+	rest.base_url = server_url
+	rest.token = token
+	add_child(rest)
+	if auto_connect:
+		connect_to_service()
+
+
+func _process(_delta: float) -> void:
+	if phase == Phase.IDLE:
+		return
+	var now := Time.get_ticks_msec()
+	if phase == Phase.BACKING_OFF:
+		if now >= _deadline_msec:
+			_open()
+		return
+	_ws.poll()
+	var ready_state := _ws.get_ready_state()
+	if ready_state == WebSocketPeer.STATE_CLOSED:
+		_lose("closed (%d %s)" % [_ws.get_close_code(), _ws.get_close_reason()])
+		return
+	if ready_state != WebSocketPeer.STATE_OPEN:
+		if now > _deadline_msec:
+			_lose("no connection within %s s" % reply_timeout_s)
+		return
+	if phase == Phase.CONNECTING:
+		_ws.set_no_delay(true)
+		_send({"type": "hello", "client": client_name, "protocol": PROTOCOL})
+		phase = Phase.WAITING_WELCOME
+		_deadline_msec = now + int(reply_timeout_s * 1000)
+	while _ws.get_available_packet_count() > 0:
+		_last_receive_msec = now
+		var parsed: Variant = JSON.parse_string(_ws.get_packet().get_string_from_utf8())
+		if parsed is Dictionary:
+			_dispatch(parsed)
+	if phase == Phase.WAITING_WELCOME and now > _deadline_msec:
+		_lose("no welcome within %s s" % reply_timeout_s)
+	elif phase == Phase.CONNECTED:
+		_tick(now)
+
+
+func _exit_tree() -> void:
+	disconnect_from_service()
+
+
+## Opens the WebSocket; the client reconnects by itself until [method disconnect_from_service].
+func connect_to_service() -> void:
+	if phase == Phase.IDLE:
+		_open()
+
+
+## Closes the WebSocket: the service releases this client's contacts with their ramp.
+func disconnect_from_service() -> void:
+	if phase == Phase.IDLE:
+		return
+	var was_connected := phase == Phase.CONNECTED
+	phase = Phase.IDLE
+	_ws.close()
+	_fail_pending("disconnected")
+	if was_connected:
+		connection_changed.emit(false)
+
+
+func is_connected_to_service() -> bool:
+	return phase == Phase.CONNECTED
+
+
+## A contact touches down at (x_cm, y_cm); intensity 0-1, or negative for the default.
+func down(contact: String, x_cm: float, y_cm: float, intensity: float = -1.0) -> void:
+	_contacts[contact] = {"x_cm": x_cm, "y_cm": y_cm, "intensity": intensity}
+	_moves.erase(contact)
+	if phase == Phase.CONNECTED:
+		_send(_down_message(contact))
+
+
+## The contact's newest position; sent with this frame's poll, replacing an unsent move.
+func move(contact: String, x_cm: float, y_cm: float) -> void:
+	if not _contacts.has(contact):
+		return
+	_contacts[contact].x_cm = x_cm
+	_contacts[contact].y_cm = y_cm
+	if phase == Phase.CONNECTED:
+		_moves[contact] = {"type": "move", "contact": contact, "x_cm": x_cm, "y_cm": y_cm}
+
+
+## Lift-off, after the contact's newest move.
+func up(contact: String) -> void:
+	if not _contacts.has(contact):
+		return
+	_contacts.erase(contact)
+	if phase != Phase.CONNECTED:
+		return
+	if _moves.has(contact):
+		_send(_moves[contact])
+		_moves.erase(contact)
+	_send({"type": "up", "contact": contact})
+
+
+## The contacts held down: {contact: Vector2(x_cm, y_cm)}.
+func active_contacts() -> Dictionary:
+	var out := {}
+	for contact in _contacts:
+		out[contact] = Vector2(_contacts[contact].x_cm, _contacts[contact].y_cm)
+	return out
+
+
+## Sends [param message] with a fresh id and waits for its reply ("ok", "pong" or "error").
+func request(message: Dictionary) -> Dictionary:
+	if phase != Phase.CONNECTED:
+		return {"type": "error", "code": "transport", "message": "not connected"}
+	var id := _next_id
+	_next_id += 1
+	var sent := message.duplicate()
+	sent["id"] = id
+	_pending[id] = Time.get_ticks_msec() + int(reply_timeout_s * 1000)
+	_send(sent)
+	var reply: Array = [0, {}]
+	while reply[0] != id:
+		reply = await reply_received
+	return reply[1]
+
+
+## Schedules a touch over the WebSocket, as POST /touch; the job is in the reply's "result".
+func play(touch_request: Dictionary) -> Dictionary:
+	var message := touch_request.duplicate()
+	message["type"] = "play"
+	return await request(message)
+
+
+## Stops one job, or everything of every client when [param job_id] is null.
+func stop(job_id: Variant = null) -> Dictionary:
+	var message := {"type": "stop"}
+	if job_id != null:
+		message["job_id"] = job_id
+	return await request(message)
+
+
+## Asks for [signal state_received] at [param rate_hz] (0 stops); kept across reconnects.
+func subscribe(rate_hz: float) -> Dictionary:
+	var reply := await request({"type": "subscribe", "rate_hz": rate_hz})
+	if reply.get("type") == "ok":
+		_subscribed_hz = rate_hz
+	return reply
+
+
+func ping() -> Dictionary:
+	return await request({"type": "ping"})
+
+
+## The service's clock now (s), estimated from the newest welcome or pong.
+func server_time_s() -> float:
+	return _clock_offset_s + Time.get_ticks_usec() / 1e6
+
+
+## A touch request for a short tap at (x_cm, y_cm): 150 Hz, like the "vr/tap" preset.
+static func tap(x_cm: float, y_cm: float, intensity: float, duration_s := 0.15) -> Dictionary:
+	return {
+		"path": {"kind": "polyline", "points_cm": [[x_cm, y_cm]]},
+		"duration_s": duration_s,
+		"fade_in_s": 0.01,
+		"fade_out_s": minf(0.08, duration_s / 2.0),
+		"carrier": {"kind": "sine", "freq_hz": 150.0},
+		"intensity": clampf(intensity, 0.0, 1.0),
+	}
+
+
+func _ws_url() -> String:
+	var url := server_url.trim_suffix("/")
+	url = url.replace("https://", "wss://").replace("http://", "ws://")
+	return url + "/ws"
+
+
+func _open() -> void:
+	_ws = WebSocketPeer.new()
+	if token != "":
+		_ws.handshake_headers = PackedStringArray(["Authorization: Bearer " + token])
+	var started := _ws.connect_to_url(_ws_url())
+	phase = Phase.CONNECTING
+	_deadline_msec = Time.get_ticks_msec() + int(reply_timeout_s * 1000)
+	if started != OK:
+		_lose("cannot connect: " + error_string(started))
+
+
+func _lose(reason: String) -> void:
+	var was_connected := phase == Phase.CONNECTED
+	_ws.close()
+	_moves.clear()
+	_fail_pending(reason)
+	var delay_s := minf(reconnect_max_s, reconnect_initial_s * pow(2.0, mini(_attempt, 16)))
+	_attempt += 1
+	phase = Phase.BACKING_OFF
+	_deadline_msec = Time.get_ticks_msec() + int(delay_s * 1000)
+	if was_connected:
+		push_warning("PhantomTouch: lost %s: %s" % [server_url, reason])
+		connection_changed.emit(false)
+
+
+func _fail_pending(reason: String) -> void:
+	var ids := _pending.keys()
+	_pending.clear()
+	for id in ids:
+		reply_received.emit(id, {"type": "error", "code": "transport", "message": reason})
+
+
+func _send(message: Dictionary) -> void:
+	_ws.send_text(JSON.stringify(message))
+	_last_send_msec = Time.get_ticks_msec()
+
+
+func _down_message(contact: String) -> Dictionary:
+	var c: Dictionary = _contacts[contact]
+	var message := {"type": "down", "contact": contact, "x_cm": c.x_cm, "y_cm": c.y_cm}
+	if c.intensity >= 0.0:
+		message["intensity"] = c.intensity
+	return message
+
+
+func _on_welcome(message: Dictionary) -> void:
+	welcome = message
+	_clock_offset_s = float(message.get("server_time_s", 0.0)) - Time.get_ticks_usec() / 1e6
+	phase = Phase.CONNECTED
+	_attempt = 0
+	if _ever_connected:
+		reconnects += 1
+	_ever_connected = true
+	for contact in _contacts:
+		_send(_down_message(contact))
+	if _subscribed_hz > 0.0:
+		_send({"type": "subscribe", "rate_hz": _subscribed_hz})
+	connection_changed.emit(true)
+
+
+func _dispatch(message: Dictionary) -> void:
+	var kind: String = message.get("type", "")
+	var id: Variant = message.get("id")
+	if (id is int or id is float) and _pending.has(int(id)):
+		_pending.erase(int(id))
+		if kind == "pong":
+			_clock_offset_s = float(message.server_time_s) - Time.get_ticks_usec() / 1e6
+		reply_received.emit(int(id), message)
+		return
+	match kind:
+		"welcome":
+			_on_welcome(message)
+		"pong":
+			_clock_offset_s = float(message.server_time_s) - Time.get_ticks_usec() / 1e6
+		"state":
+			state_received.emit(message)
+		"released":
+			var released: Array = message.get("contacts", [])
+			for contact in released:
+				_contacts.erase(contact)
+				_moves.erase(contact)
+			contacts_released.emit(released)
+		"error":
+			push_warning("PhantomTouch: %s: %s" % [message.get("code"), message.get("message")])
+			error_received.emit(message)
+
+
+func _tick(now: int) -> void:
+	for contact in _moves:
+		_send(_moves[contact])
+	_moves.clear()
+	var watchdog_s: float = welcome.get("watchdog_s", 2.0)
+	var ping_msec := maxi(50, int(watchdog_s * 1000 / 4))
+	if now - _last_send_msec >= ping_msec:
+		_send({"type": "ping"})
+	if now - _last_receive_msec > 4 * ping_msec + int(reply_timeout_s * 1000):
+		_lose("the service stopped answering")
+		return
+	var expired := []
+	for id in _pending:
+		if now > _pending[id]:
+			expired.append(id)
+	for id in expired:
+		_pending.erase(id)
+		var why := "no reply within %s s" % reply_timeout_s
+		reply_received.emit(id, {"type": "error", "code": "timeout", "message": why})
