@@ -9,16 +9,20 @@ moves, which is measured on a recording WebSocket server in the test.
 from __future__ import annotations
 
 import asyncio
+import csv
 import io
 import json
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 import soundfile
-from clients_live import LiveServer, Observer, wait_until
+from clients_live import ROOT, LiveServer, Observer, wait_until
 from phantomtouch_client import (
     AsyncClient,
     AsyncSession,
@@ -316,3 +320,36 @@ def test_contact_sends_at_most_one_move_per_frame_the_newest() -> None:
     ys = [m["y_cm"] for m in moves]
     assert ys == sorted(ys)
     assert [m["type"] for m in recorder.received][-1] == "up"
+
+
+EXAMPLES = ROOT / "sdk_clients" / "python" / "examples"
+
+
+def test_example_trial_block_schedules_trials_back_to_back(
+    server: LiveServer, tmp_path: Path
+) -> None:
+    log = tmp_path / "block.csv"
+    command = [sys.executable, str(EXAMPLES / "trial_block.py"), "--url", server.url]
+    command += ["--presets", "vr/tap", "vr/stroke", "--gap-s", "0.1", "--log", str(log)]
+    subprocess.run(command, check=True, timeout=60)
+    rows = list(csv.DictReader(log.open()))
+    assert sorted(r["preset"] for r in rows) == ["vr/stroke", "vr/tap"]
+    first, second = rows
+    gap_s = float(second["start_at_s"]) - float(first["start_at_s"]) - float(first["duration_s"])
+    assert gap_s == pytest.approx(0.1, abs=1e-3)
+    for row in rows:
+        assert server.get(f"/jobs/{row['job_id']}").status_code == 200
+
+
+def test_example_live_stroke_moves_a_contact(
+    server: LiveServer, observe: Callable[[LiveServer], Observer]
+) -> None:
+    observer = observe(server)
+    command = [sys.executable, str(EXAMPLES / "live_stroke.py"), "--url", server.url]
+    command += ["--from", "1.9", "12", "--to", "1.9", "2.4", "--speed-cm-s", "20"]
+    subprocess.run(command, check=True, timeout=60)
+    ys = [y for _, y in observer.positions("finger")]
+    assert ys and ys == sorted(ys, reverse=True) and len(set(ys)) >= 3
+    # The observer samples at 60 Hz a contact moving at 20 cm/s: within 1 cm of each end.
+    assert ys[0] == pytest.approx(12.0, abs=1.0)
+    assert ys[-1] == pytest.approx(2.4, abs=1.0)
