@@ -74,7 +74,10 @@ def wait_until(
 
 
 class LiveServer:
-    """``phantomtouch serve`` on 127.0.0.1:``port`` with its own database and log."""
+    """``phantomtouch serve`` on 127.0.0.1:``port`` with its own database and log.
+
+    It plays on the null output: the engine runs, clocked, without a sound card.
+    """
 
     def __init__(self, workdir: Path, *, port: int | None = None, extra_args: list[str] = ()):
         self.workdir = workdir
@@ -104,6 +107,8 @@ class LiveServer:
             str(self.port),
             "--db",
             str(self.db_path),
+            "--output",
+            "null",
             *self.extra_args,
         ]
 
