@@ -56,15 +56,28 @@ _y = st.floats(-1.0, 15.4, allow_nan=False)
 _points = st.tuples(_x, _y)
 
 
+PATH_KINDS = ("polyline", "arc", "spline", "keyframes")
+
+
+def _arc_through(start: tuple[float, float], end: tuple[float, float], bulge: float) -> list[float]:
+    """The point ``bulge`` cm off the middle of the chord, at right angles to it."""
+    dx, dy = end[0] - start[0], end[1] - start[1]
+    chord = float(np.hypot(dx, dy)) or 1.0
+    middle = ((start[0] + end[0]) / 2, (start[1] + end[1]) / 2)
+    return [middle[0] - bulge * dy / chord, middle[1] + bulge * dx / chord]
+
+
 @st.composite
-def paths(draw: st.DrawFn, *, keyframes: bool = True) -> dict[str, Any]:
+def paths(draw: st.DrawFn, kinds: tuple[str, ...] = PATH_KINDS) -> dict[str, Any]:
     """Polyline, arc, spline or keyframe paths around (and a little outside) the armband."""
-    kinds = ["polyline", "arc", "spline"] + (["keyframes"] if keyframes else [])
     kind = draw(st.sampled_from(kinds))
     if kind == "polyline":
         return {"kind": kind, "points_cm": draw(st.lists(_points, min_size=1, max_size=5))}
     if kind == "arc":
-        start, through, end = draw(_points), draw(_points), draw(_points)
+        start = draw(_points)
+        end = draw(_points.filter(lambda p: np.hypot(p[0] - start[0], p[1] - start[1]) > 0.1))
+        bulge = draw(st.one_of(st.floats(-4.0, -0.05), st.floats(0.05, 4.0)))
+        through = _arc_through(start, end, bulge)
         return {"kind": kind, "start_cm": start, "through_cm": through, "end_cm": end}
     if kind == "spline":
         return {"kind": kind, "points_cm": draw(st.lists(_points, min_size=2, max_size=5))}
@@ -96,9 +109,9 @@ carriers = st.one_of(
 
 
 @st.composite
-def patterns(draw: st.DrawFn) -> dict[str, Any]:
+def patterns(draw: st.DrawFn, kinds: tuple[str, ...] = PATH_KINDS) -> dict[str, Any]:
     """Valid-looking pattern dicts that render in well under half a second of audio."""
-    path = draw(paths())
+    path = draw(paths(kinds))
     fade_in = draw(st.floats(0.0, 0.05))
     fade_out = draw(st.floats(0.0, 0.05))
     repeat = draw(st.integers(1, 3))

@@ -14,7 +14,7 @@ from scipy import signal
 import phantomtouch as pt
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema import DeviceProfile, TouchPattern
-from tests.strategies import layouts, patterns
+from tests.strategies import PATH_KINDS, layouts, patterns
 
 FS = 48000
 DEVICE = DeviceProfile.default()
@@ -223,10 +223,12 @@ def check_output(pattern: TouchPattern, device: DeviceProfile) -> None:
     assert np.max(np.abs(out), initial=0.0) <= device.safety.ceiling
 
 
-@settings(max_examples=40)
-@given(data=patterns())
-def test_random_patterns_render_finite_within_the_ceiling(data):
-    check_output(TouchPattern.model_validate(data), DEVICE)
+@pytest.mark.parametrize("kind", PATH_KINDS)
+@settings(max_examples=15)
+@given(data=st.data())
+def test_random_patterns_render_finite_within_the_ceiling(kind, data):
+    pattern = data.draw(patterns(kinds=(kind,)))
+    check_output(TouchPattern.model_validate(pattern), DEVICE)
 
 
 @settings(max_examples=25)
