@@ -43,7 +43,7 @@ def test_sine_phase_derivative_is_its_frequency(freq_hz):
     slope = np.polyfit(n, phase[n], 1)[0]
     # A least-squares slope over 0.8 s of a clean phase: far better than 1e-6 relative.
     assert slope * FS / (2 * np.pi) == pytest.approx(freq_hz, rel=1e-6)
-    # And the FFT puts all the energy at that frequency.
+    # And the FFT of 1 s (1 Hz bins) peaks in the bin of that frequency.
     spectrum = np.abs(np.fft.rfft(x * np.hanning(len(x))))
     assert np.fft.rfftfreq(len(x), 1 / FS)[np.argmax(spectrum)] == pytest.approx(freq_hz, abs=1)
 
@@ -87,7 +87,9 @@ def test_noise_filter_response_is_40_db_down_an_octave_outside_the_band():
     _, response = signal.sosfreqz(sos, worN=[20.0, 40.0, 100.0, 500.0, 1000.0], fs=FS)
     level_db = 20 * np.log10(np.abs(response))
     assert level_db[0] <= -40 and level_db[-1] <= -40
-    np.testing.assert_allclose(level_db[[1, 3]], -3.0, atol=0.05)  # Butterworth edges
+    # Butterworth: -3.01 dB at each edge and flat in between (0.05 and 0.1 dB are far
+    # below the 3 dB JND of vibration amplitude and only allow for the design's rounding).
+    np.testing.assert_allclose(level_db[[1, 3]], -3.0, atol=0.05)
     assert level_db[2] == pytest.approx(0.0, abs=0.1)
 
 

@@ -207,7 +207,8 @@ def test_tactile_brush_values_at_beta_one_third(row, x):
     gains = pt.gains_at(DEVICE, x, y, mode="1d")
     lower = [row, 4 + row]  # channels (0-based) of the row below: both columns
     upper = [row + 1, 5 + row]
-    # Tactile Brush eq. 4, power law: A1 = sqrt(1 - beta), A2 = sqrt(beta).
+    # Tactile Brush eq. 4, power law: A1 = sqrt(1 - beta), A2 = sqrt(beta), here to the
+    # six digits ALGORITHMS.md gives.
     np.testing.assert_allclose(gains[lower], [0.816497, 0.816497], rtol=0, atol=1e-6)
     np.testing.assert_allclose(gains[upper], [0.57735, 0.57735], rtol=0, atol=1e-6)
     others = np.setdiff1d(np.arange(8), lower + upper)

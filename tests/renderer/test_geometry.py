@@ -11,6 +11,9 @@ from phantomtouch.schema import DeviceProfile
 
 DEVICE = DeviceProfile.default()
 WIDTH_CM, LENGTH_CM = 3.8, 14.4
+# Weights come from a 2 x 2 solve with coordinates below 20 cm, areas and distances from a
+# few products: all exact to rounding, far below 1e-12.
+EXACT = 1e-12
 
 
 def layout(points, triangles=None) -> DeviceProfile:
@@ -28,12 +31,12 @@ def test_paper_layout_has_two_triangles_per_cell():
     assert geometry.triangles.shape == (6, 3)
     assert geometry.channels == 8
     # Rows sit at k * 4.8 cm; 3 * 4.8 is one ulp below 14.4 in floating point.
-    np.testing.assert_allclose(geometry.row_y_cm, [0.0, 4.8, 9.6, 14.4], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(geometry.row_y_cm, [0.0, 4.8, 9.6, 14.4], rtol=0, atol=EXACT)
     # Each cell is 3.8 x 4.8 cm: two triangles of half its area each.
     verts = geometry.positions_cm[geometry.triangles]
     a, b, c = verts[:, 0], verts[:, 1], verts[:, 2]
     area = 0.5 * np.abs((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
-    np.testing.assert_allclose(area, 3.8 * 4.8 / 2, rtol=1e-12)
+    np.testing.assert_allclose(area, 3.8 * 4.8 / 2, rtol=EXACT)
 
 
 def test_weights_inside_are_a_partition_of_unity_that_rebuilds_the_point(rng):
@@ -41,10 +44,9 @@ def test_weights_inside_are_a_partition_of_unity_that_rebuilds_the_point(rng):
     points = rng.uniform((0, 0), (WIDTH_CM, LENGTH_CM), size=(500, 2))
     triangle, weights, distance = geometry.barycentric(points)
     assert np.all((weights >= 0) & (weights <= 1))
-    np.testing.assert_allclose(weights.sum(axis=1), 1.0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0, rtol=0, atol=EXACT)
     corners = geometry.positions_cm[geometry.triangles[triangle]]  # (n, 3, 2)
-    # An affine 2 x 2 solve with coordinates below 15 cm: rounding far below 1e-12 cm.
-    np.testing.assert_allclose(np.einsum("nk,nkd->nd", weights, corners), points, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("nk,nkd->nd", weights, corners), points, atol=EXACT)
     np.testing.assert_array_equal(distance, 0.0)
 
 
@@ -57,9 +59,9 @@ def test_points_outside_the_rectangle_are_projected_to_its_nearest_point(rng):
     # The paper's layout covers exactly the rectangle: its nearest point is the clamp.
     nearest = np.clip(points, (0, 0), (WIDTH_CM, LENGTH_CM))
     triangle, weights, distance = geometry.barycentric(points)
-    np.testing.assert_allclose(distance, np.hypot(*(points - nearest).T), atol=1e-12)
+    np.testing.assert_allclose(distance, np.hypot(*(points - nearest).T), atol=EXACT)
     corners = geometry.positions_cm[geometry.triangles[triangle]]
-    np.testing.assert_allclose(np.einsum("nk,nkd->nd", weights, corners), nearest, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("nk,nkd->nd", weights, corners), nearest, atol=EXACT)
 
 
 def test_row_weights_give_the_relative_position_between_rows():
@@ -67,8 +69,8 @@ def test_row_weights_give_the_relative_position_between_rows():
     y = np.array([-2.0, 0.0, 1.6, 4.8, 8.0, 14.4, 20.0])
     lower, beta, distance = geometry.row_weights(y)
     np.testing.assert_array_equal(lower, [0, 0, 0, 1, 1, 2, 2])
-    np.testing.assert_allclose(beta, [0.0, 0.0, 1 / 3, 0.0, 2 / 3, 1.0, 1.0], atol=1e-12)
-    np.testing.assert_allclose(distance, [2.0, 0, 0, 0, 0, 0, 5.6], atol=1e-12)
+    np.testing.assert_allclose(beta, [0.0, 0.0, 1 / 3, 0.0, 2 / 3, 1.0, 1.0], atol=EXACT)
+    np.testing.assert_allclose(distance, [2.0, 0, 0, 0, 0, 0, 5.6], atol=EXACT)
 
 
 def test_non_convex_triangles_project_points_in_the_notch():
@@ -81,7 +83,7 @@ def test_non_convex_triangles_project_points_in_the_notch():
     _, weights, distance = geometry.barycentric(np.array([[2.0, 2.0], [3.0, 0.5]]))
     assert distance[0] > 0.5  # outside both triangles, moved onto the nearer one
     assert distance[1] == 0.0
-    np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=EXACT)
 
 
 def test_delaunay_layout_with_collinear_actuators_on_its_hull():
@@ -93,7 +95,7 @@ def test_delaunay_layout_with_collinear_actuators_on_its_hull():
     a, b, c = verts[:, 0], verts[:, 1], verts[:, 2]
     area = 0.5 * np.abs((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
     assert np.all(area > 0.1)
-    np.testing.assert_allclose(area.sum(), 0.5 * 2.0 * 1.5, rtol=1e-12)  # the hull's area
+    np.testing.assert_allclose(area.sum(), 0.5 * 2.0 * 1.5, rtol=EXACT)  # the hull's area
     assert set(geometry.triangles.ravel()) == {0, 1, 2, 3}
 
 

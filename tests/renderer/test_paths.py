@@ -29,6 +29,8 @@ def test_arc_lies_on_its_circle_and_has_the_circle_segment_length(rng):
         p0, p1, p2 = (tuple(centre + radius * np.array([np.cos(a), np.sin(a)])) for a in angles)
         resolved = resolve_path(ArcPath(start_cm=p0, through_cm=p1, end_cm=p2))
         points = resolved.points_cm
+        # The ends are the given points; the others come from the circumcentre solve,
+        # whose rounding grows with the radius but stays far below 1e-9 relative.
         np.testing.assert_allclose(points[[0, -1]], [p0, p2], atol=1e-12)
         np.testing.assert_allclose(np.hypot(*(points - centre).T), radius, rtol=1e-9)
         # Chords of at most 0.5 degrees fall short of the arc by (d theta)^2 / 24 < 4e-6.
@@ -53,7 +55,7 @@ def test_spline_passes_through_its_points_and_is_no_shorter_than_their_polyline(
 
 def test_two_point_spline_is_the_straight_segment():
     resolved = resolve_path(SplinePath(points_cm=[(1.0, 12.0), (1.0, 2.4)]))
-    assert resolved.total_length_cm == pytest.approx(9.6, rel=1e-12)
+    assert resolved.total_length_cm == pytest.approx(9.6, rel=1e-12)  # one hypot
 
 
 def test_keyframes_keep_their_times_and_intensities():

@@ -63,6 +63,7 @@ def test_custom_pattern_duration_is_fade_in_plus_length_over_speed_plus_fade_out
                 fade_out_s=fade_out,
             )
         )
+        # Lengths and times are a few float64 sums and quotients: equal to rounding.
         assert resolved.path_length_cm == pytest.approx(length, rel=1e-12)
         assert resolved.speed_cm_s == speed
         assert resolved.motion_s == pytest.approx(length / speed, rel=1e-12)
@@ -209,7 +210,7 @@ def test_outside_points_are_projected_by_default_and_counted():
     resolved = pt.plan(pattern(path=path))
     assert resolved.projected_points == 2
     # (6.8, 18.4) is 3.0 cm right of x = 3.8 and 4.0 cm above y = 14.4: 5 cm off the corner.
-    assert resolved.max_projection_cm == pytest.approx(5.0, rel=1e-12)
+    assert resolved.max_projection_cm == pytest.approx(5.0, rel=1e-12)  # a 3-4-5 triangle
     assert pt.plan(pattern()).projected_points == 0
 
 
