@@ -30,8 +30,7 @@ def test_paper_layout_has_two_triangles_per_cell():
     geometry = Geometry.for_device(DEVICE)
     assert geometry.triangles.shape == (6, 3)
     assert geometry.channels == 8
-    # Rows sit at k * 4.8 cm; 3 * 4.8 is one ulp below 14.4 in floating point.
-    np.testing.assert_allclose(geometry.row_y_cm, [0.0, 4.8, 9.6, 14.4], rtol=0, atol=EXACT)
+    np.testing.assert_array_equal(geometry.row_y_cm, [0.0, 4.8, 9.6, 14.4])  # the paper's rows
     # Each cell is 3.8 x 4.8 cm: two triangles of half its area each.
     verts = geometry.positions_cm[geometry.triangles]
     a, b, c = verts[:, 0], verts[:, 1], verts[:, 2]
