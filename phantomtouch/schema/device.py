@@ -110,6 +110,10 @@ class SafetyLimits(_Frozen):
     )
 
 
+def _point(position: np.ndarray) -> str:
+    return f"({position[0]:.6g}, {position[1]:.6g})"
+
+
 def _paper_actuators() -> tuple[Actuator, ...]:
     return tuple(
         Actuator(x_cm=x_cm, y_cm=y_cm, channel=column * len(_ROWS_Y_CM) + row + 1)
@@ -229,7 +233,8 @@ class DeviceProfile(_Frozen):
         i, j = np.unravel_index(np.argmin(distance), distance.shape)
         if distance[i, j] < _MIN_ACTUATOR_DISTANCE_CM:
             raise ValueError(
-                f"actuators {i} and {j} are {distance[i, j]:.3g} cm apart; at least "
+                f"actuators[{i}] at {_point(positions[i])} cm and actuators[{j}] at "
+                f"{_point(positions[j])} cm are {distance[i, j]:.3g} cm apart; at least "
                 f"{_MIN_ACTUATOR_DISTANCE_CM} cm required (duplicate actuators)"
             )
         centred = positions - positions.mean(axis=0)
@@ -237,7 +242,8 @@ class DeviceProfile(_Frozen):
         span_cm = float(singular[0])
         if singular[1] <= 1e-6 * max(span_cm, 1.0):
             raise ValueError(
-                "actuators are collinear: a 2D layout needs actuators that span an area"
+                f"actuators at {', '.join(_point(p) for p in positions)} cm are collinear: "
+                "a 2D layout needs actuators that span an area"
             )
         for t, triangle in enumerate(self.triangles or ()):
             if any(not 0 <= k < n for k in triangle) or len(set(triangle)) != 3:
