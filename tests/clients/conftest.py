@@ -6,7 +6,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from clients_live import LiveServer, Observer, running
+
+from tests.clients.live import LiveServer, Observer, running
 
 
 @pytest.fixture(scope="session")

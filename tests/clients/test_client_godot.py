@@ -18,7 +18,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from clients_live import ROOT, LiveServer, Observer, require, require_tool
+
+from tests.clients.live import ROOT, LiveServer, Observer, require, require_tool
 
 ADDON = ROOT / "sdk_clients" / "godot" / "addons" / "phantomtouch"
 GODOT3_PROJECT = Path(__file__).parent / "godot3"

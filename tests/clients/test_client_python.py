@@ -22,7 +22,6 @@ from typing import Any
 import numpy as np
 import pytest
 import soundfile
-from clients_live import ROOT, LiveServer, Observer, wait_until
 from phantomtouch_client import (
     AsyncClient,
     AsyncSession,
@@ -37,6 +36,7 @@ from phantomtouch_client import (
 from websockets.asyncio.server import ServerConnection, serve
 
 from phantomtouch import ParameterError, TouchPattern
+from tests.clients.live import ROOT, LiveServer, Observer, wait_until
 
 STROKE = TouchPattern.model_validate(
     {

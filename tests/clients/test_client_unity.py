@@ -15,7 +15,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from clients_live import ROOT, LineProcess, LiveServer, Observer, require_tool
+
+from tests.clients.live import ROOT, LineProcess, LiveServer, Observer, require_tool
 
 UNITY = ROOT / "sdk_clients" / "unity"
 STUB = Path(__file__).parent / "unity_stub"

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import httpx
 import yaml
-from clients_live import ROOT, free_port, require, server_available, wait_until
+
+from tests.clients.live import ROOT, free_port, require, server_available, wait_until
 
 DOCKER = ROOT / "docker"
 DOCKERFILE = DOCKER / "Dockerfile"

@@ -1,0 +1,1 @@
+"""Tests of the client SDKs against the live service."""
