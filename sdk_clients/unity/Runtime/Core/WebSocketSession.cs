@@ -238,9 +238,11 @@ namespace PhantomTouch
             }
             life.Cancel();
             Wake();
+            // Cancelling aborts the socket at once; the wait is bounded so that a Unity
+            // OnDisable never holds the main thread for long.
             if (loop != null)
             {
-                try { loop.Wait(TimeoutMs); } catch (AggregateException) { }
+                try { loop.Wait(1000); } catch (AggregateException) { }
             }
             FailPending(new PhantomTouchException("transport", "the session was closed"));
         }
