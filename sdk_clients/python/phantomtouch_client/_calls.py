@@ -25,6 +25,7 @@ from phantomtouch_client.models import (
     JobId,
     JobStatus,
     RenderPlan,
+    StopAnswer,
     Summary,
     pattern_json,
     timing,
@@ -88,10 +89,6 @@ def _summaries(response: httpx.Response) -> list[Summary]:
         raise TransportError(f"{response.request.url.path}: unexpected answer: {exc}") from exc
 
 
-def _json(response: httpx.Response) -> Any:
-    return _decode(response)
-
-
 def _nothing(response: httpx.Response) -> None:
     checked(response)
 
@@ -128,8 +125,8 @@ def cancel_job(job_id: JobId) -> Call[JobStatus]:
     return Call("DELETE", f"/jobs/{_segment(job_id)}", _model(JobStatus))
 
 
-def stop() -> Call[Any]:
-    return Call("POST", "/stop", _json)
+def stop() -> Call[StopAnswer]:
+    return Call("POST", "/stop", _model(StopAnswer))
 
 
 def patterns() -> Call[list[Summary]]:
@@ -140,8 +137,8 @@ def get_pattern(name: str) -> Call[TouchPattern]:
     return Call("GET", f"/patterns/{_segment(name)}", _model(TouchPattern))
 
 
-def put_pattern(name: str, pattern: TouchPattern | Mapping[str, Any]) -> Call[None]:
-    return Call("PUT", f"/patterns/{_segment(name)}", _nothing, pattern_json(pattern))
+def put_pattern(name: str, pattern: TouchPattern | Mapping[str, Any]) -> Call[Summary]:
+    return Call("PUT", f"/patterns/{_segment(name)}", _model(Summary), pattern_json(pattern))
 
 
 def delete_pattern(name: str) -> Call[None]:

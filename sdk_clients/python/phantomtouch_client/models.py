@@ -45,14 +45,35 @@ class JobStatus(_Answer):
     job_id: JobId
     state: JobState
     start_at_s: float | None = None
+    end_at_s: float | None = None
     duration_s: float | None = None
+    late: bool | None = None
+    """Whether the job started after the time it was asked for."""
+
+
+class StopAnswer(_Answer):
+    """``POST /stop``."""
+
+    server_time_s: float
+    stopped: bool | None = None
+
+
+class PlanSummary(_Answer):
+    """What a pattern resolves to: duration, path length, speed, frames, level ..."""
+
+    duration_s: float
+    path_length_cm: float | None = None
+    speed_cm_s: float | None = None
+    frames: int | None = None
+    channels: int | None = None
+    sample_rate_hz: int | None = None
 
 
 class Summary(_Answer):
-    """One stored pattern or preset: ``{name, summary}``."""
+    """One stored pattern or preset: its name and its plan's summary."""
 
     name: str
-    summary: str = ""
+    summary: PlanSummary
 
 
 class RenderCurves(_Answer):
@@ -63,14 +84,9 @@ class RenderCurves(_Answer):
     gains: list[list[float]]
 
 
-class RenderPlan(_Answer):
+class RenderPlan(PlanSummary):
     """``POST /render`` with ``Accept: application/json``: the plan and its curves."""
 
-    duration_s: float
-    path_length_cm: float | None = None
-    speed_cm_s: float | None = None
-    frames: int | None = None
-    channels: int | None = None
     curves: RenderCurves
 
 
@@ -79,7 +95,7 @@ class Clock(_Answer):
 
     server_time_s: float
     frames: int
-    sample_rate_hz: float
+    sample_rate_hz: int
     unix_time_s: float
 
 
@@ -93,10 +109,13 @@ class Health(_Answer):
 class DeviceInfo(_Answer):
     """``GET /device``: layout, channels, sample rate, block size, backend, output device."""
 
-    channels: int | None = None
-    sample_rate_hz: float | None = None
-    block_frames: int | None = None
-    backend: str | None = None
+    channels: int
+    sample_rate_hz: int
+    block_frames: int
+    backend: str
+    output_device: str | None = None
+    output_latency_s: float | None = None
+    actuators: list[dict[str, Any]] = Field(default_factory=list)
 
 
 class Welcome(_Answer):

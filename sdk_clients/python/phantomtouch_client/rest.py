@@ -24,6 +24,7 @@ from phantomtouch_client.models import (
     JobStatus,
     PatternArg,
     RenderPlan,
+    StopAnswer,
     Summary,
     touch_request,
 )
@@ -180,7 +181,7 @@ class Client(_Base):
         """``DELETE /jobs/{id}``: stop that job with its release ramp."""
         return self._run(_calls.cancel_job(job_id))
 
-    def stop(self) -> Any:
+    def stop(self) -> StopAnswer:
         """``POST /stop``: every job and contact of every client off at once."""
         return self._run(_calls.stop())
 
@@ -192,9 +193,9 @@ class Client(_Base):
         """``GET /patterns/{name}``."""
         return self._run(_calls.get_pattern(name))
 
-    def put_pattern(self, name: str, pattern: TouchPattern | Mapping[str, Any]) -> None:
+    def put_pattern(self, name: str, pattern: TouchPattern | Mapping[str, Any]) -> Summary:
         """``PUT /patterns/{name}``: store (or replace) a pattern under ``name``."""
-        self._run(_calls.put_pattern(name, pattern))
+        return self._run(_calls.put_pattern(name, pattern))
 
     def delete_pattern(self, name: str) -> None:
         """``DELETE /patterns/{name}``."""
@@ -333,7 +334,7 @@ class AsyncClient(_Base):
         """``DELETE /jobs/{id}``: stop that job with its release ramp."""
         return await self._run(_calls.cancel_job(job_id))
 
-    async def stop(self) -> Any:
+    async def stop(self) -> StopAnswer:
         """``POST /stop``: every job and contact of every client off at once."""
         return await self._run(_calls.stop())
 
@@ -345,9 +346,9 @@ class AsyncClient(_Base):
         """``GET /patterns/{name}``."""
         return await self._run(_calls.get_pattern(name))
 
-    async def put_pattern(self, name: str, pattern: TouchPattern | Mapping[str, Any]) -> None:
+    async def put_pattern(self, name: str, pattern: TouchPattern | Mapping[str, Any]) -> Summary:
         """``PUT /patterns/{name}``: store (or replace) a pattern under ``name``."""
-        await self._run(_calls.put_pattern(name, pattern))
+        return await self._run(_calls.put_pattern(name, pattern))
 
     async def delete_pattern(self, name: str) -> None:
         """``DELETE /patterns/{name}``."""
