@@ -32,11 +32,12 @@ from phantomtouch_client import (
     NotFound,
     Session,
     SessionState,
+    Unauthorized,
 )
 from websockets.asyncio.server import ServerConnection, serve
 
 from phantomtouch import ParameterError, TouchPattern
-from tests.clients.live import ROOT, LiveServer, Observer, wait_until
+from tests.clients.live import ROOT, LiveServer, Observer, running, wait_until
 
 STROKE = TouchPattern.model_validate(
     {
@@ -353,3 +354,17 @@ def test_example_live_stroke_moves_a_contact(
     # The observer samples at 60 Hz a contact moving at 20 cm/s: within 1 cm of each end.
     assert ys[0] == pytest.approx(12.0, abs=1.0)
     assert ys[-1] == pytest.approx(2.4, abs=1.0)
+
+
+def test_the_token_is_sent_and_a_missing_one_refused(tmp_path: Path) -> None:
+    token = "client-test-token-0123"
+    with running(tmp_path, extra_args=["--token", token]) as live:
+        with Client(live.url, token=token) as pt:
+            assert pt.touch(preset="vr/tap").duration_s > 0
+        with Client(live.url) as pt, pytest.raises(Unauthorized):
+            pt.touch(preset="vr/tap")
+        with Session(live.ws_url, token=token) as ws:
+            ws.down("token-finger", 1.0, 1.0)
+            ws.up("token-finger")
+        with pytest.raises(Unauthorized), Session(live.ws_url, token="wrong-token-0123456789"):
+            pass

@@ -36,6 +36,7 @@ from typing import Any, Self
 
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus, WebSocketException
+from websockets.frames import CloseCode
 
 from phantomtouch_client.contact import Contact
 from phantomtouch_client.errors import (
@@ -439,7 +440,13 @@ class AsyncSession:
                         break
                     if message.get("type") == "error":
                         raise self._error(message)
-        except (ConnectionClosed, TimeoutError, ValueError) as exc:
+        except ConnectionClosed as exc:
+            await ws.close()
+            if exc.rcvd is not None and exc.rcvd.code == CloseCode.POLICY_VIOLATION:
+                # Before the welcome only hello was sent: the policy refused is the token.
+                raise api_error("unauthorized", exc.rcvd.reason or "token refused") from exc
+            raise TransportError(f"no welcome from {self.url}: {exc!r}") from exc
+        except (TimeoutError, ValueError) as exc:
             await ws.close()
             raise TransportError(f"no welcome from {self.url}: {exc!r}") from exc
         except BaseException:
