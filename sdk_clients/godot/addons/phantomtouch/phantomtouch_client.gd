@@ -25,6 +25,7 @@ signal reply_received(id: int, reply: Dictionary)
 enum Phase { IDLE, CONNECTING, WAITING_WELCOME, CONNECTED, BACKING_OFF }
 
 const PROTOCOL := 1
+const POLICY_VIOLATION := 1008
 
 @export var server_url := "http://127.0.0.1:8000"
 ## The service token; needed when the service listens off loopback.
@@ -80,7 +81,10 @@ func _process(_delta: float) -> void:
 	_ws.poll()
 	var ready_state := _ws.get_ready_state()
 	if ready_state == WebSocketPeer.STATE_CLOSED:
-		_lose("closed (%d %s)" % [_ws.get_close_code(), _ws.get_close_reason()])
+		var why := "closed (%d %s)" % [_ws.get_close_code(), _ws.get_close_reason()]
+		if _ws.get_close_code() == POLICY_VIOLATION:
+			push_warning("PhantomTouch: refused by %s: %s (check the token)" % [server_url, why])
+		_lose(why)
 		return
 	if ready_state != WebSocketPeer.STATE_OPEN:
 		if now > _deadline_msec:

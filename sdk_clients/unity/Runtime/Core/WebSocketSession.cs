@@ -331,7 +331,13 @@ namespace PhantomTouch
                 while (true)
                 {
                     var message = await ReceiveMessageAsync(ws, timeout.Token).ConfigureAwait(false);
-                    if (message == null) throw new PhantomTouchException("transport", "closed before welcome");
+                    if (message == null)
+                    {
+                        // 1008 before the welcome: the token is missing or wrong.
+                        var policy = ws.CloseStatus == WebSocketCloseStatus.PolicyViolation;
+                        throw new PhantomTouchException(policy ? "unauthorized" : "transport",
+                            "closed before welcome: " + ws.CloseStatus + " " + ws.CloseStatusDescription);
+                    }
                     var type = message.GetString("type");
                     if (type == "welcome")
                     {
