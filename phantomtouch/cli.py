@@ -3,6 +3,7 @@
 ``phantomtouch render``   one pattern (JSON file or preset) to an 8-channel WAV (+ plot)
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder
+``phantomtouch bench accuracy``  phantom position and level error against CPU time
 
 Errors print one line naming the field, the value and the allowed range, and exit 2.
 """
@@ -22,7 +23,7 @@ from tqdm import tqdm
 from phantomtouch.errors import PhantomTouchError
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.plan import Plan
-from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error
+from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error, limits
 
 EXIT_USAGE = 2
 _BLOCK_FRAMES = 1 << 15
@@ -104,6 +105,31 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
+    from phantomtouch.analysis.accuracy import default_settings, reference_strokes, run_accuracy
+    from phantomtouch.analysis.accuracy_report import format_table, save_plot
+
+    strokes = reference_strokes()
+    unknown = sorted(set(args.stroke or ()) - set(strokes))
+    if unknown:
+        raise PhantomTouchError(f"--stroke {unknown[0]!r} is not one of {sorted(strokes)}")
+    if args.stroke:
+        strokes = {name: strokes[name] for name in args.stroke}
+    top = limits.MAX_GAIN_UPDATE_FRAMES
+    if any(not 1 <= n <= top for n in args.frames):
+        raise PhantomTouchError(f"--frames {args.frames} must each be within [1, {top}]")
+    report = run_accuracy(
+        strokes,
+        default_settings(args.frames),
+        device=_load_device(args.device),
+        repeats=args.repeats,
+    )
+    if args.plot:
+        save_plot(report, args.plot)
+    print(json.dumps(report.to_dict(), indent=2) if args.json else format_table(report))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -128,6 +154,26 @@ def build_parser() -> argparse.ArgumentParser:
     stimuli.add_argument("-o", "--output", required=True, help="output folder")
     stimuli.add_argument("--device", help="device profile (TOML or JSON)")
     stimuli.set_defaults(func=_cmd_stimuli)
+
+    bench = sub.add_parser("bench", help="measure accuracy or speed").add_subparsers(
+        dest="bench", required=True
+    )
+    accuracy = bench.add_parser(
+        "accuracy", help="phantom position and level error of gain update settings vs CPU time"
+    )
+    accuracy.add_argument("--json", action="store_true", help="print the full results as JSON")
+    accuracy.add_argument("--plot", help="also write the work-precision plot to this PNG")
+    accuracy.add_argument(
+        "--frames",
+        type=int,
+        nargs="+",
+        default=[1, 8, 32, 128, 512],
+        help="frames between gain updates to compare, each ramped and held (default: %(default)s)",
+    )
+    accuracy.add_argument("--stroke", action="append", help="only this stroke (repeatable)")
+    accuracy.add_argument("--repeats", type=int, default=5, help="timed renders per measurement")
+    accuracy.add_argument("--device", help="device profile (TOML or JSON)")
+    accuracy.set_defaults(func=_cmd_bench_accuracy)
     return parser
 
 
