@@ -107,6 +107,7 @@ def save_plot(report: AccuracyReport, path: str | Path) -> None:
         plt.Line2D([], [], marker="o", ls="", color="tab:blue", label="ramped, from gains"),
         plt.Line2D([], [], marker="o", ls="", color="tab:orange", label="held, from gains"),
         plt.Line2D([], [], marker="o", ls="", mfc="none", color="0.3", label="through twin"),
+        plt.Line2D([], [], ls="", label=f"(errors of 0 drawn at {floor_cm:g})"),
     ]
     ax_pos.legend(handles=[*handles, *ax_pos.get_legend_handles_labels()[0]], fontsize=8)
     ax_pos.set_xlabel("CPU ms per second of audio (whole render)")
