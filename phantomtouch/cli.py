@@ -294,7 +294,12 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_argument(
         "--drive-rms", type=float, default=0.1, help="RMS of the excitation (full scale = 1)"
     )
-    calibrate.add_argument("--taps", type=int, default=4096, help="FIR taps per channel")
+    calibrate.add_argument(
+        "--taps",
+        type=int,
+        default=4096,
+        help="FIR taps per channel (fewer: less exact below 60 Hz)",
+    )
     calibrate.add_argument("--yes", action="store_true", help="do not wait for Enter per channel")
     calibrate.add_argument("--json", action="store_true", help="print the results as JSON")
     calibrate.add_argument(
