@@ -9,6 +9,9 @@ Pure numpy/scipy on top of :mod:`phantomtouch.renderer` and :mod:`phantomtouch.s
   centroid) and level from the actuators' accelerations.
 - :mod:`~phantomtouch.analysis.accuracy`: position, gain and level error of the gain
   update settings against their CPU cost (``phantomtouch bench accuracy``).
-- :mod:`~phantomtouch.analysis.calibration`: transfer-function measurement, inverse
-  FIR design and level verification (``phantomtouch calibrate``).
+- :mod:`~phantomtouch.analysis.calibration`: measure each actuator, store its
+  correction, verify the levels (``phantomtouch calibrate``), with the signal
+  processing in :mod:`~phantomtouch.analysis.inverse_filter` (Welch H1, regularised
+  minimum-phase inverse FIR) and the profile file writer in
+  :mod:`~phantomtouch.analysis.profile_file`.
 """

@@ -199,7 +199,9 @@ def _max(values: np.ndarray) -> float:
 @dataclass
 class Measurement:
     """One stroke at one setting. Errors in cm, gain errors as fractions of the
-    pattern's amplitude (worst channel per frame), levels in dB, CPU in ms per s."""
+    pattern's amplitude (worst channel per frame), levels in dB, CPU in ms per s;
+    ``silent_windows_twin`` counts windows the render left silent where the pattern
+    should be felt (they have no position, so the twin errors leave them out)."""
 
     stroke: str
     setting: str
@@ -215,6 +217,7 @@ class Measurement:
     position_error_twin_rms_cm: float
     level_variation_twin_db: float
     level_offset_twin_db: float
+    silent_windows_twin: int
     cpu_ms_per_s: float
     cpu_blocks_ms_per_s: float
 
@@ -275,9 +278,12 @@ def measure(
         windowed_mean(intended * energy[:, None], window, hop)
         / np.maximum(window_energy, 1e-300)[:, None]
     )
+    sounding = np.isfinite(percept.level_db)  # a silent window has no position to compare
     felt = window_energy >= _MASK_ENERGY * window_energy.max()
+    silent = int(np.count_nonzero(felt & ~sounding))
+    felt &= sounding
     twin_error = np.hypot(*(percept.positions_cm - expected)[felt].T)
-    level_felt = window_energy >= _LEVEL_MASK_ENERGY * window_energy.max()
+    level_felt = (window_energy >= _LEVEL_MASK_ENERGY * window_energy.max()) & sounding
     expected_db = (resolved.level_db or 0.0) + 10.0 * np.log10(window_energy[level_felt])
     level_deviation = percept.level_db[level_felt] - expected_db
 
@@ -297,6 +303,7 @@ def measure(
         position_error_twin_rms_cm=_rms(twin_error),
         level_variation_twin_db=float(np.ptp(level_deviation)) if level_deviation.size else 0.0,
         level_offset_twin_db=float(np.mean(level_deviation)) if level_deviation.size else 0.0,
+        silent_windows_twin=silent,
         cpu_ms_per_s=1000.0 * cpu_s / resolved.duration_s,
         cpu_blocks_ms_per_s=1000.0 * cpu_blocks_s / resolved.duration_s,
     )
@@ -319,6 +326,7 @@ class Row:
     position_error_twin_max_cm: float
     position_error_twin_rms_cm: float
     level_variation_twin_db: float
+    silent_windows_twin: int
     cpu_ms_per_s: float
     cpu_blocks_ms_per_s: float
     cpu_relative: float = 1.0
@@ -352,6 +360,7 @@ _WORST = (
     "position_error_twin_max_cm",
     "position_error_twin_rms_cm",
     "level_variation_twin_db",
+    "silent_windows_twin",
 )
 
 
@@ -390,6 +399,7 @@ def meets_criteria(row: Row, floor: Row, criteria: dict[str, float] = CRITERIA) 
         and row.position_error_twin_max_cm - floor.position_error_twin_max_cm <= position
         and row.level_error_gains_max_db <= level
         and row.level_variation_twin_db - floor.level_variation_twin_db <= level
+        and row.silent_windows_twin == 0
     )
 
 

@@ -1,8 +1,8 @@
 """Where and how strongly the phantom is felt, from the actuators' accelerations.
 
 A deliberately simple model of the funnelling illusion: over a short window (default
-40 ms, within the 20-50 ms over which vibrotactile energy integrates into one
-percept), the phantom sits at the energy-weighted centroid of the actuator positions,
+40 ms; the window length is an assumption of the model, not a measured integration
+time), the phantom sits at the energy-weighted centroid of the actuator positions,
 
     p = sum_i E_i p_i / sum_i E_i,    E_i = mean over the window of a_i(t)^2,
 

@@ -8,10 +8,10 @@ signal. The acceleration of the moving mass then follows the second-order high-p
 
 flat (``g``) well above the resonance (mass controlled), rising by ``Q`` at it
 (``|H(j w0)| = g Q``), falling as ``f^2`` below it (stiffness controlled). The default
-parameters, ``f0_hz = 170`` and ``Q = 3``, are assumptions for a wide-band actuator
-loaded by the skin of the forearm (the skin's stiffness lifts a voice coil's
-resonance into the 150-200 Hz region and its damping lowers Q to 2-5); a lab measures
-its own with ``phantomtouch calibrate``. ``g`` is set so that a full-scale sine at
+parameters, ``f0_hz = 170`` and ``Q = 3``, are assumptions, not measurements: a
+wide-band voice coil pressed on forearm skin is taken to resonate somewhere around
+150-200 Hz with a Q of 2-5 (the skin adds stiffness and damping). ``phantomtouch
+calibrate`` measures the real response of each actuator. ``g`` is set so that a full-scale sine at
 ``ref_hz`` gives ``level_db``, by default the device's calibration reference.
 
 Discretisation: the bilinear transform with the frequency warped at ``f0_hz``

@@ -120,6 +120,7 @@ def row(setting: str, frames: int, ramp: bool, cpu: float, **errors: float) -> R
         "position_error_twin_max_cm": 0.1,
         "position_error_twin_rms_cm": 0.0,
         "level_variation_twin_db": 0.5,
+        "silent_windows_twin": 0,
         **errors,
     }
     return Row(setting, frames, ramp, cpu_ms_per_s=cpu, cpu_blocks_ms_per_s=cpu, **values)
@@ -152,3 +153,5 @@ def test_recommend_judges_the_twin_beyond_the_per_frame_floor() -> None:
     ]
     assert recommend(rows) == "8 ramp"
     assert recommend(rows[1:]) is None  # no per-frame floor to judge against
+    rows[1].silent_windows_twin = 1  # a setting that leaves a felt window silent fails
+    assert recommend(rows) == "1"
