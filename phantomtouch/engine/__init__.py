@@ -1,0 +1,40 @@
+"""The real-time part: sample clock, scheduler, voices, mixer, safety limiter, sinks.
+
+::
+
+    from phantomtouch.engine import Engine, open_default_sink
+
+    engine = Engine(device, open_default_sink(device))
+    engine.start()
+    job = engine.schedule(pattern, start_frame=engine.frames_at(engine.server_time_s() + 0.02))
+    engine.contact_down("client", "finger", 1.9, 7.2)
+    engine.close()
+
+Modules: :mod:`~phantomtouch.engine.engine` (the API), :mod:`~phantomtouch.engine.clock`,
+:mod:`~phantomtouch.engine.commands`, :mod:`~phantomtouch.engine.scheduler` (the audio
+callback), :mod:`~phantomtouch.engine.voices`, :mod:`~phantomtouch.engine.contacts`,
+:mod:`~phantomtouch.engine.mixer`, :mod:`~phantomtouch.engine.sinks`,
+:mod:`~phantomtouch.engine.soundcard`, :mod:`~phantomtouch.engine.jobs`,
+:mod:`~phantomtouch.engine.log`. The engine imports the renderer and the schema, never
+the server.
+"""
+
+from phantomtouch.engine.contacts import ContactSettings
+from phantomtouch.engine.engine import Engine, EngineStatus
+from phantomtouch.engine.jobs import Job, JobState
+from phantomtouch.engine.sinks import CaptureSink, NullSink, Sink
+from phantomtouch.engine.soundcard import SoundDeviceSink, list_output_devices, open_default_sink
+
+__all__ = [
+    "CaptureSink",
+    "ContactSettings",
+    "Engine",
+    "EngineStatus",
+    "Job",
+    "JobState",
+    "NullSink",
+    "Sink",
+    "SoundDeviceSink",
+    "list_output_devices",
+    "open_default_sink",
+]
