@@ -77,11 +77,15 @@ class CommandQueue:
         self._seq = 0
         self._admitted = 0  # start commands accepted (producers, under the lock)
         self._retired = 0  # start commands started or voided (the callback only)
+        self._admitted_before_stop = 0  # all of them will be voided or have started
 
     @property
     def depth(self) -> int:
-        """Voices accepted but not yet started or voided."""
-        return self._admitted - self._retired
+        """Voices accepted but not yet started or voided.
+
+        Those accepted before the last ``stop_all`` no longer count: they will never start.
+        """
+        return self._admitted - max(self._retired, self._admitted_before_stop)
 
     def push(self, make: Callable[[int], C], *, bounded: bool) -> C:
         """Build a command with the next sequence number and append it.
@@ -131,6 +135,7 @@ class CommandQueue:
         with self._lock:
             self._seq += 1
             self.stop_all_seq = self._seq
+            self._admitted_before_stop = self._admitted
             return self._seq
 
     def pop(self) -> Command | None:

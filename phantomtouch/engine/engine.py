@@ -68,7 +68,8 @@ class Engine:
         :class:`~phantomtouch.engine.sinks.NullSink` (use
         :func:`~phantomtouch.engine.soundcard.open_default_sink` for the sound card).
     queue_capacity : int, 1 <= queue_capacity <= 1_000_000
-        Most jobs and touchdowns waiting to start; more raise EngineBusyError.
+        Most jobs and touchdowns waiting to start, and most jobs scheduled or playing at
+        once; more raise EngineBusyError.
     contact : ContactSettings or None
         Attack, release and transients of contacts (and the release of stopped jobs).
     log_path : str, Path or None
@@ -118,6 +119,7 @@ class Engine:
             self._clock,
             rings=RENDER_AHEAD_RINGS,
             chunk_frames=render_ahead_frames,
+            clocked=self._sink.realtime,
         )
         self._lock = threading.RLock()
         self._jobs = JobTable()
@@ -258,7 +260,8 @@ class Engine:
         ParameterError
             The pattern cannot be planned, or an argument is out of range.
         EngineBusyError
-            ``queue_capacity`` jobs and touchdowns are already waiting.
+            ``queue_capacity`` jobs and touchdowns are already waiting, or
+            ``queue_capacity`` jobs are scheduled or playing.
         DeviceError
             The engine is closed.
         """
@@ -285,8 +288,8 @@ class Engine:
             self._reporter.drain()
             if len(self._jobs) >= self._queue.capacity:
                 raise EngineBusyError(
-                    f"{len(self._jobs)} jobs are scheduled or playing; at most "
-                    f"queue_capacity={self._queue.capacity}"
+                    f"the engine is full: {len(self._jobs)} jobs are scheduled or playing; "
+                    f"at most queue_capacity={self._queue.capacity}"
                 )
             asap = frame is None
             first = self._scheduler.next_block_frame() if frame is None else frame
@@ -330,7 +333,7 @@ class Engine:
             if record is None or record.voice is None or record.state in ("finished", "stopped"):
                 return False
             self._queue.push_release(record.voice, None)
-            record.state = "stopped"
+            self._jobs.mark_stopped(record)
             return True
 
     def stop_all(self) -> None:
@@ -342,8 +345,7 @@ class Engine:
         with self._lock:
             self._queue.mark_stop_all()
             self._board.forget_all()
-            for record in self._jobs.active():
-                record.state = "stopped"
+            self._jobs.stop_all()
 
     # -- contacts ---------------------------------------------------------------------
 

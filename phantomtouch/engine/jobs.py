@@ -112,14 +112,12 @@ class JobRecord:
             late=self.late,
         )
 
-    @property
-    def over(self) -> bool:
-        """Finished, or stopped and silent."""
-        return self.state == "finished" or (self.state == "stopped" and self.voice is None)
-
 
 class JobTable:
-    """Jobs by id: all that are not over, and the last ``history`` that are.
+    """Jobs by id: those not over yet, and the last ``history`` that are.
+
+    A job that was asked to stop no longer counts as live, though the callback has yet to
+    silence it.
 
     Parameters
     ----------
@@ -128,26 +126,35 @@ class JobTable:
 
     def __init__(self, history: int = HISTORY_JOBS) -> None:
         self.history = history
-        self._active: dict[str, JobRecord] = {}
+        self._live: dict[str, JobRecord] = {}
+        self._stopping: dict[str, JobRecord] = {}
         self._over: OrderedDict[str, JobRecord] = OrderedDict()
 
     def __len__(self) -> int:
-        return len(self._active)
+        """Jobs scheduled or playing (not stopping, not over)."""
+        return len(self._live)
 
     def add(self, record: JobRecord) -> None:
-        self._active[record.job_id] = record
+        self._live[record.job_id] = record
 
     def get(self, job_id: str) -> JobRecord | None:
-        return self._active.get(job_id) or self._over.get(job_id)
+        return self._live.get(job_id) or self._stopping.get(job_id) or self._over.get(job_id)
 
-    def active(self) -> list[JobRecord]:
-        """Jobs not over yet, oldest first."""
-        return list(self._active.values())
+    def mark_stopped(self, record: JobRecord) -> None:
+        """The job was asked to stop; the callback will silence it."""
+        record.state = "stopped"
+        if self._live.pop(record.job_id, None) is not None:
+            self._stopping[record.job_id] = record
+
+    def stop_all(self) -> None:
+        for record in list(self._live.values()):
+            self.mark_stopped(record)
 
     def retire(self, record: JobRecord) -> None:
         """Move a job that is over into the bounded history."""
         record.voice = None
-        self._active.pop(record.job_id, None)
+        self._live.pop(record.job_id, None)
+        self._stopping.pop(record.job_id, None)
         self._over[record.job_id] = record
         while len(self._over) > self.history:
             self._over.popitem(last=False)

@@ -38,10 +38,14 @@ class Scheduler:
     device : DeviceProfile
     queue : CommandQueue
     clock : SampleClock
+        Told when each block is computed, if ``clocked``.
     rings : int, >= 0
         Render-ahead rings for pattern voices (see :mod:`phantomtouch.engine.voices`).
     chunk_frames : int, >= 0
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
+    clocked : bool
+        Blocks are pulled at the pace of a clock (a real-time sink). Otherwise the clock
+        is left at its anchor: frames map to time as if played from the start.
 
     Attributes
     ----------
@@ -65,10 +69,12 @@ class Scheduler:
         *,
         rings: int,
         chunk_frames: int,
+        clocked: bool = True,
     ) -> None:
         self.block_frames = device.block_frames
         self.queue = queue
         self.clock = clock
+        self.clocked = clocked
         self.mixer = Mixer(device)
         self.work = Workspace(device.block_frames, device.channels)
         chunk = max(chunk_frames, device.block_frames) if chunk_frames > 0 else 0
@@ -94,8 +100,8 @@ class Scheduler:
 
     def render(self, out: np.ndarray) -> None:
         """Fill ``out`` (frames, channels), float32, with the next frames (the callback)."""
-        now_s = time.monotonic()
-        self.clock.observe(self.frames, now_s)
+        if self.clocked:
+            self.clock.observe(self.frames, time.monotonic())
         step = self.block_frames
         for at in range(0, out.shape[0], step):
             block = out[at : at + step]
