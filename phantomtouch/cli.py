@@ -47,9 +47,19 @@ def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None 
         from phantomtouch.plot import TraceEnvelope
 
         traces = TraceEnvelope(plan.frames, plan.channels)
-    with soundfile.SoundFile(
-        str(out_path), "w", samplerate=plan.sample_rate_hz, channels=plan.channels, subtype="FLOAT"
-    ) as wav:
+    try:
+        wav = soundfile.SoundFile(
+            str(out_path),
+            "w",
+            samplerate=plan.sample_rate_hz,
+            channels=plan.channels,
+            subtype="FLOAT",
+        )
+    except soundfile.LibsndfileError as exc:
+        raise PhantomTouchError(
+            f"output={str(out_path)!r}: cannot open it for writing ({exc.error_string})"
+        ) from exc
+    with wav:
         for block in render_plan_blocks(plan, block_frames=_BLOCK_FRAMES):
             wav.write(block)
             if traces is not None:

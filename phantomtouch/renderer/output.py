@@ -50,7 +50,11 @@ class OutputStage:
             for ch, (taps, state) in enumerate(self._fir):
                 filtered, state[:] = signal.lfilter(taps, 1.0, block[:, ch], zi=state)
                 block[:, ch] = filtered
-        if not np.isfinite(block.sum()):  # NaN or Inf anywhere makes the sum non-finite
+        if block.size == 0:
+            return
+        high, low = block.max(), block.min()  # NaN or Inf anywhere shows in one of them
+        if not (np.isfinite(high) and np.isfinite(low)):
             block[:] = 0.0
             self.muted_blocks += 1
-        np.clip(block, -self.ceiling, self.ceiling, out=block)
+        elif high > self.ceiling or low < -self.ceiling:
+            np.clip(block, -self.ceiling, self.ceiling, out=block)

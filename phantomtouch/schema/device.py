@@ -23,8 +23,9 @@ from phantomtouch.schema import limits
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Coordinate = Annotated[float, Field(ge=-limits.MAX_COORD_CM, le=limits.MAX_COORD_CM)]
 
-_ROW_SPACING_CM = 4.8
-_COLUMN_SPACING_CM = 3.8
+_ROWS_Y_CM = (0.0, 4.8, 9.6, 14.4)
+"""Rows along the forearm, 4.8 cm apart (written out so 14.4 is exact, not 3 x 4.8)."""
+_COLUMNS_X_CM = (0.0, 3.8)
 _MIN_ACTUATOR_DISTANCE_CM = 0.1
 _MIN_TRIANGLE_AREA_CM2 = 1e-3
 
@@ -109,18 +110,16 @@ class SafetyLimits(_Frozen):
     )
 
 
+def _point(position: np.ndarray) -> str:
+    return f"({position[0]:.6g}, {position[1]:.6g})"
+
+
 def _paper_actuators() -> tuple[Actuator, ...]:
-    actuators = []
-    for column in range(2):
-        for row in range(4):
-            actuators.append(
-                Actuator(
-                    x_cm=column * _COLUMN_SPACING_CM,
-                    y_cm=row * _ROW_SPACING_CM,
-                    channel=column * 4 + row + 1,
-                )
-            )
-    return tuple(actuators)
+    return tuple(
+        Actuator(x_cm=x_cm, y_cm=y_cm, channel=column * len(_ROWS_Y_CM) + row + 1)
+        for column, x_cm in enumerate(_COLUMNS_X_CM)
+        for row, y_cm in enumerate(_ROWS_Y_CM)
+    )
 
 
 def _paper_triangles() -> tuple[tuple[int, int, int], ...]:
@@ -234,7 +233,8 @@ class DeviceProfile(_Frozen):
         i, j = np.unravel_index(np.argmin(distance), distance.shape)
         if distance[i, j] < _MIN_ACTUATOR_DISTANCE_CM:
             raise ValueError(
-                f"actuators {i} and {j} are {distance[i, j]:.3g} cm apart; at least "
+                f"actuators[{i}] at {_point(positions[i])} cm and actuators[{j}] at "
+                f"{_point(positions[j])} cm are {distance[i, j]:.3g} cm apart; at least "
                 f"{_MIN_ACTUATOR_DISTANCE_CM} cm required (duplicate actuators)"
             )
         centred = positions - positions.mean(axis=0)
@@ -242,7 +242,8 @@ class DeviceProfile(_Frozen):
         span_cm = float(singular[0])
         if singular[1] <= 1e-6 * max(span_cm, 1.0):
             raise ValueError(
-                "actuators are collinear: a 2D layout needs actuators that span an area"
+                f"actuators at {', '.join(_point(p) for p in positions)} cm are collinear: "
+                "a 2D layout needs actuators that span an area"
             )
         for t, triangle in enumerate(self.triangles or ()):
             if any(not 0 <= k < n for k in triangle) or len(set(triangle)) != 3:
