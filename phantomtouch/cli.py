@@ -3,6 +3,7 @@
 ``phantomtouch render``   one pattern (JSON file or preset) to an 8-channel WAV (+ plot)
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder
+``phantomtouch devices``  list the sound card outputs (``*``: enough outputs for the armband)
 
 Errors print one line naming the field, the value and the allowed range, and exit 2.
 """
@@ -114,6 +115,29 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_devices(args: argparse.Namespace) -> int:
+    from phantomtouch.engine import list_output_devices
+
+    needed = _load_device(args.device).channels
+    devices = [
+        {**d, "enough_outputs": d["max_output_channels"] >= needed} for d in list_output_devices()
+    ]
+    if args.json:
+        print(json.dumps(devices, indent=2))
+        return 0
+    for d in devices:
+        mark = "*" if d["enough_outputs"] else " "
+        default = " (default)" if d["default"] else ""
+        print(
+            f"{mark} {d['index']:3d}  {d['name']}{default}: {d['max_output_channels']} outputs, "
+            f"{d['default_samplerate']:g} Hz, {d['hostapi']}"
+        )
+    if not devices:
+        print("no sound card outputs found")
+    print(f"* = at least {needed} outputs; an output is chosen by its index or a part of its name")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -138,6 +162,11 @@ def build_parser() -> argparse.ArgumentParser:
     stimuli.add_argument("-o", "--output", required=True, help="output folder")
     stimuli.add_argument("--device", help="device profile (TOML or JSON)")
     stimuli.set_defaults(func=_cmd_stimuli)
+
+    devices = sub.add_parser("devices", help="list sound card outputs")
+    devices.add_argument("--json", action="store_true", help="print the list as JSON")
+    devices.add_argument("--device", help="device profile whose channels are needed")
+    devices.set_defaults(func=_cmd_devices)
     return parser
 
 
