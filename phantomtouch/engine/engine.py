@@ -50,7 +50,7 @@ logger = logging.getLogger(__name__)
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
 MAX_QUEUE_CAPACITY = 1_000_000
-RENDER_AHEAD_FRAMES = 2048
+RENDER_AHEAD_FRAMES = 4096
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`)."""
 RENDER_AHEAD_RINGS = 32
 """Pattern voices that can render ahead at once; more render block by block."""

@@ -16,7 +16,6 @@ before it started) and ``("stop_all", frame)``.
 from __future__ import annotations
 
 import heapq
-import math
 import time
 from collections import deque
 from typing import Any
@@ -28,6 +27,9 @@ from phantomtouch.engine.commands import CommandQueue, StartCommand
 from phantomtouch.engine.mixer import Mixer
 from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
 from phantomtouch.schema.device import DeviceProfile
+
+REFILL_MARGIN = 1.25
+"""Render-ahead refills per block, relative to what the voices consume."""
 
 
 class Scheduler:
@@ -88,6 +90,7 @@ class Scheduler:
         self._voices: list[Voice] = []
         self._waiting: list[tuple[int, int, Voice]] = []
         self._stop_seen = 0
+        self._refill_credit = 0.0
 
     @property
     def late_commands(self) -> int:
@@ -146,9 +149,18 @@ class Scheduler:
                 if ahead is not None:
                     candidates.append((ahead, len(candidates), voice))
         self._voices = keep
-        if candidates:
-            budget = math.ceil(with_ring * self.block_frames / self.pool.chunk_frames)
-            for _, _, voice in sorted(candidates)[:budget]:
+        if not candidates:
+            self._refill_credit = 0.0
+            return
+        # Refill as many chunks as the voices play per block on average (a little more, to
+        # stay ahead), the emptiest first: the renderer's cost spreads evenly over blocks.
+        self._refill_credit += (
+            REFILL_MARGIN * with_ring * self.block_frames / self.pool.chunk_frames
+        )
+        due = min(len(candidates), int(self._refill_credit))
+        if due:
+            self._refill_credit -= due
+            for _, _, voice in sorted(candidates)[:due]:
                 voice.refill()
 
     def _apply_commands(self, start: int, end: int) -> None:

@@ -13,7 +13,7 @@ so the voice is silent from frame ``R + L - 1`` on and never clicks.
 Render-ahead
 ------------
 The block renderer's cost is almost all per call (about 0.1 ms whatever the block
-length), so a pattern voice renders ``chunk_frames`` (default 2048) frames at a time into
+length), so a pattern voice renders ``chunk_frames`` (default 4096) frames at a time into
 a ring of two chunks taken from a preallocated :class:`RingPool`, and the callback adds
 slices of it. The scheduler spreads the refills of all voices evenly over the blocks.
 The samples are the same: the block renderer gives identical samples however its output

@@ -38,8 +38,10 @@ def test_the_null_sink_pulls_blocks_at_real_time_pace() -> None:
     sink.stop()
     elapsed = time.monotonic() - began
     expected = elapsed * DEVICE.sample_rate_hz
-    # one block is pulled at the start of its period; allow the thread's wake-up jitter
-    assert expected - 3 * BLOCK <= counter.frames <= expected + 2 * BLOCK
+    # never ahead of the clock (a block is pulled at the start of its period); behind it
+    # only when the machine kept the thread from running (then counted as underruns)
+    assert counter.frames <= expected + 2 * BLOCK
+    assert counter.frames >= expected - 3 * BLOCK or sink.underruns > 0
     assert (sink.backend, sink.output_device, sink.output_latency_s) == ("null", None, 0.0)
     with pytest.raises(DeviceError, match="already running"):
         sink.start(counter)
