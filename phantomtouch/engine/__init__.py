@@ -10,13 +10,16 @@
     engine.contact_down("client", "finger", 1.9, 7.2)
     engine.close()
 
-Modules: :mod:`~phantomtouch.engine.engine` (the API), :mod:`~phantomtouch.engine.clock`,
-:mod:`~phantomtouch.engine.commands`, :mod:`~phantomtouch.engine.scheduler` (the audio
-callback), :mod:`~phantomtouch.engine.voices`, :mod:`~phantomtouch.engine.contacts`,
-:mod:`~phantomtouch.engine.mixer`, :mod:`~phantomtouch.engine.sinks`,
-:mod:`~phantomtouch.engine.soundcard`, :mod:`~phantomtouch.engine.jobs`,
-:mod:`~phantomtouch.engine.log`. The engine imports the renderer and the schema, never
-the server.
+Modules: :mod:`~phantomtouch.engine.engine` (the API), :mod:`~phantomtouch.engine.clock`
+(frames and server time), :mod:`~phantomtouch.engine.commands` (the bounded queue),
+:mod:`~phantomtouch.engine.scheduler` (the audio callback), :mod:`~phantomtouch.engine.voices`
+(pattern voices), :mod:`~phantomtouch.engine.contacts` (contact voices) and
+:mod:`~phantomtouch.engine.board` (their control side), :mod:`~phantomtouch.engine.mixer`
+(limiter, output stage, meters), :mod:`~phantomtouch.engine.sinks` (null, capture),
+:mod:`~phantomtouch.engine.soundcard` (PortAudio), :mod:`~phantomtouch.engine.jobs`,
+:mod:`~phantomtouch.engine.events` and :mod:`~phantomtouch.engine.log` (what was played),
+:mod:`~phantomtouch.engine.status`, :mod:`~phantomtouch.engine.checks`. The engine imports
+the renderer and the schema, never the server.
 """
 
 from phantomtouch.engine.contacts import ContactSettings

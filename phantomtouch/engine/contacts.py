@@ -144,6 +144,7 @@ class ContactVoice(Voice):
         self._target = target.gains
         self._unit = target.unit_gains
         self._channels = np.flatnonzero(target.gains)
+        self._channel_list: list[int] = self._channels.tolist()
         self._carrier_frames = 0
         self._down_burst = down_burst
         self._bursts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
@@ -190,6 +191,7 @@ class ContactVoice(Voice):
             self._target = box.gains
             self._unit = box.unit_gains
             self._channels = np.flatnonzero(self._gains + box.gains)
+            self._channel_list = self._channels.tolist()
         silent_from = self.silent_from
         if silent_from is not None:
             count = min(count, silent_from - first)
@@ -243,7 +245,8 @@ class ContactVoice(Voice):
             block = ramp[:, None] * (self._target[channels] - start)
             block += start
             block *= signal[:, None]
-        dest[:, channels] += block
+        for column, channel in enumerate(self._channel_list):  # cheaper than a fancy index
+            dest[:, channel] += block[:, column]
 
     def _add_bursts(self, mix: np.ndarray, block_start: int) -> None:
         block_end = block_start + mix.shape[0]
