@@ -21,7 +21,6 @@ reports (job states, the stimulus log) every 50 ms; the query methods collect it
 
 from __future__ import annotations
 
-import logging
 import threading
 import time
 import uuid
@@ -44,8 +43,6 @@ from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import Carrier, TouchPattern
-
-logger = logging.getLogger(__name__)
 
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
@@ -451,6 +448,11 @@ class Engine:
         A contact that is not down is ignored (``up`` is idempotent). With
         ``normal_velocity_m_s``, a lift-off transient is added at the last position.
         Never refused when the queue is full.
+
+        Raises
+        ------
+        ParameterError
+            An argument is out of range (ids, ``normal_velocity_m_s``, ``at_frame``).
         """
         with self._lock:
             self._board.up(
