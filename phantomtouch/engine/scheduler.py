@@ -154,9 +154,9 @@ class Scheduler:
             return
         # Refill as many chunks as the voices play per block on average (a little more, to
         # stay ahead), the emptiest first: the renderer's cost spreads evenly over blocks.
-        self._refill_credit += (
-            REFILL_MARGIN * with_ring * self.block_frames / self.pool.chunk_frames
-        )
+        # Unused credit is capped, so it never comes due as a burst of refills.
+        rate = REFILL_MARGIN * with_ring * self.block_frames / self.pool.chunk_frames
+        self._refill_credit = min(self._refill_credit + rate, rate + 1.0)
         due = min(len(candidates), int(self._refill_credit))
         if due:
             self._refill_credit -= due
