@@ -18,15 +18,22 @@ Modules: :mod:`~phantomtouch.engine.engine` (the API), :mod:`~phantomtouch.engin
 (limiter, output stage, meters), :mod:`~phantomtouch.engine.sinks` (null, capture),
 :mod:`~phantomtouch.engine.soundcard` (PortAudio), :mod:`~phantomtouch.engine.jobs`,
 :mod:`~phantomtouch.engine.events` and :mod:`~phantomtouch.engine.log` (what was played),
-:mod:`~phantomtouch.engine.status`, :mod:`~phantomtouch.engine.checks`. The engine imports
-the renderer and the schema, never the server.
+:mod:`~phantomtouch.engine.status`, :mod:`~phantomtouch.engine.checks`;
+:mod:`~phantomtouch.engine.process` and :mod:`~phantomtouch.engine.child` run the engine in
+a process of its own. The engine imports the renderer and the schema, never the server.
 """
 
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import Engine, EngineStatus
 from phantomtouch.engine.jobs import Job, JobState
+from phantomtouch.engine.process import ProcessEngine
 from phantomtouch.engine.sinks import CaptureSink, NullSink, Sink
-from phantomtouch.engine.soundcard import SoundDeviceSink, list_output_devices, open_default_sink
+from phantomtouch.engine.soundcard import (
+    SinkSpec,
+    SoundDeviceSink,
+    list_output_devices,
+    open_default_sink,
+)
 
 __all__ = [
     "CaptureSink",
@@ -36,7 +43,9 @@ __all__ = [
     "Job",
     "JobState",
     "NullSink",
+    "ProcessEngine",
     "Sink",
+    "SinkSpec",
     "SoundDeviceSink",
     "list_output_devices",
     "open_default_sink",

@@ -198,6 +198,11 @@ class Engine:
         return self._device
 
     @property
+    def sink(self) -> Sink:
+        """The sink the engine plays into (owned by the engine)."""
+        return self._sink
+
+    @property
     def sample_rate_hz(self) -> int:
         return self._device.sample_rate_hz
 

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
 import numpy as np
 
-from phantomtouch.engine.sinks import NullSink, RenderFn, Sink
+from phantomtouch.engine.sinks import CaptureSink, NullSink, RenderFn, Sink
 from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.schema.device import DeviceProfile
 
@@ -285,3 +286,48 @@ def open_default_sink(device: DeviceProfile, output: int | str | None = None) ->
     except DeviceError as exc:
         logger.info("no usable sound card (%s); using the null sink", exc)
         return NullSink(device)
+
+
+@dataclass(frozen=True)
+class SinkSpec:
+    """The sink the engine process opens.
+
+    Parameters
+    ----------
+    backend : {"default", "sounddevice", "null", "capture"}
+        ``"default"``: :func:`~phantomtouch.engine.open_default_sink` (the sound card with
+        enough outputs, else the null sink).
+    output : int, str or None
+        Sound card output (index or part of its name) for "default" and "sounddevice".
+    channel_map : tuple of int or None
+        For "sounddevice" (see :class:`~phantomtouch.engine.SoundDeviceSink`).
+    latency : {"low", "high"} or float
+        For "sounddevice".
+    wav_path : str or None
+        For "capture": a real-time capture sink whose recording is written to this
+        float32 WAV when the engine closes.
+    """
+
+    backend: str = "default"
+    output: int | str | None = None
+    channel_map: tuple[int, ...] | None = None
+    latency: float | str = "low"
+    wav_path: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.backend not in ("default", "sounddevice", "null", "capture"):
+            raise ParameterError(
+                f"backend={self.backend!r} must be 'default', 'sounddevice', 'null' or 'capture'"
+            )
+
+    def open(self, device: DeviceProfile) -> Sink:
+        """Open the sink (in the engine process)."""
+        if self.backend == "null":
+            return NullSink(device)
+        if self.backend == "capture":
+            return CaptureSink(device, realtime=True)
+        if self.backend == "sounddevice":
+            return SoundDeviceSink(
+                device, self.output, channel_map=self.channel_map, latency=self.latency
+            )
+        return open_default_sink(device, self.output)
