@@ -221,3 +221,31 @@ def start_jack_or_skip(**kwargs: int) -> JackServer:
         return JackServer(**kwargs).start()
     except JackUnavailable as exc:
         unavailable(str(exc))
+
+
+class JackXrunCounter:
+    """A JACK client without ports or process callback that counts the server's xruns.
+
+    Unlike :class:`JackRecorder` it never runs Python code in JACK's cycle, so a busy
+    interpreter in this process cannot itself make the cycle late.
+    """
+
+    def __init__(self, server: JackServer) -> None:
+        try:
+            import jack
+        except (ImportError, OSError) as exc:
+            raise JackUnavailable(f"JACK-Client is not usable: {exc}") from exc
+        self.client = jack.Client(
+            f"xruns-{uuid.uuid4().hex[:6]}", servername=server.name, no_start_server=True
+        )
+        self.xruns = 0
+        self.client.set_xrun_callback(self._xrun)
+        self.client.activate()
+
+    def _xrun(self, delay_usecs: float) -> None:
+        self.xruns += 1
+
+    def close(self) -> int:
+        self.client.deactivate()
+        self.client.close()
+        return self.xruns
