@@ -23,6 +23,7 @@ from phantomtouch import (
 )
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.errors import DeviceError
+from tests.support.jack import JackRecorder, JackServer
 
 DEVICE = DeviceProfile.default()
 STROKE = TouchPattern.model_validate(
@@ -143,3 +144,23 @@ def test_a_sink_the_child_cannot_open_is_a_device_error() -> None:
         ProcessEngine(DEVICE, SinkSpec("sounddevice", output="no such output device"))
     with pytest.raises(ParameterError, match="backend='alsa'"):
         SinkSpec("alsa")
+
+
+def test_the_engine_process_plays_bit_exact_over_jack(jack_server: JackServer) -> None:
+    engine = ProcessEngine(DEVICE, SinkSpec("sounddevice", "system"))
+    recorder = JackRecorder(jack_server, max_frames=10 * 48000)
+    try:
+        # the child's PortAudio client ("PortAudio-01" or so when this process has one too)
+        assert len(recorder.connect_from("PortAudio[^:]*")) == 8
+        engine.start()
+        job = engine.schedule(STROKE, start_frame=engine.now_frames + 9600)
+        wait_for_state(engine, job.job_id, "finished")
+    finally:
+        engine.close()
+        recording = recorder.close()
+    reference = render(STROKE, DEVICE)
+    at = int(np.flatnonzero(recording.any(axis=1))[0]) - int(
+        np.flatnonzero(reference.any(axis=1))[0]
+    )
+    np.testing.assert_array_equal(recording[at : at + len(reference)], reference)
+    assert not np.any(recording[at + len(reference) :])
