@@ -18,7 +18,7 @@
    deadlines were missed.
 
 Run: ``python benchmarks/bench_engine.py [--seconds 60] [--diagnose-seconds 20]
-[--blocks 3000] [--json]`` (about 2.5 minutes with the defaults). Nothing here is
+[--blocks 3000] [--json]`` (about 2 minutes with the defaults). Nothing here is
 asserted; numbers depend on the machine and its load.
 """
 

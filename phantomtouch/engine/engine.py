@@ -1,22 +1,10 @@
 """The real-time engine: patterns and live contacts played on the armband's sound card.
 
-::
-
-    from phantomtouch import DeviceProfile, preset
-    from phantomtouch.engine import Engine, open_default_sink
-
-    device = DeviceProfile.default()
-    with Engine(device, open_default_sink(device)) as engine:
-        job = engine.schedule(preset("exp2/curved"))            # as soon as possible
-        engine.contact_down("client-1", "index", 1.9, 12.0)     # a finger touches down
-        engine.contact_move("client-1", "index", 1.9, 11.5)     # ... moves (latest wins)
-        engine.contact_up("client-1", "index")                  # ... lifts off (release ramp)
-
-Threads: every public method may be called from any thread; they build small commands
-under the engine's lock (never held by the audio callback) and push them into a bounded
-queue that the audio callback drains at the start of each block (see
-:mod:`phantomtouch.engine.scheduler`). A housekeeping thread collects what the callback
-reports (job states, the stimulus log) every 50 ms; the query methods collect it too.
+Every public method may be called from any thread: it builds small commands under the
+engine's lock (never taken by the audio callback) and pushes them into a bounded queue
+that the callback drains at the start of each block (:mod:`phantomtouch.engine.scheduler`).
+A housekeeping thread collects what the callback reports (job states, the stimulus log)
+every 50 ms; the query methods collect it too. See the README for an example.
 """
 
 from __future__ import annotations
