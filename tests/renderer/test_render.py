@@ -51,7 +51,9 @@ def test_still_sine_has_rms_a_over_root_two_on_its_actuator_alone(channel, freq_
     pattern = still_on_actuator(channel, freq_hz, intensity="high")
     amplitude = pt.plan(pattern).amplitude
     out = pt.render(pattern)
-    steady = out[int(0.1 * FS) : int(1.1 * FS)]  # the fades excluded: whole cycles
+    # the fades excluded, and 20 ms after and before them, where the gain ramps round the
+    # envelope's corners (one gain update); 0.96 s holds whole cycles of all carriers
+    steady = out[int(0.12 * FS) : int(1.08 * FS)]
     # float32 samples: the RMS is exact to about 1e-7 relative.
     assert rms(steady[:, channel]) == pytest.approx(amplitude / np.sqrt(2), rel=1e-6)
     np.testing.assert_array_equal(np.delete(out, channel, axis=1), 0.0)
