@@ -28,9 +28,6 @@ from phantomtouch.engine.mixer import Mixer
 from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
 from phantomtouch.schema.device import DeviceProfile
 
-REFILL_MARGIN = 1.25
-"""Render-ahead refills per block, relative to what the voices consume."""
-
 
 class Scheduler:
     """Applies commands and renders blocks; owned by the audio callback.
@@ -152,10 +149,12 @@ class Scheduler:
         if not candidates:
             self._refill_credit = 0.0
             return
-        # Refill as many chunks as the voices play per block on average (a little more, to
-        # stay ahead), the emptiest first: the renderer's cost spreads evenly over blocks.
+        # Refill as many chunks as the voices play per block on average, the emptiest
+        # first: the renderer's cost spreads evenly over the blocks (one refill per block
+        # for 16 voices at 256 frames). More would put two refills into some blocks and
+        # raise the worst case; a voice that runs dry all the same refills at once.
         # Unused credit is capped, so it never comes due as a burst of refills.
-        rate = REFILL_MARGIN * with_ring * self.block_frames / self.pool.chunk_frames
+        rate = with_ring * self.block_frames / self.pool.chunk_frames
         self._refill_credit = min(self._refill_credit + rate, rate + 1.0)
         due = min(len(candidates), int(self._refill_credit))
         if due:

@@ -260,26 +260,30 @@ class PatternVoice(Voice):
         return block_start + frames >= self.silent_from
 
     def _add_ahead(self, dest: np.ndarray, gains: np.ndarray | None) -> None:
-        assert self._ring is not None
+        ring = self._ring
+        assert ring is not None
         count = dest.shape[0]
         while self._write - self._read < count:
             self.refill()
-        size = self._ring.shape[0]
-        at = self._read % size
-        first = min(count, size - at)
-        while self._spans and self._spans[0][0] <= self._read:
-            self._spans.popleft()
-        lo, hi = self._ring.shape[1], 0
-        for end, span_lo, span_hi in self._spans:
-            if span_hi > span_lo and end - self._chunk < self._read + count:  # overlaps the read
-                lo, hi = min(lo, span_lo), max(hi, span_hi)
+        read = self._read
+        spans = self._spans
+        while spans[0][0] <= read:  # chunks played out (the one being read stays)
+            spans.popleft()
+        _, lo, hi = spans[0]
+        if len(spans) > 1 and spans[0][0] < read + count:  # the read reaches the next chunk
+            _, next_lo, next_hi = spans[1]
+            if next_hi > next_lo:
+                lo, hi = (next_lo, next_hi) if hi <= lo else (min(lo, next_lo), max(hi, next_hi))
         if hi <= lo:
-            return
-        for d0, r0, n in ((0, at, first), (first, 0, count - first)):
-            if n <= 0:
-                continue
-            source = self._ring[r0 : r0 + n, lo:hi]
-            if gains is None:
-                dest[d0 : d0 + n, lo:hi] += source
-            else:
-                dest[d0 : d0 + n, lo:hi] += source * gains[d0 : d0 + n, None]
+            return  # silent here
+        size = ring.shape[0]
+        at = read % size
+        first = min(count, size - at)
+        if gains is None:
+            dest[:first, lo:hi] += ring[at : at + first, lo:hi]
+            if first < count:
+                dest[first:, lo:hi] += ring[: count - first, lo:hi]
+        else:
+            dest[:first, lo:hi] += ring[at : at + first, lo:hi] * gains[:first, None]
+            if first < count:
+                dest[first:, lo:hi] += ring[: count - first, lo:hi] * gains[first:, None]
