@@ -1,0 +1,46 @@
+"""Shared route dependencies as ``Annotated`` aliases."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated, Any
+
+from fastapi import Depends, Path
+from starlette.requests import HTTPConnection
+
+from phantomtouch.server.models import PATTERN_NAME_REGEX
+from phantomtouch.server.service import Service
+from phantomtouch.server.store import PatternStore
+
+if TYPE_CHECKING:
+    from phantomtouch.engine import Engine
+
+
+def get_service(connection: HTTPConnection) -> Service:
+    service: Service = connection.app.state.service
+    return service
+
+
+def get_engine(connection: HTTPConnection) -> Any:
+    return get_service(connection).engine
+
+
+def get_store(connection: HTTPConnection) -> PatternStore:
+    return get_service(connection).store
+
+
+ServiceDep = Annotated[Service, Depends(get_service)]
+if TYPE_CHECKING:
+    EngineDep = Engine
+else:
+    EngineDep = Annotated[Any, Depends(get_engine)]
+StoreDep = Annotated[PatternStore, Depends(get_store)]
+PatternNameParam = Annotated[
+    str,
+    Path(
+        min_length=1,
+        max_length=64,
+        pattern=PATTERN_NAME_REGEX,
+        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters.",
+        examples=["my-stroke"],
+    ),
+]

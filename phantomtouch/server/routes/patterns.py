@@ -1,0 +1,89 @@
+"""The pattern library: ``GET /patterns``, ``GET|PUT|DELETE /patterns/{name}``, play."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Body, Response
+
+from phantomtouch.schema import TouchPattern
+from phantomtouch.server import touch
+from phantomtouch.server.deps import EngineDep, PatternNameParam, ServiceDep, StoreDep
+from phantomtouch.server.errors import NotFoundError, responses
+from phantomtouch.server.models import (
+    JobAccepted,
+    NamedTouch,
+    PatternInfo,
+    PlanSummary,
+    PlayRequest,
+)
+
+router = APIRouter(prefix="/patterns", tags=["patterns"])
+
+
+@router.get("", response_model=list[PatternInfo], responses=responses(401), summary="The library")
+def list_patterns(store: StoreDep) -> list[PatternInfo]:
+    """Every stored pattern with its plan summary, sorted by name."""
+    return [
+        PatternInfo(name=name, summary=PlanSummary(**summary)) for name, summary in store.list()
+    ]
+
+
+@router.get(
+    "/{name}",
+    response_model=TouchPattern,
+    response_model_exclude_unset=True,
+    responses=responses(401, 404, 422),
+    summary="One stored pattern",
+)
+def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
+    """The pattern as it was stored with `PUT`."""
+    return touch.stored_pattern(store, name)
+
+
+@router.put(
+    "/{name}",
+    response_model=PatternInfo,
+    responses=responses(401, 413, 422),
+    summary="Store a pattern",
+)
+def put_pattern(
+    name: PatternNameParam, pattern: Annotated[TouchPattern, Body()], service: ServiceDep
+) -> PatternInfo:
+    """Store (or replace) a pattern; it is planned first, so only playable patterns are kept."""
+    summary = touch.plan_for(pattern, service.device).summary()
+    service.store.put(name, pattern, summary)
+    return PatternInfo(name=name, summary=PlanSummary(**summary))
+
+
+@router.delete(
+    "/{name}", status_code=204, responses=responses(401, 404, 422), summary="Remove a pattern"
+)
+def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
+    """Remove a stored pattern."""
+    if not store.delete(name):
+        raise NotFoundError(
+            f"pattern={name!r} is not in the pattern library (GET /patterns)",
+            field="name",
+            value=name,
+        )
+    return Response(status_code=204)
+
+
+@router.post(
+    "/{name}/play",
+    status_code=202,
+    response_model=JobAccepted,
+    responses=responses(401, 404, 413, 422, 503),
+    summary="Play a stored pattern",
+)
+def play_pattern(
+    name: PatternNameParam,
+    engine: EngineDep,
+    store: StoreDep,
+    timing: Annotated[PlayRequest | None, Body()] = None,
+) -> JobAccepted:
+    """As `POST /touch` with `{"pattern": name}`; optional `start_in_ms` or `start_at_s`."""
+    timing = timing or PlayRequest()
+    request = NamedTouch(pattern=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
+    return touch.schedule(engine, request, store)
