@@ -20,6 +20,7 @@ from fastapi.staticfiles import StaticFiles
 from phantomtouch import __version__
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.server import errors
+from phantomtouch.server.bodies import merge_components
 from phantomtouch.server.engine_access import describe_output, open_engine
 from phantomtouch.server.limits import BodyLimitMiddleware, TokenMiddleware
 from phantomtouch.server.metrics import Metrics, MetricsMiddleware
@@ -74,6 +75,7 @@ def _openapi(app: FastAPI, settings: Settings) -> Any:
                 routes=app.routes,
                 tags=app.openapi_tags,
             )
+            merge_components(document)
             if settings.token is not None:
                 document.setdefault("components", {})["securitySchemes"] = {
                     "bearer": {"type": "http", "scheme": "bearer"}
@@ -95,6 +97,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version=__version__,
         description=DESCRIPTION,
         lifespan=_lifespan(settings, metrics),
+        separate_input_output_schemas=False,
         openapi_tags=[
             {"name": "touch", "description": "Play and stop touches."},
             {"name": "patterns", "description": "The pattern library (SQLite)."},

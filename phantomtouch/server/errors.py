@@ -279,9 +279,10 @@ async def _http_exception(request: Request, exc: Exception) -> JSONResponse:
     problem = describe(TooLargeError(exc.detail, field="body")) if exc.status_code == 413 else None
     if problem is None:
         message = str(exc.detail)
-        problem = Problem(
-            exc.status_code, "invalid", message, [_problem("body", None, message)], headers
-        )
+        if exc.status_code == 400:
+            message = f"the body is not JSON in UTF-8: {message}"
+        status = 422 if exc.status_code == 400 else exc.status_code
+        problem = Problem(status, "invalid", message, [_problem("body", None, message)], headers)
     return problem_response(problem)
 
 

@@ -19,6 +19,7 @@ from pydantic import (
     create_model,
     model_validator,
 )
+from pydantic.config import JsonDict
 
 from phantomtouch.schema import TouchPattern
 from phantomtouch.schema.device import Actuator
@@ -43,8 +44,14 @@ class _Body(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+_TIMING_FIELDS = frozenset({"start_in_ms", "start_at_s"})
+_NOT_BOTH_STARTS: JsonDict = {"not": {"required": ["start_in_ms", "start_at_s"]}}
+
+
 class Timing(_Body):
     """When a touch starts: ``start_in_ms`` from now, or ``start_at_s`` on the server clock."""
+
+    model_config = ConfigDict(json_schema_extra=_NOT_BOTH_STARTS)
 
     start_in_ms: float | None = Field(
         default=None,
@@ -63,7 +70,7 @@ class Timing(_Body):
 
     @model_validator(mode="after")
     def _one_start(self) -> Self:
-        if self.start_in_ms is not None and self.start_at_s is not None:
+        if self.model_fields_set >= _TIMING_FIELDS:
             raise ValueError(
                 f"give start_in_ms ({self.start_in_ms!r}) or start_at_s ({self.start_at_s!r}), "
                 "not both"
@@ -74,9 +81,6 @@ class Timing(_Body):
         return Timing(start_in_ms=self.start_in_ms, start_at_s=self.start_at_s)
 
 
-_TIMING_FIELDS = frozenset({"start_in_ms", "start_at_s"})
-
-
 class PatternTouch(TouchPattern, Timing):
     """A whole ``TouchPattern``, plus optional timing."""
 
@@ -84,13 +88,14 @@ class PatternTouch(TouchPattern, Timing):
         extra="forbid",
         frozen=True,
         json_schema_extra={
+            **_NOT_BOTH_STARTS,
             "examples": [
                 {
                     "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
                     "speed_cm_s": 5.0,
                     "start_in_ms": 20.0,
                 }
-            ]
+            ],
         },
     )
 
@@ -137,7 +142,8 @@ class PresetTouch(Timing):
         extra="forbid",
         frozen=True,
         json_schema_extra={
-            "examples": [{"preset": "exp2/curved", "overrides": {"intensity": "high"}}]
+            **_NOT_BOTH_STARTS,
+            "examples": [{"preset": "exp2/curved", "overrides": {"intensity": "high"}}],
         },
     )
 
@@ -160,7 +166,9 @@ class NamedTouch(Timing):
     """A pattern stored in the library (`GET /patterns`), with optional timing."""
 
     model_config = ConfigDict(
-        extra="forbid", frozen=True, json_schema_extra={"examples": [{"pattern": "my-stroke"}]}
+        extra="forbid",
+        frozen=True,
+        json_schema_extra={**_NOT_BOTH_STARTS, "examples": [{"pattern": "my-stroke"}]},
     )
 
     pattern: PatternName

@@ -138,13 +138,13 @@ def parse(text: str) -> ClientMessage:
     model = SIMPLE_TYPES.get(kind) if isinstance(kind, str) else None
     try:
         if model is not None:
-            return cast(ClientMessage, model.model_validate(data))
+            return cast(ClientMessage, model.model_validate_json(text, strict=True))
         if kind == "play":
             request = {k: v for k, v in data.items() if k not in ("type", "id")}
             return Play(
                 type="play",
                 id=data.get("id"),
-                request=touch_request_adapter.validate_python(request),
+                request=touch_request_adapter.validate_json(json.dumps(request), strict=True),
             )
     except ValidationError as exc:
         raise MessageError(invalid(field_problems(exc.errors())), message_id) from None

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Response
+from fastapi import APIRouter, Depends, Response
+from pydantic import TypeAdapter
 
 from phantomtouch.schema import TouchPattern
 from phantomtouch.server import touch
+from phantomtouch.server.bodies import strict_body
 from phantomtouch.server.deps import EngineDep, PatternNameParam, ServiceDep, StoreDep
 from phantomtouch.server.errors import NotFoundError, responses
 from phantomtouch.server.models import (
@@ -19,6 +21,11 @@ from phantomtouch.server.models import (
 )
 
 router = APIRouter(prefix="/patterns", tags=["patterns"])
+
+pattern_body, PATTERN_BODY_OPENAPI = strict_body(TypeAdapter(TouchPattern))
+play_body, PLAY_BODY_OPENAPI = strict_body(
+    TypeAdapter(PlayRequest), required=False, default=PlayRequest()
+)
 
 
 @router.get("", response_model=list[PatternInfo], responses=responses(401), summary="The library")
@@ -46,9 +53,12 @@ def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
     response_model=PatternInfo,
     responses=responses(401, 413, 422),
     summary="Store a pattern",
+    openapi_extra=PATTERN_BODY_OPENAPI,
 )
 def put_pattern(
-    name: PatternNameParam, pattern: Annotated[TouchPattern, Body()], service: ServiceDep
+    name: PatternNameParam,
+    pattern: Annotated[TouchPattern, Depends(pattern_body)],
+    service: ServiceDep,
 ) -> PatternInfo:
     """Store (or replace) a pattern; it is planned first, so only playable patterns are kept."""
     summary = touch.plan_for(pattern, service.device).summary()
@@ -76,14 +86,14 @@ def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
     response_model=JobAccepted,
     responses=responses(401, 404, 413, 422, 503),
     summary="Play a stored pattern",
+    openapi_extra=PLAY_BODY_OPENAPI,
 )
 def play_pattern(
     name: PatternNameParam,
     engine: EngineDep,
     store: StoreDep,
-    timing: Annotated[PlayRequest | None, Body()] = None,
+    timing: Annotated[PlayRequest, Depends(play_body)],
 ) -> JobAccepted:
     """As `POST /touch` with `{"pattern": name}`; optional `start_in_ms` or `start_at_s`."""
-    timing = timing or PlayRequest()
     request = NamedTouch(pattern=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
     return touch.schedule(engine, request, store)

@@ -8,7 +8,7 @@ from typing import IO, Annotated
 
 import numpy as np
 import soundfile
-from fastapi import APIRouter, Body, Header, Response
+from fastapi import APIRouter, Header, Response
 from fastapi.responses import StreamingResponse
 
 from phantomtouch.errors import ParameterError
@@ -18,7 +18,8 @@ from phantomtouch.renderer.trajectory import control_gains, positions_at
 from phantomtouch.server import touch
 from phantomtouch.server.deps import ServiceDep
 from phantomtouch.server.errors import responses
-from phantomtouch.server.models import Curves, RenderPlan, TouchRequest
+from phantomtouch.server.models import Curves, RenderPlan
+from phantomtouch.server.routes.touch import TOUCH_BODY_OPENAPI, TouchBody
 
 router = APIRouter(tags=["render"])
 
@@ -78,9 +79,10 @@ def _chunks(file: IO[bytes]) -> Iterator[bytes]:
         **responses(401, 404, 413, 422, 429),
     },
     summary="Render a touch offline",
+    openapi_extra=TOUCH_BODY_OPENAPI,
 )
 def post_render(
-    request: Annotated[TouchRequest, Body()],
+    request: TouchBody,
     service: ServiceDep,
     accept: Annotated[str | None, Header(include_in_schema=False)] = None,
 ) -> Response | RenderPlan:

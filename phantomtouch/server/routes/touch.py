@@ -4,15 +4,27 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body
+from fastapi import APIRouter, Depends
 from fastapi import Path as PathParam
 
 from phantomtouch.server import touch
+from phantomtouch.server.bodies import strict_body
 from phantomtouch.server.deps import EngineDep, StoreDep
 from phantomtouch.server.errors import NotFoundError, responses
-from phantomtouch.server.models import JobAccepted, JobInfo, StopAnswer, TouchRequest
+from phantomtouch.server.models import (
+    JobAccepted,
+    JobInfo,
+    NamedTouch,
+    PatternTouch,
+    PresetTouch,
+    StopAnswer,
+    touch_request_adapter,
+)
 
 router = APIRouter(tags=["touch"])
+
+touch_body, TOUCH_BODY_OPENAPI = strict_body(touch_request_adapter)
+TouchBody = Annotated[PatternTouch | PresetTouch | NamedTouch, Depends(touch_body)]
 
 JobIdParam = Annotated[
     str, PathParam(min_length=1, max_length=64, description="As `POST /touch` answered it.")
@@ -25,10 +37,9 @@ JobIdParam = Annotated[
     response_model=JobAccepted,
     responses=responses(401, 404, 413, 422, 503),
     summary="Play a touch",
+    openapi_extra=TOUCH_BODY_OPENAPI,
 )
-async def post_touch(
-    request: Annotated[TouchRequest, Body()], engine: EngineDep, store: StoreDep
-) -> JobAccepted:
+async def post_touch(request: TouchBody, engine: EngineDep, store: StoreDep) -> JobAccepted:
     """Schedule a touch: a whole pattern, a preset with overrides, or a stored pattern.
 
     Without `start_in_ms` or `start_at_s` it starts as soon as possible. 404 names an
