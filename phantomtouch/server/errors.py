@@ -179,7 +179,7 @@ def _location(loc: Sequence[int | str], *, tags: set[str]) -> str:
     items = list(loc)
     if items and items[0] in _LOCATION_PREFIXES:
         items = items[1:]
-    if items and items[0] in tags:
+    if len(items) > 1 and items[0] in tags:
         items = items[1:]
     parts: list[str] = []
     for item in items:
