@@ -258,13 +258,16 @@ JobStateName = Literal["scheduled", "playing", "finished", "stopped"]
 
 
 class JobInfo(BaseModel):
+    """Where a job is; times on the server clock."""
+
     job_id: str
     state: JobStateName
-    start_at_s: float
+    start_at_s: float = Field(description="First sample (actual once started), s.")
     start_frame: int
-    end_at_s: float | None = Field(description="Server time the job ends (or ended), s.")
-    end_frame: int | None
-    duration_s: float | None
+    end_at_s: float = Field(description="From here on silent (after a stop: its release), s.")
+    end_frame: int
+    duration_s: float = Field(description="The pattern's duration, s.")
+    late: bool = Field(description="It started after its requested start.")
 
 
 class StopAnswer(BaseModel):

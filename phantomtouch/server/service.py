@@ -6,7 +6,7 @@ import itertools
 import secrets
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.server.errors import RateLimitedError
@@ -21,6 +21,13 @@ if TYPE_CHECKING:
     from phantomtouch.engine import Engine
 
 
+class ContactHolder(Protocol):
+    """A connection that holds contacts (a WebSocket session)."""
+
+    def contacts_released(self, reason: str) -> None:
+        """The engine let go of every contact of this connection."""
+
+
 @dataclass
 class Service:
     """The running parts, built by the app's lifespan and shared by every request."""
@@ -32,6 +39,7 @@ class Service:
     metrics: Metrics
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
+    holders: set[ContactHolder] = field(default_factory=set, init=False)
 
     def __post_init__(self) -> None:
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
@@ -39,6 +47,15 @@ class Service:
     def new_owner(self) -> str:
         """A unique owner id for one WebSocket connection's contacts and jobs."""
         return f"ws-{next(self._owners)}-{secrets.token_hex(3)}"
+
+    def stop_everything(self) -> None:
+        """Every job and every contact of every client off, at once (never queued).
+
+        Each connection is told which of its contacts were let go (``released``).
+        """
+        self.engine.stop_all()
+        for holder in list(self.holders):
+            holder.contacts_released("stop")
 
     def render_slot(self) -> AbstractContextManager[None]:
         """Hold one of the ``max_concurrent_renders`` slots, or refuse with 429."""

@@ -111,6 +111,7 @@ class Session:
         self.last_message_s = time.monotonic()
         self._send_lock = asyncio.Lock()
         self._state_task: asyncio.Task[None] | None = None
+        self._notices: set[asyncio.Task[None]] = set()
         self._count_in = service.metrics.ws_messages.labels("in", "move")
 
     # -- the state machine -------------------------------------------------------------
@@ -125,6 +126,7 @@ class Session:
         await self.websocket.accept()
         self._expect(SessionState.CONNECTING, SessionState.OPEN)
         self.service.metrics.ws_connections.inc()
+        self.service.holders.add(self)
         watchdog = asyncio.create_task(self._watchdog())
         code: int | None = None
         reason = ""
@@ -141,6 +143,7 @@ class Session:
             pass
         finally:
             self._expect(SessionState.OPEN, SessionState.CLOSED)
+            self.service.holders.discard(self)
             watchdog.cancel()
             if self._state_task is not None:
                 self._state_task.cancel()
@@ -268,17 +271,15 @@ class Session:
 
     async def _stop(self, message: Stop) -> None:
         if message.job_id is None:
-            self.engine.stop_all()
-            self.contacts.clear()
+            self.service.stop_everything()
         else:
-            key = touch.job_key(message.job_id)
-            if key is None or self.engine.job_state(key) is None:
+            if self.engine.job_state(message.job_id) is None:
                 raise NotFoundError(
                     f"job_id={message.job_id!r} is not a known job",
                     field="job_id",
                     value=message.job_id,
                 )
-            self.engine.stop(key)
+            self.engine.stop(message.job_id)
         await self._ok(message)
 
     def _welcome(self, message: Hello) -> dict[str, Any]:
@@ -313,7 +314,7 @@ class Session:
         due = loop.time()
         while self.state is SessionState.OPEN:
             status = self.engine.status().to_dict()
-            await self._send(
+            await self._send_unless_gone(
                 {
                     "type": "state",
                     "server_time_s": self.engine.server_time_s(),
@@ -342,12 +343,21 @@ class Session:
                 await asyncio.sleep(self.watchdog_s - silent_s)
                 continue
             if self.contacts:
-                released = sorted(self.contacts)
                 self.engine.release_owner(self.owner)
-                self.contacts.clear()
                 self.service.metrics.ws_watchdog_releases.inc()
-                await self._send({"type": "released", "reason": "watchdog", "contacts": released})
+                self.contacts_released("watchdog")
             await asyncio.sleep(self.watchdog_s)
+
+    def contacts_released(self, reason: str) -> None:
+        """The engine let go of this connection's contacts: forget them, tell the client."""
+        if not self.contacts or self.state is not SessionState.OPEN:
+            self.contacts.clear()
+            return
+        notice = {"type": "released", "reason": reason, "contacts": sorted(self.contacts)}
+        self.contacts.clear()
+        task = asyncio.get_running_loop().create_task(self._send_unless_gone(notice))
+        self._notices.add(task)
+        task.add_done_callback(self._notices.discard)
 
     # -- sending ------------------------------------------------------------------------
 
@@ -358,6 +368,13 @@ class Session:
         async with self._send_lock:
             await self.websocket.send_text(text)
         self.service.metrics.ws_messages.labels("out", message["type"]).inc()
+
+    async def _send_unless_gone(self, message: dict[str, Any]) -> None:
+        """Send from a background task; a connection that is gone is not an error there."""
+        try:
+            await self._send(message)
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            return
 
     async def _ok(self, message: ClientMessage, result: Any = None) -> None:
         if message.id is None:

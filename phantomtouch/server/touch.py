@@ -106,8 +106,3 @@ def schedule(
     resolved = plan_for(pattern, engine.device)
     job = engine.schedule(resolved, start_frame=first, owner=owner)
     return accepted(engine, job)
-
-
-def job_key(job_id: str) -> int | None:
-    """The engine's id of a job from its text form; None if it cannot be one."""
-    return int(job_id) if job_id.isdecimal() and len(job_id) <= 18 else None

@@ -9,7 +9,7 @@ from fastapi import Path as PathParam
 
 from phantomtouch.server import touch
 from phantomtouch.server.bodies import strict_body
-from phantomtouch.server.deps import EngineDep, StoreDep
+from phantomtouch.server.deps import EngineDep, ServiceDep, StoreDep
 from phantomtouch.server.errors import NotFoundError, responses
 from phantomtouch.server.models import (
     JobAccepted,
@@ -54,33 +54,30 @@ async def post_touch(request: TouchBody, engine: EngineDep, store: StoreDep) -> 
     responses=responses(401),
     summary="Everything off",
 )
-async def post_stop(engine: EngineDep) -> StopAnswer:
+async def post_stop(service: ServiceDep) -> StopAnswer:
     """Stop every job and release every contact of every client, at once.
 
     Runs on the event loop directly (never behind a worker queue) and never answers
     `busy`.
     """
-    engine.stop_all()
-    return StopAnswer(server_time_s=engine.server_time_s())
+    service.stop_everything()
+    return StopAnswer(server_time_s=service.engine.server_time_s())
 
 
 def job_info(engine: Any, job_id: str) -> JobInfo:
     """A job's state; an unknown id is :class:`NotFoundError`."""
-    key = touch.job_key(job_id)
-    state = None if key is None else engine.job_state(key)
+    state = engine.job_state(job_id)
     if state is None:
         raise NotFoundError(f"job_id={job_id!r} is not a known job", field="job_id", value=job_id)
-    end_frame = state.end_frame
     return JobInfo(
         job_id=job_id,
         state=state.state,
         start_at_s=engine.time_at(state.start_frame),
         start_frame=state.start_frame,
-        end_at_s=None if end_frame is None else engine.time_at(end_frame),
-        end_frame=end_frame,
-        duration_s=None
-        if end_frame is None
-        else (end_frame - state.start_frame) / engine.sample_rate_hz,
+        end_at_s=engine.time_at(state.end_frame),
+        end_frame=state.end_frame,
+        duration_s=state.duration_s,
+        late=state.late,
     )
 
 
@@ -99,9 +96,9 @@ async def get_job(job_id: JobIdParam, engine: EngineDep) -> JobInfo:
     summary="Stop a job",
 )
 async def delete_job(job_id: JobIdParam, engine: EngineDep) -> JobInfo:
-    """Stop one job (with its release ramp) and answer its new state."""
-    key = touch.job_key(job_id)
-    if key is None or engine.job_state(key) is None:
-        raise NotFoundError(f"job_id={job_id!r} is not a known job", field="job_id", value=job_id)
-    engine.stop(key)
+    """Stop one job (with its release ramp) and answer its new state.
+
+    A job that is over already keeps its state (`finished` or `stopped`).
+    """
+    engine.stop(job_id)
     return job_info(engine, job_id)
