@@ -44,8 +44,12 @@ class _Body(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-_TIMING_FIELDS = frozenset({"start_in_ms", "start_at_s"})
-_NOT_BOTH_STARTS: JsonDict = {"not": {"required": ["start_in_ms", "start_at_s"]}}
+_NOT_BOTH_STARTS: JsonDict = {
+    "not": {
+        "required": ["start_in_ms", "start_at_s"],
+        "properties": {"start_in_ms": {"type": "number"}, "start_at_s": {"type": "number"}},
+    }
+}
 
 
 class Timing(_Body):
@@ -70,7 +74,7 @@ class Timing(_Body):
 
     @model_validator(mode="after")
     def _one_start(self) -> Self:
-        if self.model_fields_set >= _TIMING_FIELDS:
+        if self.start_in_ms is not None and self.start_at_s is not None:
             raise ValueError(
                 f"give start_in_ms ({self.start_in_ms!r}) or start_at_s ({self.start_at_s!r}), "
                 "not both"
@@ -100,7 +104,7 @@ class PatternTouch(TouchPattern, Timing):
     )
 
     def pattern(self) -> TouchPattern:
-        data = self.model_dump(exclude=set(_TIMING_FIELDS), exclude_unset=True)
+        data = self.model_dump(exclude={"start_in_ms", "start_at_s"}, exclude_unset=True)
         return TouchPattern.model_validate(data)
 
 
