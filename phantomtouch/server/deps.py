@@ -15,17 +15,22 @@ if TYPE_CHECKING:
     from phantomtouch.engine import Engine
 
 
-def get_service(connection: HTTPConnection) -> Service:
+# The dependencies are ``async`` so that FastAPI calls them on the event loop instead of
+# handing each to a worker thread (a thread hop per dependency per request).
+
+
+async def get_service(connection: HTTPConnection) -> Service:
     service: Service = connection.app.state.service
     return service
 
 
-def get_engine(connection: HTTPConnection) -> Any:
-    return get_service(connection).engine
+async def get_engine(connection: HTTPConnection) -> Any:
+    return connection.app.state.service.engine
 
 
-def get_store(connection: HTTPConnection) -> PatternStore:
-    return get_service(connection).store
+async def get_store(connection: HTTPConnection) -> PatternStore:
+    store: PatternStore = connection.app.state.service.store
+    return store
 
 
 ServiceDep = Annotated[Service, Depends(get_service)]

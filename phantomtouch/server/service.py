@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Protocol
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.server.errors import RateLimitedError
 from phantomtouch.server.metrics import Metrics
+from phantomtouch.server.plans import PlanCache
 from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
 
@@ -37,12 +38,14 @@ class Service:
     engine: Engine
     store: PatternStore
     metrics: Metrics
+    plans: PlanCache = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
     holders: set[ContactHolder] = field(default_factory=set, init=False)
 
     def __post_init__(self) -> None:
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
+        self.plans = PlanCache(self.device)
 
     def new_owner(self) -> str:
         """A unique owner id for one WebSocket connection's contacts and jobs."""

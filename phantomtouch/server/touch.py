@@ -21,6 +21,7 @@ from phantomtouch.server.store import PatternStore
 
 if TYPE_CHECKING:
     from phantomtouch.engine import Engine, Job
+    from phantomtouch.server.service import Service
 
 LATE_START_TOLERANCE_S = 1.0
 """How far in the past a ``start_at_s`` may lie (it then starts at once)."""
@@ -94,15 +95,14 @@ def accepted(engine: Engine, job: Job) -> JobAccepted:
 
 
 def schedule(
-    engine: Engine,
+    service: Service,
     request: PatternTouch | PresetTouch | NamedTouch,
-    store: PatternStore,
     *,
     owner: str | None = None,
 ) -> JobAccepted:
     """Resolve, plan and schedule a touch request; the answer of ``POST /touch``."""
-    pattern = resolve(request, store)
+    engine = service.engine
+    pattern = resolve(request, service.store)
     first = start_frame(engine, request.timing())
-    resolved = plan_for(pattern, engine.device)
-    job = engine.schedule(resolved, start_frame=first, owner=owner)
+    job = engine.schedule(service.plans.plan(pattern), start_frame=first, owner=owner)
     return accepted(engine, job)

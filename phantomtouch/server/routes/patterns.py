@@ -10,7 +10,7 @@ from pydantic import TypeAdapter
 from phantomtouch.schema import TouchPattern
 from phantomtouch.server import touch
 from phantomtouch.server.bodies import strict_body
-from phantomtouch.server.deps import EngineDep, PatternNameParam, ServiceDep, StoreDep
+from phantomtouch.server.deps import PatternNameParam, ServiceDep, StoreDep
 from phantomtouch.server.errors import NotFoundError, responses
 from phantomtouch.server.models import (
     JobAccepted,
@@ -61,7 +61,7 @@ def put_pattern(
     service: ServiceDep,
 ) -> PatternInfo:
     """Store (or replace) a pattern; it is planned first, so only playable patterns are kept."""
-    summary = touch.plan_for(pattern, service.device).summary()
+    summary = service.plans.plan(pattern).summary()
     service.store.put(name, pattern, summary)
     return PatternInfo(name=name, summary=PlanSummary(**summary))
 
@@ -90,10 +90,9 @@ def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
 )
 def play_pattern(
     name: PatternNameParam,
-    engine: EngineDep,
-    store: StoreDep,
+    service: ServiceDep,
     timing: Annotated[PlayRequest, Depends(play_body)],
 ) -> JobAccepted:
     """As `POST /touch` with `{"pattern": name}`; optional `start_in_ms` or `start_at_s`."""
     request = NamedTouch(pattern=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
-    return touch.schedule(engine, request, store)
+    return touch.schedule(service, request)

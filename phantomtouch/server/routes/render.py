@@ -92,7 +92,7 @@ def post_render(
     (`max_concurrent_renders`), more are refused with 429.
     """
     pattern = touch.resolve(request, service.store)
-    plan = touch.plan_for(pattern, service.device)
+    plan = service.plans.plan(pattern)
     if accept is not None and "application/json" in accept and WAV_MEDIA_TYPE not in accept:
         with service.render_slot():
             return RenderPlan(**plan.summary(), curves=curves(plan))

@@ -9,7 +9,7 @@ from fastapi import Path as PathParam
 
 from phantomtouch.server import touch
 from phantomtouch.server.bodies import strict_body
-from phantomtouch.server.deps import EngineDep, ServiceDep, StoreDep
+from phantomtouch.server.deps import EngineDep, ServiceDep
 from phantomtouch.server.errors import NotFoundError, responses
 from phantomtouch.server.models import (
     JobAccepted,
@@ -39,13 +39,13 @@ JobIdParam = Annotated[
     summary="Play a touch",
     openapi_extra=TOUCH_BODY_OPENAPI,
 )
-async def post_touch(request: TouchBody, engine: EngineDep, store: StoreDep) -> JobAccepted:
+async def post_touch(request: TouchBody, service: ServiceDep) -> JobAccepted:
     """Schedule a touch: a whole pattern, a preset with overrides, or a stored pattern.
 
     Without `start_in_ms` or `start_at_s` it starts as soon as possible. 404 names an
     unknown preset or stored pattern; 503 `busy` means the engine's queue is full.
     """
-    return touch.schedule(engine, request, store)
+    return touch.schedule(service, request)
 
 
 @router.post(
