@@ -30,7 +30,8 @@ def open_engine(settings: Settings, device: DeviceProfile) -> Engine:
     if settings.output_device == NULL_OUTPUT:
         sink = NullSink(device)
     else:
-        sink = open_default_sink(device, settings.output_device)
+        output = settings.output_device
+        sink = open_default_sink(device, int(output) if output and output.isdecimal() else output)
     engine = Engine(
         device, sink, queue_capacity=settings.queue_capacity, log_path=settings.engine_log_path
     )
