@@ -165,7 +165,7 @@ def test_stop_under_load(live: LiveServer) -> None:
     threads = [threading.Thread(target=hammer) for _ in range(clients)]
     for thread in threads:
         thread.start()
-    assert wait_until(lambda: len(statuses) >= 100, 10.0), "load is running"
+    assert wait_until(lambda: len(statuses) >= 400, 10.0), "load is running"
     with httpx.Client(base_url=live.url, timeout=10) as client:
         stop_sent.set()
         started = time.monotonic()
