@@ -8,8 +8,11 @@ and in time. Measured in the same run:
   cheapest request the framework can answer), and a plain ``json.loads`` of a ``move``
   message in this process;
 - ``POST /touch`` throughput and p50/p99 latency, a few keep-alive connections, one
-  request in flight each: the ``vr/tap`` preset (a VR collision; its plan is cached after
-  the first), and an inline stroke whose speed changes every request (planned every time);
+  request in flight each: a 20 ms tap (its plan is cached after the first request), the
+  same tap with a duration that changes every request (planned every time), and the
+  ``vr/tap`` preset (150 ms: at 1500 touches per second the engine renders some 225
+  voices at once; its underruns and late commands are reported). Between phases
+  ``POST /stop`` and a wait until no voice plays;
 - WebSocket ``move`` ingest: connections send pre-built frames as fast as the socket takes
   them, then a ``ping``; moves per second is the count over the time to its ``pong``
   (frames are handled in order). Receipt-to-engine is the server's own histogram
@@ -48,14 +51,23 @@ from tests.support.live_server import HOST, LiveServer
 TIME_BUDGET_S = 20.0
 """No single measurement runs longer than this."""
 
-TAP = b'{"preset": "vr/tap"}'
+VR_TAP = b'{"preset": "vr/tap"}'
 
 
-def stroke(k: int) -> bytes:
-    speed = 5.0 + (k % 100_000) * 1e-5
+def short_tap(k: int | None = None) -> bytes:
+    """A 20 ms touch in the middle of the armband; ``k`` makes each one a new pattern."""
+    duration_s = 0.02 if k is None else 0.02 + (k % 100_000) * 1e-7
     return json.dumps(
-        {"path": {"kind": "polyline", "points_cm": [[1.9, 12], [1.9, 2.4]]}, "speed_cm_s": speed}
+        {
+            "path": {"kind": "polyline", "points_cm": [[1.9, 7.2]]},
+            "duration_s": duration_s,
+            "fade_in_s": 0.005,
+            "fade_out_s": 0.01,
+        }
     ).encode()
+
+
+SHORT_TAP = short_tap()
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -241,11 +253,106 @@ def move_round_trip(port: int, *, hands: int, seconds: float) -> dict[str, Any]:
     }
 
 
-def ingest_histogram(port: int) -> dict[str, Any]:
-    """p50/p99 upper bounds from the server's receipt-to-engine histogram."""
+def metrics_text(port: int) -> str:
     import httpx
 
-    text = httpx.get(f"http://{HOST}:{port}/metrics").text
+    return httpx.get(f"http://{HOST}:{port}/metrics").text
+
+
+def engine_counters(port: int) -> dict[str, float]:
+    text = metrics_text(port)
+    names = ("active_voices", "underruns_total", "late_commands_total")
+    return {
+        name: float(re.search(rf"^phantomtouch_{name} (\S+)$", text, re.MULTILINE).group(1))  # type: ignore[union-attr]
+        for name in names
+    }
+
+
+def quiet(port: int) -> None:
+    """Everything off, then wait (at most 10 s) until no voice plays."""
+    import httpx
+
+    httpx.post(f"http://{HOST}:{port}/stop")
+    deadline = time.monotonic() + 10.0
+    while engine_counters(port)["active_voices"] and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
+def clock(port: int) -> dict[str, Any]:
+    import httpx
+
+    answer: dict[str, Any] = httpx.get(f"http://{HOST}:{port}/clock").json()
+    return answer
+
+
+def touch_phase(port: int, make: Any, *, count: int) -> dict[str, Any]:
+    """Touches from 4 connections; what the engine made of them (its clock, voices)."""
+    quiet(port)
+    before, start = engine_counters(port), clock(port)
+    result = http_load(port, make, connections=4, count=count)
+    after, end = engine_counters(port), clock(port)
+    elapsed_s = end["server_time_s"] - start["server_time_s"]
+    result["accepted_per_s"] = result["statuses"].get(202, 0) / elapsed_s
+    result["audio_clock_ratio"] = (end["frames"] - start["frames"]) / (
+        elapsed_s * end["sample_rate_hz"]
+    )
+    result["voices_at_end"] = int(after["active_voices"])
+    result["underruns"] = int(after["underruns_total"] - before["underruns_total"])
+    result["late_commands"] = int(after["late_commands_total"] - before["late_commands_total"])
+    return result
+
+
+async def _paced_client(
+    port: int, body: bytes, rate_per_s: float, seconds: float, latencies: list[float]
+) -> int:
+    reader, writer = await asyncio.open_connection(HOST, port)
+    data = request("POST", "/touch", body)
+    accepted = 0
+    due = time.perf_counter()
+    try:
+        for _ in range(int(rate_per_s * seconds)):
+            await asyncio.sleep(max(0.0, due - time.perf_counter()))
+            due += 1.0 / rate_per_s
+            started = time.perf_counter()
+            writer.write(data)
+            head = await reader.readuntil(b"\r\n\r\n")
+            length = int(re.search(rb"(?i)content-length: *(\d+)", head).group(1))  # type: ignore[union-attr]
+            await reader.readexactly(length)
+            latencies.append(time.perf_counter() - started)
+            accepted += head[9:12] == b"202"
+    finally:
+        writer.close()
+    return accepted
+
+
+def paced_touches(port: int, body: bytes, *, rate_per_s: float, seconds: float) -> dict[str, Any]:
+    """Touches at a fixed rate (4 connections): does the audio clock keep real time?"""
+    quiet(port)
+    start = clock(port)
+    latencies: list[float] = []
+
+    async def run() -> list[int]:
+        clients = (_paced_client(port, body, rate_per_s / 4, seconds, latencies) for _ in range(4))
+        return list(await asyncio.gather(*clients))
+
+    accepted = sum(asyncio.run(run()))
+    end = clock(port)
+    elapsed_s = end["server_time_s"] - start["server_time_s"]
+    return {
+        "rate_per_s": rate_per_s,
+        "accepted": accepted,
+        "sent": len(latencies),
+        "p50_ms": percentile(latencies, 0.50) * 1e3,
+        "p99_ms": percentile(latencies, 0.99) * 1e3,
+        "audio_clock_ratio": (end["frames"] - start["frames"])
+        / (elapsed_s * end["sample_rate_hz"]),
+        "voices_at_end": int(engine_counters(port)["active_voices"]),
+    }
+
+
+def ingest_histogram(port: int) -> dict[str, Any]:
+    """p50/p99 upper bounds from the server's receipt-to-engine histogram."""
+    text = metrics_text(port)
     buckets = [
         (float(bound), float(count))
         for bound, count in re.findall(
@@ -294,14 +401,20 @@ def main() -> None:
         results["health"] = http_load(
             port, lambda k: request("GET", "/health"), connections=4, count=http_n
         )
-        results["touch_vr_tap"] = http_load(
-            port, lambda k: request("POST", "/touch", TAP), connections=4, count=http_n
+        results["touch_tap_20ms"] = touch_phase(
+            port, lambda k: request("POST", "/touch", SHORT_TAP), count=http_n
         )
-        results["touch_uncached_stroke"] = http_load(
-            port, lambda k: request("POST", "/touch", stroke(k)), connections=4, count=http_n // 2
+        results["touch_tap_20ms_uncached"] = touch_phase(
+            port, lambda k: request("POST", "/touch", short_tap(k)), count=http_n // 2
         )
-        stop = request("POST", "/stop")
-        http_load(port, lambda k: stop, connections=1, count=1)
+        results["touch_vr_tap_150ms"] = touch_phase(
+            port, lambda k: request("POST", "/touch", VR_TAP), count=http_n
+        )
+        results["touch_paced_vr_tap"] = [
+            paced_touches(port, VR_TAP, rate_per_s=rate, seconds=3.0 * scale + 1.0)
+            for rate in (250, 500, 1000, 1500)
+        ]
+        quiet(port)
         results["move_ingest_1"] = move_ingest(port, connections=1, moves=move_n)
         results["move_ingest_4"] = move_ingest(port, connections=4, moves=move_n // 4)
         results["receipt_to_engine"] = ingest_histogram(port)
@@ -316,11 +429,23 @@ def main() -> None:
         f"{results['load_avg_1min_after']:.2f} (other processes share these cores)"
     )
     print(f"yardstick json.loads(move): {results['json_loads_us']:.2f} us")
-    for name in ("health", "touch_vr_tap", "touch_uncached_stroke"):
+    for name in ("health", "touch_tap_20ms", "touch_tap_20ms_uncached", "touch_vr_tap_150ms"):
         r = results[name]
         print(
             f"{name:24} {r['per_s']:8.0f} /s  p50 {r['p50_ms']:6.2f} ms  p99 {r['p99_ms']:6.2f} ms"
             f"  ({r['requests']} requests, statuses {r['statuses']})"
+        )
+        if "underruns" in r:
+            print(
+                f"{'':24} accepted {r['accepted_per_s']:.0f}/s; the audio clock ran at "
+                f"{r['audio_clock_ratio']:.0%} of real time, {r['voices_at_end']} voices at the "
+                f"end, underruns {r['underruns']}, late commands {r['late_commands']}"
+            )
+    for r in results["touch_paced_vr_tap"]:
+        print(
+            f"vr/tap paced at {r['rate_per_s']:5.0f}/s   accepted {r['accepted']}/{r['sent']}, "
+            f"p50 {r['p50_ms']:.2f} ms, p99 {r['p99_ms']:.2f} ms; audio clock at "
+            f"{r['audio_clock_ratio']:.0%} of real time, {r['voices_at_end']} voices at the end"
         )
     for name in ("move_ingest_1", "move_ingest_4"):
         r = results[name]
