@@ -208,6 +208,17 @@ def test_restart_after_kill_keeps_the_library(tmp_path: Path) -> None:
         assert played.status_code == 202
 
 
+def test_serve_picks_its_output_and_says_which(tmp_path: Path) -> None:
+    with LiveServer(tmp_path / "patterns.db", output=None) as server:
+        device = httpx.get(f"{server.url}/device").json()
+        log = server.log()
+    assert device["backend"] in ("sounddevice", "null")
+    if device["backend"] == "null":
+        assert "playing on the null output" in log
+    else:
+        assert f"playing on the sound card {device['output_device']!r}" in log
+
+
 @pytest.mark.parametrize("path", ["/health", "/device", "/clock"])
 def test_loopback_only(live: LiveServer, path: str) -> None:
     assert live.url.startswith("http://127.0.0.1:")

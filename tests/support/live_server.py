@@ -29,7 +29,11 @@ def free_port() -> int:
 
 
 class LiveServer:
-    """One server process; :meth:`start`, then :meth:`stop` (SIGTERM) or :meth:`kill`."""
+    """One server process; :meth:`start`, then :meth:`stop` (SIGTERM) or :meth:`kill`.
+
+    ``output`` is the ``--output`` flag: ``"null"`` by default, None lets the server pick
+    the sound card if one has enough outputs.
+    """
 
     def __init__(
         self,
@@ -38,12 +42,14 @@ class LiveServer:
         port: int | None = None,
         env: Mapping[str, str] | None = None,
         args: tuple[str, ...] = (),
+        output: str | None = "null",
         log_path: Path | None = None,
     ) -> None:
         self.db_path = db_path
         self.port = port or free_port()
         self.env = dict(env or {})
         self.args = args
+        self.output = output
         self.log_path = log_path or db_path.with_suffix(f".{self.port}.log")
         self.process: subprocess.Popen[bytes] | None = None
 
@@ -67,8 +73,7 @@ class LiveServer:
             str(self.port),
             "--db",
             str(self.db_path),
-            "--output",
-            "null",
+            *(("--output", self.output) if self.output is not None else ()),
             *self.args,
         ]
 
