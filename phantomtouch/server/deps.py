@@ -12,30 +12,33 @@ from phantomtouch.server.service import Service
 from phantomtouch.server.store import PatternStore
 
 if TYPE_CHECKING:
-    from phantomtouch.engine import Engine
+    from phantomtouch.server.engine_access import AnyEngine
 
 
 # The dependencies are ``async`` so that FastAPI calls them on the event loop instead of
 # handing each to a worker thread (a thread hop per dependency per request).
 
 
-async def get_service(connection: HTTPConnection) -> Service:
+def get_service_now(connection: HTTPConnection) -> Service:
     service: Service = connection.app.state.service
     return service
 
 
-async def get_engine(connection: HTTPConnection) -> Any:
-    return connection.app.state.service.engine
+async def get_service(connection: HTTPConnection) -> Service:
+    return get_service_now(connection)
+
+
+async def get_engine(connection: HTTPConnection) -> AnyEngine:
+    return get_service_now(connection).engine
 
 
 async def get_store(connection: HTTPConnection) -> PatternStore:
-    store: PatternStore = connection.app.state.service.store
-    return store
+    return get_service_now(connection).store
 
 
 ServiceDep = Annotated[Service, Depends(get_service)]
 if TYPE_CHECKING:
-    EngineDep = Engine
+    EngineDep = AnyEngine
 else:
     EngineDep = Annotated[Any, Depends(get_engine)]
 StoreDep = Annotated[PatternStore, Depends(get_store)]

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterator
     from contextlib import AbstractContextManager
 
-    from phantomtouch.engine import Engine
+    from phantomtouch.server.engine_access import AnyEngine
 
 
 class ContactHolder(Protocol):
@@ -35,7 +35,7 @@ class Service:
 
     settings: Settings
     device: DeviceProfile
-    engine: Engine
+    engine: AnyEngine
     store: PatternStore
     metrics: Metrics
     plans: PlanCache = field(init=False)

@@ -55,7 +55,7 @@ from phantomtouch.server.ws_messages import (
 )
 
 if TYPE_CHECKING:
-    from phantomtouch.engine import Engine
+    from phantomtouch.server.engine_access import AnyEngine
 
 
 class SessionState(enum.Enum):
@@ -99,7 +99,7 @@ class Session:
     def __init__(self, websocket: WebSocket, service: Service) -> None:
         self.websocket = websocket
         self.service = service
-        self.engine: Engine = service.engine
+        self.engine: AnyEngine = service.engine
         settings = service.settings
         self.watchdog_s = settings.watchdog_s
         self.max_message_bytes = settings.max_ws_message_bytes

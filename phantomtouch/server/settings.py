@@ -73,6 +73,13 @@ class Settings(BaseSettings):
     max_concurrent_renders: int = Field(default=2, ge=1, le=64)
     max_render_duration_s: float = Field(default=600.0, gt=0.0, le=7200.0)
     queue_capacity: int = Field(default=4096, ge=16, le=1 << 20)
+    engine_process: bool = Field(
+        default=True,
+        description=(
+            "Run the engine in a process of its own (the default), so that request handling "
+            "never holds the interpreter lock its audio callback needs; False: a thread."
+        ),
+    )
     engine_log_path: Path | None = Field(
         default=None, description="Where the engine logs what it played (None: no log)."
     )

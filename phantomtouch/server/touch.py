@@ -20,7 +20,8 @@ from phantomtouch.server.models import (
 from phantomtouch.server.store import PatternStore
 
 if TYPE_CHECKING:
-    from phantomtouch.engine import Engine, Job
+    from phantomtouch.engine import Job
+    from phantomtouch.server.engine_access import AnyEngine
     from phantomtouch.server.service import Service
 
 LATE_START_TOLERANCE_S = 1.0
@@ -61,7 +62,7 @@ def plan_for(pattern: TouchPattern, device: DeviceProfile) -> Plan:
     return plan(pattern, device)
 
 
-def start_frame(engine: Engine, timing: Timing) -> int | None:
+def start_frame(engine: AnyEngine, timing: Timing) -> int | None:
     """The engine frame a touch starts at; None: as soon as possible."""
     if timing.start_in_ms:
         return engine.frames_at(engine.server_time_s() + timing.start_in_ms / 1000.0)
@@ -81,7 +82,7 @@ def start_frame(engine: Engine, timing: Timing) -> int | None:
     return engine.frames_at(max(timing.start_at_s, now_s))
 
 
-def accepted(engine: Engine, job: Job) -> JobAccepted:
+def accepted(engine: AnyEngine, job: Job) -> JobAccepted:
     summary = job.summary
     return JobAccepted(
         job_id=str(job.job_id),

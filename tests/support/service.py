@@ -21,5 +21,10 @@ LONG: dict[str, Any] = {
 
 
 def make_settings(tmp_path: Path, **changes: Any) -> Settings:
-    """Settings for a test: null output, the test's own database."""
-    return Settings(db_path=tmp_path / "patterns.db", output_device="null", **changes)
+    """Settings for an in-process test: null output, the test's own database.
+
+    The engine runs in a thread of the test process (it starts in milliseconds); the
+    live-server tests run the default, the engine in a process of its own.
+    """
+    options = {"engine_process": False, **changes}
+    return Settings(db_path=tmp_path / "patterns.db", output_device="null", **options)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 from fastapi import APIRouter, Depends
 from fastapi import Path as PathParam
@@ -11,6 +11,9 @@ from phantomtouch.server import touch
 from phantomtouch.server.bodies import strict_body
 from phantomtouch.server.deps import EngineDep, ServiceDep
 from phantomtouch.server.errors import NotFoundError, responses
+
+if TYPE_CHECKING:
+    from phantomtouch.server.engine_access import AnyEngine
 from phantomtouch.server.models import (
     JobAccepted,
     JobInfo,
@@ -64,7 +67,7 @@ async def post_stop(service: ServiceDep) -> StopAnswer:
     return StopAnswer(server_time_s=service.engine.server_time_s())
 
 
-def job_info(engine: Any, job_id: str) -> JobInfo:
+def job_info(engine: AnyEngine, job_id: str) -> JobInfo:
     """A job's state; an unknown id is :class:`NotFoundError`."""
     state = engine.job_state(job_id)
     if state is None:
