@@ -1,8 +1,9 @@
 """The touch service measured from a real client over loopback, audio thread running.
 
 A ``phantomtouch serve`` subprocess on a free 127.0.0.1 port plays on the null output (the
-engine's audio thread runs, clocked, without a sound card). Every loop is bounded in count
-and in time. Measured in the same run:
+engine's audio thread runs, clocked, without a sound card), with the engine in a process of
+its own as the service runs by default (``--engine-thread`` keeps it in a server thread).
+Every loop is bounded in count and in time. Measured in the same run:
 
 - yardsticks: ``GET /health`` throughput and latency over the same connections (the
   cheapest request the framework can answer), and a plain ``json.loads`` of a ``move``
@@ -387,14 +388,26 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer requests (a smoke run)")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    parser.add_argument(
+        "--engine-thread",
+        action="store_true",
+        help="run the engine in a thread of the server instead of its own process",
+    )
     args = parser.parse_args()
     scale = 0.1 if args.quick else 1.0
     http_n = int(2000 * scale)
     move_n = int(100_000 * scale)
 
     folder = Path(tempfile.mkdtemp(prefix="bench-server-"))
-    env = {"PHANTOMTOUCH_WS_MESSAGES_PER_S": "1000000"}
-    results: dict[str, Any] = {"cpus": os.cpu_count(), "load_avg_1min": os.getloadavg()[0]}
+    env = {
+        "PHANTOMTOUCH_WS_MESSAGES_PER_S": "1000000",
+        "PHANTOMTOUCH_ENGINE_PROCESS": "false" if args.engine_thread else "true",
+    }
+    results: dict[str, Any] = {
+        "cpus": os.cpu_count(),
+        "load_avg_1min": os.getloadavg()[0],
+        "engine": "thread of the server" if args.engine_thread else "process of its own",
+    }
     with LiveServer(folder / "patterns.db", env=env) as server:
         port = server.port
         results["json_loads_us"] = json_parse_yardstick()
@@ -428,6 +441,7 @@ def main() -> None:
         f"machine: {results['cpus']} cpus, load average {results['load_avg_1min']:.2f} -> "
         f"{results['load_avg_1min_after']:.2f} (other processes share these cores)"
     )
+    print(f"engine: in a {results['engine']} (null output)")
     print(f"yardstick json.loads(move): {results['json_loads_us']:.2f} us")
     for name in ("health", "touch_tap_20ms", "touch_tap_20ms_uncached", "touch_vr_tap_150ms"):
         r = results[name]
