@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.clients.live import LiveServer, Observer, running
+from tests.clients.live import Observer, running
+from tests.support.live_server import LiveServer
 
 
 @pytest.fixture(scope="session")

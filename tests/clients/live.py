@@ -1,9 +1,10 @@
-"""The real service as a subprocess, and the tools the client tests share.
+"""The tools the client tests share around the real service.
 
-A :class:`LiveServer` runs ``phantomtouch serve`` on a free loopback port with a temporary
-pattern database, waits for ``/health``, and can be stopped and started again on the
-same port (the reconnect tests). :func:`require` skips a test whose real component is
-missing on a developer's machine, and fails it under ``CI=true``.
+:func:`running` starts ``phantomtouch serve`` (tests/support/live_server.py) on a free
+loopback port with a temporary pattern database; it can be stopped and started again on
+the same port (the reconnect tests). :class:`Observer` watches the server's state stream.
+:func:`require` skips a test whose real component is missing on a developer's machine,
+and fails it under ``CI=true``.
 """
 
 from __future__ import annotations
@@ -13,9 +14,7 @@ import importlib.util
 import os
 import queue
 import shutil
-import socket
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -24,6 +23,8 @@ from typing import Any, TypeVar
 
 import httpx
 import pytest
+
+from tests.support.live_server import LiveServer
 
 ROOT = Path(__file__).resolve().parents[2]
 T = TypeVar("T")
@@ -53,12 +54,6 @@ def server_available() -> bool:
     return importlib.util.find_spec("phantomtouch.server") is not None
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 def wait_until(
     condition: Callable[[], T], *, timeout_s: float, what: str, interval_s: float = 0.02
 ) -> T:
@@ -73,97 +68,21 @@ def wait_until(
         time.sleep(interval_s)
 
 
-class LiveServer:
-    """``phantomtouch serve`` on 127.0.0.1:``port`` with its own database and log.
-
-    It plays on the null output: the engine runs, clocked, without a sound card.
-    """
-
-    def __init__(self, workdir: Path, *, port: int | None = None, extra_args: list[str] = ()):
-        self.workdir = workdir
-        self.port = port or free_port()
-        self.db_path = workdir / "patterns.sqlite"
-        self.log_path = workdir / "server.log"
-        self.extra_args = list(extra_args)
-        self._process: subprocess.Popen[bytes] | None = None
-
-    @property
-    def url(self) -> str:
-        return f"http://127.0.0.1:{self.port}"
-
-    @property
-    def ws_url(self) -> str:
-        return f"ws://127.0.0.1:{self.port}/ws"
-
-    def command(self) -> list[str]:
-        return [
-            sys.executable,
-            "-m",
-            "phantomtouch",
-            "serve",
-            "--host",
-            "127.0.0.1",
-            "--port",
-            str(self.port),
-            "--db",
-            str(self.db_path),
-            "--output",
-            "null",
-            *self.extra_args,
-        ]
-
-    def start(self, *, timeout_s: float = 30.0) -> None:
-        assert self._process is None, "the server is already running"
-        log = self.log_path.open("ab")
-        self._process = subprocess.Popen(
-            self.command(), stdout=log, stderr=subprocess.STDOUT, cwd=self.workdir
-        )
-        log.close()
-        deadline = time.monotonic() + timeout_s
-        while True:
-            if self._process.poll() is not None:
-                raise RuntimeError(
-                    f"the server exited with {self._process.returncode}:\n{self.log()}"
-                )
-            with contextlib.suppress(httpx.HTTPError):
-                if httpx.get(f"{self.url}/health", timeout=1.0).status_code == 200:
-                    return
-            if time.monotonic() > deadline:
-                self.stop()
-                raise RuntimeError(f"no /health within {timeout_s} s:\n{self.log()}")
-            time.sleep(0.05)
-
-    def stop(self) -> None:
-        process, self._process = self._process, None
-        if process is None:
-            return
-        process.terminate()
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(timeout=5)
-
-    def restart(self) -> None:
-        self.stop()
-        self.start()
-
-    def log(self) -> str:
-        return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
-
-    def get(self, path: str, **kwargs: Any) -> httpx.Response:
-        return httpx.get(f"{self.url}{path}", timeout=5.0, **kwargs)
-
-
 @contextlib.contextmanager
-def running(workdir: Path, **kwargs: Any) -> Iterator[LiveServer]:
+def running(workdir: Path, *, args: tuple[str, ...] = ()) -> Iterator[LiveServer]:
+    """The service on a free loopback port, playing on the null output, stopped after."""
     require(server_available(), "the service (phantomtouch.server)")
-    server = LiveServer(workdir, **kwargs)
+    server = LiveServer(workdir / "patterns.sqlite", args=args)
     server.start()
     try:
         yield server
     finally:
         server.stop()
+
+
+def get(server: LiveServer, path: str) -> httpx.Response:
+    """``GET path`` on ``server``."""
+    return httpx.get(f"{server.url}{path}", timeout=5.0)
 
 
 def contacts_seen(state: Any) -> dict[str, tuple[float, float]]:
@@ -209,7 +128,11 @@ class Observer:
                     return state[contact]
             return None
 
-        return wait_until(seen, timeout_s=timeout_s, what=f"contact {contact!r} on the server")
+        what = f"contact {contact!r} on the server"
+        try:
+            return wait_until(seen, timeout_s=timeout_s, what=what)
+        except pytest.fail.Exception:
+            pytest.fail(f"{what} not seen in {timeout_s} s; the newest states: {self.states[-3:]}")
 
     def wait_gone(self, contact: str, *, timeout_s: float) -> None:
         """Wait until the newest state no longer holds ``contact``."""
@@ -260,8 +183,8 @@ class LineProcess:
         self.process.stdin.flush()
 
     def stderr(self) -> str:
-        if self.process.poll() is None:
-            return "(still running)"
+        """The child's stderr; a child still running is killed first (the test failed)."""
+        self.close()
         return self.process.stderr.read() if self.process.stderr else ""
 
     def finish(self, *, timeout_s: float = 30.0) -> int:

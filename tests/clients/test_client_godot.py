@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.clients.live import ROOT, LiveServer, Observer, require, require_tool
+from tests.clients.live import ROOT, Observer, get, require, require_tool
+from tests.support.live_server import LiveServer
 
 ADDON = ROOT / "sdk_clients" / "godot" / "addons" / "phantomtouch"
 GODOT3_PROJECT = Path(__file__).parent / "godot3"
@@ -107,7 +108,7 @@ def test_godot3_engine_posts_a_touch_and_streams_a_contact(
     assert MARKER in output.splitlines(), output
     job_id = re.search(r"^JOB (\S+)$", output, re.MULTILINE)
     assert job_id is not None, output
-    job = server.get(f"/jobs/{job_id.group(1)}")
+    job = get(server, f"/jobs/{job_id.group(1)}")
     assert job.status_code == 200, "Godot's touch is a job on the server"
     positions = observer.positions("godot3-stroke")
     assert positions, "the server never showed Godot's contact"

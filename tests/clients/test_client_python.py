@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import asyncio
 import csv
+import inspect
 import io
 import json
+import re
 import subprocess
 import sys
 import time
@@ -26,18 +28,30 @@ from phantomtouch_client import (
     AsyncClient,
     AsyncSession,
     Client,
+    Clock,
+    DeviceInfo,
+    Health,
     InvalidRequest,
     Job,
+    JobStatus,
     MalformedMessage,
     NotFound,
+    PlanSummary,
+    RenderCurves,
+    RenderPlan,
     Session,
     SessionState,
+    StopAnswer,
+    Summary,
     Unauthorized,
+    _calls,
 )
+from pydantic import BaseModel
 from websockets.asyncio.server import ServerConnection, serve
 
 from phantomtouch import ParameterError, TouchPattern
-from tests.clients.live import ROOT, LiveServer, Observer, running, wait_until
+from tests.clients.live import ROOT, Observer, get, running, wait_until
+from tests.support.live_server import LiveServer
 
 STROKE = TouchPattern.model_validate(
     {
@@ -339,7 +353,7 @@ def test_example_trial_block_schedules_trials_back_to_back(
     gap_s = float(second["start_at_s"]) - float(first["start_at_s"]) - float(first["duration_s"])
     assert gap_s == pytest.approx(0.1, abs=1e-3)
     for row in rows:
-        assert server.get(f"/jobs/{row['job_id']}").status_code == 200
+        assert get(server, f"/jobs/{row['job_id']}").status_code == 200
 
 
 def test_example_live_stroke_moves_a_contact(
@@ -358,7 +372,7 @@ def test_example_live_stroke_moves_a_contact(
 
 def test_the_token_is_sent_and_a_missing_one_refused(tmp_path: Path) -> None:
     token = "client-test-token-0123"
-    with running(tmp_path, extra_args=["--token", token]) as live:
+    with running(tmp_path, args=("--token", token)) as live:
         with Client(live.url, token=token) as pt:
             assert pt.touch(preset="vr/tap").duration_s > 0
         with Client(live.url) as pt, pytest.raises(Unauthorized):
@@ -368,3 +382,46 @@ def test_the_token_is_sent_and_a_missing_one_refused(tmp_path: Path) -> None:
             ws.up("token-finger")
         with pytest.raises(Unauthorized), Session(live.ws_url, token="wrong-token-0123456789"):
             pass
+
+
+# The client's answer models and the service's schemas of the same answers.
+ANSWERS: dict[str, type[BaseModel]] = {
+    "JobAccepted": Job,
+    "JobInfo": JobStatus,
+    "StopAnswer": StopAnswer,
+    "PatternInfo": Summary,
+    "PresetInfo": Summary,
+    "PlanSummary": PlanSummary,
+    "RenderPlan": RenderPlan,
+    "Curves": RenderCurves,
+    "ClockInfo": Clock,
+    "Health": Health,
+    "DeviceInfo": DeviceInfo,
+}
+
+
+def test_answer_models_have_the_fields_of_the_openapi_document(server: LiveServer) -> None:
+    schemas = get(server, "/openapi.json").json()["components"]["schemas"]
+    for name, model in ANSWERS.items():
+        schema = schemas[name]
+        assert set(model.model_fields) == set(schema["properties"]), name
+        required = {n for n, field in model.model_fields.items() if field.is_required()}
+        assert required <= set(schema.get("required", [])), name
+
+
+def test_the_client_calls_every_route_of_the_openapi_document(server: LiveServer) -> None:
+    arguments = {"body": {"preset": "vr/tap"}, "job_id": "J", "name": "N", "pattern": STROKE}
+    calls = []
+    for _, build in inspect.getmembers(_calls, inspect.isfunction):
+        if str(build.__annotations__.get("return", "")).startswith("Call["):
+            names = inspect.signature(build).parameters
+            calls.append(build(**{n: arguments[n] for n in names if n in arguments}))
+    routes = {
+        (method.upper(), re.sub(r"\{[^}]+\}", "[^/]+", path) + "$")
+        for path, operations in get(server, "/openapi.json").json()["paths"].items()
+        for method in operations
+    }
+    called = {(m, p) for m, p in routes for c in calls if c.method == m and re.match(p, c.path)}
+    assert called == routes, f"routes the client does not call: {routes - called}"
+    for call in calls:
+        assert any(call.method == m and re.match(p, call.path) for m, p in routes), call

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.clients.live import ROOT, LineProcess, LiveServer, Observer, require_tool
+from tests.clients.live import ROOT, LineProcess, Observer, get, require_tool
+from tests.support.live_server import LiveServer
 
 UNITY = ROOT / "sdk_clients" / "unity"
 STUB = Path(__file__).parent / "unity_stub"
@@ -77,7 +78,7 @@ def test_unity_core_json_and_forearm_mapping(harness: list[str]) -> None:
 def test_unity_client_rest_routes(harness: list[str], server: LiveServer) -> None:
     out = run(harness, "rest", server.url)
     assert out["HEALTH"] == "ok"
-    job = server.get(f"/jobs/{out['JOB']}")
+    job = get(server, f"/jobs/{out['JOB']}")
     assert job.status_code == 200, "the harness's touch is a job on the server"
     assert job.json()["state"] in {"scheduled", "playing", "finished", "stopped"}
     assert out["CANCELLED"] in {"stopped", "finished"}
@@ -96,7 +97,7 @@ def test_unity_client_websocket_stroke(
     out = run(harness, "stroke", server.url, "unity-stroke")
     assert float(out["PING"]) > 0
     assert out["WS_REFUSED"] == "unknown_type"
-    assert server.get(f"/jobs/{out['WS_JOB']}").status_code == 200
+    assert get(server, f"/jobs/{out['WS_JOB']}").status_code == 200
     positions = observer.positions("unity-stroke")
     assert positions, "the server never showed the harness's contact"
     assert positions[0] == pytest.approx((1.9, 2.0), abs=0.3)

@@ -20,7 +20,8 @@ from pathlib import Path
 import httpx
 import yaml
 
-from tests.clients.live import ROOT, free_port, require, server_available, wait_until
+from tests.clients.live import ROOT, require, server_available, wait_until
+from tests.support.live_server import free_port
 
 DOCKER = ROOT / "docker"
 DOCKERFILE = DOCKER / "Dockerfile"

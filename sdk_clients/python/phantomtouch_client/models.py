@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from phantomtouch_client.errors import InvalidRequest
 
 JobState = Literal["scheduled", "playing", "finished", "stopped"]
-JobId: TypeAlias = str | int
+JobId: TypeAlias = str
 PatternArg: TypeAlias = TouchPattern | Mapping[str, Any] | None
 """A pattern argument: a :class:`TouchPattern`, its JSON, or ``None``."""
 
@@ -32,11 +32,11 @@ class Job(_Answer):
 
     job_id: JobId
     start_at_s: float = Field(description="Start on the server clock, s.")
-    start_frame: int | None = None
+    start_frame: int
     duration_s: float
-    path_length_cm: float | None = None
-    speed_cm_s: float | None = None
-    frames: int | None = None
+    path_length_cm: float
+    speed_cm_s: float
+    frames: int
 
 
 class JobStatus(_Answer):
@@ -44,10 +44,12 @@ class JobStatus(_Answer):
 
     job_id: JobId
     state: JobState
-    start_at_s: float | None = None
-    end_at_s: float | None = None
-    duration_s: float | None = None
-    late: bool | None = None
+    start_at_s: float
+    start_frame: int
+    end_at_s: float
+    end_frame: int
+    duration_s: float
+    late: bool
     """Whether the job started after the time it was asked for."""
 
 
@@ -55,18 +57,25 @@ class StopAnswer(_Answer):
     """``POST /stop``."""
 
     server_time_s: float
-    stopped: bool | None = None
+    stopped: bool = True
 
 
 class PlanSummary(_Answer):
-    """What a pattern resolves to: duration, path length, speed, frames, level ..."""
+    """What a pattern resolves to (the renderer's plan): timing, path, level."""
 
     duration_s: float
-    path_length_cm: float | None = None
-    speed_cm_s: float | None = None
-    frames: int | None = None
-    channels: int | None = None
-    sample_rate_hz: int | None = None
+    path_length_cm: float
+    speed_cm_s: float
+    frames: int
+    channels: int
+    sample_rate_hz: int
+    strokes: int
+    stroke_s: float
+    motion_s: float
+    level_db: float | None
+    amplitude: float
+    projected_points: int
+    max_projection_cm: float
 
 
 class Summary(_Answer):
@@ -102,20 +111,22 @@ class Clock(_Answer):
 class Health(_Answer):
     """``GET /health``."""
 
-    status: str
-    backend: str | None = None
+    status: Literal["ok"] = "ok"
+    backend: str
 
 
 class DeviceInfo(_Answer):
     """``GET /device``: layout, channels, sample rate, block size, backend, output device."""
 
+    name: str
+    backend: str
+    output_device: str | None
     channels: int
     sample_rate_hz: int
     block_frames: int
-    backend: str
-    output_device: str | None = None
-    output_latency_s: float | None = None
-    actuators: list[dict[str, Any]] = Field(default_factory=list)
+    output_latency_s: float
+    actuators: list[dict[str, Any]]
+    triangles: list[tuple[int, int, int]]
 
 
 class Welcome(_Answer):
