@@ -122,7 +122,7 @@ def test_unity_client_reconnects_after_a_server_restart(
         child.expect("LOST")
         live.start()
         child.tell("started")
-        child.expect("RECONNECTED")
+        assert int(child.expect("RECONNECTED")) >= 1
         observer = observe(live)
         # Put back down at the position it was moved to while the server was away.
         observer.wait_for("unity-survivor", lambda p: p == pytest.approx((1.9, 6.0)), timeout_s=5)

@@ -59,8 +59,11 @@ class Contact:
 
     async def up(self, *, normal_velocity_m_s: float | None = None) -> None:
         """Lift off where the newest :meth:`move` put the contact (a pending move is sent
-        first), then fade out with the release ramp."""
+        first), then fade out with the release ramp. Nothing is sent for a contact that
+        is not down (the server released it, or it was lifted already)."""
         pending = self._take_pending()
+        if not self.active:
+            return  # never down, already lifted, or released by the server
         self.active = False
         if pending is not None:
             x_cm, y_cm, intensity = pending

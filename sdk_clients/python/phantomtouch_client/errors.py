@@ -14,7 +14,9 @@
             ├── NotFound                          code "not_found": unknown job, pattern, preset
             ├── TooLarge                          code "too_large"
             ├── RateLimited                       code "rate_limited"
-            └── Busy(EngineBusyError)             code "busy": the engine's queue is full
+            ├── MethodNotAllowed                  code "method_not_allowed"
+            ├── Busy(EngineBusyError)             code "busy": the engine's queue is full
+            └── DeviceFailed(DeviceError)         code "device": the sound card failed
 
 REST errors and WebSocket ``error`` replies carry the same ``code`` and map to the same
 class; ``status`` is the HTTP status, or ``None`` for a WebSocket reply. Errors of httpx and
@@ -25,7 +27,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from phantomtouch import EngineBusyError, ParameterError, PhantomTouchError, ProtocolError
+from phantomtouch import (
+    DeviceError,
+    EngineBusyError,
+    ParameterError,
+    PhantomTouchError,
+    ProtocolError,
+)
 
 
 class ClientError(PhantomTouchError):
@@ -95,8 +103,16 @@ class RateLimited(ApiError):
     """Too many requests or messages."""
 
 
+class MethodNotAllowed(ApiError):
+    """The route has no such method."""
+
+
 class Busy(ApiError, EngineBusyError):
     """The engine's command queue is full; the command was not accepted. Retry later."""
+
+
+class DeviceFailed(ApiError, DeviceError):
+    """The service's sound card failed."""
 
 
 _BY_CODE: dict[str, type[ApiError]] = {
@@ -107,13 +123,16 @@ _BY_CODE: dict[str, type[ApiError]] = {
     "not_found": NotFound,
     "too_large": TooLarge,
     "rate_limited": RateLimited,
+    "method_not_allowed": MethodNotAllowed,
     "busy": Busy,
+    "device": DeviceFailed,
 }
 
 _BY_STATUS: dict[int, str] = {
     400: "invalid",
     401: "unauthorized",
     404: "not_found",
+    405: "method_not_allowed",
     413: "too_large",
     422: "invalid",
     429: "rate_limited",

@@ -144,6 +144,8 @@ class ContactState(_Answer):
     contact: str
     x_cm: float
     y_cm: float
+    own: bool = False
+    """Whether the contact is this connection's (the state lists every client's)."""
 
 
 class State(_Answer):
@@ -158,7 +160,8 @@ class State(_Answer):
 
 
 class Released(_Answer):
-    """Contacts the server released because this client went silent (its watchdog)."""
+    """This connection's contacts that the server released: ``reason`` is ``watchdog``
+    (the client went silent) or ``stop`` (a global stop)."""
 
     reason: str
     contacts: list[str] = Field(default_factory=list)

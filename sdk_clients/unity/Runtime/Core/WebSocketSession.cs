@@ -72,7 +72,8 @@ namespace PhantomTouch
         public event Action<bool> ConnectionChanged;
         /// <summary>A "state" message (after Subscribe).</summary>
         public event Action<JsonObject> StateReceived;
-        /// <summary>A "released" message: the server's watchdog released these contacts.</summary>
+        /// <summary>A "released" message: the server released these contacts of this session
+        /// (reason "watchdog": the session went silent; "stop": a global stop).</summary>
         public event Action<JsonObject> Released;
         /// <summary>An "error" that answers no pending request (e.g. a bad move).</summary>
         public event Action<PhantomTouchException> ErrorReceived;

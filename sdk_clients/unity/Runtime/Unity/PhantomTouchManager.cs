@@ -75,7 +75,7 @@ namespace PhantomTouch
             session.MoveRateHz = moveRateHz;
             session.ConnectionChanged += up => mainThread.Enqueue(() => OnConnection(up));
             session.StateReceived += state => mainThread.Enqueue(() => { if (StateReceived != null) StateReceived(state); });
-            session.Released += released => mainThread.Enqueue(() => Debug.LogWarning("PhantomTouch: the service released " + Json.Serialize(released.GetArray("contacts")) + " (watchdog)"));
+            session.Released += released => mainThread.Enqueue(() => Debug.LogWarning("PhantomTouch: the service released " + Json.Serialize(released.GetArray("contacts")) + " (" + released.GetString("reason") + ")"));
             session.ErrorReceived += error => mainThread.Enqueue(() => Debug.LogWarning("PhantomTouch: " + error.Message));
             if (logConnection) session.Log += line => mainThread.Enqueue(() => Debug.Log("PhantomTouch: " + line));
         }
