@@ -3,9 +3,10 @@ command and health check run against the real service.
 
 No Docker engine runs here, so the image is never built. Instead: hadolint lints the
 Dockerfile; the command, port and health check are read from the Dockerfile and must agree
-with compose.yaml and the README; and the image's own command line (with a free port and a
-temporary database) starts the service on this machine, where the image's health check
-command must pass and the token must be enforced.
+with compose.yaml and the README; and the image's own command line (on loopback, with a
+free port, a temporary database and the null output) starts the service on this machine,
+where the image's health check command must pass and the token from the environment must
+be enforced.
 """
 
 from __future__ import annotations
@@ -139,6 +140,10 @@ def test_image_command_serves_and_its_health_check_passes(tmp_path: Path) -> Non
     port = str(free_port())
     argv[argv.index("--port") + 1] = port
     argv[argv.index("--db") + 1] = str(tmp_path / "patterns.sqlite")
+    # Loopback here: the test machine's service stays off the network. The token in the
+    # environment is enforced all the same.
+    argv[argv.index("--host") + 1] = "127.0.0.1"
+    argv += ["--output", "null"]
     argv[0:1] = [sys.executable, "-m", "phantomtouch"]
     token = "docker-test-token"
     env = {"PATH": str(Path(sys.executable).parent), TOKEN_ENV: token, "HOME": str(tmp_path)}
@@ -157,7 +162,7 @@ def test_image_command_serves_and_its_health_check_passes(tmp_path: Path) -> Non
         base = f"http://127.0.0.1:{port}"
         body = {"preset": "vr/tap"}
         refused = httpx.post(f"{base}/touch", json=body, timeout=5)
-        assert refused.status_code == 401, "off loopback the token is required"
+        assert refused.status_code == 401, "the token from the environment is required"
         accepted = httpx.post(
             f"{base}/touch", json=body, headers={"Authorization": f"Bearer {token}"}, timeout=5
         )
