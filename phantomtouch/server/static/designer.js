@@ -1,0 +1,468 @@
+// The pattern designer: a path (a preset, a saved pattern or one drawn on the armband)
+// plus the settings the user changed turn into a touch request (docs/protocol.md). Its
+// plan and gain curves are previewed as it changes; it can be played, saved and rendered
+// to a WAV file.
+
+import { api } from "./api.js";
+import { formatNumber } from "./units.js";
+
+const PREVIEW_DELAY_MS = 200;
+const DRAWN = "drawn";
+const DRAWN_DEFAULTS = {
+  speed_cm_s: 5,
+  carrier: { kind: "sine", freq_hz: 100 },
+  intensity: "low",
+  law: "power",
+};
+const PRESET_GROUPS = [
+  ["exp2/", "Experiment 2: the four strokes"],
+  ["vr/", "VR touches"],
+  ["", "Saved patterns"],
+  ["exp1/", "Experiment 1: stimuli"],
+];
+
+const $ = (id) => document.getElementById(id);
+
+export class Designer {
+  // ui: { armband, chart, session, showError(message), channelLabels() }
+  constructor(ui) {
+    this.ui = ui;
+    this.presets = [];
+    this.saved = [];
+    this.stored = new Map();
+    this.drawn = [];
+    this.planned = null;
+    this.plannedKey = "";
+    this.previewTimer = 0;
+    this.previewAbort = null;
+    this.job = null;
+    this.animation = 0;
+    this.form = {
+      source: $("source"), speed: $("speed"), carrier: $("carrier"), freq: $("carrier-freq"),
+      modulation: $("modulation"), modIndex: $("mod-index"), modFreq: $("mod-freq"),
+      intensity: $("intensity"), relative: $("relative"), law: $("law"),
+    };
+    for (const input of Object.values(this.form)) {
+      input.addEventListener("input", () => this.changed());
+      input.addEventListener("change", () => this.changed());
+    }
+    $("play").addEventListener("click", () => this.play());
+    $("download").addEventListener("click", () => this.download());
+    $("save-form").addEventListener("submit", (event) => {
+      event.preventDefault();
+      this.save();
+    });
+    $("clear-path").addEventListener("click", () => this.setDrawn([]));
+    $("refresh-library").addEventListener("click", () => this.loadLibrary());
+  }
+
+  async load() {
+    const [presets] = await Promise.all([api.presets(), this.loadLibrary()]);
+    this.presets = presets;
+    this.fillSources();
+    const first = presets.find((p) => p.name.startsWith("exp2/")) || presets[0];
+    if (first) this.form.source.value = `preset:${first.name}`;
+    this.changed();
+  }
+
+  // --- sources -----------------------------------------------------------------------
+
+  fillSources() {
+    const select = this.form.source;
+    const current = select.value;
+    select.replaceChildren();
+    const drawn = new Option(
+      this.drawn.length ? "Drawn on the armband" : "Drawn on the armband (draw one first)",
+      DRAWN,
+    );
+    drawn.disabled = this.drawn.length === 0;
+    select.add(drawn);
+    const used = new Set();
+    for (const [prefix, label] of PRESET_GROUPS) {
+      const group = document.createElement("optgroup");
+      group.label = label;
+      if (label === "Saved patterns") {
+        for (const p of this.saved) group.appendChild(new Option(p.name, `saved:${p.name}`));
+      } else {
+        for (const p of this.presets.filter((q) => q.name.startsWith(prefix))) {
+          used.add(p.name);
+          group.appendChild(new Option(p.name, `preset:${p.name}`));
+        }
+      }
+      if (group.children.length) select.appendChild(group);
+    }
+    const others = this.presets.filter((p) => !used.has(p.name));
+    if (others.length) {
+      const group = document.createElement("optgroup");
+      group.label = "Other presets";
+      for (const p of others) group.appendChild(new Option(p.name, `preset:${p.name}`));
+      select.appendChild(group);
+    }
+    if ([...select.options].some((o) => o.value === current && !o.disabled)) {
+      select.value = current;
+    }
+  }
+
+  source() {
+    const value = this.form.source.value || "";
+    if (value === DRAWN) return { kind: DRAWN, name: "drawn-path" };
+    const [kind, ...rest] = value.split(":");
+    return { kind, name: rest.join(":") };
+  }
+
+  setDrawn(points) {
+    this.drawn = points;
+    $("clear-path").disabled = points.length === 0;
+    this.fillSources();
+    if (points.length) this.form.source.value = DRAWN;
+    else if (this.form.source.value === DRAWN || !this.form.source.value) {
+      const first = this.form.source.querySelector("option:not([disabled])");
+      if (first) this.form.source.value = first.value;
+    }
+    this.changed();
+  }
+
+  addDrawnPoint(point) {
+    const points = this.source().kind === DRAWN ? this.drawn.concat([point]) : [point];
+    this.setDrawn(points);
+  }
+
+  // --- the touch request ---------------------------------------------------------------
+
+  // The settings the user changed, as TouchPattern fields; `null` removes a field.
+  overrides() {
+    const f = this.form;
+    const out = {};
+    if (f.speed.value.trim() !== "") {
+      out.speed_cm_s = Number(f.speed.value);
+      out.duration_s = null;
+    }
+    if (f.carrier.value === "noise") out.carrier = { kind: "noise" };
+    else if (f.carrier.value) out.carrier = { kind: f.carrier.value, freq_hz: Number(f.freq.value) };
+    if (f.modulation.value === "none") out.modulation = null;
+    else if (f.modulation.value) {
+      out.modulation = {
+        index: Number(f.modIndex.value),
+        freq_hz: f.modulation.value === "stroke" ? "stroke" : Number(f.modFreq.value),
+      };
+    }
+    if (f.intensity.value) {
+      out.intensity = f.intensity.value === "relative" ? Number(f.relative.value) : f.intensity.value;
+      out.level_db = null;
+    }
+    if (f.law.value) out.law = f.law.value;
+    return out;
+  }
+
+  // A whole TouchPattern for the current source, or null when only the server knows it
+  // (a preset).
+  pattern() {
+    const source = this.source();
+    if (source.kind === DRAWN) {
+      return merge(
+        { path: { kind: "polyline", points_cm: this.drawn }, ...DRAWN_DEFAULTS },
+        this.overrides(),
+      );
+    }
+    if (source.kind === "saved" && this.stored.has(source.name)) {
+      return merge(this.stored.get(source.name), this.overrides());
+    }
+    return null;
+  }
+
+  touchRequest() {
+    const source = this.source();
+    const overrides = this.overrides();
+    const changed = Object.keys(overrides).length > 0;
+    if (source.kind === "preset") {
+      return changed ? { preset: source.name, overrides } : { preset: source.name };
+    }
+    if (source.kind === "saved" && !changed) return { pattern: source.name };
+    return this.pattern();
+  }
+
+  // --- form state and preview ------------------------------------------------------
+
+  changed() {
+    const f = this.form;
+    const source = this.source();
+    const inherit = source.kind === DRAWN ? "default" : source.kind === "saved"
+      ? "as saved" : "preset's own";
+    for (const select of [f.carrier, f.modulation, f.intensity, f.law]) {
+      select.querySelector("[data-inherit]").textContent = inherit;
+    }
+    f.speed.placeholder = source.kind === DRAWN ? `${DRAWN_DEFAULTS.speed_cm_s} (default)` : inherit;
+    f.freq.disabled = !(f.carrier.value === "sine" || f.carrier.value === "combined");
+    f.modIndex.disabled = !(f.modulation.value === "stroke" || f.modulation.value === "freq");
+    f.modFreq.disabled = f.modulation.value !== "freq";
+    f.relative.disabled = f.intensity.value !== "relative";
+    $("relative-out").textContent = formatNumber(f.relative.value);
+    const summary = source.kind === "preset"
+      ? (this.presets.find((p) => p.name === source.name) || {}).summary
+      : source.kind === "saved" ? (this.saved.find((p) => p.name === source.name) || {}).summary
+        : `${this.drawn.length} point${this.drawn.length === 1 ? "" : "s"} drawn on the armband`;
+    $("source-summary").textContent = summary || "";
+    if (!$("save-name").value && source.kind === "saved") $("save-name").value = source.name;
+    if (source.kind === "saved" && !this.stored.has(source.name)) {
+      this.fetchStored(source.name);
+    }
+    clearTimeout(this.previewTimer);
+    this.previewTimer = setTimeout(() => this.preview(), PREVIEW_DELAY_MS);
+  }
+
+  async fetchStored(name) {
+    try {
+      this.stored.set(name, await api.pattern(name));
+      this.changed();
+    } catch (exc) {
+      this.ui.showError(exc.message);
+    }
+  }
+
+  async preview() {
+    const request = this.touchRequest();
+    if (!request) return;
+    const key = JSON.stringify(request);
+    if (key === this.plannedKey && this.planned) return;
+    if (this.previewAbort) this.previewAbort.abort();
+    const abort = new AbortController();
+    this.previewAbort = abort;
+    try {
+      const planned = await api.plan(request, abort.signal);
+      if (abort.signal.aborted) return;
+      this.planned = planned;
+      this.plannedKey = key;
+      $("plan-error").textContent = "";
+      this.showPlan(planned);
+    } catch (exc) {
+      if (exc.name === "AbortError") return;
+      this.planned = null;
+      this.plannedKey = "";
+      $("plan-error").textContent = `Cannot plan this pattern: ${exc.message}`;
+      this.showPlan(null);
+    }
+  }
+
+  showPlan(planned) {
+    const values = {
+      duration_s: planned && `${formatNumber(planned.duration_s, 3)} s`,
+      path_length_cm: planned && `${formatNumber(planned.path_length_cm, 2)} cm`,
+      speed_cm_s: planned && `${formatNumber(planned.speed_cm_s, 2)} cm/s`,
+      strokes: planned && String(planned.strokes ?? 1),
+      level_db: planned && (planned.level_db === null || planned.level_db === undefined
+        ? "silent" : `${formatNumber(planned.level_db, 1)} dB`),
+      frames: planned && Number(planned.frames).toLocaleString("en-US"),
+    };
+    for (const dd of document.querySelectorAll("#plan dd")) {
+      const key = dd.dataset.key;
+      dd.textContent = values[key] || "–";
+      if (planned && planned[key] !== undefined && planned[key] !== null) {
+        dd.dataset.value = String(planned[key]);
+      } else {
+        delete dd.dataset.value;
+      }
+    }
+    const curves = planned && planned.curves;
+    this.ui.chart.show(curves, this.ui.channelLabels());
+    this.ui.armband.setPath(curves ? curves.positions_cm : null);
+  }
+
+  // --- actions -----------------------------------------------------------------------
+
+  async play() {
+    const request = this.touchRequest();
+    if (!request) return;
+    const key = JSON.stringify(request);
+    try {
+      const job = await api.touch(request);
+      this.startPlayhead(job, key === this.plannedKey ? this.planned : null);
+    } catch (exc) {
+      this.ui.showError(exc.message);
+    }
+  }
+
+  playJob(job, label) {
+    this.startPlayhead({ ...job, label }, null);
+  }
+
+  startPlayhead(job, planned) {
+    cancelAnimationFrame(this.animation);
+    const label = job.label || this.source().name;
+    this.job = { ...job, planned };
+    $("job").textContent = `Playing ${label}: ${formatNumber(job.duration_s, 2)} s`
+      + (job.job_id ? ` (job ${job.job_id})` : "");
+    const tick = () => {
+      const now = this.ui.session.serverNowS();
+      const start = Number(job.start_at_s);
+      if (now === null || !Number.isFinite(start)) return;
+      const t = now - start;
+      if (t > job.duration_s) {
+        this.endPlayhead(`Played ${label}.`);
+        return;
+      }
+      if (planned && planned.curves && t >= 0) {
+        this.ui.chart.setPlayhead(t);
+        this.ui.armband.setPlayhead(positionAt(planned.curves, t));
+      }
+      this.animation = requestAnimationFrame(tick);
+    };
+    this.animation = requestAnimationFrame(tick);
+  }
+
+  endPlayhead(text) {
+    cancelAnimationFrame(this.animation);
+    this.animation = 0;
+    if (this.job) $("job").textContent = text;
+    this.job = null;
+    this.ui.chart.setPlayhead(null);
+    this.ui.armband.setPlayhead(null);
+  }
+
+  stopped() {
+    this.endPlayhead("Stopped.");
+  }
+
+  async save() {
+    const input = $("save-name");
+    if (!input.reportValidity()) return;
+    const name = input.value.trim();
+    const pattern = this.pattern() || (this.planned && this.planned.pattern);
+    if (!pattern) {
+      this.ui.showError("The service did not return this preset's pattern, so it cannot be "
+        + "saved from here; save a drawn or a saved pattern instead.");
+      return;
+    }
+    try {
+      await api.savePattern(name, pattern);
+      this.stored.set(name, pattern);
+      $("job").textContent = `Saved ${name} to the library.`;
+      await this.loadLibrary();
+    } catch (exc) {
+      this.ui.showError(exc.message);
+    }
+  }
+
+  async download() {
+    const request = this.touchRequest();
+    if (!request) return;
+    const button = $("download");
+    button.disabled = true;
+    button.setAttribute("aria-busy", "true");
+    try {
+      const blob = await api.wav(request);
+      const url = URL.createObjectURL(blob);
+      const link = document.createElement("a");
+      link.href = url;
+      link.download = `${this.source().name.replace(/[^A-Za-z0-9._-]+/g, "-")}.wav`;
+      document.body.appendChild(link);
+      link.click();
+      link.remove();
+      setTimeout(() => URL.revokeObjectURL(url), 10000);
+    } catch (exc) {
+      this.ui.showError(exc.message);
+    } finally {
+      button.disabled = false;
+      button.removeAttribute("aria-busy");
+    }
+  }
+
+  // --- the library -------------------------------------------------------------------
+
+  async loadLibrary() {
+    try {
+      this.saved = await api.patterns();
+    } catch (exc) {
+      this.ui.showError(exc.message);
+      return;
+    }
+    this.stored.clear();
+    const list = $("library");
+    list.replaceChildren();
+    for (const entry of this.saved) list.appendChild(this.libraryItem(entry));
+    $("library-empty").hidden = this.saved.length > 0;
+    if (this.presets.length) this.fillSources();
+  }
+
+  libraryItem(entry) {
+    const li = document.createElement("li");
+    const text = document.createElement("div");
+    text.className = "library-text";
+    const name = document.createElement("strong");
+    name.textContent = entry.name;
+    const summary = document.createElement("span");
+    summary.textContent = entry.summary || "";
+    text.append(name, summary);
+    const buttons = document.createElement("div");
+    buttons.className = "library-buttons";
+    const button = (label, aria, action, cls = "secondary small") => {
+      const b = document.createElement("button");
+      b.type = "button";
+      b.className = cls;
+      b.textContent = label;
+      b.setAttribute("aria-label", aria);
+      b.addEventListener("click", action);
+      buttons.appendChild(b);
+    };
+    button("Play", `Play ${entry.name}`, () => this.playSaved(entry.name));
+    button("Edit", `Edit ${entry.name} in the designer`, () => {
+      this.form.source.value = `saved:${entry.name}`;
+      $("save-name").value = entry.name;
+      this.changed();
+      this.form.source.focus();
+    });
+    button("Delete", `Delete ${entry.name}`, () => this.deleteSaved(entry.name), "danger small");
+    li.append(text, buttons);
+    return li;
+  }
+
+  async playSaved(name) {
+    try {
+      this.playJob(await api.playPattern(name), name);
+    } catch (exc) {
+      this.ui.showError(exc.message);
+    }
+  }
+
+  async deleteSaved(name) {
+    if (!window.confirm(`Delete the pattern ${name} from the library?`)) return;
+    try {
+      await api.deletePattern(name);
+      if (this.form.source.value === `saved:${name}`) this.form.source.value = "";
+      await this.loadLibrary();
+      this.changed();
+    } catch (exc) {
+      this.ui.showError(exc.message);
+    }
+  }
+}
+
+// Fields of `overrides` replace those of `base`; a null override removes the field.
+function merge(base, overrides) {
+  const out = { ...base };
+  for (const [key, value] of Object.entries(overrides)) {
+    if (value === null) delete out[key];
+    else out[key] = value;
+  }
+  return out;
+}
+
+// The planned phantom position at time t, interpolated between curve samples.
+function positionAt(curves, t) {
+  const times = curves.times_s;
+  const points = curves.positions_cm;
+  if (!times || !points || !times.length) return null;
+  if (t <= times[0]) return points[0];
+  let lo = 0;
+  let hi = times.length - 1;
+  if (t >= times[hi]) return points[hi];
+  while (hi - lo > 1) {
+    const mid = (lo + hi) >> 1;
+    if (times[mid] <= t) lo = mid;
+    else hi = mid;
+  }
+  const f = (t - times[lo]) / (times[hi] - times[lo] || 1);
+  return [
+    points[lo][0] + f * (points[hi][0] - points[lo][0]),
+    points[lo][1] + f * (points[hi][1] - points[lo][1]),
+  ];
+}
