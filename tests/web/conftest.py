@@ -1,0 +1,289 @@
+"""Fixtures for the web page tests: the real service, Debian's chromium, a state observer.
+
+The service runs as a subprocess (``phantomtouch serve``) on a free loopback port with a
+temporary pattern database; chromium is driven by Playwright from ``/usr/bin/chromium``
+(never downloaded). Without either the tests skip, except under ``CI=true``, where they
+fail. Every test leaves a screenshot in ``artifacts/web/`` and fails on console errors.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+ARTIFACTS = REPO / "artifacts" / "web"
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-component-update",
+    "--disable-sync",
+]
+SERVER_START_S = 30.0
+VIEWPORT = {"width": 1440, "height": 1000}
+
+
+def unavailable(reason: str) -> None:
+    """Skip the test, or fail it under CI=true, where nothing may be missing."""
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"{reason} (CI=true: the web tests must run)")
+    pytest.skip(reason)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait_healthy(url: str, process: subprocess.Popen[bytes] | None) -> str | None:
+    deadline = time.monotonic() + SERVER_START_S
+    last = "no answer"
+    while time.monotonic() < deadline:
+        if process is not None and process.poll() is not None:
+            return f"exited with code {process.returncode}"
+        try:
+            response = httpx.get(f"{url}/health", timeout=1.0)
+            if response.status_code == 200:
+                return None
+            last = f"GET /health answered {response.status_code}"
+        except httpx.HTTPError as exc:
+            last = str(exc)
+        time.sleep(0.2)
+    return f"not healthy after {SERVER_START_S:g} s: {last}"
+
+
+@pytest.fixture(scope="session")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """Base URL of a running service (started here, stopped at the end of the session)."""
+    tmp = tmp_path_factory.mktemp("server")
+    port = _free_port()
+    url = f"http://127.0.0.1:{port}"
+    log_path = tmp / "server.log"
+    command = [
+        sys.executable,
+        "-m",
+        "phantomtouch",
+        "serve",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        str(port),
+    ]
+    env = {**os.environ, "PHANTOMTOUCH_DB": str(tmp / "patterns.sqlite3")}
+    with log_path.open("wb") as log:
+        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env)
+    try:
+        problem = _wait_healthy(url, process)
+        if problem is not None:
+            tail = log_path.read_text(errors="replace")[-2000:]
+            unavailable(f"the service ({' '.join(command[2:])}) {problem}\n{tail}")
+        yield url
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Any]:
+    """Debian's chromium, headless, driven by Playwright."""
+    if not CHROMIUM.exists() or shutil.which(str(CHROMIUM)) is None:
+        unavailable(f"{CHROMIUM} is missing: install the Debian package chromium")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        unavailable("playwright (Python) is missing: scripts/install --dev")
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(
+            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+        )
+        yield browser
+        browser.close()
+
+
+class ConsoleErrors:
+    """Console messages of type error and uncaught page errors, with expected ones allowed."""
+
+    def __init__(self) -> None:
+        self.messages: list[str] = []
+        self.allowed: list[re.Pattern[str]] = []
+
+    def allow(self, pattern: str) -> None:
+        self.allowed.append(re.compile(pattern))
+
+    def unexpected(self) -> list[str]:
+        return [m for m in self.messages if not any(p.search(m) for p in self.allowed)]
+
+
+@pytest.fixture
+def console() -> ConsoleErrors:
+    return ConsoleErrors()
+
+
+@pytest.fixture
+def page(
+    browser: Any, server: str, console: ConsoleErrors, request: pytest.FixtureRequest
+) -> Iterator[Any]:
+    """A fresh page on the service's web UI, loaded and ready.
+
+    After the test: a screenshot in artifacts/web/<test>.png, everything stopped, and no
+    console errors other than those the test allowed.
+    """
+    context = browser.new_context(viewport=VIEWPORT, accept_downloads=True)
+    page = context.new_page()
+    page.on(
+        "console",
+        lambda message: (
+            console.messages.append(f"console: {message.text}") if message.type == "error" else None
+        ),
+    )
+    page.on("pageerror", lambda error: console.messages.append(f"pageerror: {error}"))
+    page.goto(f"{server}/")
+    page.wait_for_selector("body[data-ready=true]", timeout=10_000)
+    page.wait_for_selector("#connection[data-state=connected]", timeout=10_000)
+    try:
+        yield page
+    finally:
+        screenshot(page, request.node.name)
+        context.close()
+        httpx.post(f"{server}/stop", timeout=5.0)
+    assert console.unexpected() == []
+
+
+def screenshot(page: Any, name: str) -> Path:
+    """Save a full-page screenshot as artifacts/web/<name>.png."""
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    path = ARTIFACTS / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path
+
+
+class StateObserver:
+    """A second WebSocket client of the service that records every `state` message."""
+
+    def __init__(self, socket: Any) -> None:
+        self.socket = socket
+        self.states: list[dict[str, Any]] = []
+        self.lock = threading.Lock()
+        self.closed = threading.Event()
+        self.socket.send(json.dumps({"type": "hello", "client": "web-test-observer"}))
+        self.socket.send(json.dumps({"type": "subscribe", "rate_hz": 60}))
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+        self.pinger = threading.Thread(target=self._ping, daemon=True)
+        self.pinger.start()
+
+    def _read(self) -> None:
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            for text in self.socket:
+                message = json.loads(text)
+                if message.get("type") == "state":
+                    with self.lock:
+                        self.states.append(message)
+        except ConnectionClosed:
+            pass
+        finally:
+            self.closed.set()
+
+    def _ping(self) -> None:
+        from websockets.exceptions import ConnectionClosed
+
+        while not self.closed.wait(0.5):
+            try:
+                self.socket.send(json.dumps({"type": "ping"}))
+            except ConnectionClosed:
+                return
+
+    def mark(self) -> int:
+        """Index of the next state message: wait_for(..., since=mark()) ignores older ones."""
+        with self.lock:
+            return len(self.states)
+
+    def since(self, index: int) -> list[dict[str, Any]]:
+        with self.lock:
+            return list(self.states[index:])
+
+    def wait_for(
+        self,
+        predicate: Callable[[dict[str, Any]], bool],
+        *,
+        since: int = 0,
+        timeout_s: float = 5.0,
+        what: str = "a matching state",
+    ) -> dict[str, Any]:
+        """The first state (from index `since`) for which predicate holds; fails after timeout."""
+        deadline = time.monotonic() + timeout_s
+        checked = since
+        while True:
+            with self.lock:
+                fresh = self.states[checked:]
+            for state in fresh:
+                if predicate(state):
+                    return state
+            checked += len(fresh)
+            if time.monotonic() > deadline:
+                last = self.since(max(since, checked - 1))
+                pytest.fail(f"no {what} within {timeout_s:g} s; last state: {last[-1:]}")
+            time.sleep(0.02)
+
+
+@pytest.fixture
+def observer(server: str) -> Iterator[StateObserver]:
+    from websockets.sync.client import connect
+
+    with connect(server.replace("http://", "ws://") + "/ws") as socket:
+        observer = StateObserver(socket)
+        observer.wait_for(lambda s: True, what="first state message")
+        yield observer
+
+
+class ArmbandOnPage:
+    """Where points of the armband (cm) are on the page (CSS px)."""
+
+    def __init__(self, page: Any) -> None:
+        self.page = page
+
+    def point(self, x_cm: float, y_cm: float) -> tuple[float, float]:
+        x, y = self.page.evaluate(
+            """([x, y]) => {
+                const svg = document.getElementById("armband");
+                const p = new DOMPoint(y, x).matrixTransform(svg.getScreenCTM());
+                return [p.x, p.y];
+            }""",
+            [x_cm, y_cm],
+        )
+        return float(x), float(y)
+
+    def centre(self, actuator: int) -> tuple[float, float]:
+        box = self.page.locator(f'[data-actuator="{actuator}"] circle.body').bounding_box()
+        assert box is not None, f"actuator {actuator} is not drawn"
+        return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+
+
+@pytest.fixture
+def armband(page: Any) -> ArmbandOnPage:
+    return ArmbandOnPage(page)

@@ -1,0 +1,129 @@
+"""The armband on the page: drawn to scale, and dragging on it drives the live contact."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from conftest import ArmbandOnPage, StateObserver, screenshot
+
+CONTACT_TOLERANCE_CM = 0.3
+"""How far the server's contact may lie from the pointer: the page sends positions
+rounded to CSS pixels (about 0.03 cm at this size), so this only allows for that."""
+
+
+def loudest_channel(state: dict[str, Any]) -> int:
+    """1-based channel with the highest level."""
+    return int(np.argmax(state["levels"])) + 1
+
+
+def contact_near(state: dict[str, Any], x_cm: float, y_cm: float) -> bool:
+    return any(
+        math.hypot(c["x_cm"] - x_cm, c["y_cm"] - y_cm) < CONTACT_TOLERANCE_CM
+        for c in state["contacts"]
+    )
+
+
+def test_actuators_are_drawn_to_scale_with_labels_and_ends(
+    page: Any, server: str, armband: ArmbandOnPage
+) -> None:
+    device = httpx.get(f"{server}/device").json()
+    actuators = device["actuators"]
+    labels = page.locator(".actuator-label").all_text_contents()
+    assert labels == [str(n) for n in range(1, len(actuators) + 1)]
+    centres = np.array([armband.centre(n) for n in range(1, len(actuators) + 1)])
+    cm = np.array([[a["y_cm"], a["x_cm"]] for a in actuators])
+    # One scale for both axes: page distances are cm distances times a single factor.
+    page_d = np.hypot(*(centres[:, None, :] - centres[None, :, :]).transpose(2, 0, 1))
+    cm_d = np.hypot(*(cm[:, None, :] - cm[None, :, :]).transpose(2, 0, 1))
+    scale = page_d[cm_d > 0] / cm_d[cm_d > 0]
+    np.testing.assert_allclose(scale, scale.mean(), rtol=0.02)  # 2 %: sub-pixel rounding
+    assert page.locator(".armband .triangles polygon").count() == len(device["triangles"])
+    ends = page.locator(".end-label").all_text_contents()
+    assert any("wrist" in e for e in ends) and any("elbow" in e for e in ends)
+    wrist, elbow = (page.locator(".end-label").nth(i).bounding_box() for i in (0, 1))
+    assert wrist is not None and elbow is not None
+    first = min(actuators, key=lambda a: a["y_cm"])
+    assert "wrist" in ends[0], "the wrist label sits at the y = 0 end"
+    assert wrist["x"] < armband.centre(actuators.index(first) + 1)[0] < elbow["x"]
+    assert page.locator("#st-backend").inner_text() == device["backend"]
+    assert page.locator("#st-rate").inner_text().startswith(f"{device['sample_rate_hz']:,}")
+
+
+def test_drag_moves_the_phantom_from_actuator_4_to_actuator_5(
+    page: Any, armband: ArmbandOnPage, observer: StateObserver
+) -> None:
+    start = observer.mark()
+    x4, y4 = armband.centre(4)
+    x5, y5 = armband.centre(5)
+    page.mouse.move(x4, y4)
+    page.mouse.down()
+    at_4 = observer.wait_for(
+        lambda s: contact_near(s, 0.0, 14.4) and loudest_channel(s) == 4,
+        since=start,
+        what="contact at actuator 4 with channel 4 loudest",
+    )
+    assert at_4["active_voices"] >= 1
+    page.wait_for_function(
+        "() => Number(document.querySelector('[data-actuator=\"4\"]').dataset.level) > 0"
+    )
+    screenshot(page, "drag_at_actuator_4")
+
+    steps = 24
+    for i in range(1, steps + 1):
+        f = i / steps
+        page.mouse.move(x4 + f * (x5 - x4), y4 + f * (y5 - y4))
+        page.wait_for_timeout(25)
+    at_5 = observer.wait_for(
+        lambda s: contact_near(s, 3.8, 0.0) and loudest_channel(s) == 5,
+        since=start,
+        what="contact at actuator 5 with channel 5 loudest",
+    )
+    assert at_5["levels"][3] < at_4["levels"][3], "channel 4 fell as the phantom left it"
+    screenshot(page, "drag_at_actuator_5")
+
+    # The server saw the path, not just its ends: positions along the straight line from
+    # actuator 4 to actuator 5, in order.
+    seen = [
+        (c["x_cm"], c["y_cm"])
+        for s in observer.since(start)
+        for c in s["contacts"]
+        if c["contact"].startswith("web-")
+    ]
+    ys = [y for _, y in seen]
+    assert len({round(y, 1) for y in ys}) >= 5, f"too few distinct positions: {seen}"
+    assert all(b <= a + 1e-6 for a, b in itertools.pairwise(ys)), "y only decreases"
+    for x, y in seen:
+        assert x == pytest.approx(3.8 * (14.4 - y) / 14.4, abs=CONTACT_TOLERANCE_CM)
+
+    lifted = observer.mark()
+    page.mouse.up()
+    observer.wait_for(
+        lambda s: not s["contacts"] and s["active_voices"] == 0,
+        since=lifted,
+        what="no contacts and no voices after lift-off",
+    )
+
+
+def test_keyboard_touches_moves_and_lifts(
+    page: Any, armband: ArmbandOnPage, observer: StateObserver
+) -> None:
+    page.focus("#armband")
+    start = observer.mark()
+    page.keyboard.press("Enter")
+    first = observer.wait_for(lambda s: bool(s["contacts"]), since=start, what="keyboard contact")
+    y0 = first["contacts"][0]["y_cm"]
+    for _ in range(5):
+        page.keyboard.press("ArrowRight")
+    observer.wait_for(
+        lambda s: bool(s["contacts"]) and s["contacts"][0]["y_cm"] == pytest.approx(y0 + 1.0),
+        since=start,
+        what="contact moved 1 cm towards the elbow",
+    )
+    lifted = observer.mark()
+    page.keyboard.press("Enter")
+    observer.wait_for(lambda s: not s["contacts"], since=lifted, what="keyboard lift-off")
