@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import itertools
+import json
 import math
+import time
+from collections.abc import Callable
 from typing import Any
 
 import httpx
@@ -26,6 +29,14 @@ def contact_near(state: dict[str, Any], x_cm: float, y_cm: float) -> bool:
         math.hypot(c["x_cm"] - x_cm, c["y_cm"] - y_cm) < CONTACT_TOLERANCE_CM
         for c in state["contacts"]
     )
+
+
+def wait_until(page: Any, condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
+    """Let the page run until `condition()` holds (Playwright events arrive meanwhile)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, "condition not met in time"
+        page.wait_for_timeout(20)
 
 
 def test_actuators_are_drawn_to_scale_with_labels_and_ends(
@@ -127,3 +138,42 @@ def test_keyboard_touches_moves_and_lifts(
     lifted = observer.mark()
     page.keyboard.press("Enter")
     observer.wait_for(lambda s: not s["contacts"], since=lifted, what="keyboard lift-off")
+
+
+def test_moves_are_sent_once_per_animation_frame_and_the_latest_wins(
+    page: Any, armband: ArmbandOnPage
+) -> None:
+    sent: list[dict[str, Any]] = []
+    page.on(
+        "websocket",
+        lambda ws: ws.on("framesent", lambda payload: sent.append(json.loads(payload))),
+    )
+    page.reload()
+    page.wait_for_selector("#connection[data-state=connected]")
+    page.mouse.move(*armband.centre(2))
+    page.mouse.down()
+    wait_until(page, lambda: any(m["type"] == "down" for m in sent))
+    assert [m["type"] for m in sent if m["type"] in ("down", "move")] == ["down"]
+    targets = [armband.point(1.9, 4.8 + 0.2 * i) for i in range(1, 41)]
+    # Forty pointer moves within one task, so within one animation frame.
+    page.evaluate(
+        """targets => {
+            const svg = document.getElementById("armband");
+            for (const [x, y] of targets) {
+                svg.dispatchEvent(new PointerEvent("pointermove", {
+                    pointerId: 1, pointerType: "mouse", isPrimary: true, bubbles: true,
+                    clientX: x, clientY: y,
+                }));
+            }
+        }""",
+        targets,
+    )
+    page.evaluate("() => new Promise((r) => requestAnimationFrame(() => setTimeout(r, 50)))")
+    moves = [m for m in sent if m["type"] == "move"]
+    assert len(moves) == 1, moves
+    assert moves[0]["x_cm"] == pytest.approx(1.9, abs=0.05)
+    assert moves[0]["y_cm"] == pytest.approx(4.8 + 0.2 * 40, abs=0.05)
+    page.mouse.up()
+    wait_until(page, lambda: any(m["type"] == "up" for m in sent))
+    ups = [m for m in sent if m["type"] == "up"]
+    assert [m["contact"] for m in ups] == [moves[0]["contact"]]

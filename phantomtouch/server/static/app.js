@@ -1,4 +1,4 @@
-// The page: wires the armband, the live contacts, the designer, the status bar and the
+// The page: wires the armband, the live contacts, the designer, the status view and the
 // stop button to the service.
 
 import { api } from "./api.js";
@@ -7,13 +7,13 @@ import { GainChart } from "./chart.js";
 import { Designer } from "./designer.js";
 import { LiveTouch } from "./live.js";
 import { Session } from "./socket.js";
-import { FLOOR_DBFS, channelColor, dbfs, formatNumber, levelNorm } from "./units.js";
+import { StatusView } from "./status.js";
+import { formatNumber } from "./units.js";
 
 const $ = (id) => document.getElementById(id);
 const MAX_ALERTS = 3;
 
-// --- errors --------------------------------------------------------------------------
-
+// A server error, shown until dismissed; the same message again replaces the old one.
 function showError(message) {
   const box = $("alerts");
   for (const existing of box.querySelectorAll(".alert")) {
@@ -36,79 +36,45 @@ function showError(message) {
   while (box.childElementCount > MAX_ALERTS) box.lastElementChild.remove();
 }
 
-// --- status bar and meters -------------------------------------------------------------
-
-function setStatus(id, text) {
-  const node = $(id);
-  if (node.textContent !== text) node.textContent = text;
+function liveSettings() {
+  const kind = $("live-carrier").value;
+  const carrier = kind === "noise" ? { kind } : { kind, freq_hz: Number($("live-freq").value) };
+  return { carrier, intensity: Number($("live-intensity").value), law: $("live-law").value };
 }
 
-function showDevice(device) {
-  setStatus("st-backend", device.backend || "–");
-  setStatus("st-rate", device.sample_rate_hz ? `${device.sample_rate_hz.toLocaleString("en-US")} Hz`
-    : "–");
-  if (device.block_frames) {
-    const ms = device.sample_rate_hz ? ` (${formatNumber((device.block_frames / device.sample_rate_hz) * 1000, 1)} ms)` : "";
-    setStatus("st-block", `${device.block_frames} frames${ms}`);
-  }
-}
-
-function buildMeters(device) {
-  const box = $("meters");
-  box.replaceChildren();
-  const meters = [];
-  device.actuators.forEach((a, index) => {
-    const meter = document.createElement("div");
-    meter.className = "meter";
-    meter.setAttribute("role", "meter");
-    meter.setAttribute("aria-label", `Actuator ${index + 1} level, dBFS`);
-    meter.setAttribute("aria-valuemin", String(FLOOR_DBFS));
-    meter.setAttribute("aria-valuemax", "0");
-    meter.setAttribute("aria-valuenow", String(FLOOR_DBFS));
-    meter.style.setProperty("--channel", channelColor(a.channel - 1));
-    const track = document.createElement("span");
-    track.className = "meter-track";
-    const bar = document.createElement("span");
-    bar.className = "meter-bar";
-    track.appendChild(bar);
-    const label = document.createElement("span");
-    label.className = "meter-label";
-    label.textContent = String(index + 1);
-    const value = document.createElement("span");
-    value.className = "meter-value";
-    value.textContent = "–";
-    meter.append(label, track, value);
-    box.appendChild(meter);
-    meters.push({ channel: a.channel, meter, bar, value });
+function wireLiveControls(live) {
+  $("live-intensity").addEventListener("input", () => {
+    $("live-intensity-out").textContent = formatNumber($("live-intensity").value);
+    live.nudge();
   });
-  return meters;
+  $("live-carrier").addEventListener("change", () => {
+    $("live-freq").disabled = $("live-carrier").value === "noise";
+    live.retouch();
+  });
+  $("live-freq").addEventListener("change", () => live.retouch());
+  $("live-law").addEventListener("change", () => live.retouch());
 }
 
-function showLevels(meters, levels) {
-  for (const m of meters) {
-    const level = Number(levels[m.channel - 1]) || 0;
-    const db = dbfs(level);
-    m.bar.style.transform = `scaleX(${levelNorm(level)})`;
-    const text = db > FLOOR_DBFS ? `${Math.round(db)} dB` : "–";
-    if (m.value.textContent !== text) m.value.textContent = text;
-    m.meter.setAttribute("aria-valuenow", String(Math.max(FLOOR_DBFS, Math.round(db))));
-  }
+function wireConnection(session, status) {
+  session.addEventListener("connection", ({ detail }) => {
+    if (detail.state === "disconnected") status.clear();
+    $("connection").dataset.state = detail.state;
+    $("connection-text").textContent = detail.state === "connected" ? "Live"
+      : detail.state === "connecting" ? "Connecting…"
+        : `Disconnected, retrying in ${formatNumber(detail.retryInS, 1)} s`;
+  });
+  session.addEventListener("state", ({ detail }) => status.show(detail));
+  session.addEventListener("error", ({ detail }) => {
+    showError(detail.message || `The service refused a message (${detail.code || "error"}).`);
+  });
+  session.addEventListener("released", ({ detail }) => {
+    const count = detail.contacts ? detail.contacts.length : 0;
+    showError(`The service released ${count} contact(s): ${detail.reason || "released"}.`);
+  });
 }
-
-// --- start-up ------------------------------------------------------------------------
 
 async function main() {
   const session = new Session(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
-  const liveControls = {
-    carrier: $("live-carrier"), freq: $("live-freq"), intensity: $("live-intensity"), law: $("live-law"),
-  };
-  const liveSettings = () => {
-    const kind = liveControls.carrier.value;
-    const carrier = kind === "noise" ? { kind } : { kind, freq_hz: Number(liveControls.freq.value) };
-    return {
-      carrier, intensity: Number(liveControls.intensity.value), law: liveControls.law.value,
-    };
-  };
   const live = new LiveTouch(session, liveSettings);
   let designer = null;
   const armband = new Armband($("armband"), {
@@ -118,18 +84,9 @@ async function main() {
     drawn: (points) => designer && designer.setDrawn(points),
     addPoint: (point) => designer && designer.addDrawnPoint(point),
   });
-  const chart = new GainChart($("chart"));
-
-  liveControls.intensity.addEventListener("input", () => {
-    $("live-intensity-out").textContent = formatNumber(liveControls.intensity.value);
-    live.nudge();
-  });
-  liveControls.carrier.addEventListener("change", () => {
-    liveControls.freq.disabled = liveControls.carrier.value === "noise";
-    live.retouch();
-  });
-  liveControls.freq.addEventListener("change", () => live.retouch());
-  liveControls.law.addEventListener("change", () => live.retouch());
+  const status = new StatusView(armband);
+  wireLiveControls(live);
+  wireConnection(session, status);
 
   for (const radio of document.querySelectorAll("input[name=drag-mode]")) {
     radio.addEventListener("change", () => armband.setMode(radio.value));
@@ -144,9 +101,8 @@ async function main() {
     live.stopped();
     if (designer) designer.stopped();
     session.send({ type: "stop" });
-    const button = $("stop");
-    button.classList.add("pressed");
-    setTimeout(() => button.classList.remove("pressed"), 200);
+    $("stop").classList.add("pressed");
+    setTimeout(() => $("stop").classList.remove("pressed"), 200);
     try {
       await api.stop();
     } catch (exc) {
@@ -155,25 +111,9 @@ async function main() {
   };
   $("stop").addEventListener("click", stop);
   document.addEventListener("keydown", (event) => {
-    if (event.key === "Escape") {
-      event.preventDefault();
-      stop();
-    }
-  });
-
-  session.addEventListener("connection", ({ detail }) => {
-    const box = $("connection");
-    box.dataset.state = detail.state;
-    $("connection-text").textContent = detail.state === "connected" ? "Live"
-      : detail.state === "connecting" ? "Connecting…"
-        : `Disconnected, retrying in ${formatNumber(detail.retryInS, 1)} s`;
-  });
-  session.addEventListener("error", ({ detail }) => {
-    showError(detail.message || `The service refused a message (${detail.code || "error"}).`);
-  });
-  session.addEventListener("released", ({ detail }) => {
-    showError(`The service released ${detail.contacts ? detail.contacts.length : "the"} contact(s)`
-      + ` (${detail.reason || "released"}).`);
+    if (event.key !== "Escape") return;
+    event.preventDefault();
+    stop();
   });
 
   let device;
@@ -184,32 +124,16 @@ async function main() {
     return;
   }
   armband.build(device);
-  showDevice(device);
-  const meters = buildMeters(device);
+  status.setDevice(device);
+  status.buildMeters(device.actuators);
+  session.addEventListener("welcome", ({ detail }) => status.setDevice({ ...device, ...detail.device }));
   const channelLabels = () => {
     const labels = [];
     device.actuators.forEach((a, index) => { labels[a.channel - 1] = String(index + 1); });
     return labels;
   };
-  designer = new Designer({ armband, chart, session, showError, channelLabels });
-
-  session.addEventListener("welcome", ({ detail }) => {
-    if (detail.device) showDevice({ ...device, ...detail.device, backend: device.backend });
-  });
-  session.addEventListener("state", ({ detail }) => {
-    const levels = detail.levels || [];
-    armband.setLevels(levels);
-    showLevels(meters, levels);
-    armband.setContacts(detail.contacts || []);
-    setStatus("st-voices", String(detail.active_voices ?? "–"));
-    setStatus("st-contacts", String((detail.contacts || []).length));
-    if (detail.underruns !== undefined) setStatus("st-underruns", String(detail.underruns));
-    if (detail.output_latency_s !== undefined && detail.output_latency_s !== null) {
-      setStatus("st-latency", `${formatNumber(detail.output_latency_s * 1000, 1)} ms`);
-    }
-  });
+  designer = new Designer({ armband, chart: new GainChart($("chart")), session, showError, channelLabels });
   session.start();
-
   try {
     await designer.load();
   } catch (exc) {

@@ -60,8 +60,6 @@ export class Designer {
     const [presets] = await Promise.all([api.presets(), this.loadLibrary()]);
     this.presets = presets;
     this.fillSources();
-    const first = presets.find((p) => p.name.startsWith("exp2/")) || presets[0];
-    if (first) this.form.source.value = `preset:${first.name}`;
     this.changed();
   }
 
@@ -100,6 +98,9 @@ export class Designer {
     }
     if ([...select.options].some((o) => o.value === current && !o.disabled)) {
       select.value = current;
+    } else {
+      const first = this.presets.find((p) => p.name.startsWith("exp2/")) || this.presets[0];
+      select.value = first ? `preset:${first.name}` : "";
     }
   }
 
@@ -113,12 +114,8 @@ export class Designer {
   setDrawn(points) {
     this.drawn = points;
     $("clear-path").disabled = points.length === 0;
-    this.fillSources();
     if (points.length) this.form.source.value = DRAWN;
-    else if (this.form.source.value === DRAWN || !this.form.source.value) {
-      const first = this.form.source.querySelector("option:not([disabled])");
-      if (first) this.form.source.value = first.value;
-    }
+    this.fillSources();
     this.changed();
   }
 
@@ -427,7 +424,6 @@ export class Designer {
     if (!window.confirm(`Delete the pattern ${name} from the library?`)) return;
     try {
       await api.deletePattern(name);
-      if (this.form.source.value === `saved:${name}`) this.form.source.value = "";
       await this.loadLibrary();
       this.changed();
     } catch (exc) {
