@@ -83,7 +83,7 @@ async function main() {
     up: (id) => live.up(id),
     drawn: (points) => designer && designer.setDrawn(points),
     addPoint: (point) => designer && designer.addDrawnPoint(point),
-  });
+  }, $("pointer-readout"));
   const status = new StatusView(armband);
   wireLiveControls(live);
   wireConnection(session, status);

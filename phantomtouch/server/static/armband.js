@@ -26,8 +26,10 @@ function fmt(value) {
 export class Armband {
   // handlers: { down(id, pos), move(id, pos), up(id), drawn(points), addPoint(point) };
   // pos is {x_cm, y_cm}, a point [x_cm, y_cm]; both lie in the actuators' bounding box.
-  constructor(svg, handlers) {
+  // readout: an element that shows the position under the pointer or keyboard cursor.
+  constructor(svg, handlers, readout) {
     this.svg = svg;
+    this.readout = readout;
     this.handlers = handlers;
     this.mode = "live";
     this.actuators = [];
@@ -40,6 +42,7 @@ export class Armband {
     svg.addEventListener("pointerup", (e) => this.pointerUp(e));
     svg.addEventListener("pointercancel", (e) => this.pointerUp(e));
     svg.addEventListener("lostpointercapture", (e) => this.pointerUp(e));
+    svg.addEventListener("pointerleave", () => this.showReadout(null));
     svg.addEventListener("keydown", (e) => this.keyDown(e));
     svg.addEventListener("focus", () => this.showCursor(svg.matches(":focus-visible")));
     svg.addEventListener("blur", () => this.blur());
@@ -262,6 +265,7 @@ export class Armband {
   }
 
   pointerMove(event) {
+    this.showReadout(this.toCm(event));
     if (this.mode === "draw") {
       if (!this.stroke || this.stroke.pointerId !== event.pointerId) return;
       const pos = this.toCm(event);
@@ -306,6 +310,10 @@ export class Armband {
     if (this.keyboard.down) this.keyboardLift();
   }
 
+  showReadout(pos) {
+    this.readout.textContent = pos ? `x ${pos.x_cm.toFixed(2)} cm, y ${pos.y_cm.toFixed(2)} cm` : "";
+  }
+
   placeFinger(finger, pos) {
     finger.setAttribute("cx", fmt(pos.y_cm));
     finger.setAttribute("cy", fmt(pos.x_cm));
@@ -333,6 +341,7 @@ export class Armband {
       const [dx, dy] = moves[event.key];
       Object.assign(k, this.clamp({ x_cm: k.x_cm + dx, y_cm: k.y_cm + dy }));
       this.placeCursor();
+      this.showReadout(k);
       if (k.down) this.handlers.move("keyboard", { x_cm: k.x_cm, y_cm: k.y_cm });
     } else if (event.key === "Enter" || event.key === " ") {
       event.preventDefault();
