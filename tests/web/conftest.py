@@ -8,24 +8,21 @@ fail. Every test leaves a screenshot in ``artifacts/web/`` and fails on console 
 
 from __future__ import annotations
 
-import json
 import os
-import re
 import shutil
 import socket
 import subprocess
 import sys
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
-ARTIFACTS = REPO / "artifacts" / "web"
+from tests.web.support import VIEWPORT, ArmbandOnPage, ConsoleErrors, StateObserver, screenshot
+
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
     "--headless",
@@ -38,7 +35,6 @@ CHROMIUM_ARGS = [
     "--disable-sync",
 ]
 SERVER_START_S = 30.0
-VIEWPORT = {"width": 1440, "height": 1000}
 
 
 def unavailable(reason: str) -> None:
@@ -87,10 +83,13 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         "127.0.0.1",
         "--port",
         str(port),
+        "--db",
+        str(tmp / "patterns.db"),
+        "--output",
+        "null",
     ]
-    env = {**os.environ, "PHANTOMTOUCH_DB": str(tmp / "patterns.sqlite3")}
     with log_path.open("wb") as log:
-        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env)
+        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
     try:
         problem = _wait_healthy(url, process)
         if problem is not None:
@@ -121,20 +120,6 @@ def browser() -> Iterator[Any]:
         )
         yield browser
         browser.close()
-
-
-class ConsoleErrors:
-    """Console messages of type error and uncaught page errors, with expected ones allowed."""
-
-    def __init__(self) -> None:
-        self.messages: list[str] = []
-        self.allowed: list[re.Pattern[str]] = []
-
-    def allow(self, pattern: str) -> None:
-        self.allowed.append(re.compile(pattern))
-
-    def unexpected(self) -> list[str]:
-        return [m for m in self.messages if not any(p.search(m) for p in self.allowed)]
 
 
 @pytest.fixture
@@ -172,85 +157,6 @@ def page(
     assert console.unexpected() == []
 
 
-def screenshot(page: Any, name: str) -> Path:
-    """Save a full-page screenshot as artifacts/web/<name>.png."""
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    path = ARTIFACTS / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}.png"
-    page.screenshot(path=str(path), full_page=True)
-    return path
-
-
-class StateObserver:
-    """A second WebSocket client of the service that records every `state` message."""
-
-    def __init__(self, socket: Any) -> None:
-        self.socket = socket
-        self.states: list[dict[str, Any]] = []
-        self.lock = threading.Lock()
-        self.closed = threading.Event()
-        self.socket.send(json.dumps({"type": "hello", "client": "web-test-observer"}))
-        self.socket.send(json.dumps({"type": "subscribe", "rate_hz": 60}))
-        self.reader = threading.Thread(target=self._read, daemon=True)
-        self.reader.start()
-        self.pinger = threading.Thread(target=self._ping, daemon=True)
-        self.pinger.start()
-
-    def _read(self) -> None:
-        from websockets.exceptions import ConnectionClosed
-
-        try:
-            for text in self.socket:
-                message = json.loads(text)
-                if message.get("type") == "state":
-                    with self.lock:
-                        self.states.append(message)
-        except ConnectionClosed:
-            pass
-        finally:
-            self.closed.set()
-
-    def _ping(self) -> None:
-        from websockets.exceptions import ConnectionClosed
-
-        while not self.closed.wait(0.5):
-            try:
-                self.socket.send(json.dumps({"type": "ping"}))
-            except ConnectionClosed:
-                return
-
-    def mark(self) -> int:
-        """Index of the next state message: wait_for(..., since=mark()) ignores older ones."""
-        with self.lock:
-            return len(self.states)
-
-    def since(self, index: int) -> list[dict[str, Any]]:
-        with self.lock:
-            return list(self.states[index:])
-
-    def wait_for(
-        self,
-        predicate: Callable[[dict[str, Any]], bool],
-        *,
-        since: int = 0,
-        timeout_s: float = 5.0,
-        what: str = "a matching state",
-    ) -> dict[str, Any]:
-        """The first state (from index `since`) for which predicate holds; fails after timeout."""
-        deadline = time.monotonic() + timeout_s
-        checked = since
-        while True:
-            with self.lock:
-                fresh = self.states[checked:]
-            for state in fresh:
-                if predicate(state):
-                    return state
-            checked += len(fresh)
-            if time.monotonic() > deadline:
-                last = self.since(max(since, checked - 1))
-                pytest.fail(f"no {what} within {timeout_s:g} s; last state: {last[-1:]}")
-            time.sleep(0.02)
-
-
 @pytest.fixture
 def observer(server: str) -> Iterator[StateObserver]:
     from websockets.sync.client import connect
@@ -259,29 +165,6 @@ def observer(server: str) -> Iterator[StateObserver]:
         observer = StateObserver(socket)
         observer.wait_for(lambda s: True, what="first state message")
         yield observer
-
-
-class ArmbandOnPage:
-    """Where points of the armband (cm) are on the page (CSS px)."""
-
-    def __init__(self, page: Any) -> None:
-        self.page = page
-
-    def point(self, x_cm: float, y_cm: float) -> tuple[float, float]:
-        x, y = self.page.evaluate(
-            """([x, y]) => {
-                const svg = document.getElementById("armband");
-                const p = new DOMPoint(y, x).matrixTransform(svg.getScreenCTM());
-                return [p.x, p.y];
-            }""",
-            [x_cm, y_cm],
-        )
-        return float(x), float(y)
-
-    def centre(self, actuator: int) -> tuple[float, float]:
-        box = self.page.locator(f'[data-actuator="{actuator}"] circle.body').bounding_box()
-        assert box is not None, f"actuator {actuator} is not drawn"
-        return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
 
 
 @pytest.fixture

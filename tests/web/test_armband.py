@@ -5,14 +5,13 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import time
-from collections.abc import Callable
 from typing import Any
 
 import httpx
 import numpy as np
 import pytest
-from conftest import ArmbandOnPage, StateObserver, screenshot
+
+from tests.web.support import ArmbandOnPage, StateObserver, screenshot, wait_until
 
 CONTACT_TOLERANCE_CM = 0.3
 """How far the server's contact may lie from the pointer: the page sends positions
@@ -29,14 +28,6 @@ def contact_near(state: dict[str, Any], x_cm: float, y_cm: float) -> bool:
         math.hypot(c["x_cm"] - x_cm, c["y_cm"] - y_cm) < CONTACT_TOLERANCE_CM
         for c in state["contacts"]
     )
-
-
-def wait_until(page: Any, condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
-    """Let the page run until `condition()` holds (Playwright events arrive meanwhile)."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "condition not met in time"
-        page.wait_for_timeout(20)
 
 
 def test_actuators_are_drawn_to_scale_with_labels_and_ends(

@@ -8,7 +8,8 @@ from typing import Any
 import httpx
 import pytest
 import soundfile
-from conftest import ArmbandOnPage, ConsoleErrors, StateObserver, screenshot
+
+from tests.web.support import ArmbandOnPage, ConsoleErrors, StateObserver, screenshot
 
 PLAN_KEYS = ("duration_s", "path_length_cm", "speed_cm_s", "frames")
 
@@ -115,10 +116,8 @@ def test_designer_settings_reach_the_plan(page: Any, server: str) -> None:
             "preset": "exp2/central",
             "overrides": {
                 "speed_cm_s": 4,
-                "duration_s": None,
                 "modulation": {"index": 1, "freq_hz": "stroke"},
                 "intensity": "high",
-                "level_db": None,
             },
         },
     )
@@ -196,7 +195,7 @@ def test_a_refused_request_shows_the_server_message(
     toast.wait_for()
     refused = httpx.post(
         f"{server}/touch",
-        json={"preset": "exp2/central", "overrides": {"speed_cm_s": 0, "duration_s": None}},
+        json={"preset": "exp2/central", "overrides": {"speed_cm_s": 0}},
     )
     assert refused.status_code in (400, 422)
     assert refused.json()["error"]["message"] in toast.inner_text()

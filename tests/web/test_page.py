@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
-from conftest import VIEWPORT, ArmbandOnPage, StateObserver, screenshot
+from tests.web.support import VIEWPORT, ArmbandOnPage, StateObserver, screenshot
 
 LONG_PRESET = "exp1/noise-low-v3"
 """Up and down the band at 3 cm/s: about 12 s, long enough to be stopped."""

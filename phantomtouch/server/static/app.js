@@ -55,7 +55,7 @@ function wireLiveControls(live) {
   $("live-law").addEventListener("change", () => live.retouch());
 }
 
-function wireConnection(session, status) {
+function wireConnection(session, status, live) {
   session.addEventListener("connection", ({ detail }) => {
     if (detail.state === "disconnected") status.clear();
     $("connection").dataset.state = detail.state;
@@ -68,8 +68,11 @@ function wireConnection(session, status) {
     showError(detail.message || `The service refused a message (${detail.code || "error"}).`);
   });
   session.addEventListener("released", ({ detail }) => {
-    const count = detail.contacts ? detail.contacts.length : 0;
-    showError(`The service released ${count} contact(s): ${detail.reason || "released"}.`);
+    live.released(detail.contacts || []);
+    if (detail.reason === "watchdog") {
+      showError("The service released your touch: it heard nothing from this page for too "
+        + "long (watchdog). Touch again to continue.");
+    }
   });
 }
 
@@ -86,7 +89,7 @@ async function main() {
   }, $("pointer-readout"));
   const status = new StatusView(armband);
   wireLiveControls(live);
-  wireConnection(session, status);
+  wireConnection(session, status, live);
 
   for (const radio of document.querySelectorAll("input[name=drag-mode]")) {
     radio.addEventListener("change", () => armband.setMode(radio.value));

@@ -201,6 +201,7 @@ export class Armband {
       dot.setAttribute("cx", fmt(c.y_cm));
       dot.setAttribute("cy", fmt(c.x_cm));
       dot.dataset.contact = c.contact;
+      dot.classList.toggle("other", c.own === false);
     });
   }
 

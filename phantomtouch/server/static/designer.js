@@ -35,7 +35,7 @@ export class Designer {
     this.plannedKey = "";
     this.previewTimer = 0;
     this.previewAbort = null;
-    this.job = null;
+    this.stops = 0;
     this.animation = 0;
     this.form = {
       source: $("source"), speed: $("speed"), carrier: $("carrier"), freq: $("carrier-freq"),
@@ -170,11 +170,20 @@ export class Designer {
   touchRequest() {
     const source = this.source();
     const overrides = this.overrides();
-    const changed = Object.keys(overrides).length > 0;
     if (source.kind === "preset") {
-      return changed ? { preset: source.name, overrides } : { preset: source.name };
+      // The service ignores null overrides and lets speed_cm_s replace duration_s and
+      // intensity replace level_db by itself; "no modulation" is a modulation index of 0.
+      const changes = {};
+      for (const [key, value] of Object.entries(overrides)) {
+        if (key === "modulation" && value === null) changes.modulation = { index: 0 };
+        else if (value !== null) changes[key] = value;
+      }
+      return Object.keys(changes).length
+        ? { preset: source.name, overrides: changes } : { preset: source.name };
     }
-    if (source.kind === "saved" && !changed) return { pattern: source.name };
+    if (source.kind === "saved" && Object.keys(overrides).length === 0) {
+      return { pattern: source.name };
+    }
     return this.pattern();
   }
 
@@ -194,11 +203,15 @@ export class Designer {
     f.modFreq.disabled = f.modulation.value !== "freq";
     f.relative.disabled = f.intensity.value !== "relative";
     $("relative-out").textContent = formatNumber(f.relative.value);
-    const summary = source.kind === "preset"
-      ? (this.presets.find((p) => p.name === source.name) || {}).summary
-      : source.kind === "saved" ? (this.saved.find((p) => p.name === source.name) || {}).summary
-        : `${this.drawn.length} point${this.drawn.length === 1 ? "" : "s"} drawn on the armband`;
-    $("source-summary").textContent = summary || "";
+    const entry = source.kind === "preset" ? this.presets.find((p) => p.name === source.name)
+      : source.kind === "saved" ? this.saved.find((p) => p.name === source.name) : null;
+    $("source-summary").textContent = source.kind === DRAWN
+      ? `${this.drawn.length} point${this.drawn.length === 1 ? "" : "s"} drawn on the armband`
+      : describe(entry && entry.summary);
+    const savable = source.kind !== "preset";
+    $("save").disabled = !savable;
+    $("save-name").disabled = !savable;
+    $("save-hint").hidden = savable;
     if (!$("save-name").value && source.kind === "saved") $("save-name").value = source.name;
     if (source.kind === "saved" && !this.stored.has(source.name)) {
       this.fetchStored(source.name);
@@ -270,8 +283,10 @@ export class Designer {
     const request = this.touchRequest();
     if (!request) return;
     const key = JSON.stringify(request);
+    const stops = this.stops;
     try {
       const job = await api.touch(request);
+      if (stops !== this.stops) return;  // stopped while the request was on its way
       this.startPlayhead(job, key === this.plannedKey ? this.planned : null);
     } catch (exc) {
       this.ui.showError(exc.message);
@@ -285,16 +300,15 @@ export class Designer {
   startPlayhead(job, planned) {
     cancelAnimationFrame(this.animation);
     const label = job.label || this.source().name;
-    this.job = { ...job, planned };
-    $("job").textContent = `Playing ${label}: ${formatNumber(job.duration_s, 2)} s`
-      + (job.job_id ? ` (job ${job.job_id})` : "");
+    $("job").textContent = `Playing ${label}: ${formatNumber(job.duration_s, 2)} s.`;
     const tick = () => {
       const now = this.ui.session.serverNowS();
       const start = Number(job.start_at_s);
       if (now === null || !Number.isFinite(start)) return;
       const t = now - start;
       if (t > job.duration_s) {
-        this.endPlayhead(`Played ${label}.`);
+        this.endPlayhead();
+        $("job").textContent = `Played ${label}.`;
         return;
       }
       if (planned && planned.curves && t >= 0) {
@@ -306,29 +320,25 @@ export class Designer {
     this.animation = requestAnimationFrame(tick);
   }
 
-  endPlayhead(text) {
+  endPlayhead() {
     cancelAnimationFrame(this.animation);
     this.animation = 0;
-    if (this.job) $("job").textContent = text;
-    this.job = null;
     this.ui.chart.setPlayhead(null);
     this.ui.armband.setPlayhead(null);
   }
 
   stopped() {
-    this.endPlayhead("Stopped.");
+    this.stops += 1;
+    this.endPlayhead();
+    $("job").textContent = "Stopped.";
   }
 
   async save() {
     const input = $("save-name");
     if (!input.reportValidity()) return;
     const name = input.value.trim();
-    const pattern = this.pattern() || (this.planned && this.planned.pattern);
-    if (!pattern) {
-      this.ui.showError("The service did not return this preset's pattern, so it cannot be "
-        + "saved from here; save a drawn or a saved pattern instead.");
-      return;
-    }
+    const pattern = this.pattern();
+    if (!pattern) return;
     try {
       await api.savePattern(name, pattern);
       this.stored.set(name, pattern);
@@ -387,7 +397,7 @@ export class Designer {
     const name = document.createElement("strong");
     name.textContent = entry.name;
     const summary = document.createElement("span");
-    summary.textContent = entry.summary || "";
+    summary.textContent = describe(entry.summary);
     text.append(name, summary);
     const buttons = document.createElement("div");
     buttons.className = "library-buttons";
@@ -413,8 +423,10 @@ export class Designer {
   }
 
   async playSaved(name) {
+    const stops = this.stops;
     try {
-      this.playJob(await api.playPattern(name), name);
+      const job = await api.playPattern(name);
+      if (stops === this.stops) this.playJob(job, name);
     } catch (exc) {
       this.ui.showError(exc.message);
     }
@@ -440,6 +452,21 @@ function merge(base, overrides) {
     else out[key] = value;
   }
   return out;
+}
+
+// A plan summary ({duration_s, path_length_cm, speed_cm_s, level_db, strokes, ...}) in
+// one line.
+function describe(summary) {
+  if (!summary) return "";
+  if (typeof summary === "string") return summary;
+  const parts = [`${formatNumber(summary.duration_s, 2)} s`];
+  if (summary.path_length_cm > 0) {
+    parts.push(`${formatNumber(summary.path_length_cm, 1)} cm at `
+      + `${formatNumber(summary.speed_cm_s, 1)} cm/s`);
+  }
+  if (summary.strokes > 1) parts.push(`${summary.strokes} strokes`);
+  if (typeof summary.level_db === "number") parts.push(`${formatNumber(summary.level_db, 0)} dB`);
+  return parts.join(" · ");
 }
 
 // The planned phantom position at time t, interpolated between curve samples.

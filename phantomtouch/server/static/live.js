@@ -81,6 +81,17 @@ export class LiveTouch {
     }
   }
 
+  // The service let go of some of our contacts (watchdog or a stop from elsewhere).
+  released(names) {
+    const gone = new Set(names);
+    for (const contact of this.contacts.values()) {
+      if (gone.has(contact.name)) {
+        contact.stopped = true;
+        contact.pending = false;
+      }
+    }
+  }
+
   // A new carrier or law applies from the next touch; re-touch held contacts with it.
   retouch() {
     for (const [id, contact] of this.contacts) {
