@@ -168,3 +168,22 @@ def test_moves_are_sent_once_per_animation_frame_and_the_latest_wins(
     wait_until(page, lambda: any(m["type"] == "up" for m in sent))
     ups = [m for m in sent if m["type"] == "up"]
     assert [m["contact"] for m in ups] == [moves[0]["contact"]]
+
+
+def test_a_refused_touch_is_shown_and_its_moves_are_not_sent(
+    page: Any, armband: ArmbandOnPage, observer: StateObserver
+) -> None:
+    page.fill("#live-freq", "0")
+    start = observer.mark()
+    page.mouse.move(*armband.centre(2))
+    page.mouse.down()
+    alert = page.locator("#alerts [role=alert]")
+    alert.first.wait_for()
+    assert "freq_hz" in alert.first.inner_text()
+    for i in range(1, 11):
+        page.mouse.move(*armband.point(0.2 * i, 4.8))
+        page.wait_for_timeout(20)
+    page.mouse.up()
+    page.wait_for_timeout(300)
+    assert alert.count() == 1, "one refusal, one message: no errors for the moves after it"
+    assert all(not s["contacts"] for s in observer.since(start))

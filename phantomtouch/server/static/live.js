@@ -16,6 +16,9 @@ export class LiveTouch {
         if (!contact.stopped) this.sendDown(contact);
       }
     });
+    // A refused `down` (its id is the contact's name): the contact never touched down,
+    // so its moves would only be refused too.
+    session.addEventListener("error", ({ detail }) => this.released([detail.id]));
   }
 
   down(id, pos) {
@@ -32,8 +35,8 @@ export class LiveTouch {
   sendDown(contact) {
     const { carrier, intensity, law } = this.settings();
     this.session.send({
-      type: "down", contact: contact.name, x_cm: contact.x_cm, y_cm: contact.y_cm,
-      intensity, carrier, law,
+      type: "down", id: contact.name, contact: contact.name, x_cm: contact.x_cm,
+      y_cm: contact.y_cm, intensity, carrier, law,
     });
   }
 
