@@ -14,12 +14,11 @@ const DRAWN_DEFAULTS = {
   intensity: "low",
   law: "power",
 };
-const PRESET_GROUPS = [
-  ["exp2/", "Experiment 2: the four strokes"],
-  ["vr/", "VR touches"],
-  ["", "Saved patterns"],
-  ["exp1/", "Experiment 1: stimuli"],
-];
+const PRESET_GROUPS = {
+  "exp2/": "Experiment 2: the four strokes",
+  "vr/": "VR touches",
+  "exp1/": "Experiment 1: stimuli",
+};
 
 const $ = (id) => document.getElementById(id);
 
@@ -75,27 +74,20 @@ export class Designer {
     );
     drawn.disabled = this.drawn.length === 0;
     select.add(drawn);
-    const used = new Set();
-    for (const [prefix, label] of PRESET_GROUPS) {
-      const group = document.createElement("optgroup");
-      group.label = label;
-      if (label === "Saved patterns") {
-        for (const p of this.saved) group.appendChild(new Option(p.name, `saved:${p.name}`));
-      } else {
-        for (const p of this.presets.filter((q) => q.name.startsWith(prefix))) {
-          used.add(p.name);
-          group.appendChild(new Option(p.name, `preset:${p.name}`));
-        }
-      }
-      if (group.children.length) select.appendChild(group);
-    }
-    const others = this.presets.filter((p) => !used.has(p.name));
-    if (others.length) {
-      const group = document.createElement("optgroup");
-      group.label = "Other presets";
-      for (const p of others) group.appendChild(new Option(p.name, `preset:${p.name}`));
-      select.appendChild(group);
-    }
+    const group = (label, names, kind) => {
+      if (!names.length) return;
+      const node = document.createElement("optgroup");
+      node.label = label;
+      for (const name of names) node.appendChild(new Option(name, `${kind}:${name}`));
+      select.appendChild(node);
+    };
+    const presets = (prefix) => this.presets.map((p) => p.name).filter((n) => n.startsWith(prefix));
+    group(PRESET_GROUPS["exp2/"], presets("exp2/"), "preset");
+    group(PRESET_GROUPS["vr/"], presets("vr/"), "preset");
+    group("Saved patterns", this.saved.map((p) => p.name), "saved");
+    group(PRESET_GROUPS["exp1/"], presets("exp1/"), "preset");
+    const known = Object.keys(PRESET_GROUPS);
+    group("Other presets", presets("").filter((n) => !known.some((k) => n.startsWith(k))), "preset");
     if ([...select.options].some((o) => o.value === current && !o.disabled)) {
       select.value = current;
     } else {
