@@ -161,3 +161,17 @@ def test_narrow_screen_layout(page: Any) -> None:
     assert width <= 420, "nothing overflows sideways"
     screenshot(page, "narrow_screen")
     page.set_viewport_size(VIEWPORT)
+
+
+def test_nothing_is_fetched_from_other_hosts(page: Any, server: str) -> None:
+    urls: list[str] = []
+    page.on("request", lambda request: urls.append(request.url))
+    page.reload()
+    page.wait_for_selector("body[data-ready=true]")
+    page.wait_for_selector("#connection[data-state=connected]")
+    assert any(u.endswith("/static/app.js") for u in urls)
+    origin = server.replace("http://", "")
+    foreign = [
+        u for u in urls if not u.startswith(("data:", f"http://{origin}/", f"ws://{origin}/"))
+    ]
+    assert foreign == []
