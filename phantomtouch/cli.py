@@ -3,6 +3,8 @@
 ``phantomtouch render``   one pattern (JSON file or preset) to an 8-channel WAV (+ plot)
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder
+``phantomtouch bench accuracy``  phantom position and level error against CPU time
+``phantomtouch calibrate``  measure each actuator, write a corrected device profile
 
 Errors print one line naming the field, the value and the allowed range, and exit 2.
 """
@@ -22,7 +24,7 @@ from tqdm import tqdm
 from phantomtouch.errors import PhantomTouchError
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.plan import Plan
-from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error
+from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error, limits
 
 EXIT_USAGE = 2
 _BLOCK_FRAMES = 1 << 15
@@ -47,9 +49,19 @@ def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None 
         from phantomtouch.plot import TraceEnvelope
 
         traces = TraceEnvelope(plan.frames, plan.channels)
-    with soundfile.SoundFile(
-        str(out_path), "w", samplerate=plan.sample_rate_hz, channels=plan.channels, subtype="FLOAT"
-    ) as wav:
+    try:
+        wav = soundfile.SoundFile(
+            str(out_path),
+            "w",
+            samplerate=plan.sample_rate_hz,
+            channels=plan.channels,
+            subtype="FLOAT",
+        )
+    except soundfile.LibsndfileError as exc:
+        raise PhantomTouchError(
+            f"output={str(out_path)!r}: cannot open it for writing ({exc.error_string})"
+        ) from exc
+    with wav:
         for block in render_plan_blocks(plan, block_frames=_BLOCK_FRAMES):
             wav.write(block)
             if traces is not None:
@@ -104,6 +116,123 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
+    from phantomtouch.analysis.accuracy import default_settings, reference_strokes, run_accuracy
+    from phantomtouch.analysis.accuracy_report import format_table, save_plot
+
+    strokes = reference_strokes()
+    unknown = sorted(set(args.stroke or ()) - set(strokes))
+    if unknown:
+        raise PhantomTouchError(f"--stroke {unknown[0]!r} is not one of {sorted(strokes)}")
+    if args.stroke:
+        strokes = {name: strokes[name] for name in args.stroke}
+    top = limits.MAX_GAIN_UPDATE_FRAMES
+    if any(not 1 <= n <= top for n in args.frames):
+        raise PhantomTouchError(f"--frames {args.frames} must each be within [1, {top}]")
+    report = run_accuracy(
+        strokes,
+        default_settings(args.frames),
+        device=_load_device(args.device),
+        repeats=args.repeats,
+    )
+    if args.plot:
+        save_plot(report, args.plot)
+    print(json.dumps(report.to_dict(), indent=2) if args.json else format_table(report))
+    return 0
+
+
+def _sound_device(name: str | None) -> int | str | None:
+    return int(name) if name is not None and name.isdigit() else name
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from phantomtouch.analysis import calibration as cal
+
+    device = _load_device(args.device)
+    settings = cal.CalibrationSettings(
+        excitation_s=args.excitation_s, drive_rms=args.drive_rms, taps=args.taps
+    )
+    scale_given = args.input_reference_db is not None or args.sensitivity_v_per_m_s2 is not None
+    play_record: cal.PlayRecord
+    before: Callable[[int], None]
+    if args.simulate:
+        from phantomtouch.analysis.twin import simulated_loop
+
+        reference = args.input_reference_db
+        if not scale_given:
+            reference = device.calibration.reference_level_db + 10.0
+        scale = cal.input_scale(
+            sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2,
+            input_full_scale_v=args.input_full_scale_v,
+            input_reference_level_db=reference,
+        )
+        loop = simulated_loop(device, input_scale_m_s2=scale, seed=args.seed)
+        play_record, before = loop, loop.place_sensor
+    else:
+        scale = cal.input_scale(
+            sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2,
+            input_full_scale_v=args.input_full_scale_v,
+            input_reference_level_db=args.input_reference_db,
+        )
+        play_record = cal.sounddevice_loop(
+            sample_rate_hz=device.sample_rate_hz,
+            output_device=_sound_device(args.output_device),
+            input_device=_sound_device(args.input_device),
+            input_channel=args.input_channel,
+        )
+
+        def before(channel: int) -> None:
+            if not args.yes:
+                print(
+                    f"Put the accelerometer on actuator {channel} and press Enter.",
+                    file=sys.stderr,
+                )
+                sys.stdin.readline()
+
+    result = cal.calibrate(
+        device,
+        play_record,
+        input_scale_m_s2=scale,
+        channels=args.channels,
+        settings=settings,
+        before_channel=before,
+    )
+    from phantomtouch.analysis.profile_file import write_profile
+
+    write_profile(result.profile, args.output)
+    if args.json:
+        print(json.dumps({**result.to_dict(), "output": str(args.output)}, indent=2))
+        return 0
+    freqs = [f"{f:g} Hz" for f in cal.VERIFY_FREQS_HZ]
+    print(
+        f"{'ch':>2}  {'level dB':>8}  {'spread dB':>9}  {'coherence':>9}  {'FIR max dB':>10}  "
+        f"{'max level dB':>12}  " + "  ".join(f"{f:>7}" for f in freqs) + "  band err"
+    )
+    checks = {c.channel: c for c in result.checks}
+    for m in result.measurements:
+        check = checks[m.channel]
+        errors = "  ".join(f"{e:+7.2f}" for e in check.sine_errors_db.values())
+        print(
+            f"{m.channel:>2}  {m.level_db:8.2f}  {m.spread_db:9.2f}  {m.coherence_min:9.3f}  "
+            f"{m.fir_max_gain_db:10.2f}  {m.max_level_db:12.1f}  {errors}  "
+            f"{check.band_error_db:+8.2f}"
+        )
+    worst = max((c.worst_db for c in result.checks), default=0.0)
+    print(
+        f"level: full-scale sine at {settings.reference_hz:g} Hz, dB re 1 µm/s²; errors: "
+        f"measured minus requested after calibration (worst {worst:.2f} dB)"
+    )
+    weakest = min(result.measurements, key=lambda m: m.max_level_db)
+    if weakest.max_level_db < device.safety.max_level_db:
+        print(
+            f"note: channel {weakest.channel} reaches only {weakest.max_level_db:.1f} dB "
+            f"somewhere in {cal.BAND_HZ[0]:g}-{cal.BAND_HZ[1]:g} Hz before its drive hits the "
+            f"ceiling (max level column); safety.max_level_db is {device.safety.max_level_db:g}"
+        )
+    print(f"calibrated profile written to {args.output}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -128,6 +257,68 @@ def build_parser() -> argparse.ArgumentParser:
     stimuli.add_argument("-o", "--output", required=True, help="output folder")
     stimuli.add_argument("--device", help="device profile (TOML or JSON)")
     stimuli.set_defaults(func=_cmd_stimuli)
+
+    bench = sub.add_parser("bench", help="measure accuracy or speed").add_subparsers(
+        dest="bench", required=True
+    )
+    accuracy = bench.add_parser(
+        "accuracy", help="phantom position and level error of gain update settings vs CPU time"
+    )
+    accuracy.add_argument("--json", action="store_true", help="print the full results as JSON")
+    accuracy.add_argument("--plot", help="also write the work-precision plot to this PNG")
+    accuracy.add_argument(
+        "--frames",
+        type=int,
+        nargs="+",
+        default=[1, 8, 32, 128, 512],
+        help="frames between gain updates to compare, each ramped and held (default: %(default)s)",
+    )
+    accuracy.add_argument("--stroke", action="append", help="only this stroke (repeatable)")
+    accuracy.add_argument("--repeats", type=int, default=5, help="timed renders per measurement")
+    accuracy.add_argument("--device", help="device profile (TOML or JSON)")
+    accuracy.set_defaults(func=_cmd_bench_accuracy)
+
+    calibrate = sub.add_parser(
+        "calibrate", help="measure each actuator with an accelerometer, write a corrected profile"
+    )
+    calibrate.add_argument("-o", "--output", required=True, help="profile to write (.toml/.json)")
+    calibrate.add_argument("--device", help="profile to start from (default: the paper's)")
+    calibrate.add_argument("--channels", type=int, nargs="+", help="only these output channels")
+    calibrate.add_argument("--output-device", help="sound-card output (index or name)")
+    calibrate.add_argument("--input-device", help="sound-card input (index or name)")
+    calibrate.add_argument(
+        "--input-channel", type=int, default=1, help="input the accelerometer is on (1-based)"
+    )
+    calibrate.add_argument(
+        "--sensitivity-v-per-m-s2", type=float, help="accelerometer sensitivity, V per m/s²"
+    )
+    calibrate.add_argument(
+        "--input-full-scale-v", type=float, help="volts that read as digital full scale"
+    )
+    calibrate.add_argument(
+        "--input-reference-db",
+        type=float,
+        help="instead of the two above: level, dB re 1 µm/s², of a full-scale sine at the input",
+    )
+    calibrate.add_argument("--excitation-s", type=float, default=8.0, help="noise per channel, s")
+    calibrate.add_argument(
+        "--drive-rms", type=float, default=0.1, help="RMS of the excitation (full scale = 1)"
+    )
+    calibrate.add_argument(
+        "--taps",
+        type=int,
+        default=4096,
+        help="FIR taps per channel (fewer: less exact below 60 Hz)",
+    )
+    calibrate.add_argument("--yes", action="store_true", help="do not wait for Enter per channel")
+    calibrate.add_argument("--json", action="store_true", help="print the results as JSON")
+    calibrate.add_argument(
+        "--simulate",
+        action="store_true",
+        help="calibrate the digital twin (actuators with random resonances) instead of a card",
+    )
+    calibrate.add_argument("--seed", type=int, default=0, help="seed of --simulate")
+    calibrate.set_defaults(func=_cmd_calibrate)
     return parser
 
 

@@ -47,31 +47,69 @@ class SineSource:
         return np.sin(cycles.astype(np.float32))
 
 
+NOISE_SETTLED = 1e-4
+"""The noise preroll ends when less than this fraction of the band-pass impulse
+response's energy is still to come: the output's variance is then steady to 0.0004 dB."""
+
+
+def _butterworth(low_hz: float, high_hz: float, sample_rate_hz: int) -> np.ndarray:
+    return signal.butter(
+        NOISE_ORDER, [low_hz, high_hz], btype="bandpass", fs=sample_rate_hz, output="sos"
+    )
+
+
+def _slowest_pole_radius(sos: np.ndarray) -> float:
+    return float(max(np.max(np.abs(np.roots(section[3:]))) for section in sos))
+
+
 @lru_cache(maxsize=64)
+def noise_settle_s(low_hz: float, high_hz: float, sample_rate_hz: int) -> float:
+    """About how long the noise band-pass takes to settle, s.
+
+    The time in which the energy of its slowest mode falls to ``NOISE_SETTLED``: about
+    ``8 / bandwidth`` for a narrow band (7.7 s for 20-21 Hz), 0.1 s for 40-500 Hz, two
+    minutes for 1-1.06 Hz.
+    """
+    radius = _slowest_pole_radius(_butterworth(low_hz, high_hz, sample_rate_hz))
+    return float(np.log(NOISE_SETTLED) / (2.0 * np.log(radius)) / sample_rate_hz)
+
+
+@lru_cache(maxsize=64)
+def _band_pass_design(
+    low_hz: float, high_hz: float, sample_rate_hz: int
+) -> tuple[np.ndarray, float, int]:
+    sos = _butterworth(low_hz, high_hz, sample_rate_hz)
+    # the impulse response until its slowest mode has decayed by 200 dB
+    decayed = int(np.ceil(np.log(1e-10) / np.log(_slowest_pole_radius(sos))))
+    impulse = np.zeros(max(int(min(60.0, 50.0 / low_hz) * sample_rate_hz), decayed) + 1)
+    impulse[0] = 1.0
+    cumulative = np.cumsum(signal.sosfilt(sos, impulse) ** 2)
+    energy = float(cumulative[-1])
+    settle_frames = int(np.searchsorted(cumulative, (1.0 - NOISE_SETTLED) * energy))
+    return sos, _SINE_RMS / np.sqrt(energy), settle_frames
+
+
 def band_pass(low_hz: float, high_hz: float, sample_rate_hz: int) -> tuple[np.ndarray, float]:
     """Second-order sections of the noise band-pass and the factor to RMS 1/sqrt(2).
 
     The factor comes from the energy of the filter's impulse response (its exact noise
     gain for unit-variance white noise), summed until it has decayed.
     """
-    sos = signal.butter(
-        NOISE_ORDER, [low_hz, high_hz], btype="bandpass", fs=sample_rate_hz, output="sos"
-    )
-    impulse = np.zeros(int(min(60.0, 50.0 / low_hz) * sample_rate_hz) + 1)
-    impulse[0] = 1.0
-    energy = float(np.sum(signal.sosfilt(sos, impulse) ** 2))
-    return sos, _SINE_RMS / np.sqrt(energy)
+    sos, scale, _ = _band_pass_design(low_hz, high_hz, sample_rate_hz)
+    return sos, scale
 
 
 class NoiseSource:
     """Seeded Gaussian noise through a band-pass, RMS 1/sqrt(2), steady from frame 0."""
 
     def __init__(self, low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) -> None:
-        self._sos, self._scale = band_pass(float(low_hz), float(high_hz), int(sample_rate_hz))
+        self._sos, self._scale, settle_frames = _band_pass_design(
+            float(low_hz), float(high_hz), int(sample_rate_hz)
+        )
         self._rng = np.random.Generator(np.random.PCG64(seed))
         self._state = np.zeros((self._sos.shape[0], 2))
         self._next_frame = 0
-        preroll = int(min(1.0, 8.0 / low_hz) * sample_rate_hz)
+        preroll = max(int(min(1.0, 8.0 / low_hz) * sample_rate_hz), settle_frames)
         _, self._state = signal.sosfilt(
             self._sos, self._rng.standard_normal(preroll), zi=self._state
         )

@@ -16,6 +16,7 @@ import numpy as np
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.geometry import Geometry
+from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import Law, Mode
 
@@ -84,7 +85,7 @@ def gains_at(
     ----------
     device : DeviceProfile or None
         None: ``DeviceProfile.default()``, the paper's armband.
-    x_cm, y_cm : float, finite
+    x_cm, y_cm : float, finite, within ±1000 cm (``limits.MAX_COORD_CM``, as path points)
         Position of the point; outside the layout it is projected onto it.
     law : {"linear", "log", "power"}, default "power"
     mode : {"1d", "2d"}, default "2d"
@@ -94,8 +95,9 @@ def gains_at(
     ndarray, shape (channels,), float64
         Gains in [0, 1]; at most 3 (2D) or 2 rows (1D) are non-zero.
     """
-    if not (np.isfinite(x_cm) and np.isfinite(y_cm)):
-        raise ParameterError(f"x_cm={x_cm!r}, y_cm={y_cm!r} must be finite")
+    cap = limits.MAX_COORD_CM
+    if not (np.isfinite(x_cm) and np.isfinite(y_cm) and max(abs(x_cm), abs(y_cm)) <= cap):
+        raise ParameterError(f"x_cm={x_cm!r}, y_cm={y_cm!r} must be finite and within ±{cap:g} cm")
     geometry = Geometry.for_device(device or DeviceProfile.default())
     gains, _ = gains_for_points(geometry, np.array([[x_cm, y_cm]]), law=law, mode=mode)
     return gains[0]

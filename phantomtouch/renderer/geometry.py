@@ -21,6 +21,8 @@ _INSIDE_TOL = 1e-9
 _ROW_TOL_CM = 1e-6
 _ROUNDING_WEIGHT = 1e-12
 """Weights below this are rounding noise of a point on an edge or vertex: set to 0."""
+_FLAT_DET_CM2 = 1e-9
+"""Triangles whose edge determinant (twice the area) is below this are flat."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,7 +140,12 @@ def _geometry(device: DeviceProfile) -> Geometry:
     verts = positions[triangles]
     origin = verts[:, 0, :]
     edges = np.stack([verts[:, 1] - origin, verts[:, 2] - origin], axis=2)  # (t, 2, 2)
-    if np.any(np.abs(np.linalg.det(edges)) < 1e-9):
+    flat = np.abs(np.linalg.det(edges)) < _FLAT_DET_CM2
+    if device.triangles is None and not np.all(flat):
+        # Qhull keeps zero-area triangles along collinear actuators on the hull's edge;
+        # they cover no area, and their neighbours already hold those actuators.
+        triangles, origin, edges = triangles[~flat], origin[~flat], edges[~flat]
+    elif np.any(flat):
         raise DeviceError(f"device {device.name!r}: triangulation has a degenerate triangle")
     inverse = np.linalg.inv(edges)
     rows: list[float] = []

@@ -66,10 +66,11 @@ def envelope_at(plan: Plan, times_s: np.ndarray) -> np.ndarray:
     times_s = np.asarray(times_s, dtype=np.float64)
     _, tau = _stroke_time(plan, times_s)
     env = np.ones(len(times_s))
-    if pattern.fade_in_s > 0:
-        env *= np.clip(tau / pattern.fade_in_s, 0.0, 1.0)
-    if pattern.fade_out_s > 0:
-        env *= np.clip((plan.stroke_s - tau) / pattern.fade_out_s, 0.0, 1.0)
+    with np.errstate(over="ignore"):  # a fade of a few 1e-300 s overflows to inf, clipped to 1
+        if pattern.fade_in_s > 0:
+            env *= np.clip(tau / pattern.fade_in_s, 0.0, 1.0)
+        if pattern.fade_out_s > 0:
+            env *= np.clip((plan.stroke_s - tau) / pattern.fade_out_s, 0.0, 1.0)
     mod = pattern.modulation
     if mod is not None and mod.index > 0:
         cycles = tau / plan.stroke_s if mod.freq_hz == "stroke" else times_s * float(mod.freq_hz)

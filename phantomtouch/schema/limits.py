@@ -40,4 +40,7 @@ MAX_LEVEL_DB = 180.0
 """Highest acceleration level any profile may allow, dB re 1 µm/s²."""
 MIN_NOISE_BAND_HZ = 1.0
 """Lowest band edge of a noise carrier, Hz (a band-pass edge below this is unstable)."""
+MAX_NOISE_SETTLE_S = 10.0
+"""Longest settling time of a noise carrier's band-pass, s: the noise is pre-rolled that
+long so it starts at full level; narrower bands (e.g. 1-2 Hz: 11 s) are refused."""
 MAX_SEED = 2**32 - 1

@@ -1,0 +1,159 @@
+"""Carriers: sine RMS and phase, band-limited noise spectrum and RMS, the combined signal."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from phantomtouch.renderer.carriers import CombinedSource, NoiseSource, SineSource, band_pass
+
+FS = 48000
+UNIT_SINE_RMS = 1 / np.sqrt(2)
+
+
+def noise(low_hz=40.0, high_hz=500.0, seed=0, seconds=10.0, block=4800) -> np.ndarray:
+    source = NoiseSource(low_hz, high_hz, seed, FS)
+    frames = int(seconds * FS)
+    return np.concatenate([source.block(n, block) for n in range(0, frames, block)])
+
+
+def rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.asarray(x, dtype=np.float64) ** 2)))
+
+
+# --- sine ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("freq_hz", [50.0, 100.0, 150.0, 1000.0])
+def test_sine_rms_is_one_over_root_two(freq_hz):
+    whole_cycles = int(FS / np.gcd(int(freq_hz), FS))  # frames holding whole cycles
+    x = SineSource(freq_hz, FS).block(0, whole_cycles * max(1, 4800 // whole_cycles))
+    assert x.dtype == np.float32
+    # float32 samples carry ~6e-8 relative rounding; the mean of squares averages it out.
+    assert rms(x) == pytest.approx(UNIT_SINE_RMS, rel=1e-6)
+
+
+@pytest.mark.parametrize("freq_hz", [50.0, 100.0, 150.0, 333.3])
+def test_sine_phase_derivative_is_its_frequency(freq_hz):
+    x = SineSource(freq_hz, FS).block(0, FS).astype(np.float64)
+    phase = np.unwrap(np.angle(signal.hilbert(x)))
+    # Fit the phase in the middle (the analytic signal is distorted at the ends).
+    n = np.arange(len(x))[FS // 10 : -FS // 10]
+    slope = np.polyfit(n, phase[n], 1)[0]
+    # A least-squares slope over 0.8 s of a clean phase: far better than 1e-6 relative.
+    assert slope * FS / (2 * np.pi) == pytest.approx(freq_hz, rel=1e-6)
+    # And the FFT of 1 s (1 Hz bins) peaks in the bin of that frequency.
+    spectrum = np.abs(np.fft.rfft(x * np.hanning(len(x))))
+    assert np.fft.rfftfreq(len(x), 1 / FS)[np.argmax(spectrum)] == pytest.approx(freq_hz, abs=1)
+
+
+def test_sine_is_a_function_of_the_absolute_frame_only():
+    source = SineSource(100.0, FS)
+    whole = source.block(0, 10000)
+    parts = np.concatenate([source.block(n, 999) for n in range(0, 10000, 999)])[:10000]
+    np.testing.assert_array_equal(parts, whole)
+
+
+def test_sine_keeps_its_phase_after_two_hours():
+    # Frame n has phase 2 pi (n f / fs mod 1); with f and fs integers the fraction is exact.
+    start = 7200 * FS - 100
+    x = SineSource(100.0, FS).block(start, 200)
+    n = np.arange(start, start + 200)
+    exact = np.sin(2 * np.pi * ((n * 100) % FS) / FS)
+    # float32 output: half an ulp of 1 is 6e-8, the float32 phase adds about 4e-7.
+    np.testing.assert_allclose(x, exact, rtol=0, atol=1e-6)
+
+
+# --- band-limited noise ----------------------------------------------------------------------
+
+
+def test_noise_is_at_least_40_db_down_outside_its_band():
+    x = noise(seconds=10.0)
+    # No detrending: removing each segment's mean would leak the in-band power into the
+    # lowest bins through a rectangular window and measure the estimator, not the noise.
+    # 16384-frame segments resolve 2.9 Hz, enough to see 20 Hz apart from 40 Hz.
+    freqs, psd = signal.welch(x.astype(np.float64), fs=FS, nperseg=16384, detrend=False)
+    in_band = psd[(freqs >= 40) & (freqs <= 500)].mean()
+    below = psd[freqs < 20].max()
+    above = psd[freqs > 1000].max()
+    assert 10 * np.log10(below / in_band) <= -40
+    assert 10 * np.log10(above / in_band) <= -40
+
+
+def test_noise_filter_response_is_40_db_down_an_octave_outside_the_band():
+    # The filter itself, analytically: 8 poles per edge give 48 dB per octave.
+    sos, _ = band_pass(40.0, 500.0, FS)
+    _, response = signal.sosfreqz(sos, worN=[20.0, 40.0, 100.0, 500.0, 1000.0], fs=FS)
+    level_db = 20 * np.log10(np.abs(response))
+    assert level_db[0] <= -40 and level_db[-1] <= -40
+    # Butterworth: -3.01 dB at each edge and flat in between (0.05 and 0.1 dB are far
+    # below the 3 dB JND of vibration amplitude and only allow for the design's rounding).
+    np.testing.assert_allclose(level_db[[1, 3]], -3.0, atol=0.05)
+    assert level_db[2] == pytest.approx(0.0, abs=0.1)
+
+
+@pytest.mark.parametrize("low_hz, high_hz", [(1.0, 20.0), (40.0, 500.0), (5000.0, 20000.0)])
+def test_noise_filter_is_stable(low_hz, high_hz):
+    # A band edge far below fs is where a (b, a) form breaks down; SOS poles must stay inside.
+    sos, scale = band_pass(low_hz, high_hz, FS)
+    poles = np.concatenate([np.roots(section[3:]) for section in sos])
+    assert np.max(np.abs(poles)) < 1.0
+    assert np.isfinite(scale) and scale > 0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 12345])
+def test_noise_rms_is_a_unit_sines(seed):
+    x = noise(seed=seed, seconds=10.0)
+    assert x.dtype == np.float32
+    # The mean square of noise of bandwidth B over T seconds varies by about 1/sqrt(B T)
+    # = 1.5 % (B = 460 Hz, T = 10 s); its RMS by half that. 4 % is over 5 sigma.
+    assert rms(x) == pytest.approx(UNIT_SINE_RMS, rel=0.04)
+
+
+def test_noise_is_steady_from_its_first_frame():
+    # A band-pass started from rest rings up: its first 10 ms have ~0.8 of the RMS. The
+    # source pre-rolls its filter, so they already have the full RMS. Pooled over 200
+    # seeds (B T = 4.6 each), the mean square spreads by 1/sqrt(920) = 3.3 %, the RMS by
+    # ~1.7 %: 8 % is about 5 sigma, and a missing pre-roll (-20 %) is far outside it.
+    first_10_ms = [NoiseSource(40.0, 500.0, seed, FS).block(0, FS // 100) for seed in range(200)]
+    assert rms(np.concatenate(first_10_ms)) == pytest.approx(UNIT_SINE_RMS, rel=0.08)
+
+
+def test_noise_is_reproducible_per_seed_and_differs_between_seeds():
+    a = noise(seed=7, seconds=2.0)
+    np.testing.assert_array_equal(a, noise(seed=7, seconds=2.0, block=1000))
+    b = noise(seed=8, seconds=2.0)
+    assert not np.array_equal(a, b)
+    # Independent seeds: noise of bandwidth B over T seconds has about 2 B T = 1840
+    # independent samples, so the correlation spreads by 1/sqrt(1840) = 0.023; 0.12 is
+    # over 5 sigma.
+    assert abs(np.corrcoef(a, b)[0, 1]) < 0.12
+
+
+def test_noise_must_be_rendered_in_order():
+    source = NoiseSource(40.0, 500.0, 0, FS)
+    source.block(0, 100)
+    with pytest.raises(ValueError, match="expected frame 100, got 200"):
+        source.block(200, 100)
+
+
+# --- combined ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("freq_hz", [50.0, 100.0, 150.0])
+def test_combined_rms_equals_the_sines(freq_hz):
+    frames = 10 * FS
+    combined = CombinedSource(SineSource(freq_hz, FS), NoiseSource(40.0, 500.0, 3, FS))
+    x = combined.block(0, frames)
+    sine = SineSource(freq_hz, FS).block(0, frames)
+    # The paper's recipe: noise with the sine's RMS added to it, the sum scaled back to
+    # the sine's RMS (two uncorrelated equal parts: divide by sqrt(2)). Same seed, same
+    # noise; float32 rounding of the sum stays below 1e-6.
+    parts = (sine.astype(np.float64) + noise(seed=3, seconds=10.0, block=frames)) / np.sqrt(2)
+    np.testing.assert_allclose(x, parts, rtol=0, atol=1e-6)
+    # Measured: the noise power over 10 s spreads by ~0.4 % and the sine-noise cross term
+    # (the noise's own component at freq_hz) by ~1.5 % of the mean square, so the RMS
+    # spreads by ~0.8 %; 4 % is about 5 sigma.
+    assert rms(x) == pytest.approx(rms(sine), rel=0.04)
+    assert rms(sine) == pytest.approx(UNIT_SINE_RMS, rel=1e-6)
