@@ -83,6 +83,8 @@ def test_preset_plan_matches_the_server_and_the_chart_is_drawn(
     assert page.inner_text("#plan dd[data-key=speed_cm_s]") == f"{expected['speed_cm_s']:.2f} cm/s"
     # Eight lanes of curves: far more coloured pixels than the eight lane labels alone.
     assert coloured_pixels(page) > 3000
+    description = page.get_attribute("#chart", "aria-label") or ""
+    assert "8 actuators" in description and f"{expected['duration_s']:.2f} s" in description
     path_points = page.get_attribute(".armband .plan-path", "points") or ""
     assert len(path_points.split()) > 10, "the arc is drawn on the armband"
 

@@ -21,11 +21,28 @@ export class GainChart {
     new ResizeObserver(() => this.redraw()).observe(canvas);
   }
 
-  // curves: {times_s, gains: [[g per channel], ...]}; labels: the name of each channel's lane.
-  show(curves, labels) {
+  // curves: {times_s, gains: [[g per channel], ...]} sampled over [0, durationS);
+  // labels: the name of each channel's lane.
+  show(curves, labels, durationS) {
     this.curves = curves && curves.times_s && curves.times_s.length ? curves : null;
+    this.durationS = durationS;
     this.labels = labels;
+    this.canvas.setAttribute("aria-label", this.describe());
     this.redraw();
+  }
+
+  // The chart in words, for screen readers: its span and the strongest actuator.
+  describe() {
+    const curves = this.curves;
+    if (!curves) return "Gain of each actuator over time: no plan.";
+    let peak = 0;
+    let loudest = 0;
+    curves.gains.forEach((row) => row.forEach((g, c) => {
+      if (g > peak) [peak, loudest] = [g, c];
+    }));
+    return `Gain of each of ${this.channelCount()} actuators over `
+      + `${formatNumber(this.durationS, 2)} s; the strongest is actuator `
+      + `${this.labels[loudest] || loudest + 1} with a peak gain of ${formatNumber(peak, 4)}.`;
   }
 
   setPlayhead(timeS) {
@@ -65,10 +82,9 @@ export class GainChart {
     ctx.font = "12px system-ui, sans-serif";
     ctx.textBaseline = "middle";
     const curves = this.curves;
-    const times = curves ? curves.times_s : [0, 1];
-    const t0 = times[0];
-    const span = Math.max(1e-9, times[times.length - 1] - t0);
-    this.timeToX = (t) => LEFT_PX + ((t - t0) / span) * plotWidth;
+    const times = curves ? curves.times_s : [];
+    const span = Math.max(1e-9, curves ? this.durationS : 1);
+    this.timeToX = (t) => LEFT_PX + (t / span) * plotWidth;
     let peak = 0;
     if (curves) for (const row of curves.gains) for (const g of row) peak = Math.max(peak, g);
     const scale = peak > 0 ? 1 / peak : 1;
@@ -79,7 +95,8 @@ export class GainChart {
     ctx.lineWidth = 1;
     ctx.fillStyle = ink;
     ctx.textAlign = "center";
-    for (let t = Math.ceil(t0 / step) * step; curves && t <= t0 + span + 1e-9; t += step) {
+    for (let i = 0; curves && i * step <= span + 1e-9; i += 1) {
+      const t = i * step;
       const x = Math.round(this.timeToX(t)) + 0.5;
       ctx.beginPath();
       ctx.moveTo(x, TOP_PX - 4);

@@ -265,7 +265,7 @@ export class Designer {
       }
     }
     const curves = planned && planned.curves;
-    this.ui.chart.show(curves, this.ui.channelLabels());
+    this.ui.chart.show(curves, this.ui.channelLabels(), planned && planned.duration_s);
     this.ui.armband.setPath(curves ? curves.positions_cm : null);
   }
 
