@@ -134,6 +134,48 @@ class ArmbandOnPage:
         return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
 
 
+class TouchScreen:
+    """Fingers on a touch screen: Chrome DevTools touch events, which the page receives as
+    real pointer events of type touch."""
+
+    def __init__(self, page: Any) -> None:
+        self.cdp = page.context.new_cdp_session(page)
+        self.cdp.send("Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 5})
+        self.down: set[int] = set()
+        self.at: dict[int, tuple[float, float]] = {}
+
+    def touch(self, fingers: dict[int, tuple[float, float]]) -> None:
+        """Fingers now on the screen (id -> page position); those left out are lifted.
+
+        DevTools takes the fingers that go down with touchStart, those that go up with
+        touchEnd, and every finger still down with touchMove.
+        """
+
+        def points(ids: set[int], at: dict[int, tuple[float, float]]) -> list[dict[str, Any]]:
+            return [{"x": at[i][0], "y": at[i][1], "id": i} for i in sorted(ids)]
+
+        lifted = self.down - set(fingers)
+        if lifted:
+            at = {i: self.at[i] for i in lifted}
+            self.cdp.send(
+                "Input.dispatchTouchEvent", {"type": "touchEnd", "touchPoints": points(lifted, at)}
+            )
+        new = set(fingers) - self.down
+        if new:
+            self.cdp.send(
+                "Input.dispatchTouchEvent",
+                {"type": "touchStart", "touchPoints": points(new, fingers)},
+            )
+        moved = {i for i in set(fingers) & self.down if fingers[i] != self.at[i]}
+        if moved:
+            self.cdp.send(
+                "Input.dispatchTouchEvent",
+                {"type": "touchMove", "touchPoints": points(set(fingers), fingers)},
+            )
+        self.down = set(fingers)
+        self.at = dict(fingers)
+
+
 def wait_until(page: Any, condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
     """Let the page run until `condition()` holds (Playwright events arrive meanwhile)."""
     deadline = time.monotonic() + timeout_s

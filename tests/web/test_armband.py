@@ -11,7 +11,13 @@ import httpx
 import numpy as np
 import pytest
 
-from tests.web.support import ArmbandOnPage, StateObserver, screenshot, wait_until
+from tests.web.support import (
+    ArmbandOnPage,
+    StateObserver,
+    TouchScreen,
+    screenshot,
+    wait_until,
+)
 
 CONTACT_TOLERANCE_CM = 0.3
 """How far the server's contact may lie from the pointer: the page sends positions
@@ -187,3 +193,34 @@ def test_a_refused_touch_is_shown_and_its_moves_are_not_sent(
     page.wait_for_timeout(300)
     assert alert.count() == 1, "one refusal, one message: no errors for the moves after it"
     assert all(not s["contacts"] for s in observer.since(start))
+
+
+def test_two_fingers_are_two_contacts(
+    page: Any, armband: ArmbandOnPage, observer: StateObserver
+) -> None:
+    screen = TouchScreen(page)
+    start = observer.mark()
+    screen.touch({1: armband.centre(1)})
+    screen.touch({1: armband.centre(1), 2: armband.centre(8)})
+    both = observer.wait_for(
+        lambda s: len(s["contacts"]) == 2 and s["levels"][0] > 0 and s["levels"][7] > 0,
+        since=start,
+        what="two contacts, at actuators 1 and 8",
+    )
+    positions = sorted((round(c["x_cm"], 1), round(c["y_cm"], 1)) for c in both["contacts"])
+    assert positions == [(0.0, 0.0), (3.8, 14.4)]
+    assert all(c["contact"].startswith("web-") for c in both["contacts"])
+    # The page draws both as its own (the observer's state calls them another's).
+    page.wait_for_function(
+        "() => document.querySelectorAll('.server-contact:not(.other)').length === 2"
+    )
+    screenshot(page, "two_fingers")
+    screen.touch({2: armband.centre(8)})
+    observer.wait_for(
+        lambda s: [round(c["y_cm"], 1) for c in s["contacts"]] == [14.4],
+        since=start,
+        what="only the second finger left",
+    )
+    lifted = observer.mark()
+    screen.touch({})
+    observer.wait_for(lambda s: not s["contacts"], since=lifted, what="both fingers lifted")

@@ -5,31 +5,10 @@ from __future__ import annotations
 import re
 from typing import Any
 
-from tests.web.support import VIEWPORT, ArmbandOnPage, StateObserver, screenshot
+from tests.web.support import VIEWPORT, ArmbandOnPage, StateObserver, TouchScreen, screenshot
 
 LONG_PRESET = "exp1/noise-low-v3"
 """Up and down the band at 3 cm/s: about 12 s, long enough to be stopped."""
-
-
-class Finger:
-    """One finger on a touch screen (Chrome DevTools touch events: real pointer events)."""
-
-    def __init__(self, page: Any) -> None:
-        self.cdp = page.context.new_cdp_session(page)
-        self.cdp.send("Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 5})
-
-    def _send(self, kind: str, point: tuple[float, float] | None) -> None:
-        points = [] if point is None else [{"x": point[0], "y": point[1], "id": 1}]
-        self.cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
-
-    def down(self, point: tuple[float, float]) -> None:
-        self._send("touchStart", point)
-
-    def move(self, point: tuple[float, float]) -> None:
-        self._send("touchMove", point)
-
-    def up(self) -> None:
-        self._send("touchEnd", None)
 
 
 def play_long_pattern(page: Any) -> None:
@@ -47,8 +26,8 @@ def test_stop_button_ends_every_pattern_and_contact(
 ) -> None:
     start = observer.mark()
     play_long_pattern(page)
-    finger = Finger(page)
-    finger.down(armband.centre(6))
+    finger = TouchScreen(page)
+    finger.touch({1: armband.centre(6)})
     observer.wait_for(
         lambda s: s["active_voices"] >= 2 and len(s["contacts"]) == 1,
         since=start,
@@ -63,9 +42,9 @@ def test_stop_button_ends_every_pattern_and_contact(
         what="silence after the stop button",
     )
     # The finger is still down: moving it must not bring the contact back.
-    finger.move(armband.centre(7))
+    finger.touch({1: armband.centre(7)})
     page.wait_for_timeout(300)
-    finger.up()
+    finger.touch({})
     assert_silent_for(page, observer, 0.3)
     assert page.inner_text("#job") == "Stopped."
 
