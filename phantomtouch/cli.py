@@ -3,6 +3,7 @@
 ``phantomtouch render``   one pattern (JSON file or preset) to an 8-channel WAV (+ plot)
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder
+``phantomtouch devices``  list the sound card outputs (``*``: enough outputs for the armband)
 ``phantomtouch bench accuracy``  phantom position and level error against CPU time
 ``phantomtouch calibrate``  measure each actuator, write a corrected device profile
 
@@ -113,6 +114,29 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
         manifest[name] = {"file": file_name, **plan.summary()}
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2), encoding="utf-8")
     print(f"{len(names)} stimuli in {out_dir}")
+    return 0
+
+
+def _cmd_devices(args: argparse.Namespace) -> int:
+    from phantomtouch.engine import list_output_devices
+
+    needed = _load_device(args.device).channels
+    devices = [
+        {**d, "enough_outputs": d["max_output_channels"] >= needed} for d in list_output_devices()
+    ]
+    if args.json:
+        print(json.dumps(devices, indent=2))
+        return 0
+    for d in devices:
+        mark = "*" if d["enough_outputs"] else " "
+        default = " (default)" if d["default"] else ""
+        print(
+            f"{mark} {d['index']:3d}  {d['name']}{default}: {d['max_output_channels']} outputs, "
+            f"{d['default_samplerate']:g} Hz, {d['hostapi']}"
+        )
+    if not devices:
+        print("no sound card outputs found")
+    print(f"* = at least {needed} outputs; an output is chosen by its index or a part of its name")
     return 0
 
 
@@ -257,6 +281,11 @@ def build_parser() -> argparse.ArgumentParser:
     stimuli.add_argument("-o", "--output", required=True, help="output folder")
     stimuli.add_argument("--device", help="device profile (TOML or JSON)")
     stimuli.set_defaults(func=_cmd_stimuli)
+
+    devices = sub.add_parser("devices", help="list sound card outputs")
+    devices.add_argument("--json", action="store_true", help="print the list as JSON")
+    devices.add_argument("--device", help="device profile whose channels are needed")
+    devices.set_defaults(func=_cmd_devices)
 
     bench = sub.add_parser("bench", help="measure accuracy or speed").add_subparsers(
         dest="bench", required=True

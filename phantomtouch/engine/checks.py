@@ -1,0 +1,57 @@
+"""Argument checks shared by the engine's public methods.
+
+Each returns the checked value or raises :class:`~phantomtouch.errors.ParameterError`
+with a message that names the argument, its value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from phantomtouch.errors import ParameterError
+
+MAX_ID_CHARS = 64
+
+
+def check_range(name: str, value: object, lo: float, hi: float, unit: str) -> float:
+    """A finite number within [lo, hi], as a float."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise ParameterError(f"{name}={value!r} must be a number within [{lo:g}, {hi:g}] {unit}")
+    number = float(value)
+    if not (math.isfinite(number) and lo <= number <= hi):
+        raise ParameterError(f"{name}={value!r} must be finite and within [{lo:g}, {hi:g}] {unit}")
+    return number
+
+
+def check_int(name: str, value: object, lo: int, hi: int) -> int:
+    """An integer within [lo, hi]."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not lo <= value <= hi:
+        raise ParameterError(f"{name}={value!r} must be an integer within [{lo}, {hi}]")
+    return int(value)
+
+
+def check_seconds(name: str, value: object) -> float:
+    """A finite number of seconds."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+        raise ParameterError(f"{name}={value!r} must be a finite number of seconds")
+    if not math.isfinite(value):
+        raise ParameterError(f"{name}={value!r} must be a finite number of seconds")
+    return float(value)
+
+
+def check_id(name: str, value: object) -> str:
+    """A contact or owner id: a string of 1 to 64 characters."""
+    if not isinstance(value, str) or not 1 <= len(value) <= MAX_ID_CHARS:
+        raise ParameterError(f"{name}={value!r} must be a string of 1 to {MAX_ID_CHARS} characters")
+    return value
+
+
+def check_frame(name: str, value: object) -> int | None:
+    """An optional frame number: None or an integer >= 0."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+        raise ParameterError(f"{name}={value!r} must be None or an integer frame >= 0")
+    return int(value)

@@ -1,0 +1,72 @@
+"""The sample clock: how frames handed to the sink map to the server clock.
+
+The engine counts frames; the server speaks seconds on ``time.monotonic()``. The audio
+callback tells :class:`SampleClock` when it computes the block that starts at a frame;
+callbacks arrive with jitter but are never early, so the clock follows the earliest
+arrivals at once and later ones only slowly (which also tracks a sound card whose
+crystal runs a little slower than the system clock). A callback far later than the model
+(a stalled stream) re-anchors the clock.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+FOLLOW = 1.0 / 256.0
+"""Fraction of a late arrival the clock moves towards per block."""
+RESYNC_S = 0.05
+"""A callback this much later than the model re-anchors the clock, s."""
+
+
+class SampleClock:
+    """Maps frames of the engine's output to seconds on the server clock and back.
+
+    ``time_at(frame)`` is when that frame is expected to leave the sound card: the time its
+    block was computed, plus ``(frame - block start) / sample_rate_hz``, plus the sink's
+    output latency.
+
+    Parameters
+    ----------
+    sample_rate_hz : int, > 0
+    now_s : float or None
+        Server time of frame 0; None: ``time.monotonic()``.
+
+    Attributes
+    ----------
+    output_latency_s : float, >= 0
+        Time from a block's computation to its first frame leaving the sound card.
+    """
+
+    def __init__(self, sample_rate_hz: int, *, now_s: float | None = None) -> None:
+        self.sample_rate_hz = int(sample_rate_hz)
+        self.output_latency_s = 0.0
+        self._anchor: tuple[int, float] = (0, time.monotonic() if now_s is None else now_s)
+
+    def restart(self, frame: int, now_s: float) -> None:
+        """Anchor the clock: ``frame`` is computed at server time ``now_s``."""
+        self._anchor = (int(frame), float(now_s))
+
+    def observe(self, frame: int, now_s: float) -> None:
+        """The block starting at ``frame`` is computed at ``now_s`` (audio callback).
+
+        Constant time, no allocation beyond one tuple.
+        """
+        anchor_frame, anchor_s = self._anchor
+        predicted_s = anchor_s + (frame - anchor_frame) / self.sample_rate_hz
+        late_s = now_s - predicted_s
+        if late_s < 0.0 or late_s > RESYNC_S:
+            self._anchor = (frame, now_s)
+        else:
+            self._anchor = (frame, predicted_s + late_s * FOLLOW)
+
+    def time_at(self, frame: int) -> float:
+        """Server time, s, at which ``frame`` leaves the sound card."""
+        anchor_frame, anchor_s = self._anchor
+        return anchor_s + (frame - anchor_frame) / self.sample_rate_hz + self.output_latency_s
+
+    def frames_at(self, server_time_s: float) -> int:
+        """The frame that leaves the sound card at ``server_time_s`` (nearest frame)."""
+        anchor_frame, anchor_s = self._anchor
+        offset_s = server_time_s - self.output_latency_s - anchor_s
+        return anchor_frame + math.floor(offset_s * self.sample_rate_hz + 0.5)

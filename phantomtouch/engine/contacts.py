@@ -1,0 +1,262 @@
+"""Live contacts: a hand touching the forearm, moved by the newest position.
+
+Each contact (a client's id for one finger or hand) is a :class:`ContactVoice`. The control
+side (:mod:`phantomtouch.engine.board`) turns a position into the 8 channel gains (the
+renderer's phantom gains, power law by default, projected onto the layout) and posts them
+in the voice's one-slot mailbox: the newest position replaces the target, latest wins,
+nothing queues up. Every block the callback ramps the gains linearly from where the last
+block ended to the newest target,
+
+    g(i) = g_prev + (g_target - g_prev) (i + 1) / block_frames,
+
+so a move never steps by more than one block's ramp (no zipper noise).
+
+Touchdown fades in over ``attack_s``; lift-off fades out linearly over ``release_s`` from
+the level reached, so the contact is silent at most ``release_s`` after ``up``.
+
+Impact transients
+-----------------
+With a normal velocity, touchdown (and lift-off) adds a decaying sinusoid at the contact's
+position, the impact model of Okamura, Cutkosky and Dennerlein (IEEE/ASME Trans.
+Mechatronics 2001): ``A(v) exp(-t / transient_decay_s) sin(2 pi transient_freq_hz t)``,
+cut after 7 time constants (0.1 % left). ``A(v)`` grows linearly with ``|v|`` up to
+``transient_full_velocity_m_s`` and is then held at the amplitude of a sine of relative
+intensity ``transient_intensity`` (1 = the device's ``safety.max_level_db``). Without a
+velocity there is no transient and it costs nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from phantomtouch.engine.checks import check_range
+from phantomtouch.engine.voices import RingPool, Voice, Workspace
+from phantomtouch.errors import ParameterError
+from phantomtouch.renderer.carriers import CarrierSource
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    """How live contacts start, end and strike.
+
+    Parameters
+    ----------
+    attack_s : float, 0 <= attack_s <= 5
+        Linear fade-in on touchdown, s.
+    release_s : float, 0.001 <= release_s <= 5
+        Linear fade-out on lift-off, and of a stopped job or a released client, s.
+    transient_freq_hz : float, 1 <= transient_freq_hz <= 1000
+        Frequency of the impact transient, Hz.
+    transient_decay_s : float, 0.001 <= transient_decay_s <= 0.5
+        Time constant of its exponential decay, s.
+    transient_full_velocity_m_s : float, 0.01 <= ... <= 10
+        Normal velocity of the hand that gives the full transient, m/s.
+    transient_intensity : float, 0 <= transient_intensity <= 1
+        Full transient amplitude as a relative intensity (1 = ``safety.max_level_db``).
+    max_contacts : int, 1 <= max_contacts <= 4096
+        Most contacts down at once (all clients together).
+    """
+
+    attack_s: float = 0.01
+    release_s: float = 0.08
+    transient_freq_hz: float = 250.0
+    transient_decay_s: float = 0.008
+    transient_full_velocity_m_s: float = 0.5
+    transient_intensity: float = 0.5
+    max_contacts: int = 128
+
+    def __post_init__(self) -> None:
+        check_range("attack_s", self.attack_s, 0.0, 5.0, "s")
+        check_range("release_s", self.release_s, 0.001, 5.0, "s")
+        check_range("transient_freq_hz", self.transient_freq_hz, 1.0, 1000.0, "Hz")
+        check_range("transient_decay_s", self.transient_decay_s, 0.001, 0.5, "s")
+        check_range(
+            "transient_full_velocity_m_s", self.transient_full_velocity_m_s, 0.01, 10.0, "m/s"
+        )
+        check_range("transient_intensity", self.transient_intensity, 0.0, 1.0, "")
+        if isinstance(self.max_contacts, bool) or not isinstance(self.max_contacts, int):
+            raise ParameterError(f"max_contacts={self.max_contacts!r} must be an integer")
+        check_range("max_contacts", self.max_contacts, 1, 4096, "")
+
+
+@dataclass(frozen=True, slots=True)
+class Target:
+    """One posted position of a contact.
+
+    Attributes
+    ----------
+    serial : int
+        Increases with every post; the callback applies a target once.
+    x_cm, y_cm : float
+        As given (before projection onto the layout).
+    gains : ndarray, shape (channels,), float32
+        Phantom gains of the position times the contact's amplitude.
+    unit_gains : ndarray, shape (channels,), float32
+        Phantom gains of the position alone (for transients).
+    amplitude : float
+    frame : int or None
+        Frame at which the target applies; None: the next block.
+    """
+
+    serial: int
+    x_cm: float
+    y_cm: float
+    gains: np.ndarray
+    unit_gains: np.ndarray
+    amplitude: float
+    frame: int | None
+
+
+class ContactVoice(Voice):
+    """One live contact: a carrier at a moving phantom position.
+
+    Built on the control side by :class:`ContactFactory`; after that the control side
+    only writes :attr:`mailbox`.
+    """
+
+    kind = "contact"
+
+    def __init__(
+        self,
+        *,
+        owner: str,
+        contact: str,
+        source: CarrierSource,
+        target: Target,
+        attack_frames: int,
+        release_frames: int,
+        law: str,
+        down_burst: np.ndarray | None,
+    ) -> None:
+        super().__init__(release_frames)
+        self.owner = owner
+        self.contact = contact
+        self.law = law
+        self.mailbox = target
+        self.down_target = target
+        self._source = source
+        self._attack_frames = int(attack_frames)
+        self._applied = target.serial
+        self._gains = target.gains
+        self._target = target.gains
+        self._unit = target.unit_gains
+        self._channels = np.flatnonzero(target.gains)
+        self._channel_list: list[int] = self._channels.tolist()
+        self._carrier_frames = 0
+        self._down_burst = down_burst
+        self._bursts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
+
+    def _level_before(self, frame: int) -> float:
+        """Attack level of the frame before ``frame`` (1 without an attack)."""
+        if self._attack_frames == 0:
+            return 1.0
+        return min(1.0, max(0.0, (frame - self.start_frame) / self._attack_frames))
+
+    @property
+    def silent_from(self) -> int | None:
+        if self.release_frame is None:
+            return None
+        level = self._level_before(self.release_frame)
+        return self.release_frame - 1 + math.ceil(level * self.release_frames)
+
+    def begin(self, frame: int, pool: RingPool) -> None:
+        super().begin(frame, pool)
+        if self._down_burst is not None:
+            self._add_burst(self._down_burst, self._unit, frame)
+            self._down_burst = None
+
+    def release(self, frame: int, transient: object | None = None) -> None:
+        super().release(frame)
+        if isinstance(transient, np.ndarray):
+            self._add_burst(transient, self.mailbox.unit_gains, frame)
+
+    def _add_burst(self, burst: np.ndarray, unit: np.ndarray, frame: int) -> None:
+        channels = np.flatnonzero(unit)
+        self._bursts.append((burst, unit[channels], channels, frame))
+
+    def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
+        frames = mix.shape[0]
+        block_end = block_start + frames
+        offset = max(0, self.start_frame - block_start)
+        first = block_start + offset
+        count = frames - offset
+        box = self.mailbox
+        if box.serial != self._applied and (box.frame is None or box.frame < block_end):
+            if box.frame is not None and box.frame < block_start and offset == 0:
+                work.late_commands += 1
+            self._applied = box.serial
+            self._target = box.gains
+            self._unit = box.unit_gains
+            self._channels = np.flatnonzero(self._gains + box.gains)
+            self._channel_list = self._channels.tolist()
+        silent_from = self.silent_from
+        if silent_from is not None:
+            count = min(count, silent_from - first)
+        if count > 0 and self._channels.size:
+            self._add_carrier(mix[offset : offset + count], first, work)
+        self._gains = self._target
+        if self._bursts:
+            self._add_bursts(mix, block_start)
+        return silent_from is not None and block_end >= silent_from and not self._bursts
+
+    def _envelope(self, first: int, count: int, work: Workspace) -> np.ndarray | None:
+        env = None
+        attack = self._attack_frames
+        if attack > 0 and first - self.start_frame + 1 < attack:
+            env = work.env[:count]
+            np.add(work.index[:count], np.float32(first - self.start_frame + 1), out=env)
+            env *= np.float32(1.0 / attack)
+            np.minimum(env, np.float32(1.0), out=env)
+        release = self.release_frame
+        if release is not None and release < first + count:
+            level = self._level_before(release)
+            fade = work.gain[:count]
+            np.add(work.index[:count], np.float32(first - release + 1), out=fade)
+            fade *= np.float32(-1.0 / self.release_frames)
+            fade += np.float32(level)
+            if env is None:
+                env = fade
+                np.minimum(env, np.float32(1.0), out=env)
+            else:
+                np.minimum(env, fade, out=env)
+            np.maximum(env, np.float32(0.0), out=env)
+        return env
+
+    def _add_carrier(self, dest: np.ndarray, first: int, work: Workspace) -> None:
+        count = dest.shape[0]
+        signal = self._source.block(self._carrier_frames, count)
+        self._carrier_frames += count
+        env = self._envelope(first, count, work)
+        if env is not None:
+            signal *= env
+        channels = self._channels
+        start = self._gains[channels]
+        if self._target is self._gains:
+            block = signal[:, None] * start
+        else:
+            ramp = (
+                work.ramp
+                if count == work.block_frames
+                else (np.arange(1, count + 1, dtype=np.float64) / count).astype(np.float32)
+            )
+            block = ramp[:, None] * (self._target[channels] - start)
+            block += start
+            block *= signal[:, None]
+        for column, channel in enumerate(self._channel_list):  # cheaper than a fancy index
+            dest[:, channel] += block[:, column]
+
+    def _add_bursts(self, mix: np.ndarray, block_start: int) -> None:
+        block_end = block_start + mix.shape[0]
+        keep = []
+        for burst, gains, channels, frame in self._bursts:
+            lo = max(frame, block_start)
+            hi = min(frame + burst.shape[0], block_end)
+            if lo < hi:
+                piece = burst[lo - frame : hi - frame, None] * gains
+                mix[lo - block_start : hi - block_start, channels] += piece
+            if frame + burst.shape[0] > block_end:
+                keep.append((burst, gains, channels, frame))
+        self._bursts = keep

@@ -1,0 +1,130 @@
+"""After the voices: safety limiter, calibration, NaN guard, ceiling, level meters.
+
+The voices add into one float32 block. :class:`Limiter` then scales the whole block (all
+channels alike, so the phantom's balance between actuators is kept) when its calibrated
+peak exceeds ``threshold_ratio`` times the ceiling, and is exactly transparent otherwise.
+The renderer's :class:`~phantomtouch.renderer.OutputStage` follows: calibration, optional
+FIR, NaN/Inf muting and the hard clip at the ceiling as the last line — the same stage an
+offline render goes through, so a pattern played alone arrives with the offline samples.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from phantomtouch.renderer import OutputStage
+from phantomtouch.schema.device import DeviceProfile
+
+THRESHOLD_RATIO = 0.9
+"""The limiter acts on calibrated peaks above this fraction of the ceiling."""
+ATTACK_S = 0.001
+"""Time over which gain reduction sets in, s."""
+RELEASE_S = 0.1
+"""Time for the gain to recover from 0 to 1, s (linear)."""
+
+
+class Limiter:
+    """Smooth gain reduction of the summed signal.
+
+    For each block: ``peak`` is the largest calibrated absolute sample. The target gain is
+    1 when ``peak <= threshold`` else ``threshold / peak``; a falling gain reaches the
+    target within ``ATTACK_S`` and holds it for the rest of the block, a rising gain
+    climbs by at most ``frames / (RELEASE_S * sample_rate_hz)`` per block. At gain 1 and
+    a peak within the threshold the block is not touched at all.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+
+    Attributes
+    ----------
+    gain : float, 0 < gain <= 1
+        Gain at the end of the last block.
+    limited_blocks : int
+        Blocks whose gain was below 1 anywhere.
+    """
+
+    def __init__(self, device: DeviceProfile) -> None:
+        self.threshold = THRESHOLD_RATIO * device.safety.ceiling
+        self._calibration = OutputStage.channel_gains(device).astype(np.float32)
+        self._attack_frames = max(1, round(ATTACK_S * device.sample_rate_hz))
+        self._release_per_frame = 1.0 / (RELEASE_S * device.sample_rate_hz)
+        self._curve = np.empty(device.block_frames, dtype=np.float32)
+        self._index = np.arange(device.block_frames, dtype=np.float32)
+        self.gain = 1.0
+        self.limited_blocks = 0
+
+    def peak(self, block: np.ndarray) -> float:
+        """Largest absolute sample of ``block`` after calibration (NaN if any is NaN)."""
+        highest = block.max(axis=0)
+        np.maximum(highest, -block.min(axis=0), out=highest)
+        highest *= self._calibration
+        return float(highest.max())
+
+    def process(self, block: np.ndarray) -> None:
+        """Limit ``block`` (frames, channels), float32, in place."""
+        peak = self.peak(block)
+        if not math.isfinite(peak):
+            return  # the output stage mutes the block
+        if peak <= self.threshold and self.gain >= 1.0:
+            return
+        frames = block.shape[0]
+        target = 1.0 if peak <= self.threshold else self.threshold / peak
+        new = min(target, self.gain + frames * self._release_per_frame, 1.0)
+        curve = self._curve[:frames]
+        if new < self.gain:
+            ramp = min(self._attack_frames, frames)
+            curve[:] = new
+            np.multiply(self._index[:ramp], np.float32((new - self.gain) / ramp), out=curve[:ramp])
+            curve[:ramp] += np.float32(self.gain)
+        else:
+            np.multiply(self._index[:frames], np.float32((new - self.gain) / frames), out=curve)
+            curve += np.float32(self.gain)
+        block *= curve[:, None]
+        self.gain = new
+        self.limited_blocks += 1
+
+
+class Mixer:
+    """The chain after the voices, and the level meters.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+
+    Attributes
+    ----------
+    levels : ndarray, shape (channels,), float32
+        Peak absolute value per channel of the last output block.
+    peak : float
+        Largest absolute output sample since start.
+    """
+
+    def __init__(self, device: DeviceProfile) -> None:
+        self.limiter = Limiter(device)
+        self.stage = OutputStage(device)
+        self.levels = np.zeros(device.channels, dtype=np.float32)
+        self.peak = 0.0
+        self._magnitude = np.empty((device.block_frames, device.channels), dtype=np.float32)
+
+    @property
+    def muted_blocks(self) -> int:
+        """Blocks replaced by silence because they carried NaN or Inf."""
+        return self.stage.muted_blocks
+
+    @property
+    def limited_blocks(self) -> int:
+        return self.limiter.limited_blocks
+
+    def finish(self, block: np.ndarray) -> None:
+        """Limit, calibrate and clip the mixed ``block`` in place, then meter it."""
+        self.limiter.process(block)
+        self.stage.process(block)
+        magnitude = self._magnitude[: block.shape[0]]
+        np.abs(block, out=magnitude)
+        np.max(magnitude, axis=0, out=self.levels)
+        loudest = float(self.levels.max())
+        if loudest > self.peak:
+            self.peak = loudest

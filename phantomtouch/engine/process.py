@@ -1,0 +1,347 @@
+"""The engine in a process of its own, for hosts whose other Python work holds the GIL.
+
+The audio callback needs the interpreter lock for every block. In a process that also
+serves web requests, a thread busy with Python work (JSON, pydantic) holds the lock for
+a switch interval (5 ms) at a time, longer than a 2.67 ms block of 128 frames:
+``benchmarks/bench_engine.py`` measures the underruns that follow, and how they vanish
+when the engine runs in a process of its own. :class:`ProcessEngine` is that remedy
+with the :class:`~phantomtouch.engine.Engine` API: a child process (``spawn``) owns the
+sink and a real ``Engine``; this process keeps a thin proxy.
+
+- Calls that answer (``schedule``, ``contact_down``, ``stop``, ``job_state``,
+  ``status``, the clock) are sent through a pipe and wait for the child's answer,
+  errors included (a round trip of some tens of microseconds).
+- ``contact_move``, ``contact_up`` and ``release_owner`` are checked here and sent
+  without waiting, so a 90 Hz stream of moves never blocks the caller.
+- ``stop_all`` raises a mark in shared memory and wakes a thread in the child: it gets
+  through even when the pipe is backed up, and voids everything sent before it.
+- When this process dies, the pipe closes and the child fades out and exits: nothing
+  keeps vibrating after its host is gone.
+
+A sink cannot cross processes, so the child opens the one a :class:`SinkSpec` names.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import threading
+import time
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from phantomtouch.engine.checks import check_frame, check_id, check_int, check_range
+from phantomtouch.engine.child import serve
+from phantomtouch.engine.contacts import ContactSettings
+from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
+from phantomtouch.engine.jobs import Job, JobState, resolve_plan
+from phantomtouch.engine.soundcard import SinkSpec
+from phantomtouch.engine.status import EngineStatus
+from phantomtouch.errors import DeviceError, ParameterError, ProtocolError
+from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema import limits
+from phantomtouch.schema.device import DeviceProfile
+from phantomtouch.schema.pattern import Carrier, TouchPattern
+
+START_TIMEOUT_S = 60.0
+"""Longest wait for the child to import, open its sink and answer."""
+CLOSE_TIMEOUT_S = 10.0
+REALTIME_PRIORITY = 1
+"""SCHED_FIFO priority of the engine process's own threads: the lowest real-time one,
+below the audio callback's (JACK gives its clients server priority - 5), above every
+ordinary thread, so a thread that holds the interpreter lock the callback waits for is
+not preempted by the host's work."""
+
+
+class ProcessEngine:
+    """:class:`~phantomtouch.engine.Engine`'s API, with the engine in a child process.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+    sink : SinkSpec or None
+        The sink the child opens; None: ``SinkSpec("default")``.
+    queue_capacity, contact, log_path, render_ahead_frames
+        As for :class:`~phantomtouch.engine.Engine` (the child writes the log).
+    realtime_priority : int or None, 1 <= realtime_priority <= 99
+        SCHED_FIFO priority of the child's own threads (see ``REALTIME_PRIORITY``);
+        None, or no permission for it: ordinary scheduling.
+
+    Notes
+    -----
+    The child is started with ``spawn``: the host's main module must be importable
+    without side effects (guarded by ``if __name__ == "__main__"``).
+
+    Raises
+    ------
+    DeviceError
+        The child could not open its sink (or did not answer within 60 s).
+    ParameterError
+        An argument is out of range.
+    """
+
+    def __init__(
+        self,
+        device: DeviceProfile,
+        sink: SinkSpec | None = None,
+        *,
+        queue_capacity: int = 4096,
+        contact: ContactSettings | None = None,
+        log_path: str | Path | None = None,
+        render_ahead_frames: int = RENDER_AHEAD_FRAMES,
+        realtime_priority: int | None = REALTIME_PRIORITY,
+    ) -> None:
+        if not isinstance(device, DeviceProfile):
+            raise ParameterError(f"device={device!r} must be a DeviceProfile")
+        if realtime_priority is not None:
+            check_int("realtime_priority", realtime_priority, 1, 99)
+        spec = sink if sink is not None else SinkSpec()
+        self._device = device
+        self._lock = threading.Lock()
+        self._seq = 0
+        self._closed = False
+        self._down: set[tuple[str, str]] = set()
+        context = multiprocessing.get_context("spawn")
+        self._mark = context.Value("q", 0, lock=False)
+        self._wake = context.Event()
+        self._conn, child_conn = context.Pipe()
+        options = {
+            "queue_capacity": queue_capacity,
+            "contact": contact,
+            "log_path": None if log_path is None else str(log_path),
+            "render_ahead_frames": render_ahead_frames,
+        }
+        self._process = context.Process(
+            target=serve,
+            args=(
+                child_conn,
+                device.model_dump_json(),
+                spec,
+                options,
+                self._mark,
+                self._wake,
+                realtime_priority,
+            ),
+            name="phantomtouch-engine",
+            daemon=True,
+        )
+        self._process.start()
+        child_conn.close()
+        if not self._conn.poll(START_TIMEOUT_S):
+            self._process.kill()
+            raise DeviceError(f"the engine process did not start within {START_TIMEOUT_S:g} s")
+        ok, error = self._conn.recv()
+        if not ok:
+            self._process.join(CLOSE_TIMEOUT_S)
+            self._closed = True
+            raise error
+
+    @property
+    def pid(self) -> int | None:
+        """Process id of the engine process."""
+        return self._process.pid
+
+    def _send(self, method: str, args: tuple, kwargs: dict[str, Any], *, answer: bool) -> Any:
+        with self._lock:
+            if self._closed:
+                raise DeviceError("the engine is closed")
+            self._seq += 1
+            try:
+                self._conn.send((self._seq, method, args, kwargs, answer))
+                if not answer:
+                    return None
+                ok, value = self._conn.recv()
+            except (EOFError, OSError) as exc:
+                raise DeviceError(f"the engine process is gone ({exc})") from exc
+        if not ok:
+            raise value
+        return value
+
+    def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
+        return self._send(method, args, kwargs, answer=True)
+
+    def _post(self, method: str, *args: Any, **kwargs: Any) -> None:
+        self._send(method, args, kwargs, answer=False)
+
+    # -- life cycle
+
+    def start(self) -> None:
+        """Start the child's sink (see :meth:`Engine.start`)."""
+        self._call("start")
+
+    def close(self) -> None:
+        """Fade out, close the child's engine and sink, end the child. Idempotent."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            try:
+                self._conn.send((self._seq + 1, "close", (), {}, True))
+                if self._conn.poll(CLOSE_TIMEOUT_S):
+                    self._conn.recv()
+            except (EOFError, OSError):
+                pass
+        self._process.join(CLOSE_TIMEOUT_S)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+        self._conn.close()
+
+    def __enter__(self) -> ProcessEngine:
+        self.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # -- clock
+
+    @property
+    def device(self) -> DeviceProfile:
+        return self._device
+
+    @property
+    def sample_rate_hz(self) -> int:
+        return self._device.sample_rate_hz
+
+    @property
+    def block_frames(self) -> int:
+        return self._device.block_frames
+
+    @property
+    def channels(self) -> int:
+        return self._device.channels
+
+    @property
+    def now_frames(self) -> int:
+        return int(self._call("now_frames"))
+
+    def server_time_s(self) -> float:
+        """The server clock, s (``time.monotonic()``, the same in both processes)."""
+        return time.monotonic()
+
+    def frames_at(self, server_time_s: float) -> int:
+        return int(self._call("frames_at", server_time_s))
+
+    def time_at(self, frame: int) -> float:
+        return float(self._call("time_at", frame))
+
+    # -- jobs
+
+    def schedule(
+        self,
+        pattern: TouchPattern | Plan,
+        *,
+        start_frame: int | None = None,
+        owner: str | None = None,
+    ) -> Job:
+        """See :meth:`Engine.schedule`; the pattern is planned here, not in the child."""
+        resolved = resolve_plan(pattern, self._device)
+        return self._call("schedule", resolved, start_frame=start_frame, owner=owner)
+
+    def job_state(self, job_id: str) -> JobState | None:
+        return self._call("job_state", job_id)
+
+    def stop(self, job_id: str) -> bool:
+        return bool(self._call("stop", job_id))
+
+    def stop_all(self) -> None:
+        """See :meth:`Engine.stop_all`; never waits for the child."""
+        with self._lock:
+            if self._closed:
+                return
+            self._seq += 1
+            self._mark.value = self._seq
+            self._down.clear()
+        self._wake.set()
+
+    # -- contacts
+
+    def contact_down(
+        self,
+        owner: str,
+        contact: str,
+        x_cm: float,
+        y_cm: float,
+        *,
+        intensity: float | None = None,
+        carrier: Carrier | None = None,
+        law: str = "power",
+        normal_velocity_m_s: float | None = None,
+        at_frame: int | None = None,
+    ) -> None:
+        """See :meth:`Engine.contact_down`."""
+        self._call(
+            "contact_down",
+            owner,
+            contact,
+            x_cm,
+            y_cm,
+            intensity=intensity,
+            carrier=carrier,
+            law=law,
+            normal_velocity_m_s=normal_velocity_m_s,
+            at_frame=at_frame,
+        )
+        with self._lock:
+            self._down.add((owner, contact))
+
+    def contact_move(
+        self,
+        owner: str,
+        contact: str,
+        x_cm: float,
+        y_cm: float,
+        *,
+        intensity: float | None = None,
+        at_frame: int | None = None,
+    ) -> None:
+        """See :meth:`Engine.contact_move`; checked here, sent without waiting."""
+        check_id("owner", owner)
+        check_id("contact", contact)
+        check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
+        check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
+        if intensity is not None:
+            check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
+        check_frame("at_frame", at_frame)
+        if (owner, contact) not in self._down:
+            raise ProtocolError(
+                f"contact={contact!r} of owner={owner!r} is not down: expected down, got move"
+            )
+        self._post(
+            "contact_move", owner, contact, x_cm, y_cm, intensity=intensity, at_frame=at_frame
+        )
+
+    def contact_up(
+        self,
+        owner: str,
+        contact: str,
+        *,
+        normal_velocity_m_s: float | None = None,
+        at_frame: int | None = None,
+    ) -> None:
+        """See :meth:`Engine.contact_up`; checked here, sent without waiting."""
+        check_id("owner", owner)
+        check_id("contact", contact)
+        if normal_velocity_m_s is not None:
+            check_range("normal_velocity_m_s", normal_velocity_m_s, -10.0, 10.0, "m/s")
+        check_frame("at_frame", at_frame)
+        with self._lock:
+            self._down.discard((owner, contact))
+        self._post(
+            "contact_up", owner, contact, normal_velocity_m_s=normal_velocity_m_s, at_frame=at_frame
+        )
+
+    def release_owner(self, owner: str) -> None:
+        """See :meth:`Engine.release_owner`; sent without waiting."""
+        with self._lock:
+            self._down = {key for key in self._down if key[0] != owner}
+        self._post("release_owner", owner)
+
+    def status(self) -> EngineStatus:
+        return self._call("status")

@@ -1,0 +1,241 @@
+"""The audio callback's side of the engine: commands in, one block out.
+
+Callback contract (:meth:`Scheduler.render`): ``out`` is the sink's float32 buffer,
+shape (frames, channels); it is filled entirely. The callback never waits: it pops
+commands from the queue without a lock, applies each at the sample its frame asks for
+(a command whose frame has passed is applied at once and counted in ``late_commands``),
+renders the voices into ``out``, and runs the mixer. It allocates only small per-block
+temporaries, logs nothing and reports to the control side through counters and an event
+deque that the control side drains.
+
+Events are tuples: ``("start", voice, frame, late)``, ``("release", voice, frame)``,
+``("end", voice, frame)`` (silent from ``frame``), ``("cancel", voice, frame)`` (voided
+before it started) and ``("stop_all", frame)``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from phantomtouch.engine.clock import SampleClock
+from phantomtouch.engine.commands import CommandQueue, StartCommand
+from phantomtouch.engine.mixer import Mixer
+from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
+from phantomtouch.schema.device import DeviceProfile
+
+
+class Scheduler:
+    """Applies commands and renders blocks; owned by the audio callback.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+    queue : CommandQueue
+    clock : SampleClock
+        Told when each block is computed, if ``clocked``.
+    rings : int, >= 0
+        Render-ahead rings for pattern voices (see :mod:`phantomtouch.engine.voices`).
+    chunk_frames : int, >= 0
+        Frames a pattern voice renders ahead at a time; 0 renders every block directly.
+    clocked : bool
+        Blocks are pulled at the pace of a clock (a real-time sink). Otherwise the clock
+        is left at its anchor: frames map to time as if played from the start.
+
+    Attributes
+    ----------
+    frames : int
+        Frames rendered so far: the first frame of the next block (``now_frames``).
+    drained_frame : int
+        First frame of the last block whose commands were taken (-1 before the first).
+    active_voices : int
+    callback_errors : int
+        Blocks replaced by silence because rendering raised (the voices are dropped).
+    last_error : BaseException or None
+    events : deque
+        Reports for the control side (see the module docstring).
+    """
+
+    def __init__(
+        self,
+        device: DeviceProfile,
+        queue: CommandQueue,
+        clock: SampleClock,
+        *,
+        rings: int,
+        chunk_frames: int,
+        clocked: bool = True,
+    ) -> None:
+        self.block_frames = device.block_frames
+        self.queue = queue
+        self.clock = clock
+        self.clocked = clocked
+        self.mixer = Mixer(device)
+        self.work = Workspace(device.block_frames, device.channels)
+        chunk = max(chunk_frames, device.block_frames) if chunk_frames > 0 else 0
+        self.pool = RingPool(rings, chunk, device.channels)
+        self.frames = 0
+        self.drained_frame = -1
+        self.active_voices = 0
+        self.callback_errors = 0
+        self.last_error: BaseException | None = None
+        self.events: deque[tuple[Any, ...]] = deque()
+        self._voices: list[Voice] = []
+        self._waiting: list[tuple[int, int, Voice]] = []
+        self._stop_seen = 0
+        self._refill_credit = 0.0
+
+    @property
+    def late_commands(self) -> int:
+        return self.work.late_commands
+
+    def next_block_frame(self) -> int:
+        """First frame of the next block whose commands are not taken yet (any thread)."""
+        frames = self.frames
+        return frames + self.block_frames if self.drained_frame == frames else frames
+
+    def render(self, out: np.ndarray) -> None:
+        """Fill ``out`` (frames, channels), float32, with the next frames (the callback)."""
+        if self.clocked:
+            self.clock.observe(self.frames, time.monotonic())
+        step = self.block_frames
+        for at in range(0, out.shape[0], step):
+            block = out[at : at + step]
+            try:
+                self._block(block)
+            except Exception as exc:  # a bug must not stop the stream: silence, drop voices
+                block.fill(0.0)
+                self.callback_errors += 1
+                self.last_error = exc
+                self._drop_voices(self.frames)
+                self.frames += block.shape[0]
+
+    def _block(self, out: np.ndarray) -> None:
+        start = self.frames
+        end = start + out.shape[0]
+        self._apply_commands(start, end)
+        self.drained_frame = start
+        waiting = self._waiting
+        while waiting and waiting[0][0] < end:
+            frame, _, voice = heapq.heappop(waiting)
+            if voice.state == WAITING:
+                self._begin(voice, frame, late=False)
+        out.fill(0.0)
+        if self._voices:
+            self._render_voices(out, start)
+        self.mixer.finish(out)
+        self.active_voices = len(self._voices)
+        self.frames = end
+
+    def _render_voices(self, out: np.ndarray, start: int) -> None:
+        keep: list[Voice] = []
+        candidates: list[tuple[int, int, Voice]] = []
+        with_ring = 0
+        for voice in self._voices:
+            if voice.render(out, start, self.work):
+                self._end(voice)
+                continue
+            keep.append(voice)
+            if voice.has_ring:
+                with_ring += 1
+                ahead = voice.ahead_frames
+                if ahead is not None:
+                    candidates.append((ahead, len(candidates), voice))
+        self._voices = keep
+        if not candidates:
+            self._refill_credit = 0.0
+            return
+        # Refill as many chunks as the voices play per block on average, the emptiest
+        # first: the renderer's cost spreads evenly over the blocks (one refill per block
+        # for 16 voices at 256 frames). More would put two refills into some blocks and
+        # raise the worst case; a voice that runs dry all the same refills at once.
+        # Unused credit is capped, so it never comes due as a burst of refills.
+        rate = with_ring * self.block_frames / self.pool.chunk_frames
+        self._refill_credit = min(self._refill_credit + rate, rate + 1.0)
+        due = min(len(candidates), int(self._refill_credit))
+        if due:
+            self._refill_credit -= due
+            for _, _, voice in sorted(candidates)[:due]:
+                voice.refill()
+
+    def _apply_commands(self, start: int, end: int) -> None:
+        queue = self.queue
+        stop_seq = queue.stop_all_seq
+        if stop_seq != self._stop_seen:
+            self._stop_seen = stop_seq
+            self._stop_all(stop_seq, start)
+        while (command := queue.pop()) is not None:
+            voice = command.voice
+            if isinstance(command, StartCommand):
+                if command.seq < stop_seq or voice.state != WAITING:
+                    if voice.state == WAITING:
+                        self._cancel(voice, start)
+                    else:
+                        queue.retire()
+                    continue
+                late = not command.asap and command.frame < start
+                frame = start if command.asap or late else command.frame
+                if late:
+                    self.work.late_commands += 1
+                voice.start_frame = frame
+                if frame < end:
+                    self._begin(voice, frame, late=late)
+                else:
+                    heapq.heappush(self._waiting, (frame, command.seq, voice))
+                continue
+            if command.seq < stop_seq:
+                continue
+            frame = start if command.frame is None else command.frame
+            if frame < start:
+                self.work.late_commands += 1
+                frame = start
+            if voice.state == WAITING and frame <= voice.start_frame:
+                self._cancel(voice, frame)
+            elif voice.state != DONE:
+                voice.release(frame, command.transient)
+                if voice.state == PLAYING:
+                    self.events.append(("release", voice, frame))
+
+    def _begin(self, voice: Voice, frame: int, *, late: bool) -> None:
+        voice.begin(frame, self.pool)
+        self._voices.append(voice)
+        self.queue.retire()
+        self.events.append(("start", voice, frame, late))
+
+    def _cancel(self, voice: Voice, frame: int) -> None:
+        """Void a voice that never started (its start command or its wait)."""
+        if voice.state == WAITING:
+            voice.state = DONE
+            self.queue.retire()
+            self.events.append(("cancel", voice, frame))
+
+    def _end(self, voice: Voice) -> None:
+        voice.finish(self.pool)
+        silent_from = voice.silent_from
+        self.events.append(("end", voice, self.frames if silent_from is None else silent_from))
+
+    def _stop_all(self, stop_seq: int, frame: int) -> None:
+        for voice in self._voices:
+            if voice.seq < stop_seq:
+                voice.release(frame)
+                self.events.append(("release", voice, frame))
+        kept = []
+        for entry in self._waiting:
+            if entry[2].seq < stop_seq:
+                self._cancel(entry[2], frame)
+            elif entry[2].state == WAITING:
+                kept.append(entry)
+        heapq.heapify(kept)
+        self._waiting = kept
+        self.events.append(("stop_all", frame))
+
+    def _drop_voices(self, frame: int) -> None:
+        for voice in self._voices:
+            voice.finish(self.pool)
+            self.events.append(("end", voice, frame))
+        self._voices = []
+        self.active_voices = 0

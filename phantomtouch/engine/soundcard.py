@@ -1,0 +1,333 @@
+"""The sound card sink (PortAudio through ``sounddevice``) and output device lookup.
+
+``sounddevice`` is imported only when a sound card is asked for: the engine runs without
+it (``phantomtouch[audio]`` installs it), falling back to the null sink.
+
+PortAudio callback contract (:meth:`SoundDeviceSink._callback`): ``outdata`` is float32,
+shape (frames, stream channels), frames = ``block_frames``; it is filled entirely; the
+callback never blocks and never allocates beyond the engine's small per-block
+temporaries. Status flags are accumulated (``flags |= status``) and output underflows
+counted; both are read outside the callback.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from phantomtouch.engine.sinks import CaptureSink, NullSink, RenderFn, Sink
+from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.schema.device import DeviceProfile
+
+logger = logging.getLogger(__name__)
+
+
+def device_error(exc: BaseException, action: str) -> DeviceError:
+    """The :class:`DeviceError` for a PortAudio (or ``sounddevice``) failure.
+
+    Use as ``raise device_error(exc, "cannot open ...") from exc``.
+    """
+    return DeviceError(f"{action}: {exc}")
+
+
+def _sounddevice() -> ModuleType:
+    try:
+        import sounddevice
+    except ImportError as exc:
+        raise DeviceError(
+            "sound card output needs the sounddevice package: pip install 'phantomtouch[audio]'"
+        ) from exc
+    except OSError as exc:  # the PortAudio library itself is missing
+        raise device_error(exc, "PortAudio is not available") from exc
+    return sounddevice
+
+
+def list_output_devices() -> list[dict[str, Any]]:
+    """Every PortAudio device with outputs.
+
+    Returns
+    -------
+    list of dict
+        ``index`` (int, for ``output=``), ``name`` (str), ``max_output_channels`` (int),
+        ``default_samplerate`` (float, Hz), ``hostapi`` (str), ``default`` (bool: the
+        system's default output).
+
+    Raises
+    ------
+    DeviceError
+        ``sounddevice`` or PortAudio is not installed, or PortAudio fails.
+    """
+    sd = _sounddevice()
+    try:
+        devices = sd.query_devices()
+        hostapis = sd.query_hostapis()
+        default_output = sd.default.device[1]
+    except sd.PortAudioError as exc:
+        raise device_error(exc, "cannot list output devices") from exc
+    return [
+        {
+            "index": index,
+            "name": str(info["name"]),
+            "max_output_channels": int(info["max_output_channels"]),
+            "default_samplerate": float(info["default_samplerate"]),
+            "hostapi": str(hostapis[info["hostapi"]]["name"]),
+            "default": index == default_output,
+        }
+        for index, info in enumerate(devices)
+        if info["max_output_channels"] > 0
+    ]
+
+
+def find_output_device(output: int | str | None, channels: int) -> dict[str, Any]:
+    """The output device to open, as listed by :func:`list_output_devices`.
+
+    Parameters
+    ----------
+    output : int, str or None
+        A device index, a (case-insensitive) part of its name, or None: the default
+        output if it has enough outputs, else the first device that has.
+    channels : int
+        Outputs needed.
+
+    Raises
+    ------
+    DeviceError
+        No such device, several match the name, or it has fewer than ``channels`` outputs.
+    """
+    devices = list_output_devices()
+    if output is None:
+        suitable = [d for d in devices if d["max_output_channels"] >= channels]
+        if not suitable:
+            raise DeviceError(f"no output device has {channels} or more outputs")
+        return next((d for d in suitable if d["default"]), suitable[0])
+    if isinstance(output, bool) or not isinstance(output, int | str):
+        raise ParameterError(f"output={output!r} must be a device index, a name or None")
+    if isinstance(output, int):
+        matches = [d for d in devices if d["index"] == output]
+    else:
+        exact = [d for d in devices if d["name"].lower() == output.lower()]
+        matches = exact or [d for d in devices if output.lower() in d["name"].lower()]
+    if not matches:
+        names = ", ".join(f"{d['index']}: {d['name']}" for d in devices) or "none"
+        raise DeviceError(f"output={output!r} matches no output device (outputs: {names})")
+    if len(matches) > 1:
+        names = ", ".join(f"{d['index']}: {d['name']}" for d in matches)
+        raise DeviceError(f"output={output!r} matches several devices ({names}); give an index")
+    found = matches[0]
+    if found["max_output_channels"] < channels:
+        raise DeviceError(
+            f"output device {found['name']!r} has {found['max_output_channels']} outputs; "
+            f"{channels} needed"
+        )
+    return found
+
+
+class SoundDeviceSink:
+    """A PortAudio output stream (``sounddevice.OutputStream``), float32.
+
+    The stream is opened here (so its ports exist, e.g. for JACK connections) and
+    started by :meth:`start`.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+        Sample rate, block size (PortAudio ``blocksize``) and channels.
+    output : int, str or None
+        Device index, part of its name, or None (see :func:`find_output_device`).
+    channel_map : sequence of int or None
+        Sound card output (1-based) for each of the profile's channels, e.g.
+        ``[3, 4, 5, 6, 7, 8, 9, 10]``; outputs not in the map stay silent. None: channel k
+        on output k.
+    latency : {"low", "high"} or float
+        PortAudio's suggested output latency; a float is seconds, 0 < latency <= 1.
+
+    Raises
+    ------
+    DeviceError
+        The device is missing, has too few outputs, or PortAudio cannot open it.
+    """
+
+    backend = "sounddevice"
+    realtime = True
+
+    def __init__(
+        self,
+        device: DeviceProfile,
+        output: int | str | None = None,
+        *,
+        channel_map: Sequence[int] | None = None,
+        latency: float | str = "low",
+    ) -> None:
+        self.sample_rate_hz = device.sample_rate_hz
+        self.block_frames = device.block_frames
+        self.channels = device.channels
+        self._map = self._check_map(channel_map, device.channels)
+        self._check_latency(latency)
+        stream_channels = int(self._map.max()) + 1 if self._map is not None else self.channels
+        sd = _sounddevice()
+        found = find_output_device(output, stream_channels)
+        self.device_index: int = found["index"]
+        self._name: str = found["name"]
+        self._buffer = np.zeros((self.block_frames, self.channels), dtype=np.float32)
+        self._render: RenderFn | None = None
+        self.flags = sd.CallbackFlags()
+        self._underruns = 0
+        try:
+            self._stream = sd.OutputStream(
+                samplerate=self.sample_rate_hz,
+                blocksize=self.block_frames,
+                device=self.device_index,
+                channels=stream_channels,
+                dtype="float32",
+                latency=latency,
+                callback=self._callback,
+            )
+        except (sd.PortAudioError, ValueError) as exc:
+            raise device_error(exc, f"cannot open output device {self._name!r}") from exc
+
+    @staticmethod
+    def _check_map(channel_map: Sequence[int] | None, channels: int) -> np.ndarray | None:
+        if channel_map is None:
+            return None
+        outputs = list(channel_map)
+        valid = all(isinstance(c, int) and not isinstance(c, bool) and c >= 1 for c in outputs)
+        if not valid or len(outputs) != channels or len(set(outputs)) != channels:
+            raise ParameterError(
+                f"channel_map={channel_map!r} must list {channels} distinct outputs, each >= 1"
+            )
+        return np.array(outputs, dtype=np.intp) - 1
+
+    @staticmethod
+    def _check_latency(latency: float | str) -> None:
+        if isinstance(latency, str) and latency in ("low", "high"):
+            return
+        if isinstance(latency, int | float) and not isinstance(latency, bool) and 0 < latency <= 1:
+            return
+        raise ParameterError(f"latency={latency!r} must be 'low', 'high' or seconds in (0, 1]")
+
+    @property
+    def output_device(self) -> str | None:
+        return self._name
+
+    @property
+    def underruns(self) -> int:
+        return self._underruns
+
+    @property
+    def output_latency_s(self) -> float:
+        return float(self._stream.latency)
+
+    def _callback(self, outdata: np.ndarray, frames: int, time_info: Any, status: Any) -> None:
+        if status:
+            self.flags |= status
+            if status.output_underflow:
+                self._underruns += 1
+        render = self._render
+        if render is None:
+            outdata.fill(0.0)
+        elif self._map is None:
+            render(outdata)
+        else:
+            if frames <= self.block_frames:
+                block = self._buffer[:frames]
+            else:  # PortAudio keeps the fixed blocksize; this is only a safety net
+                block = np.empty((frames, self.channels), dtype=np.float32)
+            render(block)
+            outdata.fill(0.0)
+            outdata[:, self._map] = block
+
+    def start(self, render: RenderFn) -> None:
+        sd = _sounddevice()
+        self._render = render
+        try:
+            self._stream.start()
+        except sd.PortAudioError as exc:
+            self._render = None
+            raise device_error(exc, f"cannot start output device {self._name!r}") from exc
+
+    def stop(self) -> None:
+        sd = _sounddevice()
+        try:
+            self._stream.stop()
+        except sd.PortAudioError as exc:
+            raise device_error(exc, f"cannot stop output device {self._name!r}") from exc
+        finally:
+            self._render = None
+
+    def close(self) -> None:
+        sd = _sounddevice()
+        try:
+            self._stream.close()
+        except sd.PortAudioError as exc:
+            raise device_error(exc, f"cannot close output device {self._name!r}") from exc
+
+
+def open_default_sink(device: DeviceProfile, output: int | str | None = None) -> Sink:
+    """The sound card with enough outputs if there is one, else the null sink.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+    output : int, str or None
+        A device index or part of its name; then that device or :class:`DeviceError`.
+        None: the default output if it has ``device.channels`` outputs, else the first
+        device that has; without one (or without PortAudio), a :class:`NullSink`.
+    """
+    if output is not None:
+        return SoundDeviceSink(device, output)
+    try:
+        found = find_output_device(None, device.channels)
+        return SoundDeviceSink(device, found["index"])
+    except DeviceError as exc:
+        logger.info("no usable sound card (%s); using the null sink", exc)
+        return NullSink(device)
+
+
+@dataclass(frozen=True)
+class SinkSpec:
+    """The sink the engine process opens.
+
+    Parameters
+    ----------
+    backend : {"default", "sounddevice", "null", "capture"}
+        ``"default"``: :func:`~phantomtouch.engine.open_default_sink` (the sound card with
+        enough outputs, else the null sink).
+    output : int, str or None
+        Sound card output (index or part of its name) for "default" and "sounddevice".
+    channel_map : tuple of int or None
+        For "sounddevice" (see :class:`~phantomtouch.engine.SoundDeviceSink`).
+    latency : {"low", "high"} or float
+        For "sounddevice".
+    wav_path : str or None
+        For "capture": a real-time capture sink whose recording is written to this
+        float32 WAV when the engine closes.
+    """
+
+    backend: str = "default"
+    output: int | str | None = None
+    channel_map: tuple[int, ...] | None = None
+    latency: float | str = "low"
+    wav_path: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.backend not in ("default", "sounddevice", "null", "capture"):
+            raise ParameterError(
+                f"backend={self.backend!r} must be 'default', 'sounddevice', 'null' or 'capture'"
+            )
+
+    def open(self, device: DeviceProfile) -> Sink:
+        """Open the sink (in the engine process)."""
+        if self.backend == "null":
+            return NullSink(device)
+        if self.backend == "capture":
+            return CaptureSink(device, realtime=True)
+        if self.backend == "sounddevice":
+            return SoundDeviceSink(
+                device, self.output, channel_map=self.channel_map, latency=self.latency
+            )
+        return open_default_sink(device, self.output)

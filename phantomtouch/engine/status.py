@@ -1,0 +1,62 @@
+"""A snapshot of the engine for monitoring."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class EngineStatus:
+    """A snapshot of the engine for monitoring (``/metrics``, WebSocket ``state``).
+
+    Attributes
+    ----------
+    backend : {"sounddevice", "null", "capture"}
+    output_device : str or None
+    sample_rate_hz, block_frames, channels : int
+    now_frames : int
+        Frames handed to the sink so far.
+    active_voices : int
+        Voices rendering (jobs and contacts, releasing ones included).
+    active_contacts : list of dict
+        ``{"owner", "contact", "x_cm", "y_cm"}`` of every contact that is down.
+    levels : list of float
+        Peak absolute value per channel of the last block (after calibration, limiter).
+    peak : float
+        Largest absolute output sample since start.
+    underruns : int
+        Blocks the output needed before they were ready (sink's count).
+    late_commands : int
+        Commands applied after their frame had passed.
+    muted_blocks : int
+        Blocks replaced by silence because they carried NaN or Inf.
+    limited_blocks : int
+        Blocks the safety limiter turned down.
+    output_latency_s : float
+    queue_depth, queue_capacity : int
+        Voices waiting to start, and how many may wait.
+    running : bool
+    """
+
+    backend: str
+    output_device: str | None
+    sample_rate_hz: int
+    block_frames: int
+    channels: int
+    now_frames: int
+    active_voices: int
+    active_contacts: list[dict[str, Any]]
+    levels: list[float]
+    peak: float
+    underruns: int
+    late_commands: int
+    muted_blocks: int
+    limited_blocks: int
+    output_latency_s: float
+    queue_depth: int
+    queue_capacity: int
+    running: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)

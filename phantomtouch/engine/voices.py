@@ -1,0 +1,289 @@
+"""Voices: what the audio callback renders, one block at a time.
+
+A voice knows when it starts and when it is released, and adds its samples for one block
+into the mix, touching only the channels its gains drive. :class:`PatternVoice` plays a
+planned pattern through the renderer's :class:`~phantomtouch.renderer.PatternRenderer`,
+so it gives exactly the samples of an offline render; the contact voice lives in
+:mod:`phantomtouch.engine.contacts`.
+
+A release fades a voice out linearly over ``release_frames``: the gain of frame ``f``
+at or after the release frame ``R`` is ``(R + L - 1 - f) / L`` (``L`` the release length),
+so the voice is silent from frame ``R + L - 1`` on and never clicks.
+
+Render-ahead
+------------
+The block renderer's cost is almost all per call (about 0.1 ms whatever the block
+length), so a pattern voice renders ``chunk_frames`` (default 4096) frames at a time into
+a ring of two chunks taken from a preallocated :class:`RingPool`, and the callback adds
+slices of it. The scheduler spreads the refills of all voices evenly over the blocks.
+The samples are the same: the block renderer gives identical samples however its output
+is cut into blocks. With the pool empty, or ``chunk_frames`` 0, a voice renders each
+block directly.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import ClassVar
+
+import numpy as np
+
+from phantomtouch.renderer import PatternRenderer
+from phantomtouch.renderer.plan import Plan
+
+WAITING, PLAYING, DONE = "waiting", "playing", "done"
+
+
+class Workspace:
+    """Preallocated work buffers for one block of the audio callback.
+
+    Parameters
+    ----------
+    block_frames : int, >= 1
+    channels : int, >= 1
+
+    Attributes
+    ----------
+    index : ndarray, shape (block_frames,), float32, ``0, 1, ..., block_frames - 1``
+    ramp : ndarray, shape (block_frames,), float32, ``(i + 1) / block_frames``
+    gain, env : ndarray, shape (block_frames,), float32, scratch
+    scratch : ndarray, shape (block_frames, channels), float32
+    late_commands : int
+        Commands applied after their frame had passed (counted by voices and scheduler).
+    """
+
+    def __init__(self, block_frames: int, channels: int) -> None:
+        self.block_frames = int(block_frames)
+        self.index = np.arange(block_frames, dtype=np.float32)
+        self.ramp = (np.arange(1, block_frames + 1, dtype=np.float64) / block_frames).astype(
+            np.float32
+        )
+        self.gain = np.empty(block_frames, dtype=np.float32)
+        self.env = np.empty(block_frames, dtype=np.float32)
+        self.scratch = np.empty((block_frames, channels), dtype=np.float32)
+        self.late_commands = 0
+
+
+def release_gains(
+    out: np.ndarray, work: Workspace, first_frame: int, release: int, length: int
+) -> np.ndarray:
+    """Write the release gains of frames ``first_frame ..`` into ``out`` (in place).
+
+    ``out[i] = clip((release + length - 1 - (first_frame + i)) / length, 0, 1)``.
+    """
+    n = out.shape[0]
+    np.subtract(np.float32(release + length - 1 - first_frame), work.index[:n], out=out)
+    out *= np.float32(1.0 / length)
+    np.clip(out, 0.0, 1.0, out=out)
+    return out
+
+
+class Voice:
+    """What the scheduler needs of every voice.
+
+    Attributes
+    ----------
+    seq : int
+        Sequence number of the command that started it (``stop_all`` voids smaller ones).
+    state : {"waiting", "playing", "done"}
+    start_frame : int
+        Frame of its first sample (requested until it starts, then actual).
+    release_frame : int or None
+        Frame at which its release begins, once asked for.
+    release_frames : int, >= 1
+    """
+
+    kind: ClassVar[str] = "voice"
+
+    def __init__(self, release_frames: int) -> None:
+        self.seq = 0
+        self.state = WAITING
+        self.start_frame = 0
+        self.release_frame: int | None = None
+        self.release_frames = max(1, int(release_frames))
+
+    @property
+    def silent_from(self) -> int | None:
+        """First frame from which the voice is silent for good, when known."""
+        raise NotImplementedError
+
+    def begin(self, frame: int, pool: RingPool) -> None:
+        """Start playing at ``frame`` (audio callback)."""
+        self.start_frame = frame
+        self.state = PLAYING
+
+    def release(self, frame: int, transient: object | None = None) -> None:
+        """Begin the release at ``frame``; an earlier release already asked for stands."""
+        if self.release_frame is None or frame < self.release_frame:
+            self.release_frame = frame
+
+    def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
+        """Add this voice's frames ``block_start ..`` into ``mix`` (frames, channels).
+
+        Returns True once the voice is silent for good (it is then dropped).
+        """
+        raise NotImplementedError
+
+    def finish(self, pool: RingPool) -> None:
+        """Hand back what the voice borrowed (audio callback)."""
+        self.state = DONE
+
+    @property
+    def has_ring(self) -> bool:
+        """The voice renders ahead into a ring from the pool."""
+        return False
+
+    @property
+    def ahead_frames(self) -> int | None:
+        """Frames rendered ahead when there is room for another chunk, else None."""
+        return None
+
+    def refill(self) -> None:
+        """Render the next chunk ahead (only when :attr:`ahead_frames` is not None)."""
+
+
+class RingPool:
+    """Preallocated render-ahead rings for pattern voices (audio callback only).
+
+    Parameters
+    ----------
+    count : int, >= 0
+    chunk_frames : int, >= 0
+        Frames rendered per refill; each ring holds two chunks. 0 disables render-ahead.
+    channels : int
+    """
+
+    def __init__(self, count: int, chunk_frames: int, channels: int) -> None:
+        self.chunk_frames = int(chunk_frames)
+        self._free: list[np.ndarray] = []
+        if self.chunk_frames > 0:
+            self._free = [
+                np.zeros((2 * self.chunk_frames, channels), dtype=np.float32) for _ in range(count)
+            ]
+
+    def take(self) -> np.ndarray | None:
+        """A free ring, or None when all are in use."""
+        return self._free.pop() if self._free else None
+
+    def give(self, ring: np.ndarray) -> None:
+        self._free.append(ring)
+
+
+class PatternVoice(Voice):
+    """A planned pattern, played from its first frame.
+
+    Parameters
+    ----------
+    plan : Plan
+    job_id : str
+    owner : str or None
+    release_frames : int, >= 1
+        Fade-out length when stopped early.
+    """
+
+    kind = "job"
+
+    def __init__(self, plan: Plan, *, job_id: str, owner: str | None, release_frames: int) -> None:
+        super().__init__(release_frames)
+        self.plan = plan
+        self.job_id = job_id
+        self.owner = owner
+        self._renderer = PatternRenderer(plan)
+        self._ring: np.ndarray | None = None
+        self._chunk = 0
+        self._read = 0  # voice frames added to the mix
+        self._write = 0  # voice frames rendered into the ring
+        self._spans: deque[tuple[int, int, int]] = deque()  # (end frame, lo, hi) per chunk
+
+    @property
+    def silent_from(self) -> int:
+        end = self.start_frame + self.plan.frames
+        if self.release_frame is not None:
+            end = min(end, self.release_frame + self.release_frames - 1)
+        return end
+
+    def begin(self, frame: int, pool: RingPool) -> None:
+        super().begin(frame, pool)
+        self._ring = pool.take()
+        self._chunk = pool.chunk_frames
+
+    def finish(self, pool: RingPool) -> None:
+        super().finish(pool)
+        if self._ring is not None:
+            pool.give(self._ring)
+            self._ring = None
+
+    @property
+    def has_ring(self) -> bool:
+        return self._ring is not None
+
+    @property
+    def ahead_frames(self) -> int | None:
+        if self._ring is None or self._renderer.finished or self.release_frame is not None:
+            return None
+        ahead = self._write - self._read
+        return ahead if ahead <= self._ring.shape[0] - self._chunk else None
+
+    def refill(self) -> None:
+        assert self._ring is not None
+        frames = min(self._chunk, self._renderer.remaining_frames)
+        at = self._write % self._ring.shape[0]
+        piece = self._ring[at : at + frames]
+        self._renderer.render_into(piece)
+        used = np.flatnonzero(piece.any(axis=0))
+        lo, hi = (int(used[0]), int(used[-1]) + 1) if used.size else (0, 0)
+        self._write += frames
+        self._spans.append((self._write, lo, hi))
+
+    def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
+        frames = mix.shape[0]
+        offset = max(0, self.start_frame - block_start)
+        first = block_start + offset
+        count = min(frames - offset, self.silent_from - first)
+        if count > 0:
+            gains = None
+            if self.release_frame is not None and self.release_frame < first + count:
+                gains = release_gains(
+                    work.gain[:count], work, first, self.release_frame, self.release_frames
+                )
+            dest = mix[offset : offset + count]
+            if self._ring is not None:
+                self._add_ahead(dest, gains)
+            elif gains is None:
+                self._renderer.render_add(dest)
+            else:
+                scratch = work.scratch[:count]
+                self._renderer.render_into(scratch)
+                scratch *= gains[:, None]
+                dest += scratch
+            self._read += count
+        return block_start + frames >= self.silent_from
+
+    def _add_ahead(self, dest: np.ndarray, gains: np.ndarray | None) -> None:
+        ring = self._ring
+        assert ring is not None
+        count = dest.shape[0]
+        while self._write - self._read < count:
+            self.refill()
+        read = self._read
+        spans = self._spans
+        while spans[0][0] <= read:  # chunks played out (the one being read stays)
+            spans.popleft()
+        _, lo, hi = spans[0]
+        if len(spans) > 1 and spans[0][0] < read + count:  # the read reaches the next chunk
+            _, next_lo, next_hi = spans[1]
+            if next_hi > next_lo:
+                lo, hi = (next_lo, next_hi) if hi <= lo else (min(lo, next_lo), max(hi, next_hi))
+        if hi <= lo:
+            return  # silent here
+        size = ring.shape[0]
+        at = read % size
+        first = min(count, size - at)
+        if gains is None:
+            dest[:first, lo:hi] += ring[at : at + first, lo:hi]
+            if first < count:
+                dest[first:, lo:hi] += ring[: count - first, lo:hi]
+        else:
+            dest[:first, lo:hi] += ring[at : at + first, lo:hi] * gains[:first, None]
+            if first < count:
+                dest[first:, lo:hi] += ring[: count - first, lo:hi] * gains[first:, None]

@@ -1,0 +1,269 @@
+"""Live contacts: attack, ramps, latest-wins moves, release, transients, validation.
+
+Contacts are placed on actuators (a gain of 1 on one channel) or between two, so each
+channel's output is the carrier times a known gain; the carrier is the renderer's own
+source, started at the touchdown frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, ProtocolError, gains_at
+from phantomtouch.engine import CaptureSink, ContactSettings, Engine
+from phantomtouch.renderer.carriers import NoiseSource, SineSource
+from phantomtouch.renderer.levels import amplitude_for_level
+from phantomtouch.schema import NoiseCarrier, SineCarrier
+
+DEVICE = DeviceProfile.default()
+RATE = DEVICE.sample_rate_hz
+BLOCK = DEVICE.block_frames
+ATTACK = round(0.01 * RATE)
+RELEASE = round(0.08 * RATE)
+HALF = amplitude_for_level(DEVICE.safety.max_level_db + 20 * math.log10(0.5), DEVICE)
+FLOAT32 = 1e-7
+"""Gains, ramps and envelopes are float32: a few ulps of 1 (6e-8), times an amplitude < 1."""
+
+
+def sine(frames: int, offset: int = 0) -> np.ndarray:
+    return SineSource(100.0, RATE).block(offset, frames).astype(np.float64)
+
+
+@pytest.fixture
+def captured() -> Iterator[tuple[Engine, CaptureSink]]:
+    sink = CaptureSink(DEVICE)
+    with Engine(DEVICE, sink) as engine:
+        yield engine, sink
+
+
+def test_touchdown_fades_in_over_the_attack_from_its_sample(
+    captured: tuple[Engine, CaptureSink],
+) -> None:
+    engine, sink = captured
+    down = 3 * BLOCK + 17
+    engine.contact_down("c", "f", 0.0, 4.8, intensity=0.5, at_frame=down)  # actuator 2
+    recording = sink.pull(8).astype(np.float64)
+    n = len(recording) - down
+    attack = np.minimum(1.0, np.arange(1, n + 1) / ATTACK)
+    assert not np.any(recording[:down])
+    np.testing.assert_allclose(recording[down:, 1], HALF * attack * sine(n), atol=FLOAT32)
+    assert not np.any(np.delete(recording, 1, axis=1))  # only the driven channel is touched
+
+
+def test_a_move_ramps_the_gains_linearly_across_the_next_block(
+    captured: tuple[Engine, CaptureSink],
+) -> None:
+    engine, sink = captured
+    engine.contact_down("c", "f", 0.0, 0.0, intensity=0.5, at_frame=0)  # actuator 1
+    sink.pull(4)
+    engine.contact_move("c", "f", 0.0, 4.8)  # to actuator 2
+    block = sink.pull(2).astype(np.float64)
+    ramp = np.arange(1, BLOCK + 1) / BLOCK
+    carrier = sine(2 * BLOCK, 4 * BLOCK)
+    np.testing.assert_allclose(block[:BLOCK, 0], HALF * (1 - ramp) * carrier[:BLOCK], atol=FLOAT32)
+    np.testing.assert_allclose(block[:BLOCK, 1], HALF * ramp * carrier[:BLOCK], atol=FLOAT32)
+    np.testing.assert_allclose(block[BLOCK:, 1], HALF * carrier[BLOCK:], atol=FLOAT32)
+    assert not np.any(block[BLOCK:, 0])
+
+
+def test_latest_position_wins_and_nothing_queues_up(captured: tuple[Engine, CaptureSink]) -> None:
+    engine, sink = captured
+    engine.contact_down("c", "f", 0.0, 0.0, intensity=0.5, at_frame=0)
+    sink.pull(4)
+    for y_cm in (14.4, 9.6, 4.8):  # only the last arrives before the next block
+        engine.contact_move("c", "f", 0.0, y_cm)
+    block = sink.pull(3)
+    assert not np.any(block[:, [2, 3]])  # actuators 3 and 4 never sound
+    assert np.abs(block[BLOCK:, 1]).max() > 0.9 * HALF
+    assert engine.status().late_commands == 0
+
+
+def test_a_move_for_a_later_frame_waits_for_its_block(captured: tuple[Engine, CaptureSink]) -> None:
+    engine, sink = captured
+    engine.contact_down("c", "f", 0.0, 0.0, intensity=0.5, at_frame=0)
+    sink.pull(4)
+    engine.contact_move("c", "f", 0.0, 4.8, at_frame=7 * BLOCK + 3)
+    recording = sink.pull(5)
+    assert not np.any(recording[: 3 * BLOCK, 1])  # blocks 4-6: still at actuator 1
+    assert np.any(recording[3 * BLOCK : 4 * BLOCK, 1])  # block 7 ramps towards actuator 2
+    assert not np.any(recording[4 * BLOCK :, 0])
+
+
+def test_lift_off_fades_out_and_is_silent_within_the_release(
+    captured: tuple[Engine, CaptureSink],
+) -> None:
+    engine, sink = captured
+    engine.contact_down("c", "f", 3.8, 9.6, intensity=0.5, at_frame=0)  # actuator 7
+    sink.pull(4)
+    up = 6 * BLOCK + 100
+    engine.contact_up("c", "f", at_frame=up)
+    recording = sink.pull(4 + RELEASE // BLOCK).astype(np.float64)
+    frames = np.arange(4 * BLOCK, 4 * BLOCK + len(recording))
+    fade = np.clip((up + RELEASE - 1 - frames) / RELEASE, 0.0, 1.0)
+    expected = HALF * fade * sine(len(recording), 4 * BLOCK)
+    np.testing.assert_allclose(recording[:, 6], expected, atol=FLOAT32)
+    assert not np.any(recording[up + RELEASE - 1 - 4 * BLOCK :])
+    assert engine.status().active_voices == 0
+
+
+def test_lift_off_during_the_attack_fades_from_the_level_reached(
+    captured: tuple[Engine, CaptureSink],
+) -> None:
+    engine, sink = captured
+    engine.contact_down("c", "f", 0.0, 4.8, intensity=0.5, at_frame=0)
+    up = ATTACK // 2
+    engine.contact_up("c", "f", at_frame=up)
+    recording = sink.pull(2 + RELEASE // BLOCK).astype(np.float64)
+    frames = np.arange(len(recording))
+    level = np.minimum(np.minimum(1.0, (frames + 1) / ATTACK), 0.5 - (frames - up + 1) / RELEASE)
+    expected = HALF * np.clip(level, 0.0, None) * sine(len(recording))
+    np.testing.assert_allclose(recording[:, 1], expected, atol=FLOAT32)
+    assert not np.any(recording[up - 1 + RELEASE // 2 :])
+
+
+def test_an_impact_transient_is_a_decaying_sinusoid_scaled_by_the_velocity() -> None:
+    def play(down_m_s: float | None, up_m_s: float | None) -> np.ndarray:
+        sink = CaptureSink(DEVICE)
+        with Engine(DEVICE, sink) as engine:
+            engine.contact_down(
+                "c", "f", 0.0, 2.4, intensity=0.5, normal_velocity_m_s=down_m_s, at_frame=50
+            )
+            engine.contact_up("c", "f", normal_velocity_m_s=up_m_s, at_frame=20 * BLOCK)
+            return sink.pull(30 + RELEASE // BLOCK).astype(np.float64)
+
+    plain, struck = play(None, None), play(0.25, -1.0)
+    burst = struck - plain
+    settings = ContactSettings()
+    full = amplitude_for_level(DEVICE.safety.max_level_db + 20 * math.log10(0.5), DEVICE)
+    t = np.arange(math.ceil(7 * settings.transient_decay_s * RATE)) / RATE
+    shape = np.exp(-t / settings.transient_decay_s) * np.sin(2 * np.pi * 250.0 * t)
+    unit = np.sqrt(0.5)  # halfway between actuators 1 and 2: power law
+    for at, scale in ((50, 0.5), (20 * BLOCK, 1.0)):  # 0.25 of 0.5 m/s; |-1| m/s saturates
+        for channel in (0, 1):
+            np.testing.assert_allclose(
+                burst[at : at + len(t), channel], scale * full * unit * shape, atol=2e-7
+            )
+    burst[50 : 50 + len(t)] = 0.0
+    burst[20 * BLOCK : 20 * BLOCK + len(t)] = 0.0
+    assert np.abs(burst).max() < 1e-7  # nothing else changed
+
+
+def test_a_noise_contact_plays_the_renderers_noise(captured: tuple[Engine, CaptureSink]) -> None:
+    sink = CaptureSink(DEVICE)
+    with Engine(DEVICE, sink, contact=ContactSettings(attack_s=0.0)) as engine:
+        carrier = NoiseCarrier(low_hz=60.0, high_hz=300.0, seed=11)
+        engine.contact_down("c", "f", 3.8, 0.0, intensity=0.5, carrier=carrier, at_frame=300)
+        recording = sink.pull(6)
+    noise = NoiseSource(60.0, 300.0, 11, RATE).block(0, len(recording) - 300)
+    np.testing.assert_array_equal(recording[300:, 4], noise * np.float32(HALF))
+    assert not np.any(np.delete(recording, 4, axis=1))
+
+
+def test_default_intensity_is_table_i_low(captured: tuple[Engine, CaptureSink]) -> None:
+    engine, sink = captured
+    engine.contact_down("c", "f", 0.0, 9.6, carrier=SineCarrier(freq_hz=150.0), at_frame=0)
+    recording = sink.pull(40)
+    low = amplitude_for_level(131.0, DEVICE)  # Table I: 150 Hz, low
+    assert np.abs(recording[ATTACK:, 2]).max() == pytest.approx(low, rel=1e-4)
+
+
+def test_positions_outside_the_layout_are_projected_onto_it() -> None:
+    def play(x_cm: float, y_cm: float) -> np.ndarray:
+        sink = CaptureSink(DEVICE)
+        with Engine(DEVICE, sink) as engine:
+            engine.contact_down("c", "f", x_cm, y_cm, intensity=0.3, at_frame=0)
+            return sink.pull(5)
+
+    np.testing.assert_array_equal(play(-3.0, 20.0), play(0.0, 14.4))
+    np.testing.assert_array_equal(play(1.9, -2.0), play(1.9, 0.0))
+
+
+def test_a_second_touchdown_replaces_the_contact(captured: tuple[Engine, CaptureSink]) -> None:
+    engine, sink = captured
+    engine.contact_down("c", "f", 0.0, 0.0, intensity=0.5, at_frame=0)
+    sink.pull(4)
+    engine.contact_down("c", "f", 3.8, 14.4, intensity=0.5)
+    sink.pull(1)
+    assert engine.status().active_voices == 2
+    assert engine.status().active_contacts == [
+        {"owner": "c", "contact": "f", "x_cm": 3.8, "y_cm": 14.4}
+    ]
+    recording = sink.pull(RELEASE // BLOCK + 1)
+    assert not np.any(recording[-BLOCK:, 0])
+    assert engine.status().active_voices == 1
+
+
+def test_contacts_past_the_limit_are_refused() -> None:
+    with Engine(DEVICE, CaptureSink(DEVICE), contact=ContactSettings(max_contacts=2)) as engine:
+        engine.contact_down("a", "1", 1.0, 1.0)
+        engine.contact_down("b", "1", 1.0, 1.0)
+        engine.contact_down("b", "1", 2.0, 2.0)  # replacing one is fine
+        with pytest.raises(EngineBusyError, match="max_contacts=2"):
+            engine.contact_down("c", "1", 1.0, 1.0)
+
+
+@pytest.mark.parametrize(
+    ("arguments", "field"),
+    [
+        ({"x_cm": float("nan")}, "x_cm=nan"),
+        ({"y_cm": float("inf")}, "y_cm=inf"),
+        ({"x_cm": 1e6}, "x_cm=1000000.0"),
+        ({"intensity": 1.5}, "intensity=1.5"),
+        ({"intensity": -0.1}, "intensity=-0.1"),
+        ({"law": "cubic"}, "law='cubic'"),
+        ({"contact": ""}, "contact=''"),
+        ({"contact": "x" * 65}, "contact='xxx"),
+        ({"owner": 7}, "owner=7"),
+        ({"at_frame": -5}, "at_frame=-5"),
+        ({"normal_velocity_m_s": float("nan")}, "normal_velocity_m_s=nan"),
+        ({"carrier": SineCarrier(freq_hz=30000.0)}, "carrier.freq_hz=30000.0"),
+    ],
+)
+def test_bad_touchdowns_are_refused_naming_the_field(
+    captured: tuple[Engine, CaptureSink], arguments: dict[str, object], field: str
+) -> None:
+    engine, _ = captured
+    call: dict[str, object] = {"owner": "c", "contact": "f", "x_cm": 1.0, "y_cm": 1.0}
+    call.update(arguments)
+    with pytest.raises(ParameterError, match=f"^{field}"):
+        engine.contact_down(**call)  # type: ignore[arg-type]
+    assert engine.status().active_contacts == []
+
+
+def test_moves_need_a_contact_that_is_down_and_up_is_idempotent(
+    captured: tuple[Engine, CaptureSink],
+) -> None:
+    engine, _ = captured
+    with pytest.raises(ProtocolError, match="expected down, got move"):
+        engine.contact_move("c", "f", 1.0, 1.0)
+    engine.contact_up("c", "f")
+    engine.contact_down("c", "f", 1.0, 1.0)
+    with pytest.raises(ParameterError, match=r"^x_cm=nan"):
+        engine.contact_move("c", "f", float("nan"), 1.0)
+    with pytest.raises(ParameterError, match=r"^intensity=2"):
+        engine.contact_move("c", "f", 1.0, 1.0, intensity=2)
+
+
+def test_contact_gains_are_the_renderers_phantom_gains(
+    captured: tuple[Engine, CaptureSink],
+) -> None:
+    engine, sink = captured
+    engine.contact_down("c", "f", 1.3, 6.1, intensity=0.5, law="linear", at_frame=0)
+    recording = sink.pull(8).astype(np.float64)
+    carrier = sine(len(recording))
+    gains = gains_at(DEVICE, 1.3, 6.1, law="linear") * HALF
+    tail = slice(ATTACK, None)
+    np.testing.assert_allclose(recording[tail], carrier[tail, None] * gains, atol=FLOAT32)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("attack_s", -1.0), ("release_s", 0.0), ("transient_freq_hz", 0.0), ("max_contacts", 0)],
+)
+def test_contact_settings_refuse_nonsense(field: str, value: float) -> None:
+    with pytest.raises(ParameterError, match=f"^{field}="):
+        ContactSettings(**{field: value})  # type: ignore[arg-type]

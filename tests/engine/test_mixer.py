@@ -1,0 +1,128 @@
+"""The chain after the voices: limiter, calibration, NaN guard, ceiling, meters."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from phantomtouch import DeviceProfile, TouchPattern
+from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine.mixer import THRESHOLD_RATIO, Limiter, Mixer
+from phantomtouch.schema import Calibration, SafetyLimits
+
+DEVICE = DeviceProfile(safety=SafetyLimits(ceiling=0.8))
+BLOCK = DEVICE.block_frames
+THRESHOLD = THRESHOLD_RATIO * 0.8
+
+
+def block_with_peak(rng: np.random.Generator, peak: float) -> np.ndarray:
+    block = rng.uniform(-1.0, 1.0, (BLOCK, DEVICE.channels)).astype(np.float32)
+    block *= np.float32(peak / np.abs(block).max())
+    return block
+
+
+def test_the_limiter_is_exactly_transparent_below_its_threshold(rng: np.random.Generator) -> None:
+    limiter = Limiter(DEVICE)
+    for _ in range(20):
+        block = block_with_peak(rng, 0.999 * THRESHOLD)
+        untouched = block.copy()
+        limiter.process(block)
+        np.testing.assert_array_equal(block, untouched)
+    assert limiter.limited_blocks == 0
+
+
+def test_the_limiter_turns_loud_blocks_down_smoothly_then_recovers_to_transparent(
+    rng: np.random.Generator,
+) -> None:
+    limiter = Limiter(DEVICE)
+    loud = [block_with_peak(rng, 5.0) for _ in range(10)]
+    quiet = [block_with_peak(rng, 0.5 * THRESHOLD) for _ in range(60)]
+    gains = []
+    for block in loud + quiet:
+        before = block.copy()
+        limiter.process(block)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = block / before
+        gains.append(np.nanmax(ratio, axis=1))  # the same gain on every channel
+    gain = np.concatenate(gains)
+    attack = round(0.001 * DEVICE.sample_rate_hz)
+    assert np.abs(np.concatenate(loud)[attack : 10 * BLOCK]).max() <= THRESHOLD * (1 + 1e-6)
+    assert np.abs(np.diff(gain)).max() <= 1.0 / attack + 1e-6  # no step: a ramp
+    recovery = np.diff(gain[10 * BLOCK :])
+    assert recovery.min() >= -1e-7 and recovery.max() <= 1.0 / (0.1 * 48000) + 1e-6
+    assert gain[-1] == 1.0 and limiter.gain == 1.0
+    last = block_with_peak(rng, 0.5 * THRESHOLD)
+    untouched = last.copy()
+    limiter.process(last)
+    np.testing.assert_array_equal(last, untouched)  # transparent again
+    assert limiter.limited_blocks >= 10
+
+
+def test_the_limiter_looks_at_calibrated_levels(rng: np.random.Generator) -> None:
+    device = DeviceProfile(
+        safety=SafetyLimits(ceiling=0.8),
+        calibration=Calibration(channel_level_db=(149.0,) + (155.0,) * 7),
+    )
+    limiter = Limiter(device)
+    block = block_with_peak(rng, 0.5)  # 0.5 x 2 (6 dB weaker actuator) > threshold
+    limiter.process(block)
+    assert limiter.limited_blocks == 1 and limiter.gain < 1.0
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_block_with_nan_or_inf_is_muted_and_counted(rng: np.random.Generator, bad: float) -> None:
+    mixer = Mixer(DEVICE)
+    block = block_with_peak(rng, 0.5)
+    block[17, 3] = bad
+    mixer.finish(block)
+    assert not np.any(block)
+    assert mixer.muted_blocks == 1
+    assert mixer.limiter.gain == 1.0  # the limiter's state is not poisoned
+    good = block_with_peak(rng, 0.5)
+    expected = good.copy()
+    mixer.finish(good)
+    np.testing.assert_array_equal(good, expected)
+    assert mixer.muted_blocks == 1
+
+
+def test_the_meters_report_the_output_peaks(rng: np.random.Generator) -> None:
+    mixer = Mixer(DEVICE)
+    block = block_with_peak(rng, 0.3)
+    mixer.finish(block)
+    np.testing.assert_array_equal(mixer.levels, np.abs(block).max(axis=0))
+    assert mixer.peak == pytest.approx(0.3)
+    mixer.finish(block_with_peak(rng, 0.1))
+    assert mixer.peak == pytest.approx(0.3) and mixer.levels.max() == pytest.approx(0.1)
+
+
+@pytest.fixture
+def loud_engine() -> Iterator[tuple[Engine, CaptureSink]]:
+    sink = CaptureSink(DEVICE)
+    with Engine(DEVICE, sink) as engine:
+        yield engine, sink
+
+
+def test_a_hundred_full_level_voices_stay_under_the_ceiling(
+    loud_engine: tuple[Engine, CaptureSink],
+) -> None:
+    engine, sink = loud_engine
+    pattern = TouchPattern.model_validate(
+        {
+            "path": {"kind": "polyline", "points_cm": [[1.9, 7.2], [1.9, 8.0]]},
+            "duration_s": 0.2,
+            "fade_in_s": 0.0,
+            "fade_out_s": 0.0,
+            "intensity": 1.0,
+        }
+    )
+    for k in range(50):
+        engine.schedule(pattern, start_frame=BLOCK + 7 * k)
+        engine.contact_down("all", f"c{k}", 1.9, 7.2 + 0.01 * k, intensity=1.0, at_frame=BLOCK)
+    recording = sink.pull(50)
+    status = engine.status()
+    assert np.abs(recording).max() <= 0.8
+    assert np.abs(recording).max() >= 0.7  # limited, not muted
+    assert status.active_voices == 50 and status.limited_blocks > 0
+    assert status.muted_blocks == 0 and status.peak <= 0.8

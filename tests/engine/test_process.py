@@ -1,0 +1,166 @@
+"""The engine in a process of its own: same samples, same API, gone with its host."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile
+
+from phantomtouch import (
+    DeviceProfile,
+    EngineBusyError,
+    ParameterError,
+    ProtocolError,
+    TouchPattern,
+    render,
+)
+from phantomtouch.engine.process import ProcessEngine, SinkSpec
+from phantomtouch.errors import DeviceError
+from tests.support.jack import JackRecorder, JackServer
+
+DEVICE = DeviceProfile.default()
+STROKE = TouchPattern.model_validate(
+    {
+        "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
+        "speed_cm_s": 40.0,
+        "fade_in_s": 0.05,
+        "fade_out_s": 0.05,
+    }
+)
+
+
+def wait_until(condition: Callable[[], bool]) -> None:
+    deadline = time.monotonic() + 10.0
+    while not condition():
+        assert time.monotonic() < deadline, "timed out waiting for the engine process"
+        time.sleep(0.01)
+
+
+def wait_for_state(engine: ProcessEngine, job_id: str, state: str) -> None:
+    wait_until(lambda: engine.job_state(job_id).state == state)  # type: ignore[union-attr]
+
+
+def test_a_pattern_played_by_the_engine_process_is_the_offline_render(tmp_path: Path) -> None:
+    wav = tmp_path / "played.wav"
+    with ProcessEngine(DEVICE, SinkSpec("capture", wav_path=str(wav))) as engine:
+        job = engine.schedule(STROKE, start_frame=engine.now_frames + 4801)
+        wait_for_state(engine, job.job_id, "finished")
+        state = engine.job_state(job.job_id)
+    recording, rate = soundfile.read(wav, dtype="float32")
+    reference = render(STROKE, DEVICE)
+    assert rate == 48000 and state is not None and state.start_frame == job.start_frame
+    played = recording[job.start_frame : job.start_frame + len(reference)]
+    np.testing.assert_array_equal(played, reference)
+    assert not np.any(recording[: job.start_frame])
+
+
+def test_the_engine_process_answers_like_the_engine() -> None:
+    engine = ProcessEngine(DEVICE, SinkSpec("null"), queue_capacity=1)
+    try:
+        engine.start()
+        assert engine.pid is not None and engine.pid != os.getpid()
+        now_s = engine.server_time_s()
+        assert engine.time_at(engine.frames_at(now_s + 1.0)) == pytest.approx(now_s + 1.0, abs=1e-4)
+        waiting = engine.schedule(STROKE, start_frame=engine.now_frames + 48000 * 60)
+        with pytest.raises(EngineBusyError, match="full"):
+            engine.schedule(STROKE)
+        with pytest.raises(ParameterError, match="start_frame=-3"):
+            engine.schedule(STROKE, start_frame=-3)
+        assert engine.stop(waiting.job_id) is True
+        assert engine.stop("no-such-job") is False
+        wait_until(lambda: engine.status().queue_depth == 0)  # freed at the next block
+        engine.contact_down("client", "finger", 1.0, 2.0, intensity=0.4)
+        with pytest.raises(ProtocolError, match="expected down, got move"):
+            engine.contact_move("client", "thumb", 1.0, 2.0)
+        with pytest.raises(ParameterError, match="x_cm=nan"):
+            engine.contact_move("client", "finger", float("nan"), 2.0)
+        engine.contact_move("client", "finger", 1.5, 3.0)
+        time.sleep(0.05)
+        status = engine.status()
+        assert (status.backend, status.running, status.active_voices) == ("null", True, 1)
+        assert status.active_contacts == [
+            {"owner": "client", "contact": "finger", "x_cm": 1.5, "y_cm": 3.0}
+        ]
+        engine.release_owner("client")
+        wait_until(lambda: engine.status().active_voices == 0)
+    finally:
+        engine.close()
+        engine.close()
+    with pytest.raises(DeviceError, match="closed"):
+        engine.status()
+
+
+def test_stop_all_gets_through_before_anything_sent_after_it() -> None:
+    with ProcessEngine(DEVICE, SinkSpec("null")) as engine:
+        engine.contact_down("a", "1", 1.0, 2.0)
+        job = engine.schedule(STROKE, start_frame=engine.now_frames + 48000)
+        for k in range(200):  # a backlog of moves the child has yet to apply
+            engine.contact_move("a", "1", 1.0, 2.0 + 0.01 * k)
+        engine.stop_all()
+        engine.contact_down("b", "1", 3.0, 9.0)
+        status = engine.status()
+        assert [c["owner"] for c in status.active_contacts] == ["b"]
+        assert engine.job_state(job.job_id).state == "stopped"  # type: ignore[union-attr]
+
+
+def test_the_engine_process_ends_when_its_host_dies(tmp_path: Path) -> None:
+    script = tmp_path / "host.py"
+    script.write_text(
+        "import os, sys\n"
+        "from phantomtouch import DeviceProfile\n"
+        "from phantomtouch.engine.process import ProcessEngine, SinkSpec\n"
+        "if __name__ == '__main__':\n"
+        "    engine = ProcessEngine(DeviceProfile.default(), SinkSpec('null'))\n"
+        "    engine.start()\n"
+        "    engine.contact_down('host', 'finger', 1.0, 1.0)\n"
+        "    print(engine.pid, flush=True)\n"
+        "    os._exit(0)  # no close(): the host just vanishes\n",
+        encoding="utf-8",
+    )
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    child = int(done.stdout.strip())
+    deadline = time.monotonic() + 10.0
+    while Path(f"/proc/{child}").exists() and "zombie" not in _state(child):
+        assert time.monotonic() < deadline, "the engine process outlived its host"
+        time.sleep(0.05)
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/status").read_text().split("State:")[1].split("\n")[0].lower()
+    except (OSError, IndexError):
+        return "zombie"
+
+
+def test_a_sink_the_child_cannot_open_is_a_device_error() -> None:
+    with pytest.raises(DeviceError):
+        ProcessEngine(DEVICE, SinkSpec("sounddevice", output="no such output device"))
+    with pytest.raises(ParameterError, match="backend='alsa'"):
+        SinkSpec("alsa")
+
+
+def test_the_engine_process_plays_bit_exact_over_jack(jack_server: JackServer) -> None:
+    engine = ProcessEngine(DEVICE, SinkSpec("sounddevice", "system"))
+    recorder = JackRecorder(jack_server, max_frames=10 * 48000)
+    try:
+        # the child's PortAudio client ("PortAudio-01" or so when this process has one too)
+        assert len(recorder.connect_from("PortAudio[^:]*")) == 8
+        engine.start()
+        job = engine.schedule(STROKE, start_frame=engine.now_frames + 9600)
+        wait_for_state(engine, job.job_id, "finished")
+    finally:
+        engine.close()
+        recording = recorder.close()
+    reference = render(STROKE, DEVICE)
+    at = int(np.flatnonzero(recording.any(axis=1))[0]) - int(
+        np.flatnonzero(reference.any(axis=1))[0]
+    )
+    np.testing.assert_array_equal(recording[at : at + len(reference)], reference)
+    assert not np.any(recording[at + len(reference) :])

@@ -1,0 +1,70 @@
+"""Pattern voices: render-ahead gives the block renderer's samples; untouched channels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phantomtouch import DeviceProfile, TouchPattern, render
+from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine.engine import RENDER_AHEAD_RINGS
+from phantomtouch.engine.voices import PatternVoice, RingPool, Workspace
+from phantomtouch.renderer import plan
+
+DEVICE = DeviceProfile.default()
+BLOCK = DEVICE.block_frames
+
+
+def pattern(k: int) -> TouchPattern:
+    carriers = [{"kind": "sine", "freq_hz": 50 + k}, {"kind": "noise", "seed": k}]
+    return TouchPattern.model_validate(
+        {
+            "path": {"kind": "polyline", "points_cm": [[0.1 * (k % 38), 14.0], [3.8, 0.3 * k]]},
+            "speed_cm_s": 40.0 + k,
+            "fade_in_s": 0.01,
+            "fade_out_s": 0.01,
+            "intensity": 0.01,
+            "carrier": carriers[k % 2],
+        }
+    )
+
+
+def play(render_ahead_frames: int, voices: int) -> np.ndarray:
+    sink = CaptureSink(DEVICE)
+    with Engine(DEVICE, sink, render_ahead_frames=render_ahead_frames) as engine:
+        jobs = [engine.schedule(pattern(k), start_frame=97 * k) for k in range(voices)]
+        for job in jobs[::5]:
+            sink.pull(1)
+            engine.stop(job.job_id)  # some are stopped while rendering ahead
+        sink.pull(max(j.start_frame + j.frames for j in jobs) // BLOCK + 1)
+        return sink.recording()
+
+
+@pytest.mark.parametrize("voices", [3, RENDER_AHEAD_RINGS + 8])
+def test_rendering_ahead_gives_the_same_samples_as_rendering_each_block(voices: int) -> None:
+    np.testing.assert_array_equal(play(2048, voices), play(0, voices))
+
+
+def test_a_voice_rendered_ahead_equals_the_offline_render_whatever_the_chunk() -> None:
+    reference = render(pattern(3), DEVICE)
+    for chunk in (BLOCK, 1000, 4096):
+        sink = CaptureSink(DEVICE)
+        with Engine(DEVICE, sink, render_ahead_frames=chunk) as engine:
+            engine.schedule(pattern(3), start_frame=5)
+            recording = sink.pull(len(reference) // BLOCK + 1)
+        np.testing.assert_array_equal(recording[5 : 5 + len(reference)], reference)
+
+
+@pytest.mark.parametrize("chunk", [0, 2048])
+def test_a_voice_touches_only_the_channels_its_gains_drive(chunk: int) -> None:
+    still = TouchPattern.model_validate(
+        {"path": {"kind": "polyline", "points_cm": [[0.0, 4.8]]}, "duration_s": 1.3}
+    )
+    voice = PatternVoice(plan(still, DEVICE), job_id="j", owner=None, release_frames=100)
+    voice.begin(0, RingPool(1, chunk, DEVICE.channels))
+    work = Workspace(BLOCK, DEVICE.channels)
+    mix = np.full((BLOCK, DEVICE.channels), -0.0, dtype=np.float32)  # -0.0 + 0.0 is +0.0
+    for block in range(20):
+        voice.render(mix, block * BLOCK, work)
+    assert np.all(np.signbit(np.delete(mix, 1, axis=1)))  # never written
+    assert np.any(mix[:, 1])
