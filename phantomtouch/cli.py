@@ -1,5 +1,6 @@
 """The ``phantomtouch`` command line.
 
+``phantomtouch serve``    the touch service: REST and WebSocket API on 127.0.0.1:8000
 ``phantomtouch render``   one pattern (JSON file or preset) to an 8-channel WAV (+ plot)
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder
@@ -114,6 +115,29 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
         manifest[name] = {"file": file_name, **plan.summary()}
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2), encoding="utf-8")
     print(f"{len(names)} stimuli in {out_dir}")
+    return 0
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    from phantomtouch.server import Settings
+    from phantomtouch.server.serve import serve
+
+    options = {
+        "host": args.host,
+        "port": args.port,
+        "device_profile": args.device,
+        "output_device": args.output,
+        "db_path": args.db,
+        "token": args.token,
+    }
+    try:
+        settings = Settings(**{k: v for k, v in options.items() if v is not None})
+    except ValidationError as exc:
+        raise PhantomTouchError(f"invalid settings: {describe_validation_error(exc)}") from exc
+    print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
+    serve(settings)
     return 0
 
 
@@ -260,6 +284,17 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
+
+    serve = sub.add_parser("serve", help="run the touch service (REST and WebSocket)")
+    serve.add_argument("--host", help="address to bind (default 127.0.0.1; others need --token)")
+    serve.add_argument("--port", type=int, help="TCP port (default 8000)")
+    serve.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
+    serve.add_argument(
+        "--output", help="sound-card output name or index, or 'null' (default: first that fits)"
+    )
+    serve.add_argument("--db", help="pattern library, SQLite file")
+    serve.add_argument("--token", help="bearer token every request must carry")
+    serve.set_defaults(func=_cmd_serve)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")

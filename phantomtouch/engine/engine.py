@@ -25,7 +25,7 @@ from phantomtouch.engine.jobs import Job, JobRecord, JobState, JobTable, resolve
 from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.scheduler import Scheduler
 from phantomtouch.engine.sinks import NullSink, Sink
-from phantomtouch.engine.status import EngineStatus
+from phantomtouch.engine.status import DeviceFacts, EngineStatus
 from phantomtouch.engine.voices import PatternVoice
 from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError
 from phantomtouch.renderer.plan import Plan
@@ -41,7 +41,7 @@ RENDER_AHEAD_RINGS = 32
 """Pattern voices that can render ahead at once; more render block by block."""
 
 
-class Engine:
+class Engine(DeviceFacts):
     """Plays scheduled patterns and live contacts through a sink, sample-accurately.
 
     Parameters
@@ -182,25 +182,9 @@ class Engine:
     # -- clock ------------------------------------------------------------------------
 
     @property
-    def device(self) -> DeviceProfile:
-        return self._device
-
-    @property
     def sink(self) -> Sink:
         """The sink the engine plays into (owned by the engine)."""
         return self._sink
-
-    @property
-    def sample_rate_hz(self) -> int:
-        return self._device.sample_rate_hz
-
-    @property
-    def block_frames(self) -> int:
-        return self._device.block_frames
-
-    @property
-    def channels(self) -> int:
-        return self._device.channels
 
     @property
     def now_frames(self) -> int:

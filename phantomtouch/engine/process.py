@@ -36,7 +36,7 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.jobs import Job, JobState, resolve_plan
 from phantomtouch.engine.soundcard import SinkSpec
-from phantomtouch.engine.status import EngineStatus
+from phantomtouch.engine.status import DeviceFacts, EngineStatus
 from phantomtouch.errors import DeviceError, ParameterError, ProtocolError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import limits
@@ -53,7 +53,7 @@ ordinary thread, so a thread that holds the interpreter lock the callback waits 
 not preempted by the host's work."""
 
 
-class ProcessEngine:
+class ProcessEngine(DeviceFacts):
     """:class:`~phantomtouch.engine.Engine`'s API, with the engine in a child process.
 
     Parameters
@@ -200,22 +200,6 @@ class ProcessEngine:
         self.close()
 
     # -- clock
-
-    @property
-    def device(self) -> DeviceProfile:
-        return self._device
-
-    @property
-    def sample_rate_hz(self) -> int:
-        return self._device.sample_rate_hz
-
-    @property
-    def block_frames(self) -> int:
-        return self._device.block_frames
-
-    @property
-    def channels(self) -> int:
-        return self._device.channels
 
     @property
     def now_frames(self) -> int:

@@ -5,6 +5,30 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from phantomtouch.schema.device import DeviceProfile
+
+
+class DeviceFacts:
+    """The device-derived properties shared by :class:`Engine` and its process proxy."""
+
+    _device: DeviceProfile
+
+    @property
+    def device(self) -> DeviceProfile:
+        return self._device
+
+    @property
+    def sample_rate_hz(self) -> int:
+        return self._device.sample_rate_hz
+
+    @property
+    def block_frames(self) -> int:
+        return self._device.block_frames
+
+    @property
+    def channels(self) -> int:
+        return self._device.channels
+
 
 @dataclass(frozen=True)
 class EngineStatus:

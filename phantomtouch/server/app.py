@@ -1,0 +1,126 @@
+"""``create_app(settings)``: the FastAPI app of the touch service.
+
+Nothing heavy happens at import or in ``create_app``; the lifespan loads the device
+profile, opens the pattern store, starts the engine (its audio thread) and stops both
+on shut-down.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.openapi.utils import get_openapi
+from fastapi.staticfiles import StaticFiles
+
+from phantomtouch import __version__
+from phantomtouch.schema import DeviceProfile
+from phantomtouch.server import errors
+from phantomtouch.server.bodies import merge_components
+from phantomtouch.server.engine_access import describe_output, open_engine
+from phantomtouch.server.limits import BodyLimitMiddleware, TokenMiddleware
+from phantomtouch.server.metrics import Metrics, MetricsMiddleware
+from phantomtouch.server.routes import info, patterns, render, touch, web, ws
+from phantomtouch.server.service import Service
+from phantomtouch.server.settings import Settings
+from phantomtouch.server.store import PatternStore
+
+logger = logging.getLogger("phantomtouch.server")
+
+DESCRIPTION = """Touch on the forearm for VR scenes and touch research.
+
+Errors are `{"error": {"code", "message", "fields": [{field, value, message}]}}`; the
+wire protocol, the WebSocket `/ws` included, is described in `docs/protocol.md`.
+"""
+
+
+def _lifespan(settings: Settings, metrics: Metrics) -> Any:
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        device = (
+            DeviceProfile.load(settings.device_profile)
+            if settings.device_profile
+            else DeviceProfile.default()
+        )
+        store = PatternStore.open(settings.db_path)
+        try:
+            engine = open_engine(settings, device)
+        except BaseException:
+            store.close()
+            raise
+        app.state.service = Service(settings, device, engine, store, metrics)
+        logger.info("phantomtouch: %s; patterns in %s", describe_output(engine), store.path)
+        metrics.watch_engine(lambda: engine.status().to_dict())
+        try:
+            yield
+        finally:
+            metrics.watch_engine(None)
+            engine.close()
+            store.close()
+
+    return lifespan
+
+
+def _openapi(app: FastAPI, settings: Settings) -> Any:
+    def schema() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            document = get_openapi(
+                title=app.title,
+                version=app.version,
+                description=app.description,
+                routes=app.routes,
+                tags=app.openapi_tags,
+            )
+            merge_components(document)
+            if settings.token is not None:
+                document.setdefault("components", {})["securitySchemes"] = {
+                    "bearer": {"type": "http", "scheme": "bearer"}
+                }
+                document["security"] = [{"bearer": []}]
+                document["paths"]["/health"]["get"]["security"] = []
+            app.openapi_schema = document
+        return app.openapi_schema
+
+    return schema
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the app; the engine and the store open when it starts (lifespan)."""
+    settings = settings or Settings()
+    metrics = Metrics()
+    app = FastAPI(
+        title="phantomtouch",
+        version=__version__,
+        description=DESCRIPTION,
+        lifespan=_lifespan(settings, metrics),
+        separate_input_output_schemas=False,
+        openapi_tags=[
+            {"name": "touch", "description": "Play and stop touches."},
+            {"name": "patterns", "description": "The pattern library (SQLite)."},
+            {"name": "render", "description": "Offline rendering."},
+            {"name": "info", "description": "Device, presets, clock, health, metrics."},
+        ],
+    )
+    app.state.settings = settings
+    errors.install(app)
+    for module in (touch, patterns, render, info, ws, web):
+        app.include_router(module.router)
+    if web.STATIC_DIR.is_dir():
+        app.mount("/static", StaticFiles(directory=web.STATIC_DIR), name="static")
+    app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
+    if settings.token is not None:
+        app.add_middleware(TokenMiddleware, token=settings.token)
+    if settings.cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "POST", "PUT", "DELETE"],
+            allow_headers=["Authorization", "Content-Type", "Accept"],
+        )
+    app.add_middleware(MetricsMiddleware, metrics=metrics)
+    app.openapi = _openapi(app, settings)  # type: ignore[method-assign]
+    return app

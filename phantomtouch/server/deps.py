@@ -1,0 +1,54 @@
+"""Shared route dependencies as ``Annotated`` aliases."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated, Any
+
+from fastapi import Depends, Path
+from starlette.requests import HTTPConnection
+
+from phantomtouch.server.models import PATTERN_NAME_REGEX
+from phantomtouch.server.service import Service
+from phantomtouch.server.store import PatternStore
+
+if TYPE_CHECKING:
+    from phantomtouch.server.engine_access import AnyEngine
+
+
+# The dependencies are ``async`` so that FastAPI calls them on the event loop instead of
+# handing each to a worker thread (a thread hop per dependency per request).
+
+
+def get_service_now(connection: HTTPConnection) -> Service:
+    service: Service = connection.app.state.service
+    return service
+
+
+async def get_service(connection: HTTPConnection) -> Service:
+    return get_service_now(connection)
+
+
+async def get_engine(connection: HTTPConnection) -> AnyEngine:
+    return get_service_now(connection).engine
+
+
+async def get_store(connection: HTTPConnection) -> PatternStore:
+    return get_service_now(connection).store
+
+
+ServiceDep = Annotated[Service, Depends(get_service)]
+if TYPE_CHECKING:
+    EngineDep = AnyEngine
+else:
+    EngineDep = Annotated[Any, Depends(get_engine)]
+StoreDep = Annotated[PatternStore, Depends(get_store)]
+PatternNameParam = Annotated[
+    str,
+    Path(
+        min_length=1,
+        max_length=64,
+        pattern=PATTERN_NAME_REGEX,
+        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters.",
+        examples=["my-stroke"],
+    ),
+]

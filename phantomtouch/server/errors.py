@@ -1,0 +1,318 @@
+"""Every refusal of the service, mapped to HTTP status, error code and WebSocket close code.
+
+The exception tree the server adds below the package root::
+
+    PhantomTouchError                    phantomtouch.errors
+    ├── ParameterError                   422 invalid
+    ├── EngineBusyError                  503 busy
+    ├── DeviceError                      503 device
+    ├── ProtocolError                    422 invalid
+    └── ServiceError                     (this module)
+        ├── NotFoundError                404 not_found
+        ├── TooLargeError                413 too_large   (WebSocket: close 1009)
+        ├── RateLimitedError             429 rate_limited (WebSocket: close 1008 if repeated)
+        └── UnauthorizedError            401 unauthorized (WebSocket: close 1008)
+
+pydantic's ``ValidationError`` and FastAPI's ``RequestValidationError`` are 422 ``invalid``
+with one ``fields`` entry per problem. :func:`install` registers the handlers; the
+WebSocket session asks :func:`describe` for the same code and message.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Literal
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, Field, ValidationError
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from phantomtouch.errors import (
+    DeviceError,
+    EngineBusyError,
+    ParameterError,
+    PhantomTouchError,
+    ProtocolError,
+)
+
+ErrorCode = Literal[
+    "invalid",
+    "unauthorized",
+    "not_found",
+    "method_not_allowed",
+    "too_large",
+    "rate_limited",
+    "busy",
+    "device",
+    "invalid_json",
+    "unknown_type",
+]
+
+WS_CLOSE_UNSUPPORTED_DATA = 1003
+"""A binary frame: the protocol is JSON text."""
+WS_CLOSE_POLICY_VIOLATION = 1008
+"""Missing or wrong token, or the message rate limit exceeded again and again."""
+WS_CLOSE_MESSAGE_TOO_BIG = 1009
+"""A message over ``max_ws_message_bytes``."""
+
+
+class ServiceError(PhantomTouchError):
+    """A request the service refuses for a reason of its own (not of the renderer)."""
+
+    status_code = 400
+    code: ErrorCode = "invalid"
+    headers: ClassVar[Mapping[str, str]] = {}
+
+    def __init__(self, message: str, *, field: str | None = None, value: Any = None) -> None:
+        super().__init__(message)
+        self.field = field
+        self.value = value
+
+
+class NotFoundError(ServiceError, LookupError):
+    """An unknown job, pattern, preset or route."""
+
+    status_code = 404
+    code: ErrorCode = "not_found"
+
+
+class TooLargeError(ServiceError):
+    """A request body or WebSocket message over its size limit."""
+
+    status_code = 413
+    code: ErrorCode = "too_large"
+
+
+class RateLimitedError(ServiceError):
+    """Too many requests or messages; retry after a moment."""
+
+    status_code = 429
+    code: ErrorCode = "rate_limited"
+    headers: ClassVar[Mapping[str, str]] = {"Retry-After": "1"}
+
+
+class UnauthorizedError(ServiceError):
+    """A token is required and was missing or wrong."""
+
+    status_code = 401
+    code: ErrorCode = "unauthorized"
+    headers: ClassVar[Mapping[str, str]] = {"WWW-Authenticate": "Bearer"}
+
+
+class FieldProblem(BaseModel):
+    """One refused field: where, what was sent, and why."""
+
+    field: str = Field(description="Dotted path of the field, e.g. `path.points_cm[0]`.")
+    value: Any = Field(default=None, description="The value sent (shortened when long).")
+    message: str = Field(description="Why it was refused, with the allowed range.")
+
+
+class ErrorDetail(BaseModel):
+    code: ErrorCode
+    message: str = Field(description="Names the field, the value and what is allowed.")
+    fields: list[FieldProblem] = Field(default_factory=list)
+
+
+class ErrorBody(BaseModel):
+    """The body of every refused request."""
+
+    error: ErrorDetail
+
+    model_config = {
+        "json_schema_extra": {
+            "examples": [
+                {
+                    "error": {
+                        "code": "invalid",
+                        "message": "speed_cm_s=0: Input should be greater than 0",
+                        "fields": [
+                            {
+                                "field": "speed_cm_s",
+                                "value": 0,
+                                "message": "Input should be greater than 0",
+                            }
+                        ],
+                    }
+                }
+            ]
+        }
+    }
+
+
+@dataclass(frozen=True)
+class Problem:
+    """An exception described for the wire: HTTP status, code, message and fields."""
+
+    status_code: int
+    code: ErrorCode
+    message: str
+    fields: list[dict[str, Any]] = field(default_factory=list)
+    headers: Mapping[str, str] = field(default_factory=dict)
+
+    def body(self) -> dict[str, Any]:
+        return {"error": {"code": self.code, "message": self.message, "fields": self.fields}}
+
+
+_MAX_VALUE_CHARS = 120
+_LOCATION_PREFIXES = {"body", "query", "path", "header", "cookie"}
+_UNION_TAGS = {"touch", "preset", "named"}
+
+
+def _short_value(value: Any) -> Any:
+    """The value as sent if it is small JSON, else a shortened text of it."""
+    try:
+        text = json.dumps(value, allow_nan=False)
+    except (TypeError, ValueError):
+        text = repr(value)
+        return text if len(text) <= _MAX_VALUE_CHARS else text[: _MAX_VALUE_CHARS - 3] + "..."
+    if len(text) <= _MAX_VALUE_CHARS:
+        return value
+    return text[: _MAX_VALUE_CHARS - 3] + "..."
+
+
+def _location(loc: Sequence[int | str], *, tags: set[str]) -> str:
+    items = list(loc)
+    if items and items[0] in _LOCATION_PREFIXES:
+        items = items[1:]
+    if len(items) > 1 and items[0] in tags:
+        items = items[1:]
+    parts: list[str] = []
+    for item in items:
+        if isinstance(item, int):
+            parts.append(f"[{item}]")
+        else:
+            parts.append(("." if parts else "") + str(item))
+    return "".join(parts) or "body"
+
+
+def field_problems(errors: Sequence[Any], *, tags: set[str] = _UNION_TAGS) -> list[dict[str, Any]]:
+    """pydantic error dicts as ``[{field, value, message}]`` (union tags and ``body`` dropped)."""
+    problems = []
+    for err in errors:
+        missing = err.get("type") == "missing"
+        problems.append(
+            {
+                "field": _location(err.get("loc", ()), tags=tags),
+                "value": None if missing else _short_value(err.get("input")),
+                "message": str(err.get("msg", "invalid")).removeprefix("Value error, "),
+            }
+        )
+    return problems
+
+
+def _summary(problems: list[dict[str, Any]]) -> str:
+    parts = []
+    for item in problems:
+        if item["value"] is None and item["message"] == "Field required":
+            parts.append(f"{item['field']}: field required")
+        else:
+            parts.append(f"{item['field']}={json.dumps(item['value'])}: {item['message']}")
+    return "; ".join(parts) or "invalid request"
+
+
+def invalid(problems: list[dict[str, Any]]) -> Problem:
+    """A 422 ``invalid`` problem from field problems."""
+    return Problem(422, "invalid", _summary(problems), problems)
+
+
+def _problem(field: str, value: Any, message: str) -> dict[str, Any]:
+    return {"field": field, "value": _short_value(value), "message": message}
+
+
+def _guess_field(message: str) -> str:
+    head = message.split("=", 1)[0].split(" ", 1)[0] if "=" in message.split(" ", 1)[0] else ""
+    return head or "body"
+
+
+def describe(exc: BaseException) -> Problem:
+    """The one mapping from an exception to its status, code, message and fields."""
+    if isinstance(exc, RequestValidationError):
+        return invalid(field_problems(exc.errors()))
+    if isinstance(exc, ValidationError):
+        return invalid(field_problems(exc.errors(include_url=False)))
+    if isinstance(exc, ServiceError):
+        message = str(exc)
+        fields = [] if exc.field is None else [_problem(exc.field, exc.value, message)]
+        return Problem(exc.status_code, exc.code, message, fields, exc.headers)
+    if isinstance(exc, EngineBusyError):
+        return Problem(503, "busy", str(exc) or "the engine is busy", headers={"Retry-After": "1"})
+    if isinstance(exc, DeviceError):
+        return Problem(503, "device", str(exc))
+    if isinstance(exc, ParameterError | ProtocolError | PhantomTouchError):
+        message = str(exc)
+        return Problem(422, "invalid", message, [_problem(_guess_field(message), None, message)])
+    raise TypeError(f"no mapping for {type(exc).__name__}") from exc
+
+
+def problem_response(problem: Problem) -> JSONResponse:
+    return JSONResponse(problem.body(), status_code=problem.status_code, headers=problem.headers)
+
+
+def _allowed_methods(request: Request) -> str:
+    """The methods the OpenAPI document lists for the request's path (for ``Allow``)."""
+    path = request.url.path
+    for template, operations in request.app.openapi()["paths"].items():
+        if re.fullmatch(re.sub(r"\{[^}]+\}", "[^/]+", template), path):
+            return ", ".join(sorted(method.upper() for method in operations))
+    return ""
+
+
+async def _http_exception(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, StarletteHTTPException)
+    headers = dict(exc.headers or {})
+    if exc.status_code == 404:
+        message = f"no route {request.url.path!r}; see /openapi.json"
+        return problem_response(
+            Problem(404, "not_found", message, [_problem("path", request.url.path, message)])
+        )
+    if exc.status_code == 405:
+        allow = _allowed_methods(request)
+        headers["Allow"] = allow
+        message = f"method {request.method} not allowed on {request.url.path!r}; allowed: {allow}"
+        fields = [_problem("method", request.method, message)]
+        return problem_response(Problem(405, "method_not_allowed", message, fields, headers))
+    problem = describe(TooLargeError(exc.detail, field="body")) if exc.status_code == 413 else None
+    if problem is None:
+        message = str(exc.detail)
+        if exc.status_code == 400:
+            message = f"the body is not JSON in UTF-8: {message}"
+        status = 422 if exc.status_code == 400 else exc.status_code
+        problem = Problem(status, "invalid", message, [_problem("body", None, message)], headers)
+    return problem_response(problem)
+
+
+async def _described(request: Request, exc: Exception) -> JSONResponse:
+    return problem_response(describe(exc))
+
+
+def install(app: FastAPI) -> None:
+    """Register the handlers: every refusal leaves the service as an :class:`ErrorBody`."""
+    app.add_exception_handler(RequestValidationError, _described)
+    app.add_exception_handler(ValidationError, _described)
+    app.add_exception_handler(PhantomTouchError, _described)
+    app.add_exception_handler(StarletteHTTPException, _http_exception)
+
+
+def _response(description: str) -> dict[str, Any]:
+    return {"model": ErrorBody, "description": description}
+
+
+RESPONSES: dict[int | str, dict[str, Any]] = {
+    401: _response("A token is required and was missing or wrong (`unauthorized`)."),
+    404: _response("Unknown job, pattern or preset (`not_found`)."),
+    413: _response("Request body over the size limit (`too_large`)."),
+    422: _response("A field is out of range or malformed (`invalid`); `fields` name each."),
+    429: _response("Too many requests at once (`rate_limited`); retry after `Retry-After`."),
+    503: _response("The engine's command queue is full (`busy`) or the sound card failed."),
+}
+"""Documented error responses, picked per route with :func:`responses`."""
+
+
+def responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """The documented error responses of one route."""
+    return {status: RESPONSES[status] for status in statuses}

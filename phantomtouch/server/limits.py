@@ -1,0 +1,95 @@
+"""ASGI guards in front of the routes: the token and the request body size.
+
+Both answer with the service's error body (:mod:`phantomtouch.server.errors`). The
+WebSocket checks its token itself, after accepting, so that it can close with 1008.
+"""
+
+from __future__ import annotations
+
+import hmac
+from urllib.parse import parse_qs
+
+from starlette.datastructures import Headers
+from starlette.exceptions import HTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from phantomtouch.server.errors import Problem, TooLargeError, UnauthorizedError, describe
+
+OPEN_PATHS = frozenset({"/health"})
+"""Paths that answer without a token (liveness probes)."""
+
+
+def token_matches(scope: Scope, token: str) -> bool:
+    """Whether the request carries ``token``: ``Authorization: Bearer`` or ``?token=``."""
+    header = Headers(scope=scope).get("authorization", "")
+    scheme, _, given = header.partition(" ")
+    if scheme.lower() == "bearer" and hmac.compare_digest(given.strip(), token):
+        return True
+    if scope["type"] == "websocket":
+        query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
+        return any(hmac.compare_digest(value, token) for value in query.get("token", []))
+    return False
+
+
+async def send_problem(send: Send, problem: Problem) -> None:
+    import json
+
+    body = json.dumps(problem.body()).encode()
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+    headers += [(k.lower().encode(), v.encode()) for k, v in problem.headers.items()]
+    await send({"type": "http.response.start", "status": problem.status_code, "headers": headers})
+    await send({"type": "http.response.body", "body": body})
+
+
+class TokenMiddleware:
+    """Refuse HTTP requests without the token with 401 (except :data:`OPEN_PATHS`)."""
+
+    def __init__(self, app: ASGIApp, token: str) -> None:
+        self.app = app
+        self.token = token
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if (
+            scope["type"] == "http"
+            and scope["path"] not in OPEN_PATHS
+            and not token_matches(scope, self.token)
+        ):
+            message = "a token is required: send 'Authorization: Bearer <token>'"
+            await send_problem(send, describe(UnauthorizedError(message, field="Authorization")))
+            return
+        await self.app(scope, receive, send)
+
+
+class BodyLimitMiddleware:
+    """Refuse request bodies over ``max_bytes`` with 413, by header or while reading."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    def _message(self, size: str) -> str:
+        return f"request body of {size} bytes is over the limit of {self.max_bytes} bytes"
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        length = Headers(scope=scope).get("content-length")
+        if length is not None and length.isdigit() and int(length) > self.max_bytes:
+            await send_problem(
+                send,
+                describe(TooLargeError(self._message(length), field="body", value=int(length))),
+            )
+            return
+        received = 0
+
+        async def limited_receive() -> Message:
+            nonlocal received
+            message = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > self.max_bytes:
+                    raise HTTPException(413, self._message(f"more than {self.max_bytes}"))
+            return message
+
+        await self.app(scope, limited_receive, send)

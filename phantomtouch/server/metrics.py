@@ -1,0 +1,164 @@
+"""Prometheus metrics: requests, latency and WebSocket messages, plus engine gauges.
+
+Each app has its own registry (two apps in one process do not collide). The engine's
+figures (active voices, underruns, late commands, peak level ...) are read from
+``engine.status()`` when ``/metrics`` is scraped, never pushed from the audio thread.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
+from prometheus_client.registry import Collector
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
+_LATENCY_BUCKETS_S = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 5.0)
+
+_INGEST_BUCKETS_S = (
+    2e-6,
+    5e-6,
+    1e-5,
+    2e-5,
+    3e-5,
+    5e-5,
+    7.5e-5,
+    1e-4,
+    2e-4,
+    5e-4,
+    1e-3,
+    2e-3,
+    5e-3,
+    1e-2,
+)
+
+StatusReader = Callable[[], dict[str, Any]]
+
+
+class _EngineCollector(Collector):
+    def __init__(self) -> None:
+        self.read: StatusReader | None = None
+
+    def collect(self) -> Iterator[Metric]:
+        if self.read is None:
+            return
+        status = self.read()
+        yield GaugeMetricFamily(
+            "phantomtouch_active_voices", "Voices playing now.", value=status["active_voices"]
+        )
+        yield GaugeMetricFamily(
+            "phantomtouch_active_contacts",
+            "Live contacts held down now.",
+            value=len(status["active_contacts"]),
+        )
+        yield CounterMetricFamily(
+            "phantomtouch_underruns", "Audio blocks the sound card missed.", status["underruns"]
+        )
+        yield CounterMetricFamily(
+            "phantomtouch_late_commands",
+            "Commands that reached the audio thread after their start time.",
+            status["late_commands"],
+        )
+        yield CounterMetricFamily(
+            "phantomtouch_limited_blocks",
+            "Blocks the safety limiter had to scale down.",
+            status["limited_blocks"],
+        )
+        yield GaugeMetricFamily(
+            "phantomtouch_peak_level",
+            "Peak sample of the last block (full scale 1).",
+            status["peak"],
+        )
+        yield GaugeMetricFamily(
+            "phantomtouch_queue_depth",
+            "Commands waiting for the audio thread.",
+            status["queue_depth"],
+        )
+        channel = GaugeMetricFamily(
+            "phantomtouch_channel_peak_level", "Peak per output channel.", labels=["channel"]
+        )
+        for k, level in enumerate(status["levels"], start=1):
+            channel.add_metric([str(k)], level)
+        yield channel
+
+
+class Metrics:
+    """The registry of one app and the instruments the service updates."""
+
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry(auto_describe=True)
+        self.requests = Counter(
+            "phantomtouch_http_requests",
+            "HTTP requests by route template, method and status.",
+            ["route", "method", "status"],
+            registry=self.registry,
+        )
+        self.latency = Histogram(
+            "phantomtouch_http_request_duration_seconds",
+            "Time from request to the end of the response, by route template.",
+            ["route"],
+            buckets=_LATENCY_BUCKETS_S,
+            registry=self.registry,
+        )
+        self.ws_messages = Counter(
+            "phantomtouch_ws_messages",
+            "WebSocket messages by direction (in/out) and type.",
+            ["direction", "type"],
+            registry=self.registry,
+        )
+        self.ws_ingest = Histogram(
+            "phantomtouch_ws_move_ingest_seconds",
+            "From a move frame's receipt in the session to engine.contact_move returning.",
+            buckets=_INGEST_BUCKETS_S,
+            registry=self.registry,
+        )
+        self.ws_watchdog_releases = Counter(
+            "phantomtouch_ws_watchdog_releases",
+            "Times a silent connection's contacts were released by the watchdog.",
+            registry=self.registry,
+        )
+        self.ws_connections = Counter(
+            "phantomtouch_ws_connections", "WebSocket connections accepted.", registry=self.registry
+        )
+        self._engine = _EngineCollector()
+        self.registry.register(self._engine)
+
+    def watch_engine(self, read: StatusReader | None) -> None:
+        """Read the engine's figures with ``read`` at scrape time (None: stop)."""
+        self._engine.read = read
+
+    def exposition(self) -> bytes:
+        return generate_latest(self.registry)
+
+
+class MetricsMiddleware:
+    """Count every HTTP request by route template and status, and time it."""
+
+    def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
+        self.app = app
+        self.metrics = metrics
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = time.perf_counter()
+        status = 500
+
+        async def send_status(message: Message) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = message["status"]
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_status)
+        finally:
+            route = scope.get("route")
+            template = getattr(route, "path", None) or "unmatched"
+            self.metrics.requests.labels(template, scope["method"], str(status)).inc()
+            self.metrics.latency.labels(template).observe(time.perf_counter() - started)

@@ -1,0 +1,91 @@
+"""What the service is and does: device, presets, clock, health, metrics."""
+
+from __future__ import annotations
+
+import functools
+import time
+
+from fastapi import APIRouter, Response
+
+from phantomtouch.renderer import preset_names
+from phantomtouch.schema import DeviceProfile
+from phantomtouch.server import touch
+from phantomtouch.server.deps import EngineDep, ServiceDep
+from phantomtouch.server.errors import responses
+from phantomtouch.server.metrics import CONTENT_TYPE
+from phantomtouch.server.models import ClockInfo, DeviceInfo, Health, PlanSummary, PresetInfo
+
+router = APIRouter(tags=["info"])
+
+
+@router.get("/device", response_model=DeviceInfo, responses=responses(401), summary="The armband")
+async def get_device(engine: EngineDep) -> DeviceInfo:
+    """Layout (actuators, triangles), channels, timing, and where the engine plays."""
+    status = engine.status().to_dict()
+    device: DeviceProfile = engine.device
+    return DeviceInfo(
+        name=device.name,
+        backend=status["backend"],
+        output_device=status["output_device"],
+        channels=status["channels"],
+        sample_rate_hz=status["sample_rate_hz"],
+        block_frames=status["block_frames"],
+        output_latency_s=status["output_latency_s"],
+        actuators=list(device.actuators),
+        triangles=list(engine_triangles(device)),
+    )
+
+
+def engine_triangles(device: DeviceProfile) -> tuple[tuple[int, int, int], ...]:
+    """The triangles the renderer uses (the profile's, or its Delaunay triangulation)."""
+    from phantomtouch.renderer import Geometry
+
+    triangles = Geometry.for_device(device).triangles
+    return tuple((int(a), int(b), int(c)) for a, b, c in triangles)
+
+
+@functools.cache
+def _preset_summaries(device: DeviceProfile) -> tuple[PresetInfo, ...]:
+    return tuple(
+        PresetInfo(
+            name=name,
+            summary=PlanSummary(**touch.plan_for(touch.preset_pattern(name), device).summary()),
+        )
+        for name in preset_names()
+    )
+
+
+@router.get(
+    "/presets", response_model=list[PresetInfo], responses=responses(401), summary="The presets"
+)
+def get_presets(service: ServiceDep) -> list[PresetInfo]:
+    """Every preset with its plan summary on this device."""
+    return list(_preset_summaries(service.device))
+
+
+@router.get("/clock", response_model=ClockInfo, responses=responses(401), summary="Server clock")
+async def get_clock(engine: EngineDep) -> ClockInfo:
+    """The server clock that `start_at_s` and WebSocket times refer to."""
+    return ClockInfo(
+        server_time_s=engine.server_time_s(),
+        frames=engine.now_frames,
+        sample_rate_hz=engine.sample_rate_hz,
+        unix_time_s=time.time(),
+    )
+
+
+@router.get("/health", response_model=Health, summary="Liveness")
+async def get_health(engine: EngineDep) -> Health:
+    """`ok` while the service runs; needs no token."""
+    return Health(backend=engine.status().to_dict()["backend"])
+
+
+@router.get(
+    "/metrics",
+    response_class=Response,
+    responses={200: {"content": {CONTENT_TYPE: {"schema": {"type": "string"}}}}, **responses(401)},
+    summary="Prometheus metrics",
+)
+async def get_metrics(service: ServiceDep) -> Response:
+    """Requests, latency, WebSocket messages, active voices, underruns, late commands, peak."""
+    return Response(service.metrics.exposition(), media_type=CONTENT_TYPE)

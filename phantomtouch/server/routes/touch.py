@@ -1,0 +1,107 @@
+"""Triggered touches: ``POST /touch``, ``POST /stop``, ``GET|DELETE /jobs/{job_id}``."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated
+
+from fastapi import APIRouter, Depends
+from fastapi import Path as PathParam
+
+from phantomtouch.server import touch
+from phantomtouch.server.bodies import strict_body
+from phantomtouch.server.deps import EngineDep, ServiceDep
+from phantomtouch.server.errors import NotFoundError, responses
+
+if TYPE_CHECKING:
+    from phantomtouch.server.engine_access import AnyEngine
+from phantomtouch.server.models import (
+    JobAccepted,
+    JobInfo,
+    NamedTouch,
+    PatternTouch,
+    PresetTouch,
+    StopAnswer,
+    touch_request_adapter,
+)
+
+router = APIRouter(tags=["touch"])
+
+touch_body, TOUCH_BODY_OPENAPI = strict_body(touch_request_adapter)
+TouchBody = Annotated[PatternTouch | PresetTouch | NamedTouch, Depends(touch_body)]
+
+JobIdParam = Annotated[
+    str, PathParam(min_length=1, max_length=64, description="As `POST /touch` answered it.")
+]
+
+
+@router.post(
+    "/touch",
+    status_code=202,
+    response_model=JobAccepted,
+    responses=responses(401, 404, 413, 422, 503),
+    summary="Play a touch",
+    openapi_extra=TOUCH_BODY_OPENAPI,
+)
+async def post_touch(request: TouchBody, service: ServiceDep) -> JobAccepted:
+    """Schedule a touch: a whole pattern, a preset with overrides, or a stored pattern.
+
+    Without `start_in_ms` or `start_at_s` it starts as soon as possible. 404 names an
+    unknown preset or stored pattern; 503 `busy` means the engine's queue is full.
+    """
+    return touch.schedule(service, request)
+
+
+@router.post(
+    "/stop",
+    response_model=StopAnswer,
+    responses=responses(401),
+    summary="Everything off",
+)
+async def post_stop(service: ServiceDep) -> StopAnswer:
+    """Stop every job and release every contact of every client, at once.
+
+    Runs on the event loop directly (never behind a worker queue) and never answers
+    `busy`.
+    """
+    service.stop_everything()
+    return StopAnswer(server_time_s=service.engine.server_time_s())
+
+
+def job_info(engine: AnyEngine, job_id: str) -> JobInfo:
+    """A job's state; an unknown id is :class:`NotFoundError`."""
+    state = engine.job_state(job_id)
+    if state is None:
+        raise NotFoundError(f"job_id={job_id!r} is not a known job", field="job_id", value=job_id)
+    return JobInfo(
+        job_id=job_id,
+        state=state.state,
+        start_at_s=engine.time_at(state.start_frame),
+        start_frame=state.start_frame,
+        end_at_s=engine.time_at(state.end_frame),
+        end_frame=state.end_frame,
+        duration_s=state.duration_s,
+        late=state.late,
+    )
+
+
+@router.get(
+    "/jobs/{job_id}", response_model=JobInfo, responses=responses(401, 404, 422), summary="A job"
+)
+async def get_job(job_id: JobIdParam, engine: EngineDep) -> JobInfo:
+    """Where a job is: `scheduled`, `playing`, `finished` or `stopped`."""
+    return job_info(engine, job_id)
+
+
+@router.delete(
+    "/jobs/{job_id}",
+    response_model=JobInfo,
+    responses=responses(401, 404, 422),
+    summary="Stop a job",
+)
+async def delete_job(job_id: JobIdParam, engine: EngineDep) -> JobInfo:
+    """Stop one job (with its release ramp) and answer its new state.
+
+    A job that is over already keeps its state (`finished` or `stopped`).
+    """
+    engine.stop(job_id)
+    return job_info(engine, job_id)

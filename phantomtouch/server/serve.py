@@ -1,0 +1,37 @@
+"""Run the service under uvicorn (``phantomtouch serve``)."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+from phantomtouch.server.app import create_app
+from phantomtouch.server.settings import Settings
+
+
+def log_config() -> dict[str, Any]:
+    """uvicorn's logging, plus the ``phantomtouch`` logger (start-up lines, errors)."""
+    from uvicorn.config import LOGGING_CONFIG
+
+    config = copy.deepcopy(LOGGING_CONFIG)
+    config["loggers"]["phantomtouch"] = {
+        "handlers": ["default"],
+        "level": "INFO",
+        "propagate": False,
+    }
+    return config
+
+
+def serve(settings: Settings) -> None:
+    """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly)."""
+    import uvicorn
+
+    uvicorn.run(
+        create_app(settings),
+        host=settings.host,
+        port=settings.port,
+        ws_max_size=settings.max_ws_message_bytes,
+        log_config=log_config(),
+        access_log=False,
+        server_header=False,
+    )

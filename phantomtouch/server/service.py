@@ -1,0 +1,82 @@
+"""What one running service holds: settings, device, engine, pattern store, metrics."""
+
+from __future__ import annotations
+
+import itertools
+import secrets
+import threading
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol
+
+from phantomtouch.schema import DeviceProfile
+from phantomtouch.server.errors import RateLimitedError
+from phantomtouch.server.metrics import Metrics
+from phantomtouch.server.plans import PlanCache
+from phantomtouch.server.settings import Settings
+from phantomtouch.server.store import PatternStore
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+    from contextlib import AbstractContextManager
+
+    from phantomtouch.server.engine_access import AnyEngine
+
+
+class ContactHolder(Protocol):
+    """A connection that holds contacts (a WebSocket session)."""
+
+    def contacts_released(self, reason: str) -> None:
+        """The engine let go of every contact of this connection."""
+
+
+@dataclass
+class Service:
+    """The running parts, built by the app's lifespan and shared by every request."""
+
+    settings: Settings
+    device: DeviceProfile
+    engine: AnyEngine
+    store: PatternStore
+    metrics: Metrics
+    plans: PlanCache = field(init=False)
+    _renders: threading.BoundedSemaphore = field(init=False)
+    _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
+    holders: set[ContactHolder] = field(default_factory=set, init=False)
+
+    def __post_init__(self) -> None:
+        self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
+        self.plans = PlanCache(self.device)
+
+    def new_owner(self) -> str:
+        """A unique owner id for one WebSocket connection's contacts and jobs."""
+        return f"ws-{next(self._owners)}-{secrets.token_hex(3)}"
+
+    def stop_everything(self) -> None:
+        """Every job and every contact of every client off, at once (never queued).
+
+        Each connection is told which of its contacts were let go (``released``).
+        """
+        self.engine.stop_all()
+        for holder in list(self.holders):
+            holder.contacts_released("stop")
+
+    def render_slot(self) -> AbstractContextManager[None]:
+        """Hold one of the ``max_concurrent_renders`` slots, or refuse with 429."""
+        return _Slot(self._renders, self.settings.max_concurrent_renders)
+
+
+class _Slot:
+    def __init__(self, semaphore: threading.BoundedSemaphore, capacity: int) -> None:
+        self._semaphore = semaphore
+        self._capacity = capacity
+
+    def __enter__(self) -> None:
+        if not self._semaphore.acquire(blocking=False):
+            raise RateLimitedError(
+                f"{self._capacity} renders are running (max_concurrent_renders="
+                f"{self._capacity}); retry when one has finished",
+                field="body",
+            )
+
+    def __exit__(self, *exc: object) -> None:
+        self._semaphore.release()

@@ -1,0 +1,396 @@
+"""One WebSocket connection of ``/ws``: an explicit state machine (docs/protocol.md).
+
+::
+
+    CONNECTING --accept--> OPEN --client closes / limit broken--> CLOSED
+         \\--token missing: accept, close 1008--> CLOSED
+
+In ``OPEN`` each text frame is parsed and handled at once, in arrival order: ``move``
+goes straight to the engine's contact mailbox (latest wins, nothing queues here). Each
+contact has its own two states, up and down; a step that its state does not allow is
+answered with ``error`` ("expected X, got Y") and the session goes on. Malformed frames
+are answered with ``error`` too. Only a binary frame (1003), a frame over the size
+limit (1009), a missing token or a rate limit broken again and again (1008) close it.
+
+Every message resets the watchdog; silence longer than ``watchdog_s`` releases the
+connection's contacts (``released``). Closing, in any way, releases them all.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import json
+import time
+from typing import TYPE_CHECKING, Any
+
+from pydantic import ValidationError
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from phantomtouch.errors import PhantomTouchError, ProtocolError
+from phantomtouch.server import touch
+from phantomtouch.server.errors import (
+    WS_CLOSE_MESSAGE_TOO_BIG,
+    WS_CLOSE_POLICY_VIOLATION,
+    WS_CLOSE_UNSUPPORTED_DATA,
+    NotFoundError,
+    Problem,
+    describe,
+)
+from phantomtouch.server.limits import token_matches
+from phantomtouch.server.service import Service
+from phantomtouch.server.ws_messages import (
+    PROTOCOL_VERSION,
+    ClientMessage,
+    Down,
+    Hello,
+    MessageError,
+    Move,
+    Ping,
+    Play,
+    Stop,
+    Subscribe,
+    Up,
+    parse,
+)
+
+if TYPE_CHECKING:
+    from phantomtouch.server.engine_access import AnyEngine
+
+
+class SessionState(enum.Enum):
+    CONNECTING = "connecting"
+    OPEN = "open"
+    CLOSED = "closed"
+
+
+class SessionClosed(Exception):
+    """The session ends: the client left, or the server closes with ``code``."""
+
+    def __init__(self, code: int, reason: str = "") -> None:
+        super().__init__(f"{code} {reason}".strip())
+        self.code = code
+        self.reason = reason
+
+
+class RateLimiter:
+    """Token bucket: ``rate_per_s`` messages per second with one second of burst."""
+
+    def __init__(self, rate_per_s: float) -> None:
+        self.rate_per_s = rate_per_s
+        self._tokens = rate_per_s
+        self._stamp = time.monotonic()
+        self.refused_in_a_row = 0
+
+    def allow(self, now: float) -> bool:
+        self._tokens = min(self.rate_per_s, self._tokens + (now - self._stamp) * self.rate_per_s)
+        self._stamp = now
+        if self._tokens >= 1.0:
+            self._tokens -= 1.0
+            self.refused_in_a_row = 0
+            return True
+        self.refused_in_a_row += 1
+        return False
+
+
+class Session:
+    """The protocol of one connection; :meth:`run` returns when it is closed."""
+
+    def __init__(self, websocket: WebSocket, service: Service) -> None:
+        self.websocket = websocket
+        self.service = service
+        self.engine: AnyEngine = service.engine
+        settings = service.settings
+        self.watchdog_s = settings.watchdog_s
+        self.max_message_bytes = settings.max_ws_message_bytes
+        self.limiter = RateLimiter(settings.ws_messages_per_s)
+        self.refusals_before_close = max(10, int(settings.ws_messages_per_s))
+        self.owner = service.new_owner()
+        self.state = SessionState.CONNECTING
+        self.contacts: set[str] = set()
+        self.last_message_s = time.monotonic()
+        self._send_lock = asyncio.Lock()
+        self._state_task: asyncio.Task[None] | None = None
+        self._notices: set[asyncio.Task[None]] = set()
+        self._count_in = service.metrics.ws_messages.labels("in", "move")
+
+    # -- the state machine -------------------------------------------------------------
+
+    def _expect(self, expected: SessionState, new: SessionState) -> None:
+        if self.state is not expected:
+            raise ProtocolError(f"expected state {expected.value}, got {self.state.value}")
+        self.state = new
+
+    async def run(self) -> None:
+        """Accept, check the token, serve frames until the connection ends, release."""
+        await self.websocket.accept()
+        self._expect(SessionState.CONNECTING, SessionState.OPEN)
+        self.service.metrics.ws_connections.inc()
+        self.service.holders.add(self)
+        watchdog = asyncio.create_task(self._watchdog())
+        code: int | None = None
+        reason = ""
+        try:
+            token = self.service.settings.token
+            if token is not None and not token_matches(self.websocket.scope, token):
+                raise SessionClosed(
+                    WS_CLOSE_POLICY_VIOLATION, "a token is required: ?token=... or Bearer"
+                )
+            await self._serve()
+        except SessionClosed as closed:
+            code, reason = closed.code, closed.reason
+        except WebSocketDisconnect:
+            pass
+        finally:
+            self._expect(SessionState.OPEN, SessionState.CLOSED)
+            self.service.holders.discard(self)
+            watchdog.cancel()
+            if self._state_task is not None:
+                self._state_task.cancel()
+            self.engine.release_owner(self.owner)
+            self.contacts.clear()
+        if code is not None:
+            await self.websocket.close(code, reason)
+
+    async def _serve(self) -> None:
+        receive = self.websocket.receive
+        while True:
+            frame = await receive()
+            if frame["type"] == "websocket.disconnect":
+                raise WebSocketDisconnect(frame.get("code", 1000))
+            received_s = time.perf_counter()
+            self.last_message_s = time.monotonic()
+            text = frame.get("text")
+            if text is None:
+                raise SessionClosed(
+                    WS_CLOSE_UNSUPPORTED_DATA, "binary frames are not supported; send JSON text"
+                )
+            if len(text) > self.max_message_bytes or (
+                4 * len(text) > self.max_message_bytes
+                and len(text.encode()) > self.max_message_bytes
+            ):
+                raise SessionClosed(
+                    WS_CLOSE_MESSAGE_TOO_BIG,
+                    f"message over the limit of {self.max_message_bytes} bytes",
+                )
+            if not self.limiter.allow(self.last_message_s):
+                await self._refuse_rate()
+                continue
+            await self._handle_text(text, received_s)
+
+    async def _refuse_rate(self) -> None:
+        limit = self.limiter.rate_per_s
+        if self.limiter.refused_in_a_row > self.refusals_before_close:
+            raise SessionClosed(
+                WS_CLOSE_POLICY_VIOLATION, f"message rate limit of {limit:g}/s exceeded repeatedly"
+            )
+        message = f"more than {limit:g} messages per second; this message was dropped"
+        await self._send_error(Problem(429, "rate_limited", message), None)
+
+    async def _handle_text(self, text: str, received_s: float) -> None:
+        try:
+            message = parse(text)
+        except MessageError as exc:
+            self.service.metrics.ws_messages.labels("in", "invalid").inc()
+            await self._send_error(exc.problem, exc.message_id)
+            return
+        if isinstance(message, Move):
+            self._count_in.inc()
+        else:
+            self.service.metrics.ws_messages.labels("in", message.type).inc()
+        try:
+            await self._dispatch(message, received_s)
+        except (PhantomTouchError, ValidationError) as exc:
+            await self._send_error(describe(exc), message.id)
+
+    # -- messages ---------------------------------------------------------------------
+
+    async def _dispatch(self, message: ClientMessage, received_s: float) -> None:
+        if isinstance(message, Move):
+            self._check_down(message.contact, "move")
+            self.engine.contact_move(
+                self.owner, message.contact, message.x_cm, message.y_cm, intensity=message.intensity
+            )
+            self.service.metrics.ws_ingest.observe(time.perf_counter() - received_s)
+            if message.id is not None:
+                await self._send({"type": "ok", "id": message.id})
+        elif isinstance(message, Down):
+            await self._down(message)
+        elif isinstance(message, Up):
+            self._check_down(message.contact, "up")
+            self.engine.contact_up(
+                self.owner, message.contact, normal_velocity_m_s=message.normal_velocity_m_s
+            )
+            self.contacts.discard(message.contact)
+            await self._ok(message)
+        elif isinstance(message, Ping):
+            await self._send(
+                {"type": "pong", "server_time_s": self.engine.server_time_s(), "id": message.id}
+            )
+        elif isinstance(message, Hello):
+            await self._send(self._welcome(message))
+        elif isinstance(message, Play):
+            job = touch.schedule(self.service, message.request, owner=self.owner)
+            await self._ok(message, job.model_dump())
+        elif isinstance(message, Stop):
+            await self._stop(message)
+        elif isinstance(message, Subscribe):
+            self._subscribe(message.rate_hz)
+            await self._ok(message)
+
+    def _check_down(self, contact: str, got: str) -> None:
+        if contact not in self.contacts:
+            raise ProtocolError(
+                f"contact={contact!r} is not down: expected down, got {got} "
+                "(a contact is released by up, the watchdog or stop)"
+            )
+
+    async def _down(self, message: Down) -> None:
+        if message.contact in self.contacts:
+            raise ProtocolError(
+                f"contact={message.contact!r} is already down: expected move or up, got down"
+            )
+        limit = self.service.settings.max_contacts_per_connection
+        if len(self.contacts) >= limit:
+            raise ProtocolError(
+                f"contact={message.contact!r}: at most {limit} contacts per connection are down "
+                "at once; send up for one first"
+            )
+        self.engine.contact_down(
+            self.owner,
+            message.contact,
+            message.x_cm,
+            message.y_cm,
+            intensity=message.intensity,
+            carrier=message.carrier,
+            law=message.law,
+            normal_velocity_m_s=message.normal_velocity_m_s,
+        )
+        self.contacts.add(message.contact)
+        await self._ok(message)
+
+    async def _stop(self, message: Stop) -> None:
+        if message.job_id is None:
+            self.service.stop_everything()
+        else:
+            if self.engine.job_state(message.job_id) is None:
+                raise NotFoundError(
+                    f"job_id={message.job_id!r} is not a known job",
+                    field="job_id",
+                    value=message.job_id,
+                )
+            self.engine.stop(message.job_id)
+        await self._ok(message)
+
+    def _welcome(self, message: Hello) -> dict[str, Any]:
+        device = self.engine.device
+        welcome = {
+            "type": "welcome",
+            "protocol": PROTOCOL_VERSION,
+            "server_time_s": self.engine.server_time_s(),
+            "watchdog_s": self.watchdog_s,
+            "device": {
+                "channels": self.engine.channels,
+                "sample_rate_hz": self.engine.sample_rate_hz,
+                "block_frames": self.engine.block_frames,
+                "actuators": [a.model_dump() for a in device.actuators],
+            },
+        }
+        if message.id is not None:
+            welcome["id"] = message.id
+        return welcome
+
+    # -- background tasks ---------------------------------------------------------------
+
+    def _subscribe(self, rate_hz: float) -> None:
+        if self._state_task is not None:
+            self._state_task.cancel()
+            self._state_task = None
+        if rate_hz > 0:
+            self._state_task = asyncio.create_task(self._stream_state(1.0 / rate_hz))
+
+    async def _stream_state(self, period_s: float) -> None:
+        loop = asyncio.get_running_loop()
+        due = loop.time()
+        while self.state is SessionState.OPEN:
+            status = self.engine.status().to_dict()
+            await self._send_unless_gone(
+                {
+                    "type": "state",
+                    "server_time_s": self.engine.server_time_s(),
+                    "levels": status["levels"],
+                    "contacts": [
+                        {
+                            "contact": c["contact"],
+                            "x_cm": c["x_cm"],
+                            "y_cm": c["y_cm"],
+                            "own": c["owner"] == self.owner,
+                        }
+                        for c in status["active_contacts"]
+                    ],
+                    "active_voices": status["active_voices"],
+                    "underruns": status["underruns"],
+                    "output_latency_s": status["output_latency_s"],
+                }
+            )
+            due = max(due + period_s, loop.time())
+            await asyncio.sleep(due - loop.time())
+
+    async def _watchdog(self) -> None:
+        while True:
+            silent_s = time.monotonic() - self.last_message_s
+            if silent_s < self.watchdog_s:
+                await asyncio.sleep(self.watchdog_s - silent_s)
+                continue
+            if self.contacts:
+                self.engine.release_owner(self.owner)
+                self.service.metrics.ws_watchdog_releases.inc()
+                self.contacts_released("watchdog")
+            await asyncio.sleep(self.watchdog_s)
+
+    def contacts_released(self, reason: str) -> None:
+        """The engine let go of this connection's contacts: forget them, tell the client."""
+        if not self.contacts or self.state is not SessionState.OPEN:
+            self.contacts.clear()
+            return
+        notice = {"type": "released", "reason": reason, "contacts": sorted(self.contacts)}
+        self.contacts.clear()
+        task = asyncio.get_running_loop().create_task(self._send_unless_gone(notice))
+        self._notices.add(task)
+        task.add_done_callback(self._notices.discard)
+
+    # -- sending ------------------------------------------------------------------------
+
+    async def _send(self, message: dict[str, Any]) -> None:
+        if message.get("id", 0) is None:
+            del message["id"]
+        text = json.dumps(message)
+        async with self._send_lock:
+            await self.websocket.send_text(text)
+        self.service.metrics.ws_messages.labels("out", message["type"]).inc()
+
+    async def _send_unless_gone(self, message: dict[str, Any]) -> None:
+        """Send from a background task; a connection that is gone is not an error there."""
+        try:
+            await self._send(message)
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            return
+
+    async def _ok(self, message: ClientMessage, result: Any = None) -> None:
+        if message.id is None:
+            return
+        answer: dict[str, Any] = {"type": "ok", "id": message.id}
+        if result is not None:
+            answer["result"] = result
+        await self._send(answer)
+
+    async def _send_error(self, problem: Problem, message_id: Any) -> None:
+        answer: dict[str, Any] = {
+            "type": "error",
+            "code": problem.code,
+            "message": problem.message,
+            "fields": problem.fields,
+        }
+        if message_id is not None:
+            answer["id"] = message_id
+        await self._send(answer)

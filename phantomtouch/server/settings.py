@@ -1,0 +1,107 @@
+"""Service settings: pydantic-settings with the ``PHANTOMTOUCH_`` environment prefix.
+
+Every value is checked at start-up; nonsense (a port of 0, a watchdog of a minute, a
+public bind address without a token) is refused before the engine or the socket opens.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from pathlib import Path
+from typing import Self
+
+from pydantic import Field, field_validator, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+_LOOPBACK_NAMES = {"localhost", "ip6-localhost", "ip6-loopback"}
+
+
+def default_db_path() -> Path:
+    """``$XDG_DATA_HOME/phantomtouch/patterns.db`` (``~/.local/share/...`` without it)."""
+    import os
+
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(base) / "phantomtouch" / "patterns.db"
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` names only this machine (127.0.0.0/8, ::1, localhost)."""
+    if host.lower() in _LOOPBACK_NAMES:
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+class Settings(BaseSettings):
+    """Everything the service needs to start; each field has a sane default."""
+
+    model_config = SettingsConfigDict(env_prefix="PHANTOMTOUCH_", extra="forbid")
+
+    host: str = Field(default="127.0.0.1", min_length=1, description="Address to bind.")
+    port: int = Field(default=8000, ge=1, le=65535)
+    device_profile: Path | None = Field(
+        default=None, description="Device profile file (TOML or JSON); None: the paper's armband."
+    )
+    output_device: str | None = Field(
+        default=None,
+        description=(
+            "Sound-card output (name or index) for the engine; None: the first output with "
+            "enough channels, else the null output. 'null' forces the null output."
+        ),
+    )
+    db_path: Path = Field(default_factory=default_db_path, description="SQLite pattern store.")
+    token: str | None = Field(
+        default=None,
+        min_length=16,
+        description="Bearer token every request must carry (required off loopback).",
+    )
+    cors_origins: list[str] = Field(
+        default_factory=list, description="Origins allowed to call the API from a browser."
+    )
+    max_body_bytes: int = Field(default=1 << 20, ge=1024, le=64 << 20)
+    max_ws_message_bytes: int = Field(default=64 << 10, ge=256, le=16 << 20)
+    ws_messages_per_s: float = Field(
+        default=1000.0,
+        gt=0.0,
+        le=1_000_000.0,
+        description="Messages per second one WebSocket connection may send (1 s of burst).",
+    )
+    watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
+    max_contacts_per_connection: int = Field(default=16, ge=1, le=256)
+    max_concurrent_renders: int = Field(default=2, ge=1, le=64)
+    max_render_duration_s: float = Field(default=600.0, gt=0.0, le=7200.0)
+    queue_capacity: int = Field(default=4096, ge=16, le=1 << 20)
+    engine_process: bool = Field(
+        default=True,
+        description=(
+            "Run the engine in a process of its own (the default), so that request handling "
+            "never holds the interpreter lock its audio callback needs; False: a thread."
+        ),
+    )
+    engine_log_path: Path | None = Field(
+        default=None, description="Where the engine logs what it played (None: no log)."
+    )
+
+    @field_validator("cors_origins")
+    @classmethod
+    def _origins(cls, origins: list[str]) -> list[str]:
+        for origin in origins:
+            if origin != "*" and not origin.startswith(("http://", "https://")):
+                raise ValueError(f"cors_origins: {origin!r} must be '*' or start with http(s)://")
+        return origins
+
+    @field_validator("output_device")
+    @classmethod
+    def _output(cls, output: str | None) -> str | None:
+        return output.strip() or None if output is not None else None
+
+    @model_validator(mode="after")
+    def _public_bind_needs_token(self) -> Self:
+        if not is_loopback(self.host) and self.token is None:
+            raise ValueError(
+                f"host={self.host!r} is not a loopback address: binding to it requires a "
+                "token (PHANTOMTOUCH_TOKEN or --token, at least 16 characters)"
+            )
+        return self

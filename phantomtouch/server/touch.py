@@ -1,0 +1,109 @@
+"""Turn a touch request (REST or WebSocket ``play``) into a job on the engine."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from phantomtouch.errors import ParameterError
+from phantomtouch.renderer import plan, preset
+from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema import DeviceProfile, TouchPattern
+from phantomtouch.server.errors import NotFoundError
+from phantomtouch.server.models import (
+    MAX_START_AHEAD_S,
+    JobAccepted,
+    NamedTouch,
+    PatternTouch,
+    PresetTouch,
+    Timing,
+)
+from phantomtouch.server.store import PatternStore
+
+if TYPE_CHECKING:
+    from phantomtouch.engine import Job
+    from phantomtouch.server.engine_access import AnyEngine
+    from phantomtouch.server.service import Service
+
+LATE_START_TOLERANCE_S = 1.0
+"""How far in the past a ``start_at_s`` may lie (it then starts at once)."""
+
+
+def preset_pattern(name: str) -> TouchPattern:
+    """The preset ``name``; an unknown name is a :class:`NotFoundError`."""
+    try:
+        return preset(name)
+    except ParameterError as exc:
+        raise NotFoundError(str(exc), field="preset", value=name) from exc
+
+
+def stored_pattern(store: PatternStore, name: str) -> TouchPattern:
+    """The stored pattern ``name``; an unknown name is a :class:`NotFoundError`."""
+    pattern = store.get(name)
+    if pattern is None:
+        raise NotFoundError(
+            f"pattern={name!r} is not in the pattern library (GET /patterns)",
+            field="pattern",
+            value=name,
+        )
+    return pattern
+
+
+def resolve(request: PatternTouch | PresetTouch | NamedTouch, store: PatternStore) -> TouchPattern:
+    """The pattern a touch request asks for."""
+    if isinstance(request, PresetTouch):
+        return request.apply(preset_pattern(request.preset))
+    if isinstance(request, NamedTouch):
+        return stored_pattern(store, request.pattern)
+    return request.pattern()
+
+
+def plan_for(pattern: TouchPattern, device: DeviceProfile) -> Plan:
+    """Plan a pattern for the device (refusals are :class:`ParameterError`)."""
+    return plan(pattern, device)
+
+
+def start_frame(engine: AnyEngine, timing: Timing) -> int | None:
+    """The engine frame a touch starts at; None: as soon as possible."""
+    if timing.start_in_ms:
+        return engine.frames_at(engine.server_time_s() + timing.start_in_ms / 1000.0)
+    if timing.start_at_s is None:
+        return None
+    now_s = engine.server_time_s()
+    if timing.start_at_s > now_s + MAX_START_AHEAD_S:
+        raise ParameterError(
+            f"start_at_s={timing.start_at_s!r} is more than {MAX_START_AHEAD_S:g} s after the "
+            f"server time now ({now_s:.3f} s, GET /clock)"
+        )
+    if timing.start_at_s < now_s - LATE_START_TOLERANCE_S:
+        raise ParameterError(
+            f"start_at_s={timing.start_at_s!r} is more than {LATE_START_TOLERANCE_S:g} s before "
+            f"the server time now ({now_s:.3f} s, GET /clock)"
+        )
+    return engine.frames_at(max(timing.start_at_s, now_s))
+
+
+def accepted(engine: AnyEngine, job: Job) -> JobAccepted:
+    summary = job.summary
+    return JobAccepted(
+        job_id=str(job.job_id),
+        start_at_s=engine.time_at(job.start_frame),
+        start_frame=job.start_frame,
+        duration_s=job.duration_s,
+        path_length_cm=summary["path_length_cm"],
+        speed_cm_s=summary["speed_cm_s"],
+        frames=job.frames,
+    )
+
+
+def schedule(
+    service: Service,
+    request: PatternTouch | PresetTouch | NamedTouch,
+    *,
+    owner: str | None = None,
+) -> JobAccepted:
+    """Resolve, plan and schedule a touch request; the answer of ``POST /touch``."""
+    engine = service.engine
+    pattern = resolve(request, service.store)
+    first = start_frame(engine, request.timing())
+    job = engine.schedule(service.plans.plan(pattern), start_frame=first, owner=owner)
+    return accepted(engine, job)

@@ -1,0 +1,154 @@
+"""Client messages of the WebSocket ``/ws`` (docs/protocol.md) and their parser."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Any, Literal, cast
+
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr, ValidationError
+
+from phantomtouch.schema import limits
+from phantomtouch.schema.pattern import Carrier, Law
+from phantomtouch.server.errors import ErrorCode, Problem, field_problems, invalid
+from phantomtouch.server.models import NamedTouch, PatternTouch, PresetTouch, touch_request_adapter
+
+PROTOCOL_VERSION = 1
+MAX_NORMAL_VELOCITY_M_S = 10.0
+
+MessageId = StrictInt | Annotated[StrictStr, Field(max_length=64)]
+ContactId = Annotated[str, Field(min_length=1, max_length=64)]
+Coordinate = Annotated[
+    float, Field(ge=-limits.MAX_COORD_CM, le=limits.MAX_COORD_CM, allow_inf_nan=False)
+]
+Intensity = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+NormalVelocity = Annotated[float, Field(ge=0.0, le=MAX_NORMAL_VELOCITY_M_S, allow_inf_nan=False)]
+
+
+class _Message(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    id: MessageId | None = None
+
+
+class Hello(_Message):
+    type: Literal["hello"]
+    client: Annotated[str, Field(max_length=100)] | None = None
+    protocol: Literal[1] = 1
+
+
+class Down(_Message):
+    type: Literal["down"]
+    contact: ContactId
+    x_cm: Coordinate
+    y_cm: Coordinate
+    intensity: Intensity | None = None
+    carrier: Carrier | None = None
+    law: Law = "power"
+    normal_velocity_m_s: NormalVelocity | None = None
+
+
+class Move(_Message):
+    type: Literal["move"]
+    contact: ContactId
+    x_cm: Coordinate
+    y_cm: Coordinate
+    intensity: Intensity | None = None
+
+
+class Up(_Message):
+    type: Literal["up"]
+    contact: ContactId
+    normal_velocity_m_s: NormalVelocity | None = None
+
+
+class Stop(_Message):
+    type: Literal["stop"]
+    job_id: Annotated[str, Field(min_length=1, max_length=64)] | None = None
+
+
+class Ping(_Message):
+    type: Literal["ping"]
+
+
+class Subscribe(_Message):
+    type: Literal["subscribe"]
+    rate_hz: Annotated[float, Field(ge=0.0, le=120.0, allow_inf_nan=False)]
+
+
+class Play(_Message):
+    """``play``: a touch request (the body of ``POST /touch``) with ``type`` and ``id``."""
+
+    type: Literal["play"]
+    request: PatternTouch | PresetTouch | NamedTouch
+
+
+SIMPLE_TYPES: dict[str, type[_Message]] = {
+    "hello": Hello,
+    "down": Down,
+    "move": Move,
+    "up": Up,
+    "stop": Stop,
+    "ping": Ping,
+    "subscribe": Subscribe,
+}
+MESSAGE_TYPES = (*SIMPLE_TYPES, "play")
+
+ClientMessage = Hello | Down | Move | Up | Stop | Ping | Subscribe | Play
+
+
+class MessageError(Exception):
+    """A frame that cannot be handled; carries the answer and the message id if known."""
+
+    def __init__(self, problem: Problem, message_id: Any = None) -> None:
+        super().__init__(problem.message)
+        self.problem = problem
+        self.message_id = message_id
+
+
+def _problem(code: ErrorCode, field: str, value: Any, message: str) -> Problem:
+    return Problem(422, code, message, [{"field": field, "value": value, "message": message}])
+
+
+def _message_id(data: dict[str, Any]) -> Any:
+    value = data.get("id")
+    if isinstance(value, bool) or not isinstance(value, int | str):
+        return None
+    return value if not isinstance(value, str) or len(value) <= 64 else None
+
+
+def parse(text: str) -> ClientMessage:
+    """One text frame as a client message.
+
+    Raises
+    ------
+    MessageError
+        ``invalid_json`` (not JSON), ``invalid`` (not an object, or a field out of range)
+        or ``unknown_type``; with the message's ``id`` when it had a usable one.
+    """
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        message = f"the frame is not JSON: {exc}"
+        raise MessageError(_problem("invalid_json", "body", None, message)) from None
+    if not isinstance(data, dict):
+        message = f"expected a JSON object with a 'type', got {type(data).__name__}"
+        raise MessageError(_problem("invalid", "body", None, message))
+    message_id = _message_id(data)
+    kind = data.get("type")
+    model = SIMPLE_TYPES.get(kind) if isinstance(kind, str) else None
+    try:
+        if model is not None:
+            return cast(ClientMessage, model.model_validate_json(text, strict=True))
+        if kind == "play":
+            request = {k: v for k, v in data.items() if k not in ("type", "id")}
+            return Play(
+                type="play",
+                id=data.get("id"),
+                request=touch_request_adapter.validate_json(json.dumps(request), strict=True),
+            )
+    except ValidationError as exc:
+        raise MessageError(invalid(field_problems(exc.errors())), message_id) from None
+    if kind is None:
+        raise MessageError(_problem("invalid", "type", None, "type: field required"), message_id)
+    message = f"type={kind!r} is not a client message; expected one of {', '.join(MESSAGE_TYPES)}"
+    raise MessageError(_problem("unknown_type", "type", kind, message), message_id)

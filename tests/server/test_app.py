@@ -1,0 +1,88 @@
+"""create_app: the lifespan starts the engine and the store; OpenAPI; token; CORS; page."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from phantomtouch.errors import DeviceError
+from phantomtouch.server import create_app
+from phantomtouch.server.routes.web import STATIC_DIR
+from tests.support.service import make_settings
+
+TOKEN = "s3cret-token-0123456789"
+
+
+@pytest.mark.parametrize("engine_process", [False, True])
+def test_lifespan_runs_the_engine(tmp_path: Path, engine_process: bool) -> None:
+    app = create_app(make_settings(tmp_path, engine_process=engine_process))
+    assert not hasattr(app.state, "service"), "nothing starts before the lifespan"
+    with TestClient(app) as client:
+        engine = app.state.service.engine
+        assert engine.status().running
+        assert client.get("/health").json() == {"status": "ok", "backend": "null"}
+    try:
+        running = engine.status().running
+    except DeviceError:  # a closed engine process answers nothing more
+        running = False
+    assert not running
+    assert (tmp_path / "patterns.db").exists()
+
+
+def test_openapi_documents_error_bodies(client: TestClient) -> None:
+    document = client.get("/openapi.json").json()
+    touch = document["paths"]["/touch"]["post"]
+    assert set(touch["responses"]) == {"202", "401", "404", "413", "422", "503"}
+    assert touch["responses"]["422"]["content"]["application/json"]["schema"] == {
+        "$ref": "#/components/schemas/ErrorBody"
+    }
+    body = touch["requestBody"]["content"]["application/json"]["schema"]
+    assert len(body["oneOf"]) == 3
+    for name in ("PatternTouch", "PresetTouch", "NamedTouch", "TouchPattern", "ErrorBody"):
+        assert name in document["components"]["schemas"]
+    assert "HTTPValidationError" not in document["components"]["schemas"]
+    assert "/ws" not in document["paths"] and "/" not in document["paths"]
+
+
+def test_token_everywhere_but_health(tmp_path: Path) -> None:
+    with TestClient(create_app(make_settings(tmp_path, token=TOKEN))) as client:
+        assert client.get("/health").status_code == 200
+        refused = client.get("/device")
+        assert refused.status_code == 401
+        assert refused.json()["error"]["code"] == "unauthorized"
+        assert client.get("/openapi.json").status_code == 401
+        auth = {"Authorization": f"Bearer {TOKEN}"}
+        assert client.get("/device", headers=auth).status_code == 200
+        document = client.get("/openapi.json", headers=auth).json()
+        assert document["components"]["securitySchemes"]["bearer"]["scheme"] == "bearer"
+        assert document["paths"]["/health"]["get"]["security"] == []
+
+
+def test_cors_allow_list(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path, cors_origins=["http://localhost:5173"])
+    with TestClient(create_app(settings)) as client:
+        preflight = {"Access-Control-Request-Method": "POST"}
+        allowed = client.options("/touch", headers={"Origin": "http://localhost:5173", **preflight})
+        assert allowed.headers["access-control-allow-origin"] == "http://localhost:5173"
+        other = client.options("/touch", headers={"Origin": "http://evil.example", **preflight})
+        assert "access-control-allow-origin" not in other.headers
+
+
+def test_body_limit(tmp_path: Path) -> None:
+    with TestClient(create_app(make_settings(tmp_path, max_body_bytes=2048))) as client:
+        big = {"path": {"kind": "polyline", "points_cm": [[1.0, 2.0]] * 400}, "speed_cm_s": 5}
+        answer = client.post("/touch", json=big)
+        assert answer.status_code == 413
+        assert answer.json()["error"]["code"] == "too_large"
+
+
+def test_web_page(client: TestClient) -> None:
+    page = client.get("/")
+    if (STATIC_DIR / "index.html").is_file():
+        assert page.status_code == 200
+        assert page.headers["content-type"].startswith("text/html")
+    else:
+        assert page.status_code == 404
+        assert page.json()["error"]["code"] == "not_found"

@@ -1,0 +1,121 @@
+"""One mapping from exceptions to status, code and fields; the handlers use it."""
+
+from __future__ import annotations
+
+import pytest
+from fastapi import FastAPI
+from fastapi.testclient import TestClient
+from pydantic import BaseModel, Field, ValidationError
+
+from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError, ProtocolError
+from phantomtouch.server import errors
+from phantomtouch.server.errors import (
+    NotFoundError,
+    RateLimitedError,
+    TooLargeError,
+    UnauthorizedError,
+    describe,
+    field_problems,
+)
+
+
+class Speed(BaseModel):
+    speed_cm_s: float = Field(gt=0, le=1000)
+
+
+@pytest.mark.parametrize(
+    ("exc", "status", "code"),
+    [
+        (ParameterError("speed_cm_s=0 must be > 0"), 422, "invalid"),
+        (ProtocolError("expected down, got move"), 422, "invalid"),
+        (EngineBusyError("queue full"), 503, "busy"),
+        (DeviceError("sound card gone"), 503, "device"),
+        (
+            NotFoundError("job_id='3' is not a known job", field="job_id", value="3"),
+            404,
+            "not_found",
+        ),
+        (TooLargeError("too big", field="body"), 413, "too_large"),
+        (RateLimitedError("slow down", field="body"), 429, "rate_limited"),
+        (UnauthorizedError("token", field="Authorization"), 401, "unauthorized"),
+    ],
+)
+def test_every_error_has_one_status_and_code(exc: Exception, status: int, code: str) -> None:
+    problem = describe(exc)
+    assert (problem.status_code, problem.code) == (status, code)
+    assert problem.message == str(exc)
+
+
+def test_parameter_error_names_its_field() -> None:
+    problem = describe(ParameterError("carrier.freq_hz=30000.0 must be below the Nyquist"))
+    assert problem.fields[0]["field"] == "carrier.freq_hz"
+
+
+def test_validation_error_lists_fields_with_value_and_range() -> None:
+    with pytest.raises(ValidationError) as info:
+        Speed(speed_cm_s=0)
+    problem = describe(info.value)
+    assert problem.status_code == 422
+    assert problem.fields == [
+        {"field": "speed_cm_s", "value": 0, "message": "Input should be greater than 0"}
+    ]
+    assert problem.message == "speed_cm_s=0: Input should be greater than 0"
+
+
+def test_field_problems_drop_location_and_union_tag_and_shorten_values() -> None:
+    problems = field_problems(
+        [
+            {"loc": ("body", "touch", "path", "points_cm", 3), "msg": "bad", "input": "x" * 500},
+            {"loc": ("body", "preset"), "msg": "Field required", "type": "missing", "input": {}},
+        ]
+    )
+    assert problems[0]["field"] == "path.points_cm[3]"
+    assert len(problems[0]["value"]) <= 120
+    assert problems[1] == {"field": "preset", "value": None, "message": "Field required"}
+
+
+def _app() -> FastAPI:
+    app = FastAPI()
+    errors.install(app)
+
+    @app.get("/busy")
+    async def busy() -> None:
+        raise EngineBusyError("the engine's command queue is full (4096 commands)")
+
+    @app.get("/speed")
+    async def speed(speed_cm_s: float) -> dict[str, float]:
+        return {"speed_cm_s": Speed(speed_cm_s=speed_cm_s).speed_cm_s}
+
+    @app.put("/things/{name}")
+    async def put_thing(name: str) -> dict[str, str]:
+        return {"name": name}
+
+    return app
+
+
+def test_handlers_answer_the_error_body() -> None:
+    with TestClient(_app()) as client:
+        busy = client.get("/busy")
+        assert busy.status_code == 503
+        assert busy.headers["retry-after"] == "1"
+        assert busy.json()["error"]["code"] == "busy"
+        speed = client.get("/speed", params={"speed_cm_s": 0})
+        assert speed.status_code == 422
+        assert speed.json()["error"]["fields"][0]["field"] == "speed_cm_s"
+        query = client.get("/speed", params={"speed_cm_s": "fast"})
+        assert query.json()["error"]["fields"][0]["field"] == "speed_cm_s"
+
+
+def test_unknown_route_and_method() -> None:
+    with TestClient(_app()) as client:
+        missing = client.get("/nowhere")
+        assert missing.status_code == 404
+        assert missing.json()["error"]["fields"][0] == {
+            "field": "path",
+            "value": "/nowhere",
+            "message": "no route '/nowhere'; see /openapi.json",
+        }
+        wrong = client.delete("/things/a")
+        assert wrong.status_code == 405
+        assert wrong.headers["allow"] == "PUT"
+        assert wrong.json()["error"]["code"] == "method_not_allowed"

@@ -1,0 +1,67 @@
+"""Token and body-size guards, each on the tiny app it guards."""
+
+from __future__ import annotations
+
+from fastapi import FastAPI, Request
+from fastapi.testclient import TestClient
+
+from phantomtouch.server import errors
+from phantomtouch.server.limits import BodyLimitMiddleware, TokenMiddleware
+
+TOKEN = "t" * 24
+
+
+def _app() -> FastAPI:
+    app = FastAPI()
+    errors.install(app)
+
+    @app.get("/health")
+    async def health() -> dict[str, str]:
+        return {"status": "ok"}
+
+    @app.post("/echo")
+    async def echo(request: Request) -> dict[str, int]:
+        return {"bytes": len(await request.body())}
+
+    return app
+
+
+def test_token_required_except_health() -> None:
+    app = _app()
+    app.add_middleware(TokenMiddleware, token=TOKEN)
+    with TestClient(app) as client:
+        assert client.get("/health").status_code == 200
+        refused = client.post("/echo", content=b"{}")
+        assert refused.status_code == 401
+        assert refused.headers["www-authenticate"] == "Bearer"
+        assert refused.json()["error"]["code"] == "unauthorized"
+        assert refused.json()["error"]["fields"][0]["field"] == "Authorization"
+        wrong = client.post("/echo", content=b"{}", headers={"Authorization": "Bearer nope"})
+        assert wrong.status_code == 401
+        good = client.post("/echo", content=b"{}", headers={"Authorization": f"Bearer {TOKEN}"})
+        assert good.status_code == 200
+        query = client.post(f"/echo?token={TOKEN}", content=b"{}")
+        assert query.status_code == 401, "the query token is for the WebSocket only"
+
+
+def test_body_limit_by_header_and_by_stream() -> None:
+    app = _app()
+    app.add_middleware(BodyLimitMiddleware, max_bytes=1024)
+    with TestClient(app) as client:
+        assert client.post("/echo", content=b"x" * 1024).json() == {"bytes": 1024}
+        big = client.post("/echo", content=b"x" * 1025)
+        assert big.status_code == 413
+        assert big.json()["error"]["code"] == "too_large"
+        assert big.json()["error"]["fields"][0] == {
+            "field": "body",
+            "value": 1025,
+            "message": "request body of 1025 bytes is over the limit of 1024 bytes",
+        }
+
+        def chunks():  # type: ignore[no-untyped-def]
+            for _ in range(4):
+                yield b"x" * 512
+
+        streamed = client.post("/echo", content=chunks())
+        assert streamed.status_code == 413
+        assert streamed.json()["error"]["code"] == "too_large"

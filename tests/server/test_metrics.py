@@ -1,0 +1,70 @@
+"""Prometheus metrics of the requests and, at scrape time, of the engine."""
+
+from __future__ import annotations
+
+from fastapi import FastAPI, Response
+from fastapi.testclient import TestClient
+
+from phantomtouch.server.metrics import CONTENT_TYPE, Metrics, MetricsMiddleware
+
+STATUS = {
+    "active_voices": 3,
+    "active_contacts": [{"owner": "ws-0", "contact": "L", "x_cm": 1.0, "y_cm": 2.0}],
+    "underruns": 2,
+    "late_commands": 5,
+    "limited_blocks": 0,
+    "peak": 0.25,
+    "queue_depth": 1,
+    "levels": [0.25, 0.0],
+}
+
+
+def _app(metrics: Metrics) -> FastAPI:
+    app = FastAPI()
+
+    @app.get("/items/{item}")
+    async def item(item: int) -> dict[str, int]:
+        return {"item": item}
+
+    @app.get("/metrics")
+    async def scrape() -> Response:
+        return Response(metrics.exposition(), media_type=CONTENT_TYPE)
+
+    app.add_middleware(MetricsMiddleware, metrics=metrics)
+    return app
+
+
+def test_requests_by_route_template_and_status() -> None:
+    metrics = Metrics()
+    with TestClient(_app(metrics)) as client:
+        client.get("/items/1")
+        client.get("/items/2")
+        client.get("/items/x")
+        text = client.get("/metrics").text
+    assert (
+        'phantomtouch_http_requests_total{method="GET",route="/items/{item}",status="200"} 2.0'
+        in text
+    )
+    assert 'route="/items/{item}",status="422"} 1.0' in text
+    assert 'phantomtouch_http_request_duration_seconds_count{route="/items/{item}"} 3.0' in text
+
+
+def test_engine_figures_are_read_at_scrape_time() -> None:
+    metrics = Metrics()
+    metrics.watch_engine(lambda: STATUS)
+    text = metrics.exposition().decode()
+    assert "phantomtouch_active_voices 3.0" in text
+    assert "phantomtouch_active_contacts 1.0" in text
+    assert "phantomtouch_underruns_total 2.0" in text
+    assert "phantomtouch_late_commands_total 5.0" in text
+    assert "phantomtouch_peak_level 0.25" in text
+    assert 'phantomtouch_channel_peak_level{channel="1"} 0.25' in text
+    metrics.watch_engine(None)
+    assert "phantomtouch_active_voices" not in metrics.exposition().decode()
+
+
+def test_two_apps_do_not_share_a_registry() -> None:
+    first, second = Metrics(), Metrics()
+    first.ws_messages.labels("in", "move").inc()
+    assert "phantomtouch_ws_messages_total" in first.exposition().decode()
+    assert 'direction="in"' not in second.exposition().decode()

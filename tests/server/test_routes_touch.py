@@ -1,0 +1,107 @@
+"""POST /touch, POST /stop, GET|DELETE /jobs/{job_id} with the engine running."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from fastapi.testclient import TestClient
+
+from phantomtouch.server import create_app
+from tests.support.service import LONG, STROKE, make_settings
+
+
+def test_touch_is_accepted_with_its_plan(client: TestClient) -> None:
+    answer = client.post("/touch", json={**STROKE, "start_in_ms": 50})
+    assert answer.status_code == 202
+    job = answer.json()
+    assert job["duration_s"] == 3.12
+    assert job["path_length_cm"] == 9.6
+    assert job["speed_cm_s"] == 5.0
+    assert job["frames"] == 149760
+    clock = client.get("/clock").json()
+    assert 0.0 < job["start_at_s"] - clock["server_time_s"] < 0.1
+    state = client.get(f"/jobs/{job['job_id']}").json()
+    assert state["state"] in ("scheduled", "playing")
+    assert state["duration_s"] == 3.12
+
+
+def test_preset_with_overrides_and_stored_pattern(client: TestClient) -> None:
+    preset = client.post("/touch", json={"preset": "exp2/curved", "overrides": {"speed_cm_s": 9.6}})
+    assert preset.status_code == 202
+    assert preset.json()["speed_cm_s"] == 9.6
+    assert client.put("/patterns/stroke", json=STROKE).status_code == 200
+    stored = client.post("/touch", json={"pattern": "stroke"})
+    assert stored.status_code == 202
+    assert stored.json()["path_length_cm"] == 9.6
+
+
+def test_unknown_preset_and_pattern_are_404_naming_the_field(client: TestClient) -> None:
+    preset = client.post("/touch", json={"preset": "exp2/curvy"})
+    assert preset.status_code == 404
+    assert preset.json()["error"]["fields"][0]["field"] == "preset"
+    assert "exp2/curved" in preset.json()["error"]["message"], "suggests the close name"
+    pattern = client.post("/touch", json={"pattern": "nope"})
+    assert pattern.status_code == 404
+    assert pattern.json()["error"]["fields"][0] == {
+        "field": "pattern",
+        "value": "nope",
+        "message": "pattern='nope' is not in the pattern library (GET /patterns)",
+    }
+
+
+def test_invalid_touch_names_field_value_and_range(client: TestClient) -> None:
+    answer = client.post("/touch", json={**STROKE, "speed_cm_s": 0})
+    assert answer.status_code == 422
+    assert answer.json() == {
+        "error": {
+            "code": "invalid",
+            "message": "speed_cm_s=0: Input should be greater than 0",
+            "fields": [
+                {"field": "speed_cm_s", "value": 0, "message": "Input should be greater than 0"}
+            ],
+        }
+    }
+    nyquist = client.post("/touch", json={**STROKE, "carrier": {"kind": "sine", "freq_hz": 30000}})
+    assert nyquist.status_code == 422
+    assert nyquist.json()["error"]["fields"][0]["field"] == "carrier.freq_hz"
+    past = client.post("/touch", json={**STROKE, "start_at_s": 1.0})
+    assert past.status_code == 422
+    assert past.json()["error"]["fields"][0]["field"] == "start_at_s"
+
+
+def test_delete_job_stops_it(client: TestClient) -> None:
+    job = client.post("/touch", json=LONG).json()
+    stopped = client.delete(f"/jobs/{job['job_id']}")
+    assert stopped.status_code == 200
+    assert stopped.json()["state"] == "stopped"
+    again = client.delete(f"/jobs/{job['job_id']}")
+    assert again.json()["state"] == "stopped"
+    missing = client.get("/jobs/0123abc")
+    assert missing.status_code == 404
+    assert missing.json()["error"]["fields"][0]["field"] == "job_id"
+
+
+def test_stop_turns_everything_off(client: TestClient) -> None:
+    jobs = [client.post("/touch", json=LONG).json()["job_id"] for _ in range(5)]
+    answer = client.post("/stop")
+    assert answer.status_code == 200
+    assert answer.json()["stopped"] is True
+    assert {client.get(f"/jobs/{j}").json()["state"] for j in jobs} == {"stopped"}
+    engine = client.app.state.service.engine  # type: ignore[attr-defined]
+    deadline = time.monotonic() + 5.0
+    while engine.status().active_voices and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert engine.status().active_voices == 0
+
+
+def test_full_engine_answers_503_busy(tmp_path: Path) -> None:
+    with TestClient(create_app(make_settings(tmp_path, queue_capacity=16))) as client:
+        answers = [client.post("/touch", json=LONG) for _ in range(17)]
+        assert [a.status_code for a in answers[:16]] == [202] * 16
+        busy = answers[16]
+        assert busy.status_code == 503
+        assert busy.headers["retry-after"] == "1"
+        assert busy.json()["error"]["code"] == "busy"
+        assert "queue_capacity=16" in busy.json()["error"]["message"]
+        assert client.post("/stop").status_code == 200, "stop is never refused"

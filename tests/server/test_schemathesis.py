@@ -1,0 +1,74 @@
+"""schemathesis drives the live server from its published /openapi.json alone.
+
+``--checks all`` (schemathesis' checks and ``refusal_names_field`` from st_hooks.py: every
+4xx names the field and says why), a fixed seed, a few hundred generated requests. Nothing
+is excluded. WAV renders are capped at 5 s for this run so that a generated long pattern
+is refused quickly instead of rendered.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.support.live_server import LiveServer
+
+HERE = Path(__file__).resolve().parent
+SCHEMATHESIS = Path(sys.executable).parent / "schemathesis"
+TOKEN = "schemathesis-token-0123456789"
+
+
+def run_schemathesis(server: LiveServer, *args: str, max_examples: int, cwd: Path) -> str:
+    command = [
+        str(SCHEMATHESIS),
+        "--config-file",
+        str(HERE / "schemathesis.toml"),
+        "run",
+        f"{server.url}/openapi.json",
+        "--checks",
+        "all",
+        "--seed",
+        "1",
+        "--max-examples",
+        str(max_examples),
+        "--workers",
+        "1",
+        "--request-timeout",
+        "30",
+        *args,
+    ]
+    env = {**os.environ, "SCHEMATHESIS_HOOKS": str(HERE / "st_hooks.py")}
+    result = subprocess.run(command, env=env, cwd=cwd, capture_output=True, text=True, timeout=600)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output[-20000:]
+    assert " passed" in output and "failed" not in output.split("SUMMARY")[-1], output[-5000:]
+    return output
+
+
+@pytest.mark.slow
+def test_openapi_conformance(tmp_path: Path) -> None:
+    env = {"PHANTOMTOUCH_MAX_RENDER_DURATION_S": "5"}
+    with LiveServer(tmp_path / "patterns.db", env=env) as server:
+        output = run_schemathesis(server, max_examples=40, cwd=tmp_path)
+    print(output.split("SUMMARY")[-1])
+
+
+@pytest.mark.slow
+def test_openapi_conformance_with_a_token(tmp_path: Path) -> None:
+    env = {"PHANTOMTOUCH_MAX_RENDER_DURATION_S": "5"}
+    server = LiveServer(tmp_path / "patterns.db", env=env, args=("--token", TOKEN))
+    with server:
+        output = run_schemathesis(
+            server,
+            "--header",
+            f"Authorization: Bearer {TOKEN}",
+            "--phases",
+            "examples,coverage",
+            max_examples=10,
+            cwd=tmp_path,
+        )
+    print(output.split("SUMMARY")[-1])

@@ -1,0 +1,60 @@
+"""Settings refuse nonsense at start-up."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from pydantic import ValidationError
+
+from phantomtouch.server.settings import Settings, default_db_path, is_loopback
+
+
+def test_defaults_bind_loopback_port_8000(tmp_path: Path) -> None:
+    settings = Settings(db_path=tmp_path / "p.db")
+    assert (settings.host, settings.port, settings.token) == ("127.0.0.1", 8000, None)
+    assert settings.watchdog_s == 2.0
+
+
+def test_environment_prefix(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("PHANTOMTOUCH_PORT", "9123")
+    monkeypatch.setenv("PHANTOMTOUCH_WATCHDOG_S", "0.5")
+    settings = Settings()
+    assert (settings.port, settings.watchdog_s) == (9123, 0.5)
+
+
+@pytest.mark.parametrize("host", ["127.0.0.1", "127.3.2.1", "::1", "[::1]", "localhost"])
+def test_loopback_hosts(host: str) -> None:
+    assert is_loopback(host)
+
+
+@pytest.mark.parametrize("host", ["0.0.0.0", "192.168.1.20", "::", "example.org"])
+def test_public_bind_without_token_is_refused(host: str) -> None:
+    assert not is_loopback(host)
+    with pytest.raises(ValidationError, match="requires a token"):
+        Settings(host=host)
+
+
+def test_public_bind_with_token_is_allowed() -> None:
+    settings = Settings(host="0.0.0.0", token="x" * 16)
+    assert settings.token == "x" * 16
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "expected"),
+    [
+        ("port", 0, "greater than or equal to 1"),
+        ("watchdog_s", 60, "less than or equal to 30"),
+        ("token", "short", "at least 16 characters"),
+        ("cors_origins", ["ftp://x"], "must be '\\*' or start with http"),
+        ("max_body_bytes", 10, "greater than or equal to 1024"),
+    ],
+)
+def test_nonsense_is_refused(field: str, value: object, expected: str) -> None:
+    with pytest.raises(ValidationError, match=expected):
+        Settings(**{field: value})
+
+
+def test_default_db_path_follows_xdg(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))
+    assert default_db_path() == tmp_path / "phantomtouch" / "patterns.db"
