@@ -1,19 +1,17 @@
 """Fixtures for the web page tests: the real service, Debian's chromium, a state observer.
 
-The service runs as a subprocess (``phantomtouch serve``) on a free loopback port with a
-temporary pattern database; chromium is driven by Playwright from ``/usr/bin/chromium``
-(never downloaded). Without either the tests skip, except under ``CI=true``, where they
-fail. Every test leaves a screenshot in ``artifacts/web/`` and fails on console errors.
+The service runs as a subprocess (``phantomtouch serve``, see
+:mod:`tests.support.live_server`) on a free loopback port with a temporary pattern
+database and the null output; chromium is driven by Playwright from
+``/usr/bin/chromium`` (never downloaded). Without either the tests skip, except under
+``CI=true``, where they fail. Every test leaves a screenshot in ``artifacts/web/`` and
+fails on console errors.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
-import socket
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -21,6 +19,7 @@ from typing import Any
 import httpx
 import pytest
 
+from tests.support.live_server import LiveServer
 from tests.web.support import VIEWPORT, ArmbandOnPage, ConsoleErrors, StateObserver, screenshot
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -34,7 +33,6 @@ CHROMIUM_ARGS = [
     "--disable-component-update",
     "--disable-sync",
 ]
-SERVER_START_S = 30.0
 
 
 def unavailable(reason: str) -> None:
@@ -44,65 +42,18 @@ def unavailable(reason: str) -> None:
     pytest.skip(reason)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _wait_healthy(url: str, process: subprocess.Popen[bytes] | None) -> str | None:
-    deadline = time.monotonic() + SERVER_START_S
-    last = "no answer"
-    while time.monotonic() < deadline:
-        if process is not None and process.poll() is not None:
-            return f"exited with code {process.returncode}"
-        try:
-            response = httpx.get(f"{url}/health", timeout=1.0)
-            if response.status_code == 200:
-                return None
-            last = f"GET /health answered {response.status_code}"
-        except httpx.HTTPError as exc:
-            last = str(exc)
-        time.sleep(0.2)
-    return f"not healthy after {SERVER_START_S:g} s: {last}"
-
-
 @pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """Base URL of a running service (started here, stopped at the end of the session)."""
-    tmp = tmp_path_factory.mktemp("server")
-    port = _free_port()
-    url = f"http://127.0.0.1:{port}"
-    log_path = tmp / "server.log"
-    command = [
-        sys.executable,
-        "-m",
-        "phantomtouch",
-        "serve",
-        "--host",
-        "127.0.0.1",
-        "--port",
-        str(port),
-        "--db",
-        str(tmp / "patterns.db"),
-        "--output",
-        "null",
-    ]
-    with log_path.open("wb") as log:
-        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+    live = LiveServer(tmp_path_factory.mktemp("server") / "patterns.db")
     try:
-        problem = _wait_healthy(url, process)
-        if problem is not None:
-            tail = log_path.read_text(errors="replace")[-2000:]
-            unavailable(f"the service ({' '.join(command[2:])}) {problem}\n{tail}")
-        yield url
+        live.start()
+    except RuntimeError as exc:
+        unavailable(f"the service did not start: {exc}")
+    try:
+        yield live.url
     finally:
-        process.terminate()
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+        live.stop()
 
 
 @pytest.fixture(scope="session")
