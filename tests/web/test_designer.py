@@ -204,3 +204,42 @@ def test_a_refused_request_shows_the_server_message(
     screenshot(page, "error_shown")
     page.click("#alerts [role=alert] button")
     assert page.locator("#alerts [role=alert]").count() == 0
+
+
+def test_library_edit_save_play_and_delete(page: Any, server: str, observer: StateObserver) -> None:
+    stored = {
+        "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.0]]},
+        "duration_s": 3.0,
+        "modulation": {"index": 1.0},
+        "level_db": 130.0,
+    }
+    assert httpx.put(f"{server}/patterns/web-test-library", json=stored).status_code == 200
+    page.fill("#speed", "9")  # a setting left over from before is reset by Edit
+    page.click("#refresh-library")
+    item = page.locator("#library li", has_text="web-test-library")
+    item.get_by_role("button", name="Edit web-test-library in the designer").click()
+    wait_for_plan(page, server_plan(server, {"pattern": "web-test-library"}))
+    assert page.input_value("#speed") == ""
+
+    page.fill("#speed", "6")
+    page.select_option("#modulation", "none")
+    page.wait_for_function(
+        "() => document.querySelector('#plan dd[data-key=speed_cm_s]').dataset.value === '6'"
+    )
+    assert page.input_value("#save-name") == "web-test-library"
+    page.click("#save")
+    page.wait_for_function("() => document.getElementById('job').textContent.startsWith('Saved')")
+    saved = httpx.get(f"{server}/patterns/web-test-library").json()
+    assert saved["speed_cm_s"] == 6
+    assert "duration_s" not in saved and "modulation" not in saved
+    assert saved["level_db"] == 130
+
+    start = observer.mark()
+    item.get_by_role("button", name="Play web-test-library").click()
+    observer.wait_for(lambda s: s["active_voices"] >= 1, since=start, what="the saved pattern")
+
+    page.once("dialog", lambda dialog: dialog.accept())
+    item.get_by_role("button", name="Delete web-test-library").click()
+    item.wait_for(state="detached")
+    assert httpx.get(f"{server}/patterns/web-test-library").status_code == 404
+    assert page.input_value("#source").startswith("preset:exp2/")

@@ -53,6 +53,15 @@ export class Designer {
     });
     $("clear-path").addEventListener("click", () => this.setDrawn([]));
     $("refresh-library").addEventListener("click", () => this.loadLibrary());
+    $("reset-settings").addEventListener("click", () => this.resetSettings());
+  }
+
+  // Every setting back to the pattern's own: the path as it is.
+  resetSettings() {
+    const f = this.form;
+    f.speed.value = "";
+    for (const select of [f.carrier, f.modulation, f.intensity, f.law]) select.value = "";
+    this.changed();
   }
 
   async load() {
@@ -406,7 +415,7 @@ export class Designer {
     button("Edit", `Edit ${entry.name} in the designer`, () => {
       this.form.source.value = `saved:${entry.name}`;
       $("save-name").value = entry.name;
-      this.changed();
+      this.resetSettings();
       this.form.source.focus();
     });
     button("Delete", `Delete ${entry.name}`, () => this.deleteSaved(entry.name), "danger small");
