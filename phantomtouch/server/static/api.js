@@ -27,8 +27,12 @@ async function errorFrom(response) {
   return new ApiError(message, { status: response.status, code });
 }
 
+// A service started with a token serves this page at /?token=...; every call carries it.
+export const token = new URLSearchParams(location.search).get("token");
+
 async function request(method, path, { json, accept = "application/json", signal } = {}) {
   const headers = { Accept: accept };
+  if (token) headers.Authorization = `Bearer ${token}`;
   const init = { method, headers, signal };
   if (json !== undefined) {
     headers["Content-Type"] = "application/json";

@@ -1,7 +1,7 @@
 // The page: wires the armband, the live contacts, the designer, the status view and the
 // stop button to the service.
 
-import { api } from "./api.js";
+import { api, token } from "./api.js";
 import { Armband } from "./armband.js";
 import { GainChart } from "./chart.js";
 import { Designer } from "./designer.js";
@@ -77,7 +77,9 @@ function wireConnection(session, status, live) {
 }
 
 async function main() {
-  const session = new Session(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  const query = token ? `?token=${encodeURIComponent(token)}` : "";
+  const session = new Session(`${scheme}://${location.host}/ws${query}`);
   const live = new LiveTouch(session, liveSettings);
   let designer = null;
   const armband = new Armband($("armband"), {
