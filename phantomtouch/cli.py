@@ -195,6 +195,7 @@ def _sound_device(name: str | None) -> int | str | None:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from phantomtouch.analysis import calibration as cal
+    from phantomtouch.analysis.sound_input import input_scale, sounddevice_loop
 
     device = _load_device(args.device)
     settings = cal.CalibrationSettings(
@@ -209,7 +210,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         reference = args.input_reference_db
         if not scale_given:
             reference = device.calibration.reference_level_db + 10.0
-        scale = cal.input_scale(
+        scale = input_scale(
             sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2,
             input_full_scale_v=args.input_full_scale_v,
             input_reference_level_db=reference,
@@ -217,12 +218,12 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         loop = simulated_loop(device, input_scale_m_s2=scale, seed=args.seed)
         play_record, before = loop, loop.place_sensor
     else:
-        scale = cal.input_scale(
+        scale = input_scale(
             sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2,
             input_full_scale_v=args.input_full_scale_v,
             input_reference_level_db=args.input_reference_db,
         )
-        play_record = cal.sounddevice_loop(
+        play_record = sounddevice_loop(
             sample_rate_hz=device.sample_rate_hz,
             output_device=_sound_device(args.output_device),
             input_device=_sound_device(args.input_device),

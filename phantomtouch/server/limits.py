@@ -15,8 +15,16 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from phantomtouch.server.errors import Problem, TooLargeError, UnauthorizedError, describe
 
-OPEN_PATHS = frozenset({"/health"})
-"""Paths that answer without a token (liveness probes)."""
+OPEN_PATHS = frozenset({"/health", "/"})
+"""Paths that answer without a token: the liveness probe and the web page, which holds no
+data; the page itself sends the token of its URL (``/?token=...``) with every request."""
+OPEN_PREFIXES = ("/static/",)
+"""Path prefixes that answer without a token: the web page's static files."""
+
+
+def is_open_path(path: str) -> bool:
+    """Whether ``path`` answers without a token (see :data:`OPEN_PATHS`)."""
+    return path in OPEN_PATHS or path.startswith(OPEN_PREFIXES)
 
 
 def token_matches(scope: Scope, token: str) -> bool:
@@ -42,7 +50,7 @@ async def send_problem(send: Send, problem: Problem) -> None:
 
 
 class TokenMiddleware:
-    """Refuse HTTP requests without the token with 401 (except :data:`OPEN_PATHS`)."""
+    """Refuse HTTP requests without the token with 401 (except :func:`is_open_path`)."""
 
     def __init__(self, app: ASGIApp, token: str) -> None:
         self.app = app
@@ -51,7 +59,7 @@ class TokenMiddleware:
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if (
             scope["type"] == "http"
-            and scope["path"] not in OPEN_PATHS
+            and not is_open_path(scope["path"])
             and not token_matches(scope, self.token)
         ):
             message = "a token is required: send 'Authorization: Bearer <token>'"

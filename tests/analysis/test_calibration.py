@@ -3,13 +3,9 @@ import math
 import pytest
 
 from phantomtouch import DeviceError, DeviceProfile, ParameterError
-from phantomtouch.analysis.calibration import (
-    CalibrationSettings,
-    calibrate,
-    input_scale,
-    sounddevice_loop,
-)
+from phantomtouch.analysis.calibration import CalibrationSettings, calibrate
 from phantomtouch.analysis.profile_file import write_profile
+from phantomtouch.analysis.sound_input import input_scale, sounddevice_loop
 from phantomtouch.analysis.twin import ActuatorModel, ArmbandTwin, TwinLoop, amplitude_m_s2
 
 RATE = 48000

@@ -65,3 +65,26 @@ def test_body_limit_by_header_and_by_stream() -> None:
         streamed = client.post("/echo", content=chunks())
         assert streamed.status_code == 413
         assert streamed.json()["error"]["code"] == "too_large"
+
+
+def test_web_page_and_its_files_answer_without_the_token() -> None:
+    app = FastAPI()
+
+    @app.get("/")
+    def page() -> dict[str, str]:
+        return {"page": "index"}
+
+    @app.get("/static/app.js")
+    def script() -> dict[str, str]:
+        return {"file": "app.js"}
+
+    @app.get("/device")
+    def device() -> dict[str, str]:
+        return {"device": "armband"}
+
+    app.add_middleware(TokenMiddleware, token=TOKEN)
+    with TestClient(app) as client:
+        assert client.get("/").status_code == 200
+        assert client.get("/static/app.js").status_code == 200
+        assert client.get("/device").status_code == 401, "the API still needs the token"
+        assert client.get("/staticfile").status_code == 401, "only the /static/ folder is open"
