@@ -35,6 +35,8 @@ from phantomtouch.schema.pattern import Carrier, TouchPattern
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
 MAX_QUEUE_CAPACITY = 1_000_000
+MAX_VOICES = 64
+"""Default of ``max_voices``: pattern voices that may sound at once."""
 RENDER_AHEAD_FRAMES = 4096
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`)."""
 RENDER_AHEAD_RINGS = 32
@@ -55,6 +57,13 @@ class Engine(DeviceFacts):
     queue_capacity : int, 1 <= queue_capacity <= 1_000_000
         Most jobs and touchdowns waiting to start, and most jobs scheduled or playing at
         once; more raise EngineBusyError.
+    max_voices : int, 1 <= max_voices <= 1_000_000
+        Most pattern voices that may sound at the same time: a job whose frames would
+        overlap ``max_voices`` others is refused with EngineBusyError, so the audio
+        thread is never handed more than it can render. Jobs scheduled for later count
+        only where they overlap. About 40 voices render in real time on a 2-core machine
+        (``benchmarks/bench_engine.py``); the default leaves room above that for short
+        bursts.
     contact : ContactSettings or None
         Attack, release and transients of contacts (and the release of stopped jobs).
     log_path : str, Path or None
@@ -76,6 +85,7 @@ class Engine(DeviceFacts):
         sink: Sink | None = None,
         *,
         queue_capacity: int = 4096,
+        max_voices: int = MAX_VOICES,
         contact: ContactSettings | None = None,
         log_path: str | Path | None = None,
         render_ahead_frames: int = RENDER_AHEAD_FRAMES,
@@ -83,6 +93,8 @@ class Engine(DeviceFacts):
         if not isinstance(device, DeviceProfile):
             raise ParameterError(f"device={device!r} must be a DeviceProfile")
         check_int("queue_capacity", queue_capacity, 1, MAX_QUEUE_CAPACITY)
+        check_int("max_voices", max_voices, 1, MAX_QUEUE_CAPACITY)
+        self._max_voices = max_voices
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
         if contact is not None and not isinstance(contact, ContactSettings):
             raise ParameterError(f"contact={contact!r} must be ContactSettings or None")
@@ -267,6 +279,12 @@ class Engine(DeviceFacts):
                 )
             asap = frame is None
             first = self._scheduler.next_block_frame() if frame is None else frame
+            sounding = self._jobs.overlapping(first, first + resolved.frames)
+            if sounding >= self._max_voices:
+                raise EngineBusyError(
+                    f"{sounding} pattern voices would sound at once from frame {first}; "
+                    f"at most max_voices={self._max_voices}"
+                )
             self._queue.push_start(voice, first, asap)
             self._jobs.add(
                 JobRecord(

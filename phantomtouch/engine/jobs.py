@@ -134,6 +134,20 @@ class JobTable:
         """Jobs scheduled or playing (not stopping, not over)."""
         return len(self._live)
 
+    def overlapping(self, start_frame: int, end_frame: int) -> int:
+        """Jobs not over (stopping ones included) that sound within [start, end) frames."""
+        count = 0
+        for table in (self._live, self._stopping):
+            for record in table.values():
+                first = (
+                    record.requested_start_frame
+                    if record.start_frame is None
+                    else record.start_frame
+                )
+                if first < end_frame and first + record.frames > start_frame:
+                    count += 1
+        return count
+
     def add(self, record: JobRecord) -> None:
         self._live[record.job_id] = record
 

@@ -33,7 +33,7 @@ from typing import Any
 from phantomtouch.engine.checks import check_frame, check_id, check_int, check_range
 from phantomtouch.engine.child import serve
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
+from phantomtouch.engine.engine import MAX_VOICES, RENDER_AHEAD_FRAMES
 from phantomtouch.engine.jobs import Job, JobState, resolve_plan
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.status import DeviceFacts, EngineStatus
@@ -61,7 +61,7 @@ class ProcessEngine(DeviceFacts):
     device : DeviceProfile
     sink : SinkSpec or None
         The sink the child opens; None: ``SinkSpec("default")``.
-    queue_capacity, contact, log_path, render_ahead_frames
+    queue_capacity, max_voices, contact, log_path, render_ahead_frames
         As for :class:`~phantomtouch.engine.Engine` (the child writes the log).
     realtime_priority : int or None, 1 <= realtime_priority <= 99
         SCHED_FIFO priority of the child's own threads (see ``REALTIME_PRIORITY``);
@@ -86,6 +86,7 @@ class ProcessEngine(DeviceFacts):
         sink: SinkSpec | None = None,
         *,
         queue_capacity: int = 4096,
+        max_voices: int = MAX_VOICES,
         contact: ContactSettings | None = None,
         log_path: str | Path | None = None,
         render_ahead_frames: int = RENDER_AHEAD_FRAMES,
@@ -107,6 +108,7 @@ class ProcessEngine(DeviceFacts):
         self._conn, child_conn = context.Pipe()
         options = {
             "queue_capacity": queue_capacity,
+            "max_voices": max_voices,
             "contact": contact,
             "log_path": None if log_path is None else str(log_path),
             "render_ahead_frames": render_ahead_frames,

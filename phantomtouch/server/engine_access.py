@@ -44,12 +44,20 @@ def open_engine(settings: Settings, device: DeviceProfile) -> AnyEngine:
     if settings.engine_process:
         spec = SinkSpec("null") if output == NULL_OUTPUT else SinkSpec("default", output=output)
         engine = ProcessEngine(
-            device, spec, queue_capacity=settings.queue_capacity, log_path=settings.engine_log_path
+            device,
+            spec,
+            queue_capacity=settings.queue_capacity,
+            max_voices=settings.max_voices,
+            log_path=settings.engine_log_path,
         )
     else:
         sink = NullSink(device) if output == NULL_OUTPUT else open_default_sink(device, output)
         engine = Engine(
-            device, sink, queue_capacity=settings.queue_capacity, log_path=settings.engine_log_path
+            device,
+            sink,
+            queue_capacity=settings.queue_capacity,
+            max_voices=settings.max_voices,
+            log_path=settings.engine_log_path,
         )
     engine.start()
     return engine

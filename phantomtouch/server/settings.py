@@ -73,6 +73,15 @@ class Settings(BaseSettings):
     max_concurrent_renders: int = Field(default=2, ge=1, le=64)
     max_render_duration_s: float = Field(default=600.0, gt=0.0, le=7200.0)
     queue_capacity: int = Field(default=4096, ge=16, le=1 << 20)
+    max_voices: int = Field(
+        default=64,
+        ge=1,
+        le=4096,
+        description=(
+            "Most pattern voices that may sound at once; a touch that would overlap more "
+            "is answered 503 busy, so the audio thread keeps real time."
+        ),
+    )
     engine_process: bool = Field(
         default=True,
         description=(

@@ -198,6 +198,27 @@ def test_a_job_stopped_before_it_starts_never_sounds(
     assert engine.status().queue_depth == 0
 
 
+def test_max_voices_bounds_the_voices_that_sound_at_once_not_those_scheduled() -> None:
+    sink = CaptureSink(DEVICE)
+    with Engine(DEVICE, sink, max_voices=3) as engine:
+        first = engine.schedule(stroke(), start_frame=100 * BLOCK)
+        frames = first.frames
+        # Two more overlap the first one (one starts in its middle): three sound at once.
+        engine.schedule(stroke(), start_frame=100 * BLOCK)
+        engine.schedule(stroke(), start_frame=100 * BLOCK + frames // 2)
+        with pytest.raises(EngineBusyError, match="max_voices=3"):
+            engine.schedule(stroke(), start_frame=100 * BLOCK + frames // 2)
+        # Jobs that start after the first two end overlap only the third: accepted.
+        later = 100 * BLOCK + frames
+        engine.schedule(stroke(), start_frame=later)
+        engine.schedule(stroke(), start_frame=later)
+        with pytest.raises(EngineBusyError, match="3 pattern voices would sound at once"):
+            engine.schedule(stroke(), start_frame=later)
+        # Far later, nothing overlaps: many jobs may wait in line as long as they do not.
+        for k in range(10):
+            engine.schedule(stroke(), start_frame=200 * BLOCK + 2 * k * frames)
+
+
 def test_a_full_queue_refuses_new_work_but_stop_all_always_gets_through() -> None:
     sink = CaptureSink(DEVICE)
     with Engine(DEVICE, sink, queue_capacity=3) as engine:

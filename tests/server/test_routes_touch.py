@@ -105,3 +105,14 @@ def test_full_engine_answers_503_busy(tmp_path: Path) -> None:
         assert busy.json()["error"]["code"] == "busy"
         assert "queue_capacity=16" in busy.json()["error"]["message"]
         assert client.post("/stop").status_code == 200, "stop is never refused"
+
+
+def test_more_voices_than_max_voices_at_once_answer_503_busy(tmp_path: Path) -> None:
+    with TestClient(create_app(make_settings(tmp_path, max_voices=2))) as client:
+        answers = [client.post("/touch", json=LONG) for _ in range(3)]
+        assert [a.status_code for a in answers[:2]] == [202, 202]
+        busy = answers[2]
+        assert busy.status_code == 503
+        assert busy.json()["error"]["code"] == "busy"
+        assert "max_voices=2" in busy.json()["error"]["message"]
+        assert client.post("/stop").status_code == 200
