@@ -35,8 +35,9 @@ from phantomtouch.schema.pattern import Carrier, TouchPattern
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
 MAX_QUEUE_CAPACITY = 1_000_000
-MAX_VOICES = 64
-"""Default of ``max_voices``: pattern voices that may sound at once."""
+MAX_VOICES = 40
+"""Default of ``max_voices``: pattern voices that may sound at once (about what a 2-core
+machine renders in real time: ``benchmarks/bench_server.py`` overloads it with taps)."""
 RENDER_AHEAD_FRAMES = 4096
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`)."""
 RENDER_AHEAD_RINGS = 32
@@ -61,9 +62,8 @@ class Engine(DeviceFacts):
         Most pattern voices that may sound at the same time: a job whose frames would
         overlap ``max_voices`` others is refused with EngineBusyError, so the audio
         thread is never handed more than it can render. Jobs scheduled for later count
-        only where they overlap. About 40 voices render in real time on a 2-core machine
-        (``benchmarks/bench_engine.py``); the default leaves room above that for short
-        bursts.
+        only where they overlap. The default, 40, is about what a 2-core machine renders
+        in real time; raise it on a faster one.
     contact : ContactSettings or None
         Attack, release and transients of contacts (and the release of stopped jobs).
     log_path : str, Path or None

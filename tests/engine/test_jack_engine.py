@@ -16,6 +16,7 @@ import numpy as np
 
 from phantomtouch import DeviceProfile, TouchPattern, gains_at, render
 from phantomtouch.engine import Engine, SoundDeviceSink
+from phantomtouch.engine.engine import MAX_VOICES
 from phantomtouch.renderer.carriers import SineSource
 from phantomtouch.renderer.levels import amplitude_for_level
 from phantomtouch.schema import NoiseCarrier, SafetyLimits
@@ -69,13 +70,17 @@ class Session:
 
 @contextmanager
 def over_jack(
-    server: JackServer, device: DeviceProfile = DEVICE, seconds: float = 8.0
+    server: JackServer,
+    device: DeviceProfile = DEVICE,
+    seconds: float = 8.0,
+    *,
+    max_voices: int = MAX_VOICES,
 ) -> Iterator[Session]:
     """An engine on JACK's "system" device, recorded; MARKER plays at frame 0."""
     sink = SoundDeviceSink(device, "system")
     recorder = JackRecorder(server, channels=8, max_frames=int(seconds * RATE))
     assert len(recorder.connect_from("PortAudio")) == 8
-    engine = Engine(device, sink)
+    engine = Engine(device, sink, max_voices=max_voices)
     session = Session(engine, recorder)
     try:
         engine.schedule(MARKER, start_frame=0)
@@ -179,7 +184,8 @@ def test_lifted_contacts_are_silent_within_the_release_time(jack_server: JackSer
 def test_a_hundred_full_level_voices_never_exceed_the_ceiling(jack_server: JackServer) -> None:
     device = DeviceProfile(safety=SafetyLimits(ceiling=0.5))
     loud = stroke(intensity=1.0, path={"kind": "polyline", "points_cm": [[1.9, 7.2]]})
-    with over_jack(jack_server, device) as session:
+    # 60 pattern voices at once: above the default cap, which this test lifts.
+    with over_jack(jack_server, device, max_voices=60) as session:
         engine = session.engine
         start = engine.now_frames + RATE // 2
         jobs = [engine.schedule(loud, start_frame=start) for _ in range(60)]

@@ -100,7 +100,7 @@ def test_the_meters_report_the_output_peaks(rng: np.random.Generator) -> None:
 @pytest.fixture
 def loud_engine() -> Iterator[tuple[Engine, CaptureSink]]:
     sink = CaptureSink(DEVICE)
-    with Engine(DEVICE, sink) as engine:
+    with Engine(DEVICE, sink, max_voices=50) as engine:  # 50 patterns at once, above the default
         yield engine, sink
 
 
