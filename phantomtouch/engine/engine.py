@@ -13,7 +13,6 @@ import threading
 import time
 import uuid
 from pathlib import Path
-from types import TracebackType
 
 from phantomtouch.engine.board import ContactBoard
 from phantomtouch.engine.checks import check_frame, check_id, check_int, check_seconds
@@ -25,7 +24,7 @@ from phantomtouch.engine.jobs import Job, JobRecord, JobState, JobTable, resolve
 from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.scheduler import Scheduler
 from phantomtouch.engine.sinks import NullSink, Sink
-from phantomtouch.engine.status import DeviceFacts, EngineStatus
+from phantomtouch.engine.status import EngineFront, EngineStatus
 from phantomtouch.engine.voices import PatternVoice
 from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError
 from phantomtouch.renderer.plan import Plan
@@ -44,7 +43,7 @@ RENDER_AHEAD_RINGS = 32
 """Pattern voices that can render ahead at once; more render block by block."""
 
 
-class Engine(DeviceFacts):
+class Engine(EngineFront):
     """Plays scheduled patterns and live contacts through a sink, sample-accurately.
 
     Parameters
@@ -166,18 +165,6 @@ class Engine(DeviceFacts):
             self._sink.close()
         finally:
             self._reporter.close()
-
-    def __enter__(self) -> Engine:
-        self.start()
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def _fade_out(self) -> None:
         self.stop_all()

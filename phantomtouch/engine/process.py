@@ -27,7 +27,6 @@ import multiprocessing
 import threading
 import time
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 from phantomtouch.engine.checks import check_frame, check_id, check_int, check_range
@@ -36,7 +35,7 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import MAX_VOICES, RENDER_AHEAD_FRAMES
 from phantomtouch.engine.jobs import Job, JobState, resolve_plan
 from phantomtouch.engine.soundcard import SinkSpec
-from phantomtouch.engine.status import DeviceFacts, EngineStatus
+from phantomtouch.engine.status import EngineFront, EngineStatus
 from phantomtouch.errors import DeviceError, ParameterError, ProtocolError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import limits
@@ -53,7 +52,7 @@ ordinary thread, so a thread that holds the interpreter lock the callback waits 
 not preempted by the host's work."""
 
 
-class ProcessEngine(DeviceFacts):
+class ProcessEngine(EngineFront):
     """:class:`~phantomtouch.engine.Engine`'s API, with the engine in a child process.
 
     Parameters
@@ -188,18 +187,6 @@ class ProcessEngine(DeviceFacts):
             self._process.kill()
             self._process.join()
         self._conn.close()
-
-    def __enter__(self) -> ProcessEngine:
-        self.start()
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # -- clock
 

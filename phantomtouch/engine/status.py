@@ -3,15 +3,35 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any
+from types import TracebackType
+from typing import Any, Self
 
 from phantomtouch.schema.device import DeviceProfile
 
 
-class DeviceFacts:
-    """The device-derived properties shared by :class:`Engine` and its process proxy."""
+class EngineFront:
+    """What :class:`Engine` and its process proxy share: the device's figures, and use as
+    a context manager (``start`` on entry, ``close`` on exit)."""
 
     _device: DeviceProfile
+
+    def start(self) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        self.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
 
     @property
     def device(self) -> DeviceProfile:
