@@ -1,10 +1,11 @@
-"""The control side of live contacts: validation, phantom gains, who is down.
+"""The control side of live contacts: validation, touchdowns, who is down.
 
 :class:`ContactBoard` checks every argument (a bad one raises ParameterError naming it),
-computes a position's channel gains with the renderer's phantom gains (outside the
-audio callback), builds contact voices and keeps the contacts that are down, keyed by
-``(owner, contact)``. The engine calls it under its lock; building a voice (a noise
-carrier pre-rolls its filter) happens before the lock is taken.
+computes a touchdown's channel gains with the renderer's phantom gains (outside the
+audio callback), posts moves as positions (the callback computes their gains, see
+:mod:`phantomtouch.engine.contacts`), builds contact voices and keeps the contacts that
+are down, keyed by ``(owner, contact)``. The engine calls it under its lock; building a
+voice happens before the lock is taken.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 
 from phantomtouch.engine.checks import check_frame, check_id, check_range
 from phantomtouch.engine.commands import CommandQueue
-from phantomtouch.engine.contacts import ContactSettings, ContactVoice, Target
+from phantomtouch.engine.contacts import ContactSettings, ContactVoice, Position, Target
 from phantomtouch.errors import EngineBusyError, ParameterError, ProtocolError
 from phantomtouch.renderer.carriers import make_source
 from phantomtouch.renderer.gains import LAWS, gains_for_points
@@ -215,10 +216,12 @@ class ContactBoard:
             raise ProtocolError(
                 f"contact={contact!r} of owner={owner!r} is not down: expected down, got move"
             )
+        x = check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
+        y = check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
         amplitude = (
             voice.mailbox.amplitude if intensity is None else self.amplitude(intensity, None)
         )
-        voice.mailbox = self.target(x_cm, y_cm, amplitude=amplitude, law=voice.law, frame=frame)
+        voice.mailbox = Position(next(self._serials), x, y, amplitude, frame)
 
     def up(
         self, owner: str, contact: str, *, normal_velocity_m_s: object, at_frame: int | None

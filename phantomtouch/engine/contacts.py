@@ -1,11 +1,14 @@
 """Live contacts: a hand touching the forearm, moved by the newest position.
 
 Each contact (a client's id for one finger or hand) is a :class:`ContactVoice`. The control
-side (:mod:`phantomtouch.engine.board`) turns a position into the 8 channel gains (the
-renderer's phantom gains, power law by default, projected onto the layout) and posts them
-in the voice's one-slot mailbox: the newest position replaces the target, latest wins,
-nothing queues up. Every block the callback ramps the gains linearly from where the last
-block ended to the newest target,
+side (:mod:`phantomtouch.engine.board`) checks a position and posts it, as a
+:class:`Position`, in the voice's one-slot mailbox: the newest position replaces the
+target, latest wins, nothing queues up. At the start of a block the callback takes the
+newest position of every contact that moved and turns them all into channel gains (the
+renderer's phantom gains, power law by default, projected onto the layout) with one
+vectorised call, :class:`ContactGains`: a stream of moves costs the sender only the post,
+and the gains are computed once per block however many moves arrived. Every block the
+callback ramps the gains linearly from where the last block ended to the newest target,
 
     g(i) = g_prev + (g_target - g_prev) (i + 1) / block_frames,
 
@@ -36,6 +39,9 @@ from phantomtouch.engine.checks import check_range
 from phantomtouch.engine.voices import RingPool, Voice, Workspace
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.carriers import CarrierSource
+from phantomtouch.renderer.gains import gains_for_points
+from phantomtouch.renderer.geometry import Geometry
+from phantomtouch.schema.device import DeviceProfile
 
 
 @dataclass(frozen=True)
@@ -83,8 +89,31 @@ class ContactSettings:
 
 
 @dataclass(frozen=True, slots=True)
+class Position:
+    """One posted position of a contact, before its gains are known.
+
+    Attributes
+    ----------
+    serial : int
+        Increases with every post; the callback applies a position once.
+    x_cm, y_cm : float
+        As given (before projection onto the layout).
+    amplitude : float
+        The contact's amplitude from this position on.
+    frame : int or None
+        Frame at which the position applies; None: the next block.
+    """
+
+    serial: int
+    x_cm: float
+    y_cm: float
+    amplitude: float
+    frame: int | None
+
+
+@dataclass(frozen=True, slots=True)
 class Target:
-    """One posted position of a contact.
+    """A position of a contact with its channel gains (the touchdown's).
 
     Attributes
     ----------
@@ -113,8 +142,9 @@ class Target:
 class ContactVoice(Voice):
     """One live contact: a carrier at a moving phantom position.
 
-    Built on the control side by :class:`ContactFactory`; after that the control side
-    only writes :attr:`mailbox`.
+    Built on the control side by :class:`~phantomtouch.engine.board.ContactBoard`; after
+    that the control side only writes :attr:`mailbox`, a :class:`Position`, and the
+    callback applies it through :meth:`pending` and :meth:`retarget`.
     """
 
     kind = "contact"
@@ -135,7 +165,7 @@ class ContactVoice(Voice):
         self.owner = owner
         self.contact = contact
         self.law = law
-        self.mailbox = target
+        self.mailbox = Position(target.serial, target.x_cm, target.y_cm, target.amplitude, None)
         self.down_target = target
         self._source = source
         self._attack_frames = int(attack_frames)
@@ -171,11 +201,37 @@ class ContactVoice(Voice):
     def release(self, frame: int, transient: object | None = None) -> None:
         super().release(frame)
         if isinstance(transient, np.ndarray):
-            self._add_burst(transient, self.mailbox.unit_gains, frame)
+            self._add_burst(transient, self._unit, frame)
 
     def _add_burst(self, burst: np.ndarray, unit: np.ndarray, frame: int) -> None:
         channels = np.flatnonzero(unit)
         self._bursts.append((burst, unit[channels], channels, frame))
+
+    def pending(self, block_end: int) -> Position | None:
+        """The newest position, when it is not applied yet and due before ``block_end``."""
+        box = self.mailbox
+        if box.serial != self._applied and (box.frame is None or box.frame < block_end):
+            return box
+        return None
+
+    def retarget(
+        self, position: Position, unit_gains: np.ndarray, block_start: int, work: Workspace
+    ) -> None:
+        """Ramp towards ``position`` in the block from ``block_start`` (audio callback).
+
+        ``unit_gains``, shape (channels,), float32, are the phantom gains of the position.
+        """
+        if (
+            position.frame is not None
+            and position.frame < block_start
+            and self.start_frame <= block_start
+        ):
+            work.late_commands += 1
+        self._applied = position.serial
+        self._unit = unit_gains
+        self._target = unit_gains * np.float32(position.amplitude)
+        self._channels = np.flatnonzero(self._gains + self._target)
+        self._channel_list = self._channels.tolist()
 
     def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
         frames = mix.shape[0]
@@ -183,15 +239,6 @@ class ContactVoice(Voice):
         offset = max(0, self.start_frame - block_start)
         first = block_start + offset
         count = frames - offset
-        box = self.mailbox
-        if box.serial != self._applied and (box.frame is None or box.frame < block_end):
-            if box.frame is not None and box.frame < block_start and offset == 0:
-                work.late_commands += 1
-            self._applied = box.serial
-            self._target = box.gains
-            self._unit = box.unit_gains
-            self._channels = np.flatnonzero(self._gains + box.gains)
-            self._channel_list = self._channels.tolist()
         silent_from = self.silent_from
         if silent_from is not None:
             count = min(count, silent_from - first)
@@ -260,3 +307,28 @@ class ContactVoice(Voice):
             if frame + burst.shape[0] > block_end:
                 keep.append((burst, gains, channels, frame))
         self._bursts = keep
+
+
+class ContactGains:
+    """Applies the newest positions of all moved contacts with one vectorised call.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+    """
+
+    def __init__(self, device: DeviceProfile) -> None:
+        self._geometry = Geometry.for_device(device)
+
+    def apply(self, voices: list[Voice], block_start: int, block_end: int, work: Workspace) -> None:
+        """Retarget every contact among ``voices`` with a position due before ``block_end``."""
+        due: dict[str, list[tuple[ContactVoice, Position]]] = {}
+        for voice in voices:
+            if isinstance(voice, ContactVoice) and (position := voice.pending(block_end)):
+                due.setdefault(voice.law, []).append((voice, position))
+        for law, moved in due.items():
+            points = np.array([(p.x_cm, p.y_cm) for _, p in moved], dtype=np.float64)
+            unit, _ = gains_for_points(self._geometry, points, law=law, mode="2d")
+            unit32 = unit.astype(np.float32)
+            for row, (voice, position) in enumerate(moved):
+                voice.retarget(position, unit32[row], block_start, work)

@@ -24,6 +24,7 @@ import numpy as np
 
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue, StartCommand
+from phantomtouch.engine.contacts import ContactGains
 from phantomtouch.engine.mixer import Mixer
 from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
 from phantomtouch.schema.device import DeviceProfile
@@ -75,6 +76,7 @@ class Scheduler:
         self.clock = clock
         self.clocked = clocked
         self.mixer = Mixer(device)
+        self.contact_gains = ContactGains(device)
         self.work = Workspace(device.block_frames, device.channels)
         chunk = max(chunk_frames, device.block_frames) if chunk_frames > 0 else 0
         self.pool = RingPool(rings, chunk, device.channels)
@@ -126,6 +128,7 @@ class Scheduler:
                 self._begin(voice, frame, late=False)
         out.fill(0.0)
         if self._voices:
+            self.contact_gains.apply(self._voices, start, end, self.work)
             self._render_voices(out, start)
         self.mixer.finish(out)
         self.active_voices = len(self._voices)
