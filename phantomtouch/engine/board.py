@@ -218,10 +218,38 @@ class ContactBoard:
             )
         x = check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
         y = check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
+        self.post(voice, x, y, intensity, frame)
+
+    def post_checked(
+        self,
+        owner: str,
+        contact: str,
+        x_cm: float,
+        y_cm: float,
+        intensity: float | None,
+        frame: int | None,
+    ) -> None:
+        """Post a position checked by the sender already; a contact not down is ignored.
+
+        Needs no lock (the audio callback posts what another process wrote).
+        """
+        voice = self._contacts.get((owner, contact))
+        if voice is not None:
+            self.post(voice, x_cm, y_cm, intensity, frame)
+
+    def post(
+        self,
+        voice: ContactVoice,
+        x_cm: float,
+        y_cm: float,
+        intensity: float | None,
+        frame: int | None,
+    ) -> None:
+        """Replace the voice's mailbox with a position (None intensity: unchanged)."""
         amplitude = (
             voice.mailbox.amplitude if intensity is None else self.amplitude(intensity, None)
         )
-        voice.mailbox = Position(next(self._serials), x, y, amplitude, frame)
+        voice.mailbox = Position(next(self._serials), x_cm, y_cm, amplitude, frame)
 
     def up(
         self, owner: str, contact: str, *, normal_velocity_m_s: object, at_frame: int | None

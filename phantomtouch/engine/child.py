@@ -5,7 +5,9 @@
 :class:`~phantomtouch.engine.Engine` and answers the host's calls from the pipe, one at a
 time. Messages the host sent without waiting for an answer and before its last
 ``stop_all`` are dropped; a thread applies ``stop_all`` as soon as the host raises its
-mark. When the pipe closes (the host is gone), the engine fades out and the child ends.
+mark. Plans arrive once and are kept under the host's key; contact moves and the clock
+go through shared memory (:mod:`phantomtouch.engine.shared`). When the pipe closes (the
+host is gone), the engine fades out and the child ends.
 """
 
 from __future__ import annotations
@@ -13,12 +15,17 @@ from __future__ import annotations
 import logging
 import os
 import threading
+from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
+from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.engine import Engine
+from phantomtouch.engine.jobs import Job
+from phantomtouch.engine.shared import MoveSlots, SharedClock
 from phantomtouch.engine.sinks import CaptureSink
 from phantomtouch.engine.soundcard import SinkSpec
+from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger(__name__)
@@ -27,13 +34,23 @@ logger = logging.getLogger(__name__)
 class _Child:
     """The engine process: a real Engine served over a pipe."""
 
-    def __init__(self, conn: Connection, engine: Engine, spec: SinkSpec, mark: Any) -> None:
+    def __init__(
+        self, conn: Connection, engine: Engine, spec: SinkSpec, mark: Any, slots: MoveSlots
+    ) -> None:
         self.conn = conn
         self.engine = engine
         self.spec = spec
         self.mark = mark
+        self.slots = slots
         self.handled_mark = 0
         self.stop_lock = threading.Lock()
+        self.plans: dict[int, Plan] = {}
+        self.handlers: dict[str, Callable[..., Any]] = {
+            "schedule": self.schedule,
+            "contact_down": self.contact_down,
+            "contact_up": self.contact_up,
+            "release_owner": self.release_owner,
+        }
 
     def apply_stop_all(self) -> None:
         with self.stop_lock:
@@ -41,6 +58,29 @@ class _Child:
             if mark > self.handled_mark:
                 self.handled_mark = mark
                 self.engine.stop_all()
+                self.slots.unbind_all()
+
+    def schedule(self, plan_key: int, plan: Plan | None, forget: list[int], **kwargs: Any) -> Job:
+        """``Engine.schedule`` with the plan sent once and kept under its key."""
+        for key in forget:
+            self.plans.pop(key, None)
+        if plan is not None:
+            self.plans[plan_key] = plan
+        return self.engine.schedule(self.plans[plan_key], **kwargs)
+
+    def contact_down(self, *args: Any, slot: tuple[int, int], **kwargs: Any) -> None:
+        """``Engine.contact_down``, then the contact's moves come through its slot."""
+        self.engine.contact_down(*args, **kwargs)
+        owner, contact = args[0], args[1]
+        self.slots.bind(slot[0], slot[1], owner, contact)
+
+    def contact_up(self, owner: str, contact: str, **kwargs: Any) -> None:
+        self.slots.unbind(owner, contact)
+        self.engine.contact_up(owner, contact, **kwargs)
+
+    def release_owner(self, owner: str) -> None:
+        self.slots.unbind(owner)
+        self.engine.release_owner(owner)
 
     def watch_stop_all(self, wake: Any) -> None:
         while True:
@@ -63,7 +103,7 @@ class _Child:
             if not answer and seq < self.handled_mark:
                 continue  # sent before a stop_all: void
             try:
-                attribute = getattr(self.engine, method)
+                attribute = self.handlers.get(method) or getattr(self.engine, method)
                 result = attribute(*args, **kwargs) if callable(attribute) else attribute
                 reply = (True, result)
             except Exception as exc:
@@ -99,6 +139,7 @@ def serve(
     mark: Any,
     wake: Any,
     priority: int | None,
+    shared: dict[str, Any],
 ) -> None:
     """The engine process's main function (the target of the child process).
 
@@ -118,15 +159,24 @@ def serve(
         Set by the host with every ``stop_all``.
     priority : int or None
         SCHED_FIFO priority for this process's threads.
+    shared : dict
+        The shared memory: ``clock`` (a :class:`~phantomtouch.engine.shared.SharedClock`'s
+        array), ``slots`` and ``slot_count`` (:class:`~phantomtouch.engine.shared.MoveSlots`).
     """
     raise_priority(priority)
     try:
         device = DeviceProfile.model_validate_json(device_json)
-        engine = Engine(device, spec.open(device), **options)
+        clock = SampleClock(
+            device.sample_rate_hz,
+            publish=SharedClock(device.sample_rate_hz, shared["clock"]).publish,
+        )
+        slots = MoveSlots(shared["slot_count"], shared["slots"])
+        engine = Engine(device, spec.open(device), clock=clock, **options)
+        engine.take_positions(slots)
     except Exception as exc:
         conn.send((False, exc))
         return
     conn.send((True, None))
-    child = _Child(conn, engine, spec, mark)
+    child = _Child(conn, engine, spec, mark, slots)
     threading.Thread(target=child.watch_stop_all, args=(wake,), daemon=True).start()
     child.serve()

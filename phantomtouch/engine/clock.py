@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 FOLLOW = 1.0 / 256.0
 """Fraction of a late arrival the clock moves towards per block."""
@@ -31,21 +32,42 @@ class SampleClock:
     sample_rate_hz : int, > 0
     now_s : float or None
         Server time of frame 0; None: ``time.monotonic()``.
-
-    Attributes
-    ----------
-    output_latency_s : float, >= 0
-        Time from a block's computation to its first frame leaving the sound card.
+    publish : callable or None
+        Called as ``publish(anchor_frame, anchor_s, output_latency_s)`` after every
+        change (from the thread that made it), to share the clock with another process.
     """
 
-    def __init__(self, sample_rate_hz: int, *, now_s: float | None = None) -> None:
+    def __init__(
+        self,
+        sample_rate_hz: int,
+        *,
+        now_s: float | None = None,
+        publish: Callable[[int, float, float], None] | None = None,
+    ) -> None:
         self.sample_rate_hz = int(sample_rate_hz)
-        self.output_latency_s = 0.0
+        self._latency_s = 0.0
         self._anchor: tuple[int, float] = (0, time.monotonic() if now_s is None else now_s)
+        self._publish = publish
+        self._changed()
+
+    def _changed(self) -> None:
+        if self._publish is not None:
+            self._publish(self._anchor[0], self._anchor[1], self._latency_s)
+
+    @property
+    def output_latency_s(self) -> float:
+        """Time from a block's computation to its first frame leaving the sound card, s."""
+        return self._latency_s
+
+    @output_latency_s.setter
+    def output_latency_s(self, value: float) -> None:
+        self._latency_s = float(value)
+        self._changed()
 
     def restart(self, frame: int, now_s: float) -> None:
         """Anchor the clock: ``frame`` is computed at server time ``now_s``."""
         self._anchor = (int(frame), float(now_s))
+        self._changed()
 
     def observe(self, frame: int, now_s: float) -> None:
         """The block starting at ``frame`` is computed at ``now_s`` (audio callback).
@@ -59,14 +81,16 @@ class SampleClock:
             self._anchor = (frame, now_s)
         else:
             self._anchor = (frame, predicted_s + late_s * FOLLOW)
+        if self._publish is not None:
+            self._publish(frame, self._anchor[1], self._latency_s)
 
     def time_at(self, frame: int) -> float:
         """Server time, s, at which ``frame`` leaves the sound card."""
         anchor_frame, anchor_s = self._anchor
-        return anchor_s + (frame - anchor_frame) / self.sample_rate_hz + self.output_latency_s
+        return anchor_s + (frame - anchor_frame) / self.sample_rate_hz + self._latency_s
 
     def frames_at(self, server_time_s: float) -> int:
         """The frame that leaves the sound card at ``server_time_s`` (nearest frame)."""
         anchor_frame, anchor_s = self._anchor
-        offset_s = server_time_s - self.output_latency_s - anchor_s
+        offset_s = server_time_s - self._latency_s - anchor_s
         return anchor_frame + math.floor(offset_s * self.sample_rate_hz + 0.5)

@@ -23,6 +23,7 @@ from phantomtouch.engine.events import Reporter
 from phantomtouch.engine.jobs import Job, JobRecord, JobState, JobTable, resolve_plan
 from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.scheduler import Scheduler
+from phantomtouch.engine.shared import MoveSlots
 from phantomtouch.engine.sinks import NullSink, Sink
 from phantomtouch.engine.status import EngineFront, EngineStatus
 from phantomtouch.engine.voices import PatternVoice
@@ -69,6 +70,9 @@ class Engine(EngineFront):
         Append the stimulus log (JSON lines, :mod:`phantomtouch.engine.log`) here.
     render_ahead_frames : int, >= 0
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
+    clock : SampleClock or None
+        The sample clock to keep, at the device's sample rate (one that publishes itself
+        to another process, say); None: a new one.
 
     Raises
     ------
@@ -88,6 +92,7 @@ class Engine(EngineFront):
         contact: ContactSettings | None = None,
         log_path: str | Path | None = None,
         render_ahead_frames: int = RENDER_AHEAD_FRAMES,
+        clock: SampleClock | None = None,
     ) -> None:
         if not isinstance(device, DeviceProfile):
             raise ParameterError(f"device={device!r} must be a DeviceProfile")
@@ -108,7 +113,13 @@ class Engine(EngineFront):
         self._settings = contact or ContactSettings()
         self._queue = CommandQueue(queue_capacity)
         self._board = ContactBoard(device, self._settings, self._queue)
-        self._clock = SampleClock(device.sample_rate_hz)
+        if clock is not None and (
+            not isinstance(clock, SampleClock) or clock.sample_rate_hz != device.sample_rate_hz
+        ):
+            raise ParameterError(
+                f"clock={clock!r} must be a SampleClock at {device.sample_rate_hz} Hz or None"
+            )
+        self._clock = clock if clock is not None else SampleClock(device.sample_rate_hz)
         self._scheduler = Scheduler(
             device,
             self._queue,
@@ -448,6 +459,16 @@ class Engine(EngineFront):
         """
         with self._lock:
             self._board.release_owner(owner)
+
+    def take_positions(self, slots: MoveSlots) -> None:
+        """Apply, at the start of every block, the positions written into ``slots``.
+
+        For :class:`~phantomtouch.engine.process.ProcessEngine`, whose host writes moves
+        into shared memory: the audio callback posts each new one like
+        :meth:`contact_move` (the host has checked them).
+        """
+        post = self._board.post_checked
+        self._scheduler.intake = lambda: slots.drain(post)
 
     # -- monitoring -------------------------------------------------------------------
 

@@ -9,10 +9,14 @@ with the :class:`~phantomtouch.engine.Engine` API: a child process (``spawn``) o
 sink and a real ``Engine``; this process keeps a thin proxy.
 
 - Calls that answer (``schedule``, ``contact_down``, ``stop``, ``job_state``,
-  ``status``, the clock) are sent through a pipe and wait for the child's answer,
-  errors included (a round trip of some tens of microseconds).
-- ``contact_move``, ``contact_up`` and ``release_owner`` are checked here and sent
-  without waiting, so a 90 Hz stream of moves never blocks the caller.
+  ``status``, ``now_frames``) are sent through a pipe and wait for the child's answer,
+  errors included (a round trip of some tens of microseconds). A plan crosses the pipe
+  once: the child keeps the last ``PLAN_CACHE`` plans under a key.
+- ``time_at`` and ``frames_at`` read the engine's clock from shared memory, and
+  ``contact_move`` writes the newest position into the contact's slot in shared memory,
+  which the audio callback reads every block (:mod:`phantomtouch.engine.shared`): no
+  message, so a stream of moves costs the caller a few microseconds each.
+- ``contact_up`` and ``release_owner`` are checked here and sent without waiting.
 - ``stop_all`` raises a mark in shared memory and wakes a thread in the child: it gets
   through even when the pipe is backed up, and voids everything sent before it.
 - When this process dies, the pipe closes and the child fades out and exits: nothing
@@ -23,20 +27,29 @@ A sink cannot cross processes, so the child opens the one a :class:`SinkSpec` na
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import threading
 import time
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
-from phantomtouch.engine.checks import check_frame, check_id, check_int, check_range
+from phantomtouch.engine.checks import (
+    check_frame,
+    check_id,
+    check_int,
+    check_range,
+    check_seconds,
+)
 from phantomtouch.engine.child import serve
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import MAX_VOICES, RENDER_AHEAD_FRAMES
 from phantomtouch.engine.jobs import Job, JobState, resolve_plan
+from phantomtouch.engine.shared import MoveSlots, SharedClock
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.status import EngineFront, EngineStatus
-from phantomtouch.errors import DeviceError, ParameterError, ProtocolError
+from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError, ProtocolError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
@@ -45,6 +58,8 @@ from phantomtouch.schema.pattern import Carrier, TouchPattern
 START_TIMEOUT_S = 60.0
 """Longest wait for the child to import, open its sink and answer."""
 CLOSE_TIMEOUT_S = 10.0
+PLAN_CACHE = 256
+"""Plans the engine process keeps, so that a pattern played again is not sent again."""
 REALTIME_PRIORITY = 1
 """SCHED_FIFO priority of the engine process's own threads: the lowest real-time one,
 below the audio callback's (JACK gives its clients server priority - 5), above every
@@ -100,7 +115,13 @@ class ProcessEngine(EngineFront):
         self._lock = threading.Lock()
         self._seq = 0
         self._closed = False
-        self._down: set[tuple[str, str]] = set()
+        self._down: dict[tuple[str, str], tuple[int, int]] = {}  # slot, generation
+        self._clock = SharedClock(device.sample_rate_hz)
+        max_contacts = (contact or ContactSettings()).max_contacts
+        self._slots = MoveSlots(max_contacts)
+        self._plans: OrderedDict[int, tuple[int, Plan]] = OrderedDict()  # id(plan): key, plan
+        self._plan_keys = itertools.count(1)
+        self._forget: list[int] = []
         context = multiprocessing.get_context("spawn")
         self._mark = context.Value("q", 0, lock=False)
         self._wake = context.Event()
@@ -122,6 +143,7 @@ class ProcessEngine(EngineFront):
                 self._mark,
                 self._wake,
                 realtime_priority,
+                {"clock": self._clock.raw, "slots": self._slots.raw, "slot_count": max_contacts},
             ),
             name="phantomtouch-engine",
             daemon=True,
@@ -199,10 +221,12 @@ class ProcessEngine(EngineFront):
         return time.monotonic()
 
     def frames_at(self, server_time_s: float) -> int:
-        return int(self._call("frames_at", server_time_s))
+        """See :meth:`Engine.frames_at` (the clock is read from shared memory)."""
+        return self._clock.frames_at(check_seconds("server_time_s", server_time_s))
 
     def time_at(self, frame: int) -> float:
-        return float(self._call("time_at", frame))
+        """See :meth:`Engine.time_at` (the clock is read from shared memory)."""
+        return self._clock.time_at(check_int("frame", frame, -(1 << 62), 1 << 62))
 
     # -- jobs
 
@@ -215,7 +239,26 @@ class ProcessEngine(EngineFront):
     ) -> Job:
         """See :meth:`Engine.schedule`; the pattern is planned here, not in the child."""
         resolved = resolve_plan(pattern, self._device)
-        return self._call("schedule", resolved, start_frame=start_frame, owner=owner)
+        with self._lock:
+            known = self._plans.get(id(resolved))
+            if known is not None and known[1] is resolved:
+                self._plans.move_to_end(id(resolved))
+                key, sent = known[0], None
+            else:
+                key, sent = next(self._plan_keys), resolved
+                self._plans[id(resolved)] = (key, resolved)
+                while len(self._plans) > PLAN_CACHE:
+                    self._forget.append(self._plans.popitem(last=False)[1][0])
+            forget, self._forget = self._forget, []
+        try:
+            return self._call("schedule", key, sent, forget, start_frame=start_frame, owner=owner)
+        except BaseException:
+            with self._lock:
+                self._forget.extend(forget)  # the child may not have seen them
+                if sent is not None:  # nor this plan: send it again next time
+                    self._plans.pop(id(resolved), None)
+                    self._forget.append(key)
+            raise
 
     def job_state(self, job_id: str) -> JobState | None:
         return self._call("job_state", job_id)
@@ -230,6 +273,8 @@ class ProcessEngine(EngineFront):
                 return
             self._seq += 1
             self._mark.value = self._seq
+            for slot, _ in self._down.values():
+                self._slots.release(slot)
             self._down.clear()
         self._wake.set()
 
@@ -248,21 +293,40 @@ class ProcessEngine(EngineFront):
         normal_velocity_m_s: float | None = None,
         at_frame: int | None = None,
     ) -> None:
-        """See :meth:`Engine.contact_down`."""
-        self._call(
-            "contact_down",
-            owner,
-            contact,
-            x_cm,
-            y_cm,
-            intensity=intensity,
-            carrier=carrier,
-            law=law,
-            normal_velocity_m_s=normal_velocity_m_s,
-            at_frame=at_frame,
-        )
+        """See :meth:`Engine.contact_down`; the contact gets a slot for its moves."""
+        key = (owner, contact)
         with self._lock:
-            self._down.add((owner, contact))
+            held = self._down.pop(key, None)
+            slot = held[0] if held is not None else None
+            fresh = self._slots.allocate() if slot is None else (slot, self._slots.renew())
+            if fresh is None:
+                raise EngineBusyError(
+                    f"{len(self._down)} contacts are down; at most "
+                    f"max_contacts={self._slots.capacity}"
+                )
+        try:
+            self._call(
+                "contact_down",
+                owner,
+                contact,
+                x_cm,
+                y_cm,
+                intensity=intensity,
+                carrier=carrier,
+                law=law,
+                normal_velocity_m_s=normal_velocity_m_s,
+                at_frame=at_frame,
+                slot=fresh,
+            )
+        except BaseException:
+            with self._lock:
+                if held is not None:  # the contact that was down stays down
+                    self._down[key] = held
+                else:
+                    self._slots.release(fresh[0])
+            raise
+        with self._lock:
+            self._down[key] = fresh
 
     def contact_move(
         self,
@@ -281,14 +345,14 @@ class ProcessEngine(EngineFront):
         check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
         if intensity is not None:
             check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
-        check_frame("at_frame", at_frame)
-        if (owner, contact) not in self._down:
-            raise ProtocolError(
-                f"contact={contact!r} of owner={owner!r} is not down: expected down, got move"
-            )
-        self._post(
-            "contact_move", owner, contact, x_cm, y_cm, intensity=intensity, at_frame=at_frame
-        )
+        frame = check_frame("at_frame", at_frame)
+        with self._lock:
+            held = self._down.get((owner, contact))
+            if held is None:
+                raise ProtocolError(
+                    f"contact={contact!r} of owner={owner!r} is not down: expected down, got move"
+                )
+            self._slots.write(held[0], held[1], float(x_cm), float(y_cm), intensity, frame)
 
     def contact_up(
         self,
@@ -305,7 +369,9 @@ class ProcessEngine(EngineFront):
             check_range("normal_velocity_m_s", normal_velocity_m_s, -10.0, 10.0, "m/s")
         check_frame("at_frame", at_frame)
         with self._lock:
-            self._down.discard((owner, contact))
+            held = self._down.pop((owner, contact), None)
+            if held is not None:
+                self._slots.release(held[0])
         self._post(
             "contact_up", owner, contact, normal_velocity_m_s=normal_velocity_m_s, at_frame=at_frame
         )
@@ -313,7 +379,8 @@ class ProcessEngine(EngineFront):
     def release_owner(self, owner: str) -> None:
         """See :meth:`Engine.release_owner`; sent without waiting."""
         with self._lock:
-            self._down = {key for key in self._down if key[0] != owner}
+            for key in [key for key in self._down if key[0] == owner]:
+                self._slots.release(self._down.pop(key)[0])
         self._post("release_owner", owner)
 
     def status(self) -> EngineStatus:

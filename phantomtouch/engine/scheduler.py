@@ -18,6 +18,7 @@ from __future__ import annotations
 import heapq
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -59,6 +60,9 @@ class Scheduler:
     last_error : BaseException or None
     events : deque
         Reports for the control side (see the module docstring).
+    intake : callable or None
+        Called at the start of every block, after the commands: posts what arrives
+        outside the queue (contact positions another process writes).
     """
 
     def __init__(
@@ -86,6 +90,7 @@ class Scheduler:
         self.callback_errors = 0
         self.last_error: BaseException | None = None
         self.events: deque[tuple[Any, ...]] = deque()
+        self.intake: Callable[[], None] | None = None
         self._voices: list[Voice] = []
         self._waiting: list[tuple[int, int, Voice]] = []
         self._stop_seen = 0
@@ -126,6 +131,8 @@ class Scheduler:
             frame, _, voice = heapq.heappop(waiting)
             if voice.state == WAITING:
                 self._begin(voice, frame, late=False)
+        if self.intake is not None:
+            self.intake()
         out.fill(0.0)
         if self._voices:
             self.contact_gains.apply(self._voices, start, end, self.work)

@@ -19,8 +19,11 @@ from phantomtouch import (
     ParameterError,
     ProtocolError,
     TouchPattern,
+    plan,
     render,
 )
+from phantomtouch.engine import process
+from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.errors import DeviceError
 from tests.support.jack import JackRecorder, JackServer
@@ -164,3 +167,59 @@ def test_the_engine_process_plays_bit_exact_over_jack(jack_server: JackServer) -
     )
     np.testing.assert_array_equal(recording[at : at + len(reference)], reference)
     assert not np.any(recording[at + len(reference) :])
+
+
+def test_moves_through_shared_memory_reach_the_output(tmp_path: Path) -> None:
+    wav = tmp_path / "moved.wav"
+    with ProcessEngine(DEVICE, SinkSpec("capture", wav_path=str(wav))) as engine:
+        engine.contact_down("hand", "1", 0.0, 0.0, intensity=0.5)  # on actuator 1
+        time.sleep(0.1)
+        for k in range(1, 101):  # a stroke to actuator 8, the last position wins
+            engine.contact_move("hand", "1", 3.8 * k / 100, 14.4 * k / 100)
+        time.sleep(0.2)
+        moved_at = engine.now_frames
+        time.sleep(0.1)
+        engine.contact_up("hand", "1")
+        with pytest.raises(ProtocolError, match="expected down, got move"):
+            engine.contact_move("hand", "1", 1.0, 1.0)
+        time.sleep(0.2)
+    recording, _ = soundfile.read(wav, dtype="float32")
+    first = int(np.flatnonzero(recording.any(axis=1))[0])
+    before = np.abs(recording[first : first + 2400]).max(axis=0)
+    after = np.abs(recording[moved_at : moved_at + 4800]).max(axis=0)
+    assert before[0] > 0.1 and not np.any(before[1:])
+    assert after[7] == pytest.approx(before[0], rel=1e-3) and not np.any(after[:7])
+    assert not np.any(recording[-4800:])
+
+
+def test_contacts_get_slots_up_to_max_contacts() -> None:
+    settings = ContactSettings(max_contacts=2)
+    with ProcessEngine(DEVICE, SinkSpec("null"), contact=settings) as engine:
+        engine.contact_down("a", "1", 1.0, 2.0)
+        engine.contact_down("a", "1", 1.5, 2.0)  # down again: the same contact, one slot
+        engine.contact_down("b", "1", 1.0, 3.0)
+        with pytest.raises(EngineBusyError, match="max_contacts=2"):
+            engine.contact_down("c", "1", 1.0, 4.0)
+        engine.contact_up("a", "1")
+        engine.contact_down("c", "1", 1.0, 4.0)
+        engine.contact_move("c", "1", 2.0, 5.0)
+        engine.release_owner("b")
+        engine.contact_down("d", "1", 1.0, 6.0)
+        wait_until(
+            lambda: (
+                sorted((c["owner"], c["y_cm"]) for c in engine.status().active_contacts)
+                == [("c", 5.0), ("d", 6.0)]
+            )
+        )
+
+
+def test_plans_sent_once_are_kept_and_forgotten_in_turn(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(process, "PLAN_CACHE", 2)
+    patterns = [STROKE.model_copy(update={"speed_cm_s": 10.0 + 5 * k}) for k in range(5)]
+    plans = [plan(pattern, DEVICE) for pattern in patterns]
+    with ProcessEngine(DEVICE, SinkSpec("null"), max_voices=100) as engine:
+        for round_ in range(3):
+            for k, planned in enumerate(plans[: 2 + round_]):
+                job = engine.schedule(planned, start_frame=engine.now_frames + 48000 * 30)
+                assert job.frames == planned.frames, (round_, k)
+                engine.stop(job.job_id)

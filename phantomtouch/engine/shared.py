@@ -1,0 +1,188 @@
+"""What the host and the engine process share without a message: the clock and moves.
+
+:class:`~phantomtouch.engine.process.ProcessEngine` talks to its engine process through a
+pipe, and a message costs both processes a system call, a wake-up and pickling. Two
+things are asked for too often for that:
+
+- the sample clock (``time_at``, ``frames_at``: every ``POST /touch`` answers its start
+  time): :class:`SharedClock` publishes the engine's clock anchor, so the host computes
+  the mapping itself, with the same arithmetic as
+  :class:`~phantomtouch.engine.clock.SampleClock`;
+- contact moves (a VR hand streams them at 90 Hz or more): :class:`MoveSlots` gives every
+  contact that is down a slot in shared memory; the host writes the newest position into
+  it, and the audio callback reads every slot that changed at the start of each block.
+  Latest wins, as in the engine's own mailbox; nothing is queued or pickled.
+
+Both use a sequence lock: the writer makes the sequence number odd, writes, and makes it
+even again; a reader that sees an odd number, or a different one after reading, reads
+again (the clock) or leaves the slot for the next block (moves). Each value has a single
+writer thread. This relies on one thread's stores becoming visible to other processes in
+the order they were made, as on x86-64.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+_CLOCK_FIELDS = 4  # seq, anchor frame, anchor time s, output latency s
+_SLOT_FIELDS = 6  # seq, generation, x_cm, y_cm, intensity (NaN: unchanged), frame (NaN: next)
+
+
+def _raw(count: int) -> Any:
+    return multiprocessing.get_context("spawn").RawArray("d", count)
+
+
+class SharedClock:
+    """The engine clock's anchor, published by the engine process, read by the host.
+
+    Parameters
+    ----------
+    sample_rate_hz : int, > 0
+    raw : multiprocessing RawArray of float64, or None
+        The shared memory (as passed to the child); None: allocate it.
+    """
+
+    def __init__(self, sample_rate_hz: int, raw: Any = None) -> None:
+        self.sample_rate_hz = int(sample_rate_hz)
+        self.raw = raw if raw is not None else _raw(_CLOCK_FIELDS)
+        self._values = np.frombuffer(self.raw, dtype=np.float64)
+
+    def publish(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
+        """Write a new anchor (one writer thread at a time: the engine's); a ``publish``
+        for :class:`~phantomtouch.engine.clock.SampleClock`."""
+        values = self._values
+        values[0] += 1.0
+        values[1] = anchor_frame
+        values[2] = anchor_s
+        values[3] = output_latency_s
+        values[0] += 1.0
+
+    def anchor(self) -> tuple[int, float, float]:
+        """``(anchor_frame, anchor_s, output_latency_s)``, consistent."""
+        values = self._values
+        while True:
+            seq = values[0]
+            frame, anchor_s, latency_s = float(values[1]), float(values[2]), float(values[3])
+            if seq % 2.0 == 0.0 and values[0] == seq:
+                return int(frame), anchor_s, latency_s
+
+    def time_at(self, frame: int) -> float:
+        """As :meth:`~phantomtouch.engine.clock.SampleClock.time_at`."""
+        anchor_frame, anchor_s, latency_s = self.anchor()
+        return anchor_s + (frame - anchor_frame) / self.sample_rate_hz + latency_s
+
+    def frames_at(self, server_time_s: float) -> int:
+        """As :meth:`~phantomtouch.engine.clock.SampleClock.frames_at`."""
+        anchor_frame, anchor_s, latency_s = self.anchor()
+        offset_s = server_time_s - latency_s - anchor_s
+        return anchor_frame + math.floor(offset_s * self.sample_rate_hz + 0.5)
+
+
+class MoveSlots:
+    """One slot per contact that is down: the newest position, written by the host.
+
+    The host binds a slot to a contact when it touches down (with a new generation
+    number, so that what the slot held for an earlier contact is never applied to the
+    new one) and writes moves into it; the engine process binds the slot to the contact
+    once the touchdown is through, and the audio callback hands every new position to
+    the engine.
+
+    Parameters
+    ----------
+    capacity : int, >= 1
+        Slots (the engine's ``contact.max_contacts``).
+    raw : multiprocessing RawArray of float64, or None
+        The shared memory (as passed to the child); None: allocate it.
+    """
+
+    def __init__(self, capacity: int, raw: Any = None) -> None:
+        self.capacity = int(capacity)
+        self.raw = raw if raw is not None else _raw(self.capacity * _SLOT_FIELDS)
+        self._rows = np.frombuffer(self.raw, dtype=np.float64).reshape(self.capacity, _SLOT_FIELDS)
+        # the host's side
+        self._free = list(range(self.capacity - 1, -1, -1))
+        self._generation = 0
+        # the engine process's side
+        self._seen = np.zeros(self.capacity)
+        self._bound: list[tuple[str, str, float] | None] = [None] * self.capacity
+
+    # -- the host ---------------------------------------------------------------------
+
+    def allocate(self) -> tuple[int, int] | None:
+        """A free slot and its new generation, or None when all are taken."""
+        if not self._free:
+            return None
+        self._generation += 1
+        return self._free.pop(), self._generation
+
+    def renew(self) -> int:
+        """A new generation for a slot that changes hands (a contact touching down again)."""
+        self._generation += 1
+        return self._generation
+
+    def release(self, slot: int) -> None:
+        """Give a slot back (its contact is up or gone)."""
+        self._free.append(slot)
+
+    def write(
+        self,
+        slot: int,
+        generation: int,
+        x_cm: float,
+        y_cm: float,
+        intensity: float | None,
+        frame: int | None,
+    ) -> None:
+        """Post a position (one writer thread at a time)."""
+        row = self._rows[slot]
+        row[0] += 1.0
+        row[1] = generation
+        row[2] = x_cm
+        row[3] = y_cm
+        row[4] = math.nan if intensity is None else intensity
+        row[5] = math.nan if frame is None else frame
+        row[0] += 1.0
+
+    # -- the engine process -----------------------------------------------------------
+
+    def bind(self, slot: int, generation: int, owner: str, contact: str) -> None:
+        """The contact is down in the engine: apply what the host writes for it."""
+        self._bound[slot] = (owner, contact, float(generation))
+
+    def unbind(self, owner: str, contact: str | None = None) -> None:
+        """Stop applying the slots of a contact (or of every contact of ``owner``)."""
+        for slot, bound in enumerate(self._bound):
+            if bound is not None and bound[0] == owner and contact in (None, bound[1]):
+                self._bound[slot] = None
+
+    def unbind_all(self) -> None:
+        self._bound = [None] * self.capacity
+
+    def drain(
+        self, post: Callable[[str, str, float, float, float | None, int | None], None]
+    ) -> None:
+        """Hand every new position to ``post(owner, contact, x, y, intensity, frame)``.
+
+        Audio callback: a vectorised look at the sequence numbers, then a copy of each
+        changed row; a row caught mid-write waits for the next block.
+        """
+        rows = self._rows
+        seqs = rows[:, 0].copy()
+        changed = np.flatnonzero(seqs != self._seen)
+        for slot in changed.tolist():
+            row = rows[slot].copy()
+            seq = row[0]
+            if seq % 2.0 != 0.0 or rows[slot, 0] != seq:
+                continue
+            self._seen[slot] = seq
+            bound = self._bound[slot]
+            if bound is None or bound[2] != row[1]:
+                continue
+            intensity = None if math.isnan(row[4]) else float(row[4])
+            frame = None if math.isnan(row[5]) else int(row[5])
+            post(bound[0], bound[1], float(row[2]), float(row[3]), intensity, frame)
