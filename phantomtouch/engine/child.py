@@ -12,8 +12,10 @@ host is gone), the engine fades out and the child ends.
 
 from __future__ import annotations
 
+import gc
 import logging
 import os
+import sys
 import threading
 from collections.abc import Callable
 from multiprocessing.connection import Connection
@@ -29,6 +31,11 @@ from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger(__name__)
+
+SWITCH_INTERVAL_S = 0.001
+"""How soon a thread of the engine process that holds the interpreter lock is asked to
+hand it over, s (Python's default, 5 ms, is longer than a block of 128 frames): the
+audio callback waits at most about this long for the lock."""
 
 
 class _Child:
@@ -164,6 +171,7 @@ def serve(
         array), ``slots`` and ``slot_count`` (:class:`~phantomtouch.engine.shared.MoveSlots`).
     """
     raise_priority(priority)
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     try:
         device = DeviceProfile.model_validate_json(device_json)
         clock = SampleClock(
@@ -176,6 +184,7 @@ def serve(
     except Exception as exc:
         conn.send((False, exc))
         return
+    gc.freeze()  # what start-up made is never scanned again: collections stay short
     conn.send((True, None))
     child = _Child(conn, engine, spec, mark, slots)
     threading.Thread(target=child.watch_stop_all, args=(wake,), daemon=True).start()
