@@ -264,6 +264,8 @@ def underrun_run(seconds: float, *, json_thread: bool, own_process: bool) -> dic
         "jack_xruns": jack_xruns,
         "json_calls_per_s": calls[0] / seconds,
         "switch_interval_ms": sys.getswitchinterval() * 1e3,
+        "render_load_p99": status.render_load_p99,
+        "render_load_max": status.render_load_max,
     }
     if probe is not None:  # the callback runs in this process: where did deadlines go?
         n = min(probe.count, len(probe.starts))
@@ -319,6 +321,10 @@ def main() -> None:
         line = (
             f"{name:28} {run['seconds']:4.0f} s: underruns {run['underruns']:5d} "
             f"(JACK xruns {run['jack_xruns']}), JSON calls/s {run['json_calls_per_s']:.0f}"
+        )
+        line += (
+            f"; engine's render load p99/max over its last 4096 blocks "
+            f"{run['render_load_p99']:.0%}/{run['render_load_max']:.0%}"
         )
         if "callbacks" in run:
             line += (

@@ -480,6 +480,7 @@ class Engine(EngineFront):
             running = self._running
         scheduler = self._scheduler
         mixer = scheduler.mixer
+        load_p99, load_max = scheduler.render_load()
         return EngineStatus(
             backend=self._sink.backend,
             output_device=self._sink.output_device,
@@ -499,4 +500,6 @@ class Engine(EngineFront):
             queue_depth=self._queue.depth,
             queue_capacity=self._queue.capacity,
             running=running,
+            render_load_p99=load_p99,
+            render_load_max=load_max,
         )

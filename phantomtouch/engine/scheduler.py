@@ -30,6 +30,10 @@ from phantomtouch.engine.mixer import Mixer
 from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
 from phantomtouch.schema.device import DeviceProfile
 
+RENDER_TIMES = 4096
+"""Render times the scheduler keeps for :meth:`Scheduler.render_load` (the last 11 s at
+128-frame blocks)."""
+
 
 class Scheduler:
     """Applies commands and renders blocks; owned by the audio callback.
@@ -60,6 +64,9 @@ class Scheduler:
     last_error : BaseException or None
     events : deque
         Reports for the control side (see the module docstring).
+    render_loads : ndarray, shape (RENDER_TIMES,)
+        Wall time of each of the last calls of :meth:`render` over the playing time of
+        the frames it rendered (a ring).
     intake : callable or None
         Called at the start of every block, after the commands: posts what arrives
         outside the queue (contact positions another process writes).
@@ -95,6 +102,8 @@ class Scheduler:
         self._waiting: list[tuple[int, int, Voice]] = []
         self._stop_seen = 0
         self._refill_credit = 0.0
+        self.render_loads = np.zeros(RENDER_TIMES)
+        self._timed = 0
 
     @property
     def late_commands(self) -> int:
@@ -107,8 +116,23 @@ class Scheduler:
 
     def render(self, out: np.ndarray) -> None:
         """Fill ``out`` (frames, channels), float32, with the next frames (the callback)."""
+        began_s = time.monotonic()
         if self.clocked:
-            self.clock.observe(self.frames, time.monotonic())
+            self.clock.observe(self.frames, began_s)
+        self._render_blocks(out)
+        playing_s = out.shape[0] / self.clock.sample_rate_hz
+        self.render_loads[self._timed % RENDER_TIMES] = (time.monotonic() - began_s) / playing_s
+        self._timed += 1
+
+    def render_load(self) -> tuple[float, float]:
+        """p99 and largest render load of the last ``RENDER_TIMES`` calls (any thread;
+        0 before the first call)."""
+        loads = self.render_loads[: min(self._timed, RENDER_TIMES)]
+        if loads.size == 0:
+            return 0.0, 0.0
+        return float(np.percentile(loads, 99)), float(loads.max())
+
+    def _render_blocks(self, out: np.ndarray) -> None:
         step = self.block_frames
         for at in range(0, out.shape[0], step):
             block = out[at : at + step]

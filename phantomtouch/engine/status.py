@@ -81,6 +81,10 @@ class EngineStatus:
     queue_depth, queue_capacity : int
         Voices waiting to start, and how many may wait.
     running : bool
+    render_load_p99, render_load_max : float
+        p99 and largest wall time the audio callback took for a block, over the last
+        4096 blocks, as a fraction of the block's playing time (1.0: the output underruns
+        unless it has more buffered).
     """
 
     backend: str
@@ -101,6 +105,8 @@ class EngineStatus:
     queue_depth: int
     queue_capacity: int
     running: bool
+    render_load_p99: float
+    render_load_max: float
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -78,6 +78,15 @@ class _EngineCollector(Collector):
             "Commands waiting for the audio thread.",
             status["queue_depth"],
         )
+        load = GaugeMetricFamily(
+            "phantomtouch_render_load",
+            "Audio callback time per block over the last 4096 blocks, as a fraction of the "
+            "block's playing time.",
+            labels=["quantile"],
+        )
+        load.add_metric(["0.99"], status["render_load_p99"])
+        load.add_metric(["1"], status["render_load_max"])
+        yield load
         channel = GaugeMetricFamily(
             "phantomtouch_channel_peak_level", "Peak per output channel.", labels=["channel"]
         )

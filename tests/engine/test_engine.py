@@ -336,3 +336,18 @@ def test_the_null_sink_plays_in_real_time() -> None:
         took_s = engine.server_time_s() - began_s
     # blocks are pulled at the pace of the clock: the pattern takes its duration, not less
     assert took_s >= job.duration_s - 2 * BLOCK / 48000
+
+
+def test_the_render_load_is_each_block_s_time_over_its_playing_time(
+    captured: tuple[Engine, CaptureSink], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    engine, sink = captured
+    assert (engine.status().render_load_p99, engine.status().render_load_max) == (0.0, 0.0)
+    block_s = BLOCK / DEVICE.sample_rate_hz
+    ticks = iter(np.arange(0.0, 1000.0, 0.5 * block_s))  # each render: half a period
+    monkeypatch.setattr(time, "monotonic", lambda: float(next(ticks)))
+    sink.pull(10)
+    monkeypatch.undo()
+    status = engine.status()
+    assert status.render_load_p99 == pytest.approx(0.5)
+    assert status.render_load_max == pytest.approx(0.5)

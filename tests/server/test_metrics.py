@@ -16,6 +16,8 @@ STATUS = {
     "peak": 0.25,
     "queue_depth": 1,
     "levels": [0.25, 0.0],
+    "render_load_p99": 0.125,
+    "render_load_max": 0.5,
 }
 
 
@@ -59,6 +61,8 @@ def test_engine_figures_are_read_at_scrape_time() -> None:
     assert "phantomtouch_late_commands_total 5.0" in text
     assert "phantomtouch_peak_level 0.25" in text
     assert 'phantomtouch_channel_peak_level{channel="1"} 0.25' in text
+    assert 'phantomtouch_render_load{quantile="0.99"} 0.125' in text
+    assert 'phantomtouch_render_load{quantile="1"} 0.5' in text
     metrics.watch_engine(None)
     assert "phantomtouch_active_voices" not in metrics.exposition().decode()
 
