@@ -11,11 +11,13 @@
 2. Underruns during 60 s at 128-frame blocks (2.67 ms) on JACK's dummy driver
    (``jackd -p 128``, a private server) while another thread keeps the GIL busy with
    JSON work; 8 pattern voices and 8 contacts moving at 90 Hz play. Counted from
-   PortAudio's underflow flags and JACK's xrun reports. Target: 0. Two shorter runs
-   say why when it is missed: the same without the JSON thread, and the same with the
-   engine in a process of its own (``ProcessEngine``; the JSON thread stays in this
-   process). In-process, the callback's start-to-start gaps and durations show where
-   deadlines were missed.
+   PortAudio's underflow flags and JACK's xrun reports. Target: 0. The 60 s run has the
+   engine in a process of its own (``ProcessEngine``, as the service runs it; the JSON
+   thread stays in this process). Two shorter runs show why: the engine in this
+   process, with and without the JSON thread; there the callback's start-to-start gaps
+   and durations show where deadlines were missed. Every run reports the engine's own
+   render load (p99 and largest callback time over its last 4096 blocks, as a fraction
+   of the block period).
 
 Run: ``python benchmarks/bench_engine.py [--seconds 60] [--diagnose-seconds 20]
 [--blocks 3000] [--json]`` (about 2 minutes with the defaults). Nothing here is
@@ -294,13 +296,15 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     args = parser.parse_args()
     render_rows = render_benchmark(args.blocks)
-    runs = {"Engine, JSON thread": underrun_run(args.seconds, json_thread=True, own_process=False)}
+    runs = {
+        "ProcessEngine, JSON thread": underrun_run(args.seconds, json_thread=True, own_process=True)
+    }
     if args.diagnose_seconds > 0:
+        runs["Engine, JSON thread"] = underrun_run(
+            args.diagnose_seconds, json_thread=True, own_process=False
+        )
         runs["Engine, no JSON thread"] = underrun_run(
             args.diagnose_seconds, json_thread=False, own_process=False
-        )
-        runs["ProcessEngine, JSON thread"] = underrun_run(
-            args.diagnose_seconds, json_thread=True, own_process=True
         )
     if args.json:
         print(json.dumps({"render": render_rows, "underruns": runs}, indent=2))
