@@ -27,11 +27,13 @@ A sink cannot cross processes, so the child opens the one a :class:`SinkSpec` na
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import multiprocessing
+import os
 import threading
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +67,50 @@ REALTIME_PRIORITY = 1
 below the audio callback's (JACK gives its clients server priority - 5), above every
 ordinary thread, so a thread that holds the interpreter lock the callback waits for is
 not preempted by the host's work."""
+
+
+class _Waiter:
+    """Where the answer to one request goes: a thread that waits, or an asyncio future."""
+
+    __slots__ = ("done", "future", "ok", "value")
+
+    def __init__(self, future: asyncio.Future[Any] | None = None) -> None:
+        self.future = future
+        self.done = False
+        self.ok = False
+        self.value: Any = None
+
+    def deliver(self, answer: tuple[bool, Any]) -> None:
+        self.ok, self.value = answer
+        self.done = True
+        future = self.future
+        if future is None:
+            return
+        loop = future.get_loop()
+        if loop.is_closed():
+            return
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            running = None
+        if running is loop:
+            self._settle()
+        else:
+            loop.call_soon_threadsafe(self._settle)
+
+    def _settle(self) -> None:
+        future = self.future
+        if future is None or future.done():
+            return
+        if self.ok:
+            future.set_result(self.value)
+        else:
+            future.set_exception(self.value)
+
+    def result(self) -> Any:
+        if not self.ok:
+            raise self.value
+        return self.value
 
 
 class ProcessEngine(EngineFront):
@@ -112,7 +158,10 @@ class ProcessEngine(EngineFront):
             check_int("realtime_priority", realtime_priority, 1, 99)
         spec = sink if sink is not None else SinkSpec()
         self._device = device
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # sending, and the state kept here
+        self._receiving = threading.Lock()  # reading answers
+        self._waiters: deque[_Waiter] = deque()  # in the order the child answers
+        self._loop: asyncio.AbstractEventLoop | None = None
         self._seq = 0
         self._closed = False
         self._down: dict[tuple[str, str], tuple[int, int]] = {}  # slot, generation
@@ -164,27 +213,80 @@ class ProcessEngine(EngineFront):
         """Process id of the engine process."""
         return self._process.pid
 
-    def _send(self, method: str, args: tuple, kwargs: dict[str, Any], *, answer: bool) -> Any:
+    def _send(
+        self, method: str, args: tuple, kwargs: dict[str, Any], waiter: _Waiter | None
+    ) -> None:
+        """Send a request; with a waiter, its answer is delivered to it (in order)."""
         with self._lock:
             if self._closed:
                 raise DeviceError("the engine is closed")
             self._seq += 1
             try:
-                self._conn.send((self._seq, method, args, kwargs, answer))
-                if not answer:
-                    return None
-                ok, value = self._conn.recv()
+                self._conn.send((self._seq, method, args, kwargs, waiter is not None))
             except (EOFError, OSError) as exc:
                 raise DeviceError(f"the engine process is gone ({exc})") from exc
-        if not ok:
-            raise value
-        return value
+            if waiter is not None:
+                self._waiters.append(waiter)
+
+    def _receive_one(self) -> None:
+        """Deliver the next answer to the oldest waiter (holding ``_receiving``)."""
+        try:
+            answer = self._conn.recv()
+        except (EOFError, OSError) as exc:
+            self._fail_waiters(DeviceError(f"the engine process is gone ({exc})"))
+            raise DeviceError(f"the engine process is gone ({exc})") from exc
+        self._waiters.popleft().deliver(answer)
+
+    def _fail_waiters(self, error: DeviceError) -> None:
+        while self._waiters:
+            self._waiters.popleft().deliver((False, error))
 
     def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
-        return self._send(method, args, kwargs, answer=True)
+        waiter = _Waiter()
+        self._send(method, args, kwargs, waiter)
+        while not waiter.done:
+            with self._receiving:
+                if not waiter.done:
+                    self._receive_one()
+        return waiter.result()
+
+    async def _call_async(self, method: str, *args: Any, **kwargs: Any) -> Any:
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[Any] = loop.create_future()
+        self._send(method, args, kwargs, _Waiter(future))
+        self._watch(loop)  # the pipe stays readable until the answer is read
+        return await future
+
+    def _watch(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Let ``loop`` deliver answers as they arrive (its reader on the pipe)."""
+        if self._loop is loop:
+            return
+        if self._loop is not None and not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(self._loop.remove_reader, self._conn.fileno())
+        self._loop = loop
+        loop.add_reader(self._conn.fileno(), self._drain)
+        # some loops (uvloop) make the pipe non-blocking; answers are read whole, and only
+        # once the pipe is readable, so it stays blocking
+        os.set_blocking(self._conn.fileno(), True)
+
+    def _drain(self) -> None:
+        """The event loop's reader: deliver what has arrived, never wait for more."""
+        if not self._receiving.acquire(blocking=False):
+            return  # a caller is receiving; what is left keeps the pipe readable
+        try:
+            while self._conn.poll(0):
+                if not self._waiters:  # nothing asked for: the pipe has closed
+                    raise DeviceError("the engine process is gone")
+                self._receive_one()
+        except DeviceError:
+            if self._loop is not None:
+                self._loop.remove_reader(self._conn.fileno())
+                self._loop = None
+        finally:
+            self._receiving.release()
 
     def _post(self, method: str, *args: Any, **kwargs: Any) -> None:
-        self._send(method, args, kwargs, answer=False)
+        self._send(method, args, kwargs, None)
 
     # -- life cycle
 
@@ -194,16 +296,27 @@ class ProcessEngine(EngineFront):
 
     def close(self) -> None:
         """Fade out, close the child's engine and sink, end the child. Idempotent."""
+        waiter = _Waiter()
         with self._lock:
             if self._closed:
                 return
             self._closed = True
             try:
                 self._conn.send((self._seq + 1, "close", (), {}, True))
-                if self._conn.poll(CLOSE_TIMEOUT_S):
-                    self._conn.recv()
+                self._waiters.append(waiter)
             except (EOFError, OSError):
                 pass
+        deadline_s = time.monotonic() + CLOSE_TIMEOUT_S
+        with self._receiving:
+            try:
+                while not waiter.done and self._conn.poll(max(0.0, deadline_s - time.monotonic())):
+                    self._receive_one()
+            except DeviceError:
+                pass
+            self._fail_waiters(DeviceError("the engine is closed"))
+        loop, self._loop = self._loop, None
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(loop.remove_reader, self._conn.fileno())
         self._process.join(CLOSE_TIMEOUT_S)
         if self._process.is_alive():
             self._process.kill()
@@ -238,6 +351,39 @@ class ProcessEngine(EngineFront):
         owner: str | None = None,
     ) -> Job:
         """See :meth:`Engine.schedule`; the pattern is planned here, not in the child."""
+        resolved, request = self._schedule_request(pattern)
+        try:
+            job: Job = self._call("schedule", *request, start_frame=start_frame, owner=owner)
+        except BaseException:
+            self._schedule_failed(resolved, request)
+            raise
+        return job
+
+    async def schedule_async(
+        self,
+        pattern: TouchPattern | Plan,
+        *,
+        start_frame: int | None = None,
+        owner: str | None = None,
+    ) -> Job:
+        """:meth:`schedule` for a coroutine: the event loop goes on while the child works.
+
+        The answer is read by the running loop when it arrives, so a server can accept the
+        next request while the engine process schedules this one.
+        """
+        resolved, request = self._schedule_request(pattern)
+        try:
+            job: Job = await self._call_async(
+                "schedule", *request, start_frame=start_frame, owner=owner
+            )
+        except BaseException:
+            self._schedule_failed(resolved, request)
+            raise
+        return job
+
+    def _schedule_request(self, pattern: TouchPattern | Plan) -> tuple[Plan, tuple[Any, ...]]:
+        """The plan, and the child's arguments: its key, the plan unless sent already,
+        and the keys of plans the child may forget."""
         resolved = resolve_plan(pattern, self._device)
         with self._lock:
             known = self._plans.get(id(resolved))
@@ -250,15 +396,15 @@ class ProcessEngine(EngineFront):
                 while len(self._plans) > PLAN_CACHE:
                     self._forget.append(self._plans.popitem(last=False)[1][0])
             forget, self._forget = self._forget, []
-        try:
-            return self._call("schedule", key, sent, forget, start_frame=start_frame, owner=owner)
-        except BaseException:
-            with self._lock:
-                self._forget.extend(forget)  # the child may not have seen them
-                if sent is not None:  # nor this plan: send it again next time
-                    self._plans.pop(id(resolved), None)
-                    self._forget.append(key)
-            raise
+        return resolved, (key, sent, forget)
+
+    def _schedule_failed(self, resolved: Plan, request: tuple[Any, ...]) -> None:
+        key, sent, forget = request
+        with self._lock:
+            self._forget.extend(forget)  # the child may not have seen them
+            if sent is not None:  # nor this plan: send it again next time
+                self._plans.pop(id(resolved), None)
+                self._forget.append(key)
 
     def job_state(self, job_id: str) -> JobState | None:
         return self._call("job_state", job_id)

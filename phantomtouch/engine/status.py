@@ -4,9 +4,14 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 from types import TracebackType
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 from phantomtouch.schema.device import DeviceProfile
+
+if TYPE_CHECKING:
+    from phantomtouch.engine.jobs import Job
+    from phantomtouch.renderer.plan import Plan
+    from phantomtouch.schema.pattern import TouchPattern
 
 
 class EngineFront:
@@ -17,6 +22,25 @@ class EngineFront:
 
     def start(self) -> None:
         raise NotImplementedError
+
+    def schedule(
+        self,
+        pattern: TouchPattern | Plan,
+        *,
+        start_frame: int | None = None,
+        owner: str | None = None,
+    ) -> Job:
+        raise NotImplementedError
+
+    async def schedule_async(
+        self,
+        pattern: TouchPattern | Plan,
+        *,
+        start_frame: int | None = None,
+        owner: str | None = None,
+    ) -> Job:
+        """:meth:`schedule` for a coroutine (an engine in this process answers at once)."""
+        return self.schedule(pattern, start_frame=start_frame, owner=owner)
 
     def close(self) -> None:
         raise NotImplementedError

@@ -230,7 +230,7 @@ class Session:
         elif isinstance(message, Hello):
             await self._send(self._welcome(message))
         elif isinstance(message, Play):
-            job = touch.schedule(self.service, message.request, owner=self.owner)
+            job = await touch.schedule(self.service, message.request, owner=self.owner)
             await self._ok(message, job.model_dump())
         elif isinstance(message, Stop):
             await self._stop(message)

@@ -95,15 +95,18 @@ def accepted(engine: AnyEngine, job: Job) -> JobAccepted:
     )
 
 
-def schedule(
+async def schedule(
     service: Service,
     request: PatternTouch | PresetTouch | NamedTouch,
     *,
     owner: str | None = None,
 ) -> JobAccepted:
-    """Resolve, plan and schedule a touch request; the answer of ``POST /touch``."""
+    """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
+
+    The event loop goes on while an engine process schedules it.
+    """
     engine = service.engine
     pattern = resolve(request, service.store)
     first = start_frame(engine, request.timing())
-    job = engine.schedule(service.plans.plan(pattern), start_frame=first, owner=owner)
+    job = await engine.schedule_async(service.plans.plan(pattern), start_frame=first, owner=owner)
     return accepted(engine, job)

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -223,3 +225,71 @@ def test_plans_sent_once_are_kept_and_forgotten_in_turn(monkeypatch: pytest.Monk
                 job = engine.schedule(planned, start_frame=engine.now_frames + 48000 * 30)
                 assert job.frames == planned.frames, (round_, k)
                 engine.stop(job.job_id)
+
+
+def test_answers_reach_coroutines_and_threads_that_wait_at_once() -> None:
+    plans = [plan(STROKE.model_copy(update={"speed_cm_s": 10.0 + k}), DEVICE) for k in range(6)]
+    with ProcessEngine(DEVICE, SinkSpec("null"), queue_capacity=40, max_voices=100) as engine:
+        later = engine.now_frames + 48000 * 60
+
+        async def schedule_all() -> list[object]:
+            calls = [
+                engine.schedule_async(plans[k % 6], start_frame=later, owner=f"o{k}")
+                for k in range(60)
+            ]
+            return await asyncio.gather(*calls, return_exceptions=True)
+
+        seen: list[int] = []
+        stop = threading.Event()
+
+        def ask() -> None:  # a thread with calls that wait, between the coroutines' answers
+            while not stop.is_set():
+                seen.append(engine.status().queue_capacity)
+
+        thread = threading.Thread(target=ask)
+        thread.start()
+        try:
+            answers = asyncio.run(schedule_all())
+        finally:
+            stop.set()
+            thread.join()
+        jobs = [answer for answer in answers if not isinstance(answer, BaseException)]
+        refused = [answer for answer in answers if isinstance(answer, BaseException)]
+        assert len(jobs) == 40 and all(isinstance(e, EngineBusyError) for e in refused)
+        for k, job in enumerate(answers):
+            if not isinstance(job, BaseException):
+                assert job.frames == plans[k % 6].frames  # type: ignore[attr-defined]
+                assert engine.job_state(job.job_id).owner == f"o{k}"  # type: ignore[attr-defined,union-attr]
+        assert seen and set(seen) == {40}
+
+
+def test_closing_answers_what_waits_and_refuses_what_comes_after() -> None:
+    engine = ProcessEngine(DEVICE, SinkSpec("null"))
+    engine.start()
+
+    async def schedule_then_close() -> None:
+        pending = asyncio.ensure_future(engine.schedule_async(STROKE))
+        await asyncio.sleep(0)  # sent
+        engine.close()
+        assert (await pending).frames == plan(STROKE, DEVICE).frames
+        with pytest.raises(DeviceError, match="closed"):
+            await engine.schedule_async(STROKE)
+
+    asyncio.run(schedule_then_close())
+
+
+def test_a_coroutine_waiting_on_an_engine_process_that_died_gets_a_device_error() -> None:
+    engine = ProcessEngine(DEVICE, SinkSpec("null"))
+    try:
+        engine.start()
+
+        async def schedule_after_death() -> None:
+            await engine.schedule_async(STROKE)  # the loop reads the pipe from now on
+            engine._process.kill()
+            engine._process.join()
+            with pytest.raises(DeviceError, match="gone"):
+                await asyncio.wait_for(engine.schedule_async(STROKE), timeout=10)
+
+        asyncio.run(schedule_after_death())
+    finally:
+        engine.close()

@@ -88,11 +88,11 @@ def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
     summary="Play a stored pattern",
     openapi_extra=PLAY_BODY_OPENAPI,
 )
-def play_pattern(
+async def play_pattern(
     name: PatternNameParam,
     service: ServiceDep,
     timing: Annotated[PlayRequest, Depends(play_body)],
 ) -> JobAccepted:
     """As `POST /touch` with `{"pattern": name}`; optional `start_in_ms` or `start_at_s`."""
     request = NamedTouch(pattern=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
-    return touch.schedule(service, request)
+    return await touch.schedule(service, request)

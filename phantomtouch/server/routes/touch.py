@@ -48,7 +48,7 @@ async def post_touch(request: TouchBody, service: ServiceDep) -> JobAccepted:
     Without `start_in_ms` or `start_at_s` it starts as soon as possible. 404 names an
     unknown preset or stored pattern; 503 `busy` means the engine's queue is full.
     """
-    return touch.schedule(service, request)
+    return await touch.schedule(service, request)
 
 
 @router.post(
