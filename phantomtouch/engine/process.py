@@ -10,7 +10,10 @@ sink and a real ``Engine``; this process keeps a thin proxy.
 
 - Calls that answer (``schedule``, ``contact_down``, ``stop``, ``job_state``,
   ``status``, ``now_frames``) are sent through a pipe and wait for the child's answer,
-  errors included (a round trip of some tens of microseconds). A plan crosses the pipe
+  errors included (a round trip of some tens of microseconds). The child answers in
+  order, and whoever reads an answer hands it to the call it belongs to: a thread that
+  waits, or a coroutine awaiting ``schedule_async``, whose answers the running event
+  loop reads as they arrive (the loop never waits on the pipe). A plan crosses the pipe
   once: the child keeps the last ``PLAN_CACHE`` plans under a key.
 - ``time_at`` and ``frames_at`` read the engine's clock from shared memory, and
   ``contact_move`` writes the newest position into the contact's slot in shared memory,
