@@ -31,6 +31,7 @@ A sink cannot cross processes, so the child opens the one a :class:`SinkSpec` na
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import multiprocessing
 import os
@@ -224,12 +225,14 @@ class ProcessEngine(EngineFront):
             if self._closed:
                 raise DeviceError("the engine is closed")
             self._seq += 1
+            if waiter is not None:  # in line before the answer can arrive
+                self._waiters.append(waiter)
             try:
                 self._conn.send((self._seq, method, args, kwargs, waiter is not None))
             except (EOFError, OSError) as exc:
+                if waiter is not None:
+                    self._waiters.remove(waiter)
                 raise DeviceError(f"the engine process is gone ({exc})") from exc
-            if waiter is not None:
-                self._waiters.append(waiter)
 
     def _receive_one(self) -> None:
         """Deliver the next answer to the oldest waiter (holding ``_receiving``)."""
@@ -304,11 +307,9 @@ class ProcessEngine(EngineFront):
             if self._closed:
                 return
             self._closed = True
-            try:
+            self._waiters.append(waiter)
+            with contextlib.suppress(EOFError, OSError):
                 self._conn.send((self._seq + 1, "close", (), {}, True))
-                self._waiters.append(waiter)
-            except (EOFError, OSError):
-                pass
         deadline_s = time.monotonic() + CLOSE_TIMEOUT_S
         with self._receiving:
             try:
