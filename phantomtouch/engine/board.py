@@ -4,7 +4,7 @@
 computes a position's channel gains with the renderer's phantom gains (outside the
 audio callback), builds contact voices and keeps the contacts that are down, keyed by
 ``(owner, contact)``. The engine calls it under its lock; building a voice (a noise
-carrier pre-rolls its filter) happens before the lock is taken.
+carrier's loop is computed on its first use) happens before the lock is taken.
 """
 
 from __future__ import annotations

@@ -2,8 +2,7 @@
 
 Both the offline render and the engine's pattern voices use :class:`PatternRenderer`,
 so the two give the same samples. Each output sample is a pure function of its frame
-index (and, for noise, of the noise stream, which is consumed in order), so the blocks
-of any block size concatenate to exactly the whole render.
+index, so the blocks of any block size concatenate to exactly the whole render.
 
 Gains are computed every ``device.gain_update_frames`` frames on a grid anchored at
 frame 0, and ramped linearly between grid points (or held, ``gain_ramp=False``).
