@@ -230,8 +230,7 @@ class PatternVoice(Voice):
         at = self._write % self._ring.shape[0]
         piece = self._ring[at : at + frames]
         self._renderer.render_into(piece)
-        used = np.flatnonzero(piece.any(axis=0))
-        lo, hi = (int(used[0]), int(used[-1]) + 1) if used.size else (0, 0)
+        lo, hi = self._renderer.active_span
         self._write += frames
         self._spans.append((self._write, lo, hi))
 
