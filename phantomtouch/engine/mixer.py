@@ -63,9 +63,13 @@ class Limiter:
         highest *= self._calibration
         return float(highest.max())
 
-    def process(self, block: np.ndarray) -> None:
-        """Limit ``block`` (frames, channels), float32, in place."""
-        peak = self.peak(block)
+    def process(self, block: np.ndarray, peak: float | None = None) -> None:
+        """Limit ``block`` (frames, channels), float32, in place.
+
+        ``peak`` is the block's :meth:`peak` when the caller has it already.
+        """
+        if peak is None:
+            peak = self.peak(block)
         if not math.isfinite(peak):
             return  # the output stage mutes the block
         if peak <= self.threshold and self.gain >= 1.0:
@@ -127,8 +131,8 @@ class Mixer:
         Most blocks are finite with calibrated peaks within the limiter's threshold while
         its gain is 1: the limiter, the NaN guard and the clip leave them as they are. On a
         device without FIR such a block is only calibrated, and its levels are its
-        calibrated peaks, found once. Every other block takes the whole chain. Both ways
-        give the same samples and levels.
+        calibrated peaks, found once. Every other block takes the whole chain, whose
+        limiter uses the largest of those peaks. Both ways give the same samples and levels.
         """
         levels = self._channel_peaks(block)
         levels *= self._calibration  # calibrated peaks: rounding keeps the order of |x|
@@ -136,7 +140,7 @@ class Mixer:
         if loudest <= self._untouched_peak and self.limiter.gain >= 1.0 and not self.stage.has_fir:
             self.stage.calibrate(block)
         else:
-            self.limiter.process(block)
+            self.limiter.process(block, loudest)  # loudest is the limiter's peak
             self.stage.process(block)
             loudest = float(self._channel_peaks(block).max())
         if loudest > self.peak:
