@@ -5,7 +5,8 @@ computes a touchdown's channel gains with the renderer's phantom gains (outside 
 audio callback), posts moves as positions (the callback computes their gains, see
 :mod:`phantomtouch.engine.contacts`), builds contact voices and keeps the contacts that
 are down, keyed by ``(owner, contact)``. The engine calls it under its lock; building a
-voice happens before the lock is taken.
+voice (a noise carrier's loop is computed on its first use) happens before the lock is
+taken.
 """
 
 from __future__ import annotations

@@ -173,11 +173,17 @@ class ContactVoice(Voice):
         self._gains = target.gains
         self._target = target.gains
         self._unit = target.unit_gains
-        self._channels = np.flatnonzero(target.gains)
-        self._channel_list: list[int] = self._channels.tolist()
+        self._set_channels(np.flatnonzero(target.gains))
         self._carrier_frames = 0
         self._down_burst = down_burst
         self._bursts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
+
+    def _set_channels(self, channels: np.ndarray) -> None:
+        """The channels the gains drive; all of them are added when they span over half."""
+        self._channels = channels
+        self._channel_list: list[int] = channels.tolist()
+        span = int(channels[-1] - channels[0]) + 1 if channels.size else 0
+        self._wide = 2 * span > len(self._gains)
 
     def _level_before(self, frame: int) -> float:
         """Attack level of the frame before ``frame`` (1 without an attack)."""
@@ -230,8 +236,7 @@ class ContactVoice(Voice):
         self._applied = position.serial
         self._unit = unit_gains
         self._target = unit_gains * np.float32(position.amplitude)
-        self._channels = np.flatnonzero(self._gains + self._target)
-        self._channel_list = self._channels.tolist()
+        self._set_channels(np.flatnonzero(self._gains + self._target))
 
     def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
         frames = mix.shape[0]
@@ -279,8 +284,10 @@ class ContactVoice(Voice):
         env = self._envelope(first, count, work)
         if env is not None:
             signal *= env
+        # Over a wide span, all channels at once: a contiguous add beats one strided add per
+        # channel. The others have gains 0 before and after, so they add zeros.
         channels = self._channels
-        start = self._gains[channels]
+        start = self._gains if self._wide else self._gains[channels]
         if self._target is self._gains:
             block = signal[:, None] * start
         else:
@@ -289,9 +296,13 @@ class ContactVoice(Voice):
                 if count == work.block_frames
                 else (np.arange(1, count + 1, dtype=np.float64) / count).astype(np.float32)
             )
-            block = ramp[:, None] * (self._target[channels] - start)
+            target = self._target if self._wide else self._target[channels]
+            block = ramp[:, None] * (target - start)
             block += start
             block *= signal[:, None]
+        if self._wide:
+            dest += block
+            return
         for column, channel in enumerate(self._channel_list):  # cheaper than a fancy index
             dest[:, channel] += block[:, column]
 

@@ -63,9 +63,13 @@ class Limiter:
         highest *= self._calibration
         return float(highest.max())
 
-    def process(self, block: np.ndarray) -> None:
-        """Limit ``block`` (frames, channels), float32, in place."""
-        peak = self.peak(block)
+    def process(self, block: np.ndarray, peak: float | None = None) -> None:
+        """Limit ``block`` (frames, channels), float32, in place.
+
+        ``peak`` is the block's :meth:`peak` when the caller has it already.
+        """
+        if peak is None:
+            peak = self.peak(block)
         if not math.isfinite(peak):
             return  # the output stage mutes the block
         if peak <= self.threshold and self.gain >= 1.0:
@@ -107,7 +111,10 @@ class Mixer:
         self.stage = OutputStage(device)
         self.levels = np.zeros(device.channels, dtype=np.float32)
         self.peak = 0.0
-        self._magnitude = np.empty((device.block_frames, device.channels), dtype=np.float32)
+        self._calibration = OutputStage.channel_gains(device).astype(np.float32)
+        self._untouched_peak = min(self.limiter.threshold, float(self.stage.ceiling))
+        # channels first: a max along each row is far cheaper than one down the columns
+        self._magnitude = np.empty((device.channels, device.block_frames), dtype=np.float32)
 
     @property
     def muted_blocks(self) -> int:
@@ -119,12 +126,28 @@ class Mixer:
         return self.limiter.limited_blocks
 
     def finish(self, block: np.ndarray) -> None:
-        """Limit, calibrate and clip the mixed ``block`` in place, then meter it."""
-        self.limiter.process(block)
-        self.stage.process(block)
-        magnitude = self._magnitude[: block.shape[0]]
-        np.abs(block, out=magnitude)
-        np.max(magnitude, axis=0, out=self.levels)
-        loudest = float(self.levels.max())
+        """Limit, calibrate and clip the mixed ``block`` in place, then meter it.
+
+        Most blocks are finite with calibrated peaks within the limiter's threshold while
+        its gain is 1: the limiter, the NaN guard and the clip leave them as they are. On a
+        device without FIR such a block is only calibrated, and its levels are its
+        calibrated peaks, found once. Every other block takes the whole chain, whose
+        limiter uses the largest of those peaks. Both ways give the same samples and levels.
+        """
+        levels = self._channel_peaks(block)
+        levels *= self._calibration  # calibrated peaks: rounding keeps the order of |x|
+        loudest = float(levels.max())  # NaN when any sample is NaN: the whole chain
+        if loudest <= self._untouched_peak and self.limiter.gain >= 1.0 and not self.stage.has_fir:
+            self.stage.calibrate(block)
+        else:
+            self.limiter.process(block, loudest)  # loudest is the limiter's peak
+            self.stage.process(block)
+            loudest = float(self._channel_peaks(block).max())
         if loudest > self.peak:
             self.peak = loudest
+
+    def _channel_peaks(self, block: np.ndarray) -> np.ndarray:
+        """Largest absolute sample per channel of ``block``, into :attr:`levels`."""
+        magnitude = self._magnitude[:, : block.shape[0]]
+        np.abs(block.T, out=magnitude)
+        return np.max(magnitude, axis=1, out=self.levels)

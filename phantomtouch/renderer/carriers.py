@@ -1,10 +1,20 @@
 """Carrier signals: sine, band-limited noise and their combination.
 
-Every carrier has the RMS of a unit sine (1/sqrt(2)). The sine's phase is computed per
-sample from the absolute frame index, wrapped in float64, so it neither drifts over
-hours nor depends on how the signal is cut into blocks. Noise is seeded white noise
-through a Butterworth band-pass in second-order sections (a high-order band-pass with a
-low edge is unstable in (b, a) form), normalised by the filter's exact noise gain.
+Every carrier has the RMS of a unit sine (1/sqrt(2)), and every sample is a pure
+function of its absolute frame index, so a carrier can be read in blocks of any size,
+in any order, and the blocks concatenate to exactly the whole signal.
+
+The sine's phase is computed per sample from the absolute frame index, wrapped in
+float64, so it neither drifts over hours nor depends on how the signal is cut into
+blocks.
+
+Noise is a loop of ``NOISE_PERIOD_FRAMES`` frames (21.8 s at 48 kHz), computed once per
+band, seed and sample rate: seeded white Gaussian noise whose spectrum is shaped by the
+magnitude response of a Butterworth band-pass of order ``NOISE_ORDER`` per edge, then
+scaled to RMS 1/sqrt(2) exactly. Shaping a whole period at once makes the loop seamless
+(the filtering is circular) and the noise steady from its first frame, with no
+pre-roll; reading it costs a copy. The period is a choice: longer than the paper's 12 s
+stimuli, so each plays noise that does not repeat, and 4 MB of float32 per loop.
 """
 
 from __future__ import annotations
@@ -13,23 +23,23 @@ from functools import lru_cache
 from typing import Protocol
 
 import numpy as np
-from scipy import signal
 
 from phantomtouch.schema.pattern import Carrier, CombinedCarrier, NoiseCarrier, SineCarrier
 
 NOISE_ORDER = 8
 """Butterworth order of each band edge (48 dB per octave)."""
+NOISE_PERIOD_FRAMES = 2**20
+"""Length of the noise loop, frames (21.8 s at 48 kHz; 4 MB of float32)."""
+_NOISE_TABLES = 8
+"""Noise loops kept at once (32 MB at most); another band or seed computes its own."""
 _SINE_RMS = 1.0 / np.sqrt(2.0)
 
 
 class CarrierSource(Protocol):
-    """A mono carrier, rendered block after block."""
+    """A mono carrier, a pure function of the absolute frame index."""
 
     def block(self, start_frame: int, frames: int) -> np.ndarray:
-        """Frames ``start_frame ..`` of the carrier, shape (frames,), float32.
-
-        Stateful sources require consecutive calls (``start_frame`` continues the last).
-        """
+        """Frames ``start_frame ..`` of the carrier, shape (frames,), float32, a new array."""
         ...
 
 
@@ -47,83 +57,72 @@ class SineSource:
         return np.sin(cycles.astype(np.float32))
 
 
-NOISE_SETTLED = 1e-4
-"""The noise preroll ends when less than this fraction of the band-pass impulse
-response's energy is still to come: the output's variance is then steady to 0.0004 dB."""
+def band_pass_gain(
+    low_hz: float, high_hz: float, sample_rate_hz: int, freqs_hz: np.ndarray
+) -> np.ndarray:
+    """Magnitude response of the noise band-pass at ``freqs_hz``.
 
+    The digital Butterworth band-pass of order ``NOISE_ORDER`` per edge, as the bilinear
+    transform with pre-warped edges makes it (``scipy.signal.butter(NOISE_ORDER, [low_hz,
+    high_hz], "bandpass", fs=sample_rate_hz)``), in closed form: with the warped
+    frequency ``w = 2 fs tan(pi f / fs)``, the gain is ``1 / sqrt(1 + r**(2 NOISE_ORDER))``,
+    ``r = (w**2 - w_low w_high) / (w (w_high - w_low))``. -3 dB at both edges, 0 dB at
+    their geometric mean.
 
-def _butterworth(low_hz: float, high_hz: float, sample_rate_hz: int) -> np.ndarray:
-    return signal.butter(
-        NOISE_ORDER, [low_hz, high_hz], btype="bandpass", fs=sample_rate_hz, output="sos"
-    )
+    Parameters
+    ----------
+    low_hz, high_hz : float, ``0 < low_hz < high_hz < sample_rate_hz / 2``
+    sample_rate_hz : int
+    freqs_hz : ndarray, shape (n,), each in ``[0, sample_rate_hz / 2]``
 
-
-def _slowest_pole_radius(sos: np.ndarray) -> float:
-    return float(max(np.max(np.abs(np.roots(section[3:]))) for section in sos))
-
-
-@lru_cache(maxsize=64)
-def noise_settle_s(low_hz: float, high_hz: float, sample_rate_hz: int) -> float:
-    """About how long the noise band-pass takes to settle, s.
-
-    The time in which the energy of its slowest mode falls to ``NOISE_SETTLED``: about
-    ``8 / bandwidth`` for a narrow band (7.7 s for 20-21 Hz), 0.1 s for 40-500 Hz, two
-    minutes for 1-1.06 Hz.
+    Returns
+    -------
+    ndarray, shape (n,), float64, each in [0, 1]
     """
-    radius = _slowest_pole_radius(_butterworth(low_hz, high_hz, sample_rate_hz))
-    return float(np.log(NOISE_SETTLED) / (2.0 * np.log(radius)) / sample_rate_hz)
+    fs = float(sample_rate_hz)
+    warped = 2.0 * fs * np.tan(np.pi * np.asarray(freqs_hz, dtype=np.float64) / fs)
+    w_low, w_high = (2.0 * fs * np.tan(np.pi * edge / fs) for edge in (low_hz, high_hz))
+    with np.errstate(divide="ignore", over="ignore"):  # 0 Hz and Nyquist: r is +-inf, gain 0
+        ratio = (warped**2 - w_low * w_high) / (warped * (w_high - w_low))
+        return 1.0 / np.sqrt(1.0 + ratio ** (2 * NOISE_ORDER))
 
 
-@lru_cache(maxsize=64)
-def _band_pass_design(
-    low_hz: float, high_hz: float, sample_rate_hz: int
-) -> tuple[np.ndarray, float, int]:
-    sos = _butterworth(low_hz, high_hz, sample_rate_hz)
-    # the impulse response until its slowest mode has decayed by 200 dB
-    decayed = int(np.ceil(np.log(1e-10) / np.log(_slowest_pole_radius(sos))))
-    impulse = np.zeros(max(int(min(60.0, 50.0 / low_hz) * sample_rate_hz), decayed) + 1)
-    impulse[0] = 1.0
-    cumulative = np.cumsum(signal.sosfilt(sos, impulse) ** 2)
-    energy = float(cumulative[-1])
-    settle_frames = int(np.searchsorted(cumulative, (1.0 - NOISE_SETTLED) * energy))
-    return sos, _SINE_RMS / np.sqrt(energy), settle_frames
+@lru_cache(maxsize=_NOISE_TABLES)
+def noise_loop(low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) -> np.ndarray:
+    """One period of the band-limited noise, read-only.
 
+    White Gaussian noise from ``PCG64(seed)``, shaped in the frequency domain by
+    :func:`band_pass_gain` and scaled so that the period's RMS is 1/sqrt(2).
 
-def band_pass(low_hz: float, high_hz: float, sample_rate_hz: int) -> tuple[np.ndarray, float]:
-    """Second-order sections of the noise band-pass and the factor to RMS 1/sqrt(2).
-
-    The factor comes from the energy of the filter's impulse response (its exact noise
-    gain for unit-variance white noise), summed until it has decayed.
+    Returns
+    -------
+    ndarray, shape (NOISE_PERIOD_FRAMES,), float32
     """
-    sos, scale, _ = _band_pass_design(low_hz, high_hz, sample_rate_hz)
-    return sos, scale
+    rng = np.random.Generator(np.random.PCG64(seed))
+    spectrum = np.fft.rfft(rng.standard_normal(NOISE_PERIOD_FRAMES))
+    freqs_hz = np.fft.rfftfreq(NOISE_PERIOD_FRAMES, 1.0 / sample_rate_hz)
+    spectrum *= band_pass_gain(low_hz, high_hz, sample_rate_hz, freqs_hz)
+    noise = np.fft.irfft(spectrum, NOISE_PERIOD_FRAMES)
+    noise *= _SINE_RMS / np.sqrt(np.mean(noise**2))
+    loop = noise.astype(np.float32)
+    loop.flags.writeable = False
+    return loop
 
 
 class NoiseSource:
-    """Seeded Gaussian noise through a band-pass, RMS 1/sqrt(2), steady from frame 0."""
+    """Seeded band-limited Gaussian noise, RMS 1/sqrt(2), a loop of ``NOISE_PERIOD_FRAMES``.
+
+    Frame ``n`` is frame ``n mod NOISE_PERIOD_FRAMES`` of :func:`noise_loop`.
+    """
 
     def __init__(self, low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) -> None:
-        self._sos, self._scale, settle_frames = _band_pass_design(
-            float(low_hz), float(high_hz), int(sample_rate_hz)
-        )
-        self._rng = np.random.Generator(np.random.PCG64(seed))
-        self._state = np.zeros((self._sos.shape[0], 2))
-        self._next_frame = 0
-        preroll = max(int(min(1.0, 8.0 / low_hz) * sample_rate_hz), settle_frames)
-        _, self._state = signal.sosfilt(
-            self._sos, self._rng.standard_normal(preroll), zi=self._state
-        )
+        self._loop = noise_loop(float(low_hz), float(high_hz), int(seed), int(sample_rate_hz))
 
     def block(self, start_frame: int, frames: int) -> np.ndarray:
-        if start_frame != self._next_frame:
-            raise ValueError(
-                f"noise is rendered in order: expected frame {self._next_frame}, got {start_frame}"
-            )
-        self._next_frame += frames
-        out, self._state = signal.sosfilt(
-            self._sos, self._rng.standard_normal(frames), zi=self._state
-        )
-        return (out * self._scale).astype(np.float32)
+        at = start_frame % NOISE_PERIOD_FRAMES
+        if at + frames <= NOISE_PERIOD_FRAMES:
+            return self._loop[at : at + frames].copy()
+        return np.take(self._loop, np.arange(at, at + frames), mode="wrap")  # across the seam
 
 
 class CombinedSource:

@@ -60,7 +60,7 @@ def gains_for_points(
         gains = np.zeros((len(points), geometry.channels))
         triangle, weights, distance = geometry.barycentric(points)
         columns = geometry.columns[geometry.triangles[triangle]]  # (n, 3)
-        np.put_along_axis(gains, columns, apply_law(weights, law), axis=1)
+        gains[np.arange(len(points))[:, None], columns] = apply_law(weights, law)
     elif mode == "1d":
         lower, beta, distance = geometry.row_weights(points[:, 1])
         rows = geometry.row_channels  # (rows, channels): 1 where an actuator of the row sits

@@ -42,10 +42,23 @@ class OutputStage:
         levels = np.array(cal.channel_level_db, dtype=np.float64)
         return np.asarray(10.0 ** ((cal.reference_level_db - levels) / 20.0))
 
-    def process(self, block: np.ndarray) -> None:
-        """Calibrate and limit ``block`` in place, shape (frames, channels), float32."""
+    @property
+    def has_fir(self) -> bool:
+        """The device has FIR correction filters (they carry state from block to block)."""
+        return self._fir is not None
+
+    def calibrate(self, block: np.ndarray) -> None:
+        """Apply the calibration gains alone to ``block`` in place, (frames, channels), float32.
+
+        All :meth:`process` does to a block that is finite, within the ceiling once
+        calibrated, on a device without FIR.
+        """
         if self._gains is not None:
             block *= self._gains
+
+    def process(self, block: np.ndarray) -> None:
+        """Calibrate and limit ``block`` in place, shape (frames, channels), float32."""
+        self.calibrate(block)
         if self._fir is not None:
             for ch, (taps, state) in enumerate(self._fir):
                 filtered, state[:] = signal.lfilter(taps, 1.0, block[:, ch], zi=state)

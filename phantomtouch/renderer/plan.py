@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from phantomtouch.errors import ParameterError
-from phantomtouch.renderer.carriers import noise_settle_s
+from phantomtouch.renderer.carriers import NOISE_PERIOD_FRAMES
 from phantomtouch.renderer.gains import gains_for_points
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.levels import amplitude_for_level, pattern_level_db
@@ -123,11 +123,12 @@ def _check_frequencies(pattern: TouchPattern, sample_rate_hz: int) -> None:
             f"carrier.high_hz={carrier.high_hz!r} must be <= {_NOISE_MAX_EDGE * sample_rate_hz:g} "
             f"Hz ({_NOISE_MAX_EDGE} x sample_rate_hz={sample_rate_hz})"
         )
-    settle_s = noise_settle_s(carrier.low_hz, carrier.high_hz, sample_rate_hz)
-    if settle_s > limits.MAX_NOISE_SETTLE_S:
+    narrowest_hz = limits.MIN_NOISE_LOOP_BINS * sample_rate_hz / NOISE_PERIOD_FRAMES
+    if carrier.high_hz - carrier.low_hz < narrowest_hz:
         raise ParameterError(
             f"carrier.low_hz={carrier.low_hz!r}, carrier.high_hz={carrier.high_hz!r}: this band "
-            f"takes {settle_s:.3g} s to settle; at most {limits.MAX_NOISE_SETTLE_S:g} s: "
+            f"is too narrow for the noise loop of {NOISE_PERIOD_FRAMES} frames; at "
+            f"sample_rate_hz={sample_rate_hz} it must be at least {narrowest_hz:.3g} Hz wide: "
             "widen the band"
         )
 

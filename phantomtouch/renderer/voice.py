@@ -2,8 +2,7 @@
 
 Both the offline render and the engine's pattern voices use :class:`PatternRenderer`,
 so the two give the same samples. Each output sample is a pure function of its frame
-index (and, for noise, of the noise stream, which is consumed in order), so the blocks
-of any block size concatenate to exactly the whole render.
+index, so the blocks of any block size concatenate to exactly the whole render.
 
 Gains are computed every ``device.gain_update_frames`` frames on a grid anchored at
 frame 0, and ramped linearly between grid points (or held, ``gain_ramp=False``).
@@ -89,6 +88,14 @@ class PatternRenderer:
     ----------
     plan : Plan
 
+    Attributes
+    ----------
+    position_frames : int
+        First frame of the next block.
+    active_span : tuple of int
+        Channels ``lo:hi`` outside which the last block rendered is 0 (its gains are 0
+        there); ``(0, 0)`` when it is silent.
+
     Notes
     -----
     Frames past ``plan.frames`` are silent. A block whose non-zero gains span at most
@@ -99,6 +106,7 @@ class PatternRenderer:
     def __init__(self, plan: Plan) -> None:
         self.plan = plan
         self.position_frames = 0
+        self.active_span = (0, 0)
         self._carrier: CarrierSource = make_source(plan.pattern.carrier, plan.sample_rate_hz)
         self._step = plan.device.gain_update_frames
         self._ramp = plan.device.gain_ramp
@@ -135,6 +143,7 @@ class PatternRenderer:
         frames = min(out.shape[0], self.remaining_frames)
         if overwrite:
             out[frames:] = 0.0
+        self.active_span = (0, 0)
         if frames <= 0:
             return
         first = self.position_frames
@@ -151,6 +160,7 @@ class PatternRenderer:
                 out[:frames] = 0.0
             return
         lo, hi = int(active[0]), int(active[-1]) + 1
+        self.active_span = (lo, hi)
         channels = out.shape[1]
         if overwrite or 2 * (hi - lo) > channels:
             lo, hi = 0, channels  # a contiguous add beats a strided one

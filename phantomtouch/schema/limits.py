@@ -39,8 +39,9 @@ MIN_LEVEL_DB = 60.0
 MAX_LEVEL_DB = 180.0
 """Highest acceleration level any profile may allow, dB re 1 µm/s²."""
 MIN_NOISE_BAND_HZ = 1.0
-"""Lowest band edge of a noise carrier, Hz (a band-pass edge below this is unstable)."""
-MAX_NOISE_SETTLE_S = 10.0
-"""Longest settling time of a noise carrier's band-pass, s: the noise is pre-rolled that
-long so it starts at full level; narrower bands (e.g. 1-2 Hz: 11 s) are refused."""
+"""Lowest band edge of a noise carrier, Hz."""
+MIN_NOISE_LOOP_BINS = 16
+"""Fewest frequency steps of the noise loop a noise band must span (a step is
+``sample_rate_hz / 2**20``: 0.046 Hz at 48 kHz, so bands of at least 0.73 Hz). A narrower
+band would hold a few beating sines, not noise."""
 MAX_SEED = 2**32 - 1

@@ -70,6 +70,26 @@ def test_a_move_ramps_the_gains_linearly_across_the_next_block(
     assert not np.any(block[BLOCK:, 0])
 
 
+def test_a_contact_across_the_band_moves_with_its_gains_and_leaves_the_rest_silent(
+    captured: tuple[Engine, CaptureSink],
+) -> None:
+    # Between actuators 1 and 5 (channels 1 and 5), then between 2 and 6: the driven
+    # channels span more than half the band, which the voice adds all at once.
+    engine, sink = captured
+    engine.contact_down("c", "f", 1.9, 0.0, intensity=0.5, at_frame=0)
+    sink.pull(4)
+    engine.contact_move("c", "f", 1.9, 4.8)
+    block = sink.pull(2).astype(np.float64)
+    ramp = np.arange(1, BLOCK + 1) / BLOCK
+    carrier = sine(2 * BLOCK, 4 * BLOCK)
+    before, after = gains_at(DEVICE, 1.9, 0.0), gains_at(DEVICE, 1.9, 4.8)
+    assert np.count_nonzero(before) == np.count_nonzero(after) == 2
+    gains = before + ramp[:, None] * (after - before)
+    np.testing.assert_allclose(block[:BLOCK], HALF * gains * carrier[:BLOCK, None], atol=FLOAT32)
+    np.testing.assert_allclose(block[BLOCK:], HALF * after * carrier[BLOCK:, None], atol=FLOAT32)
+    assert not np.any(block[:, before + after == 0])
+
+
 def test_latest_position_wins_and_nothing_queues_up(captured: tuple[Engine, CaptureSink]) -> None:
     engine, sink = captured
     engine.contact_down("c", "f", 0.0, 0.0, intensity=0.5, at_frame=0)

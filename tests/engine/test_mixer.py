@@ -10,6 +10,7 @@ import pytest
 from phantomtouch import DeviceProfile, TouchPattern
 from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.engine.mixer import THRESHOLD_RATIO, Limiter, Mixer
+from phantomtouch.renderer import OutputStage
 from phantomtouch.schema import Calibration, SafetyLimits
 
 DEVICE = DeviceProfile(safety=SafetyLimits(ceiling=0.8))
@@ -126,3 +127,52 @@ def test_a_hundred_full_level_voices_stay_under_the_ceiling(
     assert np.abs(recording).max() >= 0.7  # limited, not muted
     assert status.active_voices == 50 and status.limited_blocks > 0
     assert status.muted_blocks == 0 and status.peak <= 0.8
+
+
+def blocks_of_every_kind(rng: np.random.Generator) -> list[np.ndarray]:
+    """Quiet, near the threshold, loud (limited), past the ceiling, NaN/Inf, short blocks."""
+    blocks = []
+    for peak in [0.1, 0.5, 0.999 * THRESHOLD, THRESHOLD, 1.001 * THRESHOLD, 2.0, 50.0]:
+        blocks.append(block_with_peak(rng, peak))
+    blocks += [block_with_peak(rng, 0.3) for _ in range(30)]  # the limiter recovers
+    for bad in [np.nan, np.inf, -np.inf]:
+        block = block_with_peak(rng, 0.2)
+        block[rng.integers(BLOCK), rng.integers(DEVICE.channels)] = bad
+        blocks.append(block)
+    silent = np.zeros((BLOCK, DEVICE.channels), dtype=np.float32)
+    blocks += [silent, -silent, block_with_peak(rng, 0.4)[:100], block_with_peak(rng, 3.0)[:7]]
+    blocks += [block_with_peak(rng, peak) for peak in rng.uniform(0.0, 1.2, 60)]
+    return blocks
+
+
+@pytest.mark.parametrize(
+    "calibration",
+    [
+        Calibration(),
+        Calibration(channel_level_db=(149.0, 152.0, 155.0, 158.0, 161.0, 150.0, 155.0, 156.0)),
+        Calibration(fir_taps=((0.5, 0.3, 0.2),) + ((1.0,),) * 7),
+    ],
+)
+def test_the_mixer_gives_the_whole_chains_samples_and_levels_for_every_block(
+    rng: np.random.Generator, calibration: Calibration
+) -> None:
+    device = DEVICE.model_copy(update={"calibration": calibration})
+    mixer = Mixer(device)
+    limiter, stage = Limiter(device), OutputStage(device)  # the whole chain, every block
+    peak = 0.0
+    for block in blocks_of_every_kind(rng):
+        expected = block.copy()
+        limiter.process(expected)
+        stage.process(expected)
+        levels = np.abs(expected).max(axis=0)
+        peak = max(peak, float(levels.max()))
+        mixer.finish(block)
+        np.testing.assert_array_equal(block.view(np.uint32), expected.view(np.uint32))  # bits
+        np.testing.assert_array_equal(mixer.levels.view(np.uint32), levels.view(np.uint32))
+        assert mixer.peak == peak
+        assert mixer.limiter.gain == limiter.gain
+        assert (mixer.limited_blocks, mixer.muted_blocks) == (
+            limiter.limited_blocks,
+            stage.muted_blocks,
+        )
+    assert limiter.limited_blocks > 0 and stage.muted_blocks == 3

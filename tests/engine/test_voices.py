@@ -68,3 +68,31 @@ def test_a_voice_touches_only_the_channels_its_gains_drive(chunk: int) -> None:
         voice.render(mix, block * BLOCK, work)
     assert np.all(np.signbit(np.delete(mix, 1, axis=1)))  # never written
     assert np.any(mix[:, 1])
+
+
+def test_a_voice_adds_exactly_its_samples_to_what_the_mix_holds(rng: np.random.Generator) -> None:
+    # A 1D stroke drives two rows (channels 1, 2, 5, 6 and so on): wider than half the
+    # channels, so the voice adds all of them; the others must keep their values exactly.
+    stroke = TouchPattern.model_validate(
+        {
+            "path": {"kind": "polyline", "points_cm": [[1.9, 0.0], [1.9, 14.4]]},
+            "mode": "1d",
+            "speed_cm_s": 30.0,
+            "fade_in_s": 0.05,
+            "fade_out_s": 0.05,
+        }
+    )
+    reference = render(stroke, DEVICE)  # the default device: no calibration, no clipping
+    voice = PatternVoice(plan(stroke, DEVICE), job_id="j", owner=None, release_frames=100)
+    voice.begin(0, RingPool(1, 4096, DEVICE.channels))
+    work = Workspace(BLOCK, DEVICE.channels)
+    blocks = len(reference) // BLOCK
+    base = rng.uniform(-0.5, 0.5, (blocks * BLOCK, DEVICE.channels)).astype(np.float32)
+    mixed = base.copy()
+    for block in range(blocks):
+        voice.render(mixed[block * BLOCK : (block + 1) * BLOCK], block * BLOCK, work)
+    np.testing.assert_array_equal(mixed, base + reference[: blocks * BLOCK])
+    # some blocks span more than half the channels yet leave some of them silent
+    driven = reference[: blocks * BLOCK].reshape(blocks, BLOCK, -1).any(axis=1)
+    span = DEVICE.channels - np.argmax(driven[:, ::-1], axis=1) - np.argmax(driven, axis=1)
+    assert np.any((2 * span > DEVICE.channels) & ~driven.all(axis=1))

@@ -102,3 +102,20 @@ def test_frames_past_the_end_are_silent_and_untouched():
     more = np.full((100, 8), 7.0, dtype=np.float32)
     voice.render_add(more)
     np.testing.assert_array_equal(more, 7.0)
+
+
+@pytest.mark.parametrize("block", [1, 7, 256, 1000, 4096])
+def test_the_active_span_holds_every_channel_a_block_drives(block):
+    resolved = plan_of()  # an arc over the layout: the driven channels change as it moves
+    voice = PatternRenderer(resolved)
+    out = np.empty((block, 8), dtype=np.float32)
+    spans = set()
+    while not voice.finished:
+        voice.render_into(out)
+        lo, hi = voice.active_span
+        assert 0 <= lo < hi <= 8
+        assert not np.any(out[:, :lo]) and not np.any(out[:, hi:])
+        spans.add((lo, hi))
+    assert len(spans) > 1
+    voice.render_into(out)  # past the end: silent
+    assert voice.active_span == (0, 0) and not np.any(out)
