@@ -25,13 +25,12 @@ from phantomtouch.renderer.carriers import make_source
 from phantomtouch.renderer.gains import LAWS, gains_for_points
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.levels import amplitude_for_level, table_i_level_db
+from phantomtouch.renderer.plan import check_carrier_frequencies
 from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import CombinedCarrier, NoiseCarrier, SineCarrier
 
 MAX_VELOCITY_M_S = 10.0
-_NOISE_MAX_EDGE = 0.45
-"""Highest noise band edge as a fraction of the sample rate (as the renderer's plan)."""
 _TRANSIENT_TIME_CONSTANTS = 7.0
 
 CarrierModel = SineCarrier | NoiseCarrier | CombinedCarrier
@@ -120,16 +119,7 @@ class ContactBoard:
             raise ParameterError(
                 f"carrier={carrier!r} must be a SineCarrier, NoiseCarrier or CombinedCarrier"
             )
-        rate = self.device.sample_rate_hz
-        if not isinstance(carrier, NoiseCarrier) and carrier.freq_hz >= rate / 2:
-            raise ParameterError(
-                f"carrier.freq_hz={carrier.freq_hz!r} must be below the Nyquist frequency "
-                f"{rate / 2:g} Hz"
-            )
-        if not isinstance(carrier, SineCarrier) and carrier.high_hz > _NOISE_MAX_EDGE * rate:
-            raise ParameterError(
-                f"carrier.high_hz={carrier.high_hz!r} must be <= {_NOISE_MAX_EDGE * rate:g} Hz"
-            )
+        check_carrier_frequencies(carrier, self.device.sample_rate_hz)
         return carrier
 
     def target(

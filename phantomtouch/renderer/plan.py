@@ -20,7 +20,7 @@ from phantomtouch.renderer.levels import amplitude_for_level, pattern_level_db
 from phantomtouch.renderer.paths import ResolvedPath, resolve_path
 from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
-from phantomtouch.schema.pattern import NoiseCarrier, SineCarrier, TouchPattern
+from phantomtouch.schema.pattern import Carrier, NoiseCarrier, SineCarrier, TouchPattern
 
 _NOISE_MAX_EDGE = 0.45
 """Highest noise band edge as a fraction of the sample rate."""
@@ -108,9 +108,16 @@ class Plan:
         }
 
 
-def _check_frequencies(pattern: TouchPattern, sample_rate_hz: int) -> None:
+def check_carrier_frequencies(carrier: Carrier, sample_rate_hz: int) -> None:
+    """Refuse a carrier the sample rate cannot play (patterns and live contacts alike).
+
+    Raises
+    ------
+    ParameterError
+        A sine at or above Nyquist, a noise band edge above ``0.45 * sample_rate_hz``,
+        or a noise band narrower than ``limits.MIN_NOISE_LOOP_BINS`` steps of the loop.
+    """
     nyquist = sample_rate_hz / 2.0
-    carrier = pattern.carrier
     if not isinstance(carrier, NoiseCarrier) and carrier.freq_hz >= nyquist:
         raise ParameterError(
             f"carrier.freq_hz={carrier.freq_hz!r} must be below the Nyquist frequency "
@@ -211,7 +218,7 @@ def plan(pattern: TouchPattern, device: DeviceProfile | None = None) -> Plan:
     """
     device = device or DeviceProfile.default()
     sample_rate_hz = device.sample_rate_hz
-    _check_frequencies(pattern, sample_rate_hz)
+    check_carrier_frequencies(pattern.carrier, sample_rate_hz)
     geometry = Geometry.for_device(device)
     path = resolve_path(pattern.path)
     if len(path.points_cm) * (2 if pattern.alternate else 1) > limits.MAX_TIMELINE_POINTS:

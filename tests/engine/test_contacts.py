@@ -241,6 +241,11 @@ def test_contacts_past_the_limit_are_refused() -> None:
         ({"at_frame": -5}, "at_frame=-5"),
         ({"normal_velocity_m_s": float("nan")}, "normal_velocity_m_s=nan"),
         ({"carrier": SineCarrier(freq_hz=30000.0)}, "carrier.freq_hz=30000.0"),
+        ({"carrier": NoiseCarrier(low_hz=40.0, high_hz=22000.0)}, "carrier.high_hz=22000.0"),
+        (  # a band of a few steps of the noise loop is a few beating sines, not noise
+            {"carrier": NoiseCarrier(low_hz=1.0, high_hz=1.2)},
+            "carrier.low_hz=1.0, carrier.high_hz=1.2",
+        ),
     ],
 )
 def test_bad_touchdowns_are_refused_naming_the_field(
