@@ -112,31 +112,19 @@ class Position:
 
 
 @dataclass(frozen=True, slots=True)
-class Target:
-    """A position of a contact with its channel gains (the touchdown's).
+class Target(Position):
+    """A position with its channel gains: a touchdown's.
 
     Attributes
     ----------
-    serial : int
-        Increases with every post; the callback applies a target once.
-    x_cm, y_cm : float
-        As given (before projection onto the layout).
     gains : ndarray, shape (channels,), float32
         Phantom gains of the position times the contact's amplitude.
     unit_gains : ndarray, shape (channels,), float32
         Phantom gains of the position alone (for transients).
-    amplitude : float
-    frame : int or None
-        Frame at which the target applies; None: the next block.
     """
 
-    serial: int
-    x_cm: float
-    y_cm: float
     gains: np.ndarray
     unit_gains: np.ndarray
-    amplitude: float
-    frame: int | None
 
 
 class ContactVoice(Voice):
@@ -165,7 +153,7 @@ class ContactVoice(Voice):
         self.owner = owner
         self.contact = contact
         self.law = law
-        self.mailbox = Position(target.serial, target.x_cm, target.y_cm, target.amplitude, None)
+        self.mailbox: Position = target
         self.down_target = target
         self._source = source
         self._attack_frames = int(attack_frames)
