@@ -267,13 +267,26 @@ class ProcessEngine(EngineFront):
         """Let ``loop`` deliver answers as they arrive (its reader on the pipe)."""
         if self._loop is loop:
             return
-        if self._loop is not None and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._loop.remove_reader, self._conn.fileno())
+        self._unwatch()
         self._loop = loop
         loop.add_reader(self._conn.fileno(), self._drain)
         # some loops (uvloop) make the pipe non-blocking; answers are read whole, and only
         # once the pipe is readable, so it stays blocking
         os.set_blocking(self._conn.fileno(), True)
+
+    def _unwatch(self) -> None:
+        """Take the reader off the loop that watches the pipe (at once on its thread)."""
+        loop, self._loop = self._loop, None
+        if loop is None or loop.is_closed():
+            return
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            running = None
+        if running is loop:
+            loop.remove_reader(self._conn.fileno())
+        else:
+            loop.call_soon_threadsafe(loop.remove_reader, self._conn.fileno())
 
     def _drain(self) -> None:
         """The event loop's reader: deliver what has arrived, never wait for more."""
@@ -285,9 +298,7 @@ class ProcessEngine(EngineFront):
                     raise DeviceError("the engine process is gone")
                 self._receive_one()
         except DeviceError:
-            if self._loop is not None:
-                self._loop.remove_reader(self._conn.fileno())
-                self._loop = None
+            self._unwatch()
         finally:
             self._receiving.release()
 
@@ -318,9 +329,7 @@ class ProcessEngine(EngineFront):
             except DeviceError:
                 pass
             self._fail_waiters(DeviceError("the engine is closed"))
-        loop, self._loop = self._loop, None
-        if loop is not None and not loop.is_closed():
-            loop.call_soon_threadsafe(loop.remove_reader, self._conn.fileno())
+        self._unwatch()
         self._process.join(CLOSE_TIMEOUT_S)
         if self._process.is_alive():
             self._process.kill()
