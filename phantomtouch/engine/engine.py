@@ -35,13 +35,17 @@ from phantomtouch.schema.pattern import Carrier, TouchPattern
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
 MAX_QUEUE_CAPACITY = 1_000_000
-MAX_VOICES = 40
-"""Default of ``max_voices``: pattern voices that may sound at once (about what a 2-core
-machine renders in real time: ``benchmarks/bench_server.py`` overloads it with taps)."""
+MAX_VOICES = 64
+"""Default of ``max_voices``: pattern voices that may sound at once. On a 2-core machine
+64 of the paper's 12 s stimuli take a fifth of a 256-frame block at p99
+(``benchmarks/bench_engine.py``), leaving room for contacts, smaller blocks and the
+host's own work; ``benchmarks/bench_server.py`` overloads the cap with taps."""
 RENDER_AHEAD_FRAMES = 4096
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`)."""
-RENDER_AHEAD_RINGS = 32
-"""Pattern voices that can render ahead at once; more render block by block."""
+RENDER_AHEAD_RINGS = 64
+"""Most pattern voices that render ahead at once: the engine preallocates a ring (two
+chunks, 256 KB at 8 channels) for each of ``min(max_voices, RENDER_AHEAD_RINGS)``
+voices; voices beyond render block by block."""
 
 
 class Engine(EngineFront):
@@ -62,8 +66,8 @@ class Engine(EngineFront):
         Most pattern voices that may sound at the same time: a job whose frames would
         overlap ``max_voices`` others is refused with EngineBusyError, so the audio
         thread is never handed more than it can render. Jobs scheduled for later count
-        only where they overlap. The default, 40, is about what a 2-core machine renders
-        in real time; raise it on a faster one.
+        only where they overlap. The default, 64, renders in a fifth of real time on a
+        2-core machine (``MAX_VOICES``); raise it on a faster one.
     contact : ContactSettings or None
         Attack, release and transients of contacts (and the release of stopped jobs).
     log_path : str, Path or None
@@ -124,7 +128,7 @@ class Engine(EngineFront):
             device,
             self._queue,
             self._clock,
-            rings=RENDER_AHEAD_RINGS,
+            rings=min(max_voices, RENDER_AHEAD_RINGS),
             chunk_frames=render_ahead_frames,
             clocked=self._sink.realtime,
         )

@@ -74,7 +74,7 @@ class Settings(BaseSettings):
     max_render_duration_s: float = Field(default=600.0, gt=0.0, le=7200.0)
     queue_capacity: int = Field(default=4096, ge=16, le=1 << 20)
     max_voices: int = Field(
-        default=40,
+        default=64,
         ge=1,
         le=4096,
         description=(

@@ -31,7 +31,7 @@ def pattern(k: int) -> TouchPattern:
 
 def play(render_ahead_frames: int, voices: int) -> np.ndarray:
     sink = CaptureSink(DEVICE)
-    with Engine(DEVICE, sink, render_ahead_frames=render_ahead_frames) as engine:
+    with Engine(DEVICE, sink, render_ahead_frames=render_ahead_frames, max_voices=voices) as engine:
         jobs = [engine.schedule(pattern(k), start_frame=97 * k) for k in range(voices)]
         for job in jobs[::5]:
             sink.pull(1)
