@@ -311,7 +311,7 @@ def main() -> None:
     if args.json:
         print(json.dumps({"render": render_rows, "underruns": runs}, indent=2))
         return
-    print("Render time of one 256-frame block, 16 voices (period 5.333 ms; target p99 <= 10 %)")
+    print("Render time of one 256-frame block (period 5.333 ms; target p99 <= 10 % at 16 voices)")
     header = f"{'scene':34} {'wall p50':>9} {'wall p99':>9} {'p99/period':>10}"
     print(header + f" {'cpu p50':>8} {'cpu p99':>8} {'p99/period':>10} {'p50/copy':>8}")
     for row in render_rows:
