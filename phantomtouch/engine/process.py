@@ -497,7 +497,7 @@ class ProcessEngine(EngineFront):
         intensity: float | None = None,
         at_frame: int | None = None,
     ) -> None:
-        """See :meth:`Engine.contact_move`; checked here, sent without waiting."""
+        """See :meth:`Engine.contact_move`; checked here, written into the contact's slot."""
         check_id("owner", owner)
         check_id("contact", contact)
         check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
