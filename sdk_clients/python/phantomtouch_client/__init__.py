@@ -20,6 +20,7 @@
 
 from phantomtouch import TouchPattern
 
+from phantomtouch_client.connection import Backoff, SessionState
 from phantomtouch_client.contact import Contact
 from phantomtouch_client.errors import (
     ApiError,
@@ -55,7 +56,7 @@ from phantomtouch_client.models import (
     touch_request,
 )
 from phantomtouch_client.rest import AsyncClient, Client, ws_url
-from phantomtouch_client.session import AsyncSession, Backoff, SessionState
+from phantomtouch_client.session import AsyncSession
 from phantomtouch_client.sync_session import Session, SyncContact
 
 __version__ = "0.1.0"

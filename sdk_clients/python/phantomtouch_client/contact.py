@@ -4,15 +4,23 @@ A hand tracker reports a fingertip more often than is useful (or in bursts); the
 only ever renders the newest position of a contact. :class:`Contact` keeps the newest
 position given to :meth:`Contact.move` and its session sends it once per frame, so a burst
 of updates costs one message and nothing queues up behind a slow network.
+:class:`ContactHelpers` keeps a session's helpers and sends their newest moves, and
+:func:`pace_frames` runs that once per frame.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable, Mapping
 from typing import TYPE_CHECKING, Any
+
+from phantomtouch_client.errors import ClientError
 
 if TYPE_CHECKING:
     from phantomtouch_client.session import AsyncSession
+
+log = logging.getLogger("phantomtouch_client")
 
 
 class Contact:
@@ -77,3 +85,50 @@ class Contact:
     def _released(self) -> None:
         self._pending = None
         self.active = False
+
+
+class ContactHelpers:
+    """The :class:`Contact` helpers of one session, by name."""
+
+    def __init__(self, session: AsyncSession) -> None:
+        self._session = session
+        self._helpers: dict[str, Contact] = {}
+
+    def get(self, name: str) -> Contact:
+        """The helper of contact ``name`` (made on first use)."""
+        helper = self._helpers.get(name)
+        if helper is None:
+            helper = self._helpers[name] = Contact(self._session, name)
+        return helper
+
+    async def flush(self) -> None:
+        """Send the newest pending ``move`` of every helper (one frame)."""
+        for helper in self._helpers.values():
+            pending = helper._take_pending()
+            if pending is not None:
+                x_cm, y_cm, intensity = pending
+                await self._session.move(helper.name, x_cm, y_cm, intensity=intensity)
+
+    def released(self, names: list[str]) -> None:
+        """The server released these contacts: their helpers are up and forget moves."""
+        for name in names:
+            helper = self._helpers.get(name)
+            if helper is not None:
+                helper._released()
+
+
+async def pace_frames(rate_hz: float, flush: Callable[[], Awaitable[None]]) -> None:
+    """Call ``flush`` once per frame at ``rate_hz``, for ever (a late frame is not made up)."""
+    period = 1.0 / rate_hz
+    loop = asyncio.get_running_loop()
+    next_frame = loop.time()
+    while True:
+        next_frame += period
+        now = loop.time()
+        if next_frame < now:
+            next_frame = now + period
+        await asyncio.sleep(next_frame - now)
+        try:
+            await flush()
+        except ClientError as exc:
+            log.debug("frame flush failed: %s", exc)

@@ -183,6 +183,13 @@ def pattern_json(pattern: TouchPattern | Mapping[str, Any]) -> dict[str, Any]:
     return body
 
 
+def contact_message(kind: str, contact: str, **fields: Any) -> dict[str, Any]:
+    """A ``down``, ``move`` or ``up`` message; fields that are None are left out."""
+    message: dict[str, Any] = {"type": kind, "contact": contact}
+    message.update({name: value for name, value in fields.items() if value is not None})
+    return message
+
+
 def touch_request(
     pattern: TouchPattern | Mapping[str, Any] | None = None,
     *,

@@ -23,31 +23,27 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import enum
-import itertools
 import json
 import logging
-import random
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Self
 
-from websockets.asyncio.client import ClientConnection, connect
-from websockets.exceptions import ConnectionClosed, InvalidStatus, WebSocketException
-from websockets.frames import CloseCode
+from websockets.asyncio.client import ClientConnection
+from websockets.exceptions import ConnectionClosed
 
-from phantomtouch_client.contact import Contact
-from phantomtouch_client.errors import (
-    ApiError,
-    ClientError,
-    ConnectionLost,
-    ReplyTimeout,
-    TransportError,
-    api_error,
-    error_from_response,
+from phantomtouch_client.connection import (
+    DEFAULT_WS_URL,
+    Backoff,
+    PendingReplies,
+    SessionState,
+    error_from_message,
+    open_connection,
+    ping_interval_s,
 )
+from phantomtouch_client.contact import Contact, ContactHelpers, pace_frames
+from phantomtouch_client.errors import ApiError, ClientError, ConnectionLost, ReplyTimeout
 from phantomtouch_client.models import (
     Job,
     JobId,
@@ -55,39 +51,11 @@ from phantomtouch_client.models import (
     Released,
     State,
     Welcome,
+    contact_message,
     touch_request,
 )
-from phantomtouch_client.rest import auth_headers
 
 log = logging.getLogger("phantomtouch_client")
-
-DEFAULT_WS_URL = "ws://127.0.0.1:8000/ws"
-PROTOCOL = 1
-
-
-class SessionState(enum.Enum):
-    IDLE = "idle"
-    CONNECTED = "connected"
-    RECONNECTING = "reconnecting"
-    CLOSED = "closed"
-
-
-@dataclass(frozen=True)
-class Backoff:
-    """Exponential back-off between reconnection attempts.
-
-    Attempt n (from 0) waits ``min(max_s, initial_s * factor**n)``, spread by +-``jitter``
-    (a fraction) so that many clients of a restarted server do not return in lockstep.
-    """
-
-    initial_s: float = 0.1
-    factor: float = 2.0
-    max_s: float = 5.0
-    jitter: float = 0.1
-
-    def delay_s(self, attempt: int) -> float:
-        base = min(self.max_s, self.initial_s * self.factor**attempt)
-        return base * (1.0 + self.jitter * (2.0 * random.random() - 1.0))
 
 
 class AsyncSession:
@@ -163,10 +131,9 @@ class AsyncSession:
 
         self._ws: ClientConnection | None = None
         self._connected = asyncio.Event()
-        self._ids = itertools.count(1)
-        self._pending: dict[int, asyncio.Future[dict[str, Any]]] = {}
+        self._replies = PendingReplies()
         self._contacts: dict[str, dict[str, Any]] = {}
-        self._helpers: dict[str, Contact] = {}
+        self._helpers = ContactHelpers(self)
         self._contact_lock = asyncio.Lock()
         self._subscribed_hz = 0.0
         self._last_send = 0.0
@@ -217,7 +184,8 @@ class AsyncSession:
             asyncio.create_task(self._ping_loop(), name="phantomtouch-ping"),
         ]
         if self.move_rate_hz is not None:
-            self._tasks.append(asyncio.create_task(self._frame_loop(), name="phantomtouch-frame"))
+            frames = pace_frames(self.move_rate_hz, self.flush)
+            self._tasks.append(asyncio.create_task(frames, name="phantomtouch-frame"))
         await self.ping()
         return welcome
 
@@ -233,25 +201,18 @@ class AsyncSession:
             with contextlib.suppress(asyncio.CancelledError):
                 await task
         self._tasks = []
-        self._fail_pending(ConnectionLost("the session was closed"))
+        self._replies.fail_all(ConnectionLost("the session was closed"))
         if self._ws is not None:
             await self._ws.close()
             self._ws = None
 
     def contact(self, name: str) -> Contact:
         """The helper of contact ``name``: ``down``, then ``move`` once per frame, ``up``."""
-        helper = self._helpers.get(name)
-        if helper is None:
-            helper = self._helpers[name] = Contact(self, name)
-        return helper
+        return self._helpers.get(name)
 
     async def flush(self) -> None:
         """Send the newest pending ``move`` of every contact helper (one frame)."""
-        for helper in self._helpers.values():
-            pending = helper._take_pending()
-            if pending is not None:
-                x_cm, y_cm, intensity = pending
-                await self.move(helper.name, x_cm, y_cm, intensity=intensity)
+        await self._helpers.flush()
 
     async def down(
         self,
@@ -265,14 +226,16 @@ class AsyncSession:
         normal_velocity_m_s: float | None = None,
     ) -> None:
         """A contact touches down at (``x_cm``, ``y_cm``)."""
-        message: dict[str, Any] = {"type": "down", "contact": contact, "x_cm": x_cm, "y_cm": y_cm}
-        optional = {
-            "intensity": intensity,
-            "carrier": dict(carrier) if carrier is not None else None,
-            "law": law,
-            "normal_velocity_m_s": normal_velocity_m_s,
-        }
-        message.update({k: v for k, v in optional.items() if v is not None})
+        message = contact_message(
+            "down",
+            contact,
+            x_cm=x_cm,
+            y_cm=y_cm,
+            intensity=intensity,
+            carrier=dict(carrier) if carrier is not None else None,
+            law=law,
+            normal_velocity_m_s=normal_velocity_m_s,
+        )
         async with self._contact_lock:
             self._contacts[contact] = message
             try:
@@ -286,9 +249,7 @@ class AsyncSession:
     ) -> None:
         """The contact's newest position; sent at once, without reply (errors go to
         ``on_error``). While reconnecting, only remembered for the contact's return."""
-        message: dict[str, Any] = {"type": "move", "contact": contact, "x_cm": x_cm, "y_cm": y_cm}
-        if intensity is not None:
-            message["intensity"] = intensity
+        message = contact_message("move", contact, x_cm=x_cm, y_cm=y_cm, intensity=intensity)
         tracked = self._contacts.get(contact)
         if tracked is not None:
             tracked["x_cm"], tracked["y_cm"] = x_cm, y_cm
@@ -301,9 +262,7 @@ class AsyncSession:
 
     async def up(self, contact: str, *, normal_velocity_m_s: float | None = None) -> None:
         """Lift-off: the contact fades out with its release ramp."""
-        message: dict[str, Any] = {"type": "up", "contact": contact}
-        if normal_velocity_m_s is not None:
-            message["normal_velocity_m_s"] = normal_velocity_m_s
+        message = contact_message("up", contact, normal_velocity_m_s=normal_velocity_m_s)
         async with self._contact_lock:
             self._contacts.pop(contact, None)
             await self._contact_request(message)
@@ -359,9 +318,7 @@ class AsyncSession:
 
     async def _exchange(self, message: Mapping[str, Any]) -> dict[str, Any]:
         await self._wait_connected()
-        request_id = next(self._ids)
-        future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
-        self._pending[request_id] = future
+        request_id, future = self._replies.expect()
         try:
             await self._send({**message, "id": request_id})
             return await asyncio.wait_for(future, self.reply_timeout_s)
@@ -371,7 +328,7 @@ class AsyncSession:
                 f"within {self.reply_timeout_s} s"
             ) from None
         finally:
-            self._pending.pop(request_id, None)
+            self._replies.forget(request_id)
 
     async def _contact_request(self, message: dict[str, Any]) -> None:
         """``down``/``up``: confirmed while connected; while reconnecting the contact table
@@ -408,52 +365,13 @@ class AsyncSession:
 
     async def _open(self) -> Welcome:
         """Connect, send ``hello`` and read the ``welcome``."""
-        try:
-            ws = await connect(
-                self.url,
-                additional_headers=auth_headers(self.token),
-                open_timeout=self.reply_timeout_s,
-                compression=None,
-                proxy=None,
-                ping_interval=5.0,
-                ping_timeout=self.reply_timeout_s,
-                close_timeout=1.0,
-            )
-        except InvalidStatus as exc:
-            response = exc.response
-            text = response.body.decode("utf-8", "replace") if response.body else ""
-            try:
-                body = json.loads(text)
-            except ValueError:
-                body = None
-            raise error_from_response(response.status_code, body, text) from exc
-        except (OSError, WebSocketException, TimeoutError) as exc:
-            raise TransportError(f"cannot connect to {self.url}: {exc}") from exc
-        try:
-            hello = {"type": "hello", "client": self.client_name, "protocol": PROTOCOL}
-            await ws.send(json.dumps(hello))
-            self._last_send = time.monotonic()
-            async with asyncio.timeout(self.reply_timeout_s):
-                while True:
-                    message = json.loads(await ws.recv())
-                    if message.get("type") == "welcome":
-                        break
-                    if message.get("type") == "error":
-                        raise self._error(message)
-        except ConnectionClosed as exc:
-            await ws.close()
-            if exc.rcvd is not None and exc.rcvd.code == CloseCode.POLICY_VIOLATION:
-                # Before the welcome only hello was sent: the policy refused is the token.
-                raise api_error("unauthorized", exc.rcvd.reason or "token refused") from exc
-            raise TransportError(f"no welcome from {self.url}: {exc!r}") from exc
-        except (TimeoutError, ValueError) as exc:
-            await ws.close()
-            raise TransportError(f"no welcome from {self.url}: {exc!r}") from exc
-        except BaseException:
-            await ws.close()
-            raise
-        self._ws = ws
-        self.welcome = Welcome.model_validate(message)
+        self._ws, self.welcome = await open_connection(
+            self.url,
+            token=self.token,
+            client_name=self.client_name,
+            timeout_s=self.reply_timeout_s,
+        )
+        self._last_send = time.monotonic()
         return self.welcome
 
     def _set_connected(self) -> None:
@@ -476,7 +394,7 @@ class AsyncSession:
             if self.state is SessionState.CLOSED:
                 return
             self._connected.clear()
-            self._fail_pending(ConnectionLost(f"the connection to {self.url} was lost"))
+            self._replies.fail_all(ConnectionLost(f"the connection to {self.url} was lost"))
             if self.on_connection is not None:
                 self.on_connection(False)
             if not self.reconnect:
@@ -532,15 +450,9 @@ class AsyncSession:
         if not isinstance(message, dict):
             log.warning("ignored a frame that is not an object: %.80r", frame)
             return
-        kind = message.get("type")
-        request_id = message.get("id")
-        future = self._pending.get(request_id) if isinstance(request_id, int) else None
-        if future is not None and not future.done():
-            if kind == "error":
-                future.set_exception(self._error(message))
-            else:
-                future.set_result(message)
+        if self._replies.settle(message):
             return
+        kind = message.get("type")
         if kind == "state":
             self.last_state = State.model_validate(message)
             if self.on_state is not None:
@@ -549,13 +461,11 @@ class AsyncSession:
             released = Released.model_validate(message)
             for contact in released.contacts:
                 self._contacts.pop(contact, None)
-                helper = self._helpers.get(contact)
-                if helper is not None:
-                    helper._released()
+            self._helpers.released(released.contacts)
             if self.on_released is not None:
                 self.on_released(released)
         elif kind == "error":
-            error = self._error(message)
+            error = error_from_message(message)
             if self.on_error is not None:
                 self.on_error(error)
             else:
@@ -563,26 +473,10 @@ class AsyncSession:
         elif kind not in ("pong", "ok", "welcome"):
             log.debug("ignored a message of type %r", kind)
 
-    @staticmethod
-    def _error(message: Mapping[str, Any]) -> ApiError:
-        fields = message.get("fields")
-        return api_error(
-            str(message.get("code", "error")),
-            str(message.get("message", "")),
-            fields=fields if isinstance(fields, list) else None,
-            request_id=message.get("id"),
-        )
-
-    def _fail_pending(self, error: Exception) -> None:
-        for future in self._pending.values():
-            if not future.done():
-                future.set_exception(error)
-        self._pending.clear()
-
     async def _ping_loop(self) -> None:
         """Send a ``ping`` whenever nothing was sent for ``ping_interval_s``."""
         while True:
-            interval = self._ping_interval()
+            interval = ping_interval_s(self.ping_interval_s, self.welcome)
             idle = time.monotonic() - self._last_send
             if idle < interval:
                 await asyncio.sleep(interval - idle)
@@ -599,28 +493,5 @@ class AsyncSession:
             except ClientError as exc:
                 log.debug("ping failed: %s", exc)
 
-    def _ping_interval(self) -> float:
-        if self.ping_interval_s is not None:
-            return self.ping_interval_s
-        watchdog_s = self.welcome.watchdog_s if self.welcome is not None else 2.0
-        return max(0.05, watchdog_s / 4)
 
-    async def _frame_loop(self) -> None:
-        """Once per frame (``move_rate_hz``), send every helper's newest pending move."""
-        assert self.move_rate_hz is not None
-        period = 1.0 / self.move_rate_hz
-        loop = asyncio.get_running_loop()
-        next_frame = loop.time()
-        while True:
-            next_frame += period
-            now = loop.time()
-            if next_frame < now:
-                next_frame = now + period
-            await asyncio.sleep(next_frame - now)
-            try:
-                await self.flush()
-            except ClientError as exc:
-                log.debug("frame flush failed: %s", exc)
-
-
-__all__ = ["AsyncSession", "Backoff", "SessionState"]
+__all__ = ["AsyncSession"]

@@ -15,9 +15,10 @@ from collections.abc import Coroutine, Mapping
 from types import TracebackType
 from typing import Any, Self, TypeVar
 
+from phantomtouch_client.connection import DEFAULT_WS_URL, SessionState
 from phantomtouch_client.contact import Contact
 from phantomtouch_client.models import Job, JobId, PatternArg, State, Welcome
-from phantomtouch_client.session import DEFAULT_WS_URL, AsyncSession, SessionState
+from phantomtouch_client.session import AsyncSession
 
 T = TypeVar("T")
 
