@@ -13,7 +13,7 @@ sink and a real ``Engine``; this process keeps a thin proxy.
   errors included (a round trip of some tens of microseconds). The child answers in
   order, and whoever reads an answer hands it to the call it belongs to: a thread that
   waits, or a coroutine awaiting ``schedule_async``, whose answers the running event
-  loop reads as they arrive (the loop never waits on the pipe). A plan crosses the pipe
+  loop reads as they arrive (:mod:`phantomtouch.engine.pipe`). A plan crosses the pipe
   once: the child keeps the last ``PLAN_CACHE`` plans under a key.
 - ``time_at`` and ``frames_at`` read the engine's clock from shared memory, and
   ``contact_move`` writes the newest position into the contact's slot in shared memory,
@@ -30,14 +30,11 @@ A sink cannot cross processes, so the child opens the one a :class:`SinkSpec` na
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import itertools
 import multiprocessing
-import os
 import threading
 import time
-from collections import OrderedDict, deque
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +49,7 @@ from phantomtouch.engine.child import serve
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import MAX_VOICES, RENDER_AHEAD_FRAMES
 from phantomtouch.engine.jobs import Job, JobState, resolve_plan
+from phantomtouch.engine.pipe import RequestPipe
 from phantomtouch.engine.shared import MoveSlots, SharedClock
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.status import EngineFront, EngineStatus
@@ -71,50 +69,6 @@ REALTIME_PRIORITY = 1
 below the audio callback's (JACK gives its clients server priority - 5), above every
 ordinary thread, so a thread that holds the interpreter lock the callback waits for is
 not preempted by the host's work."""
-
-
-class _Waiter:
-    """Where the answer to one request goes: a thread that waits, or an asyncio future."""
-
-    __slots__ = ("done", "future", "ok", "value")
-
-    def __init__(self, future: asyncio.Future[Any] | None = None) -> None:
-        self.future = future
-        self.done = False
-        self.ok = False
-        self.value: Any = None
-
-    def deliver(self, answer: tuple[bool, Any]) -> None:
-        self.ok, self.value = answer
-        self.done = True
-        future = self.future
-        if future is None:
-            return
-        loop = future.get_loop()
-        if loop.is_closed():
-            return
-        try:
-            running = asyncio.get_running_loop()
-        except RuntimeError:
-            running = None
-        if running is loop:
-            self._settle()
-        else:
-            loop.call_soon_threadsafe(self._settle)
-
-    def _settle(self) -> None:
-        future = self.future
-        if future is None or future.done():
-            return
-        if self.ok:
-            future.set_result(self.value)
-        else:
-            future.set_exception(self.value)
-
-    def result(self) -> Any:
-        if not self.ok:
-            raise self.value
-        return self.value
 
 
 class ProcessEngine(EngineFront):
@@ -162,12 +116,7 @@ class ProcessEngine(EngineFront):
             check_int("realtime_priority", realtime_priority, 1, 99)
         spec = sink if sink is not None else SinkSpec()
         self._device = device
-        self._lock = threading.Lock()  # sending, and the state kept here
-        self._receiving = threading.Lock()  # reading answers
-        self._waiters: deque[_Waiter] = deque()  # in the order the child answers
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._seq = 0
-        self._closed = False
+        self._lock = threading.Lock()  # the state kept here
         self._down: dict[tuple[str, str], tuple[int, int]] = {}  # slot, generation
         self._clock = SharedClock(device.sample_rate_hz)
         max_contacts = (contact or ContactSettings()).max_contacts
@@ -178,7 +127,7 @@ class ProcessEngine(EngineFront):
         context = multiprocessing.get_context("spawn")
         self._mark = context.Value("q", 0, lock=False)
         self._wake = context.Event()
-        self._conn, child_conn = context.Pipe()
+        conn, child_conn = context.Pipe()
         options = {
             "queue_capacity": queue_capacity,
             "max_voices": max_voices,
@@ -203,107 +152,25 @@ class ProcessEngine(EngineFront):
         )
         self._process.start()
         child_conn.close()
-        if not self._conn.poll(START_TIMEOUT_S):
+        if not conn.poll(START_TIMEOUT_S):
             self._process.kill()
             raise DeviceError(f"the engine process did not start within {START_TIMEOUT_S:g} s")
-        ok, error = self._conn.recv()
+        ok, error = conn.recv()
         if not ok:
             self._process.join(CLOSE_TIMEOUT_S)
-            self._closed = True
             raise error
+        self._pipe = RequestPipe(conn)
 
     @property
     def pid(self) -> int | None:
         """Process id of the engine process."""
         return self._process.pid
 
-    def _send(
-        self, method: str, args: tuple, kwargs: dict[str, Any], waiter: _Waiter | None
-    ) -> None:
-        """Send a request; with a waiter, its answer is delivered to it (in order)."""
-        with self._lock:
-            if self._closed:
-                raise DeviceError("the engine is closed")
-            self._seq += 1
-            if waiter is not None:  # in line before the answer can arrive
-                self._waiters.append(waiter)
-            try:
-                self._conn.send((self._seq, method, args, kwargs, waiter is not None))
-            except (EOFError, OSError) as exc:
-                if waiter is not None:
-                    self._waiters.remove(waiter)
-                raise DeviceError(f"the engine process is gone ({exc})") from exc
-
-    def _receive_one(self) -> None:
-        """Deliver the next answer to the oldest waiter (holding ``_receiving``)."""
-        try:
-            answer = self._conn.recv()
-        except (EOFError, OSError) as exc:
-            self._fail_waiters(DeviceError(f"the engine process is gone ({exc})"))
-            raise DeviceError(f"the engine process is gone ({exc})") from exc
-        self._waiters.popleft().deliver(answer)
-
-    def _fail_waiters(self, error: DeviceError) -> None:
-        while self._waiters:
-            self._waiters.popleft().deliver((False, error))
-
     def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
-        waiter = _Waiter()
-        self._send(method, args, kwargs, waiter)
-        while not waiter.done:
-            with self._receiving:
-                if not waiter.done:
-                    self._receive_one()
-        return waiter.result()
-
-    async def _call_async(self, method: str, *args: Any, **kwargs: Any) -> Any:
-        loop = asyncio.get_running_loop()
-        future: asyncio.Future[Any] = loop.create_future()
-        self._send(method, args, kwargs, _Waiter(future))
-        self._watch(loop)  # the pipe stays readable until the answer is read
-        return await future
-
-    def _watch(self, loop: asyncio.AbstractEventLoop) -> None:
-        """Let ``loop`` deliver answers as they arrive (its reader on the pipe)."""
-        if self._loop is loop:
-            return
-        self._unwatch()
-        self._loop = loop
-        loop.add_reader(self._conn.fileno(), self._drain)
-        # some loops (uvloop) make the pipe non-blocking; answers are read whole, and only
-        # once the pipe is readable, so it stays blocking
-        os.set_blocking(self._conn.fileno(), True)
-
-    def _unwatch(self) -> None:
-        """Take the reader off the loop that watches the pipe (at once on its thread)."""
-        loop, self._loop = self._loop, None
-        if loop is None or loop.is_closed():
-            return
-        try:
-            running = asyncio.get_running_loop()
-        except RuntimeError:
-            running = None
-        if running is loop:
-            loop.remove_reader(self._conn.fileno())
-        else:
-            loop.call_soon_threadsafe(loop.remove_reader, self._conn.fileno())
-
-    def _drain(self) -> None:
-        """The event loop's reader: deliver what has arrived, never wait for more."""
-        if not self._receiving.acquire(blocking=False):
-            return  # a caller is receiving; what is left keeps the pipe readable
-        try:
-            while self._conn.poll(0):
-                if not self._waiters:  # nothing asked for: the pipe has closed
-                    raise DeviceError("the engine process is gone")
-                self._receive_one()
-        except DeviceError:
-            self._unwatch()
-        finally:
-            self._receiving.release()
+        return self._pipe.call(method, *args, **kwargs)
 
     def _post(self, method: str, *args: Any, **kwargs: Any) -> None:
-        self._send(method, args, kwargs, None)
+        self._pipe.post(method, *args, **kwargs)
 
     # -- life cycle
 
@@ -313,28 +180,12 @@ class ProcessEngine(EngineFront):
 
     def close(self) -> None:
         """Fade out, close the child's engine and sink, end the child. Idempotent."""
-        waiter = _Waiter()
-        with self._lock:
-            if self._closed:
-                return
-            self._closed = True
-            self._waiters.append(waiter)
-            with contextlib.suppress(EOFError, OSError):
-                self._conn.send((self._seq + 1, "close", (), {}, True))
-        deadline_s = time.monotonic() + CLOSE_TIMEOUT_S
-        with self._receiving:
-            try:
-                while not waiter.done and self._conn.poll(max(0.0, deadline_s - time.monotonic())):
-                    self._receive_one()
-            except DeviceError:
-                pass
-            self._fail_waiters(DeviceError("the engine is closed"))
-        self._unwatch()
+        if not self._pipe.close(CLOSE_TIMEOUT_S):
+            return
         self._process.join(CLOSE_TIMEOUT_S)
         if self._process.is_alive():
             self._process.kill()
             self._process.join()
-        self._conn.close()
 
     # -- clock
 
@@ -386,7 +237,7 @@ class ProcessEngine(EngineFront):
         """
         resolved, request = self._schedule_request(pattern)
         try:
-            job: Job = await self._call_async(
+            job: Job = await self._pipe.call_async(
                 "schedule", *request, start_frame=start_frame, owner=owner
             )
         except BaseException:
@@ -427,11 +278,9 @@ class ProcessEngine(EngineFront):
 
     def stop_all(self) -> None:
         """See :meth:`Engine.stop_all`; never waits for the child."""
+        if not self._pipe.raise_mark(self._mark):
+            return  # closed
         with self._lock:
-            if self._closed:
-                return
-            self._seq += 1
-            self._mark.value = self._seq
             for slot, _ in self._down.values():
                 self._slots.release(slot)
             self._down.clear()
