@@ -55,3 +55,14 @@ def check_frame(name: str, value: object) -> int | None:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
         raise ParameterError(f"{name}={value!r} must be None or an integer frame >= 0")
     return int(value)
+
+
+def check_ahead(frame: int, now_frames: int, sample_rate_hz: int, max_ahead_s: float) -> int:
+    """A start frame at most ``max_ahead_s`` after ``now_frames``."""
+    ahead_s = (frame - now_frames) / sample_rate_hz
+    if ahead_s > max_ahead_s:
+        raise ParameterError(
+            f"start_frame={frame} is {ahead_s:.6g} s ahead of now_frames={now_frames}; "
+            f"at most {max_ahead_s:g} s"
+        )
+    return frame

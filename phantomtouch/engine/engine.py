@@ -15,7 +15,7 @@ import uuid
 from pathlib import Path
 
 from phantomtouch.engine.board import ContactBoard
-from phantomtouch.engine.checks import check_frame, check_id, check_int, check_seconds
+from phantomtouch.engine.checks import check_ahead, check_frame, check_id, check_int, check_seconds
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings
@@ -27,7 +27,7 @@ from phantomtouch.engine.shared import MoveSlots
 from phantomtouch.engine.sinks import NullSink, Sink
 from phantomtouch.engine.status import EngineFront, EngineStatus
 from phantomtouch.engine.voices import PatternVoice
-from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError
+from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import Carrier, TouchPattern
@@ -259,12 +259,7 @@ class Engine(EngineFront):
         if owner is not None:
             check_id("owner", owner)
         if frame is not None:
-            ahead_s = (frame - self.now_frames) / self.sample_rate_hz
-            if ahead_s > MAX_SCHEDULE_AHEAD_S:
-                raise ParameterError(
-                    f"start_frame={frame} is {ahead_s:.6g} s ahead of now_frames="
-                    f"{self.now_frames}; at most {MAX_SCHEDULE_AHEAD_S:g} s"
-                )
+            check_ahead(frame, self.now_frames, self.sample_rate_hz, MAX_SCHEDULE_AHEAD_S)
         voice = PatternVoice(
             resolved,
             job_id=uuid.uuid4().hex,
@@ -274,20 +269,11 @@ class Engine(EngineFront):
         with self._lock:
             self._check_open()
             self._reporter.drain()
-            if len(self._jobs) >= self._queue.capacity:
-                raise EngineBusyError(
-                    f"the engine is full: {len(self._jobs)} jobs are scheduled or playing; "
-                    f"at most queue_capacity={self._queue.capacity}"
-                )
-            asap = frame is None
             first = self._scheduler.next_block_frame() if frame is None else frame
-            sounding = self._jobs.overlapping(first, first + resolved.frames)
-            if sounding >= self._max_voices:
-                raise EngineBusyError(
-                    f"{sounding} pattern voices would sound at once from frame {first}; "
-                    f"at most max_voices={self._max_voices}"
-                )
-            self._queue.push_start(voice, first, asap)
+            self._jobs.check_room(
+                first, resolved.frames, jobs=self._queue.capacity, voices=self._max_voices
+            )
+            self._queue.push_start(voice, first, frame is None)
             self._jobs.add(
                 JobRecord(
                     voice=voice,

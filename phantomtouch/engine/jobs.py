@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 from phantomtouch.engine.voices import PatternVoice
-from phantomtouch.errors import ParameterError
+from phantomtouch.errors import EngineBusyError, ParameterError
 from phantomtouch.renderer.plan import Plan, plan
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
@@ -147,6 +147,27 @@ class JobTable:
                 if first < end_frame and first + record.frames > start_frame:
                     count += 1
         return count
+
+    def check_room(self, start_frame: int, frames: int, *, jobs: int, voices: int) -> None:
+        """Refuse a job when ``jobs`` are scheduled or playing already, or when it would
+        sound together with ``voices`` others anywhere in its frames.
+
+        Raises
+        ------
+        EngineBusyError
+            Naming the limit (``queue_capacity`` or ``max_voices``) and the count.
+        """
+        if len(self._live) >= jobs:
+            raise EngineBusyError(
+                f"the engine is full: {len(self._live)} jobs are scheduled or playing; "
+                f"at most queue_capacity={jobs}"
+            )
+        sounding = self.overlapping(start_frame, start_frame + frames)
+        if sounding >= voices:
+            raise EngineBusyError(
+                f"{sounding} pattern voices would sound at once from frame {start_frame}; "
+                f"at most max_voices={voices}"
+            )
 
     def add(self, record: JobRecord) -> None:
         self._live[record.job_id] = record
