@@ -10,22 +10,29 @@
     engine.contact_down("client", "finger", 1.9, 7.2)
     engine.close()
 
-Modules: :mod:`~phantomtouch.engine.engine` (the API), :mod:`~phantomtouch.engine.clock`
-(frames and server time), :mod:`~phantomtouch.engine.commands` (the bounded queue),
-:mod:`~phantomtouch.engine.scheduler` (the audio callback), :mod:`~phantomtouch.engine.voices`
-(pattern voices), :mod:`~phantomtouch.engine.contacts` (contact voices) and
-:mod:`~phantomtouch.engine.board` (their control side), :mod:`~phantomtouch.engine.mixer`
-(limiter, output stage, meters), :mod:`~phantomtouch.engine.sinks` (null, capture),
-:mod:`~phantomtouch.engine.soundcard` (PortAudio), :mod:`~phantomtouch.engine.jobs`,
-:mod:`~phantomtouch.engine.events` and :mod:`~phantomtouch.engine.log` (what was played),
-:mod:`~phantomtouch.engine.status`, :mod:`~phantomtouch.engine.checks`;
-:mod:`~phantomtouch.engine.process` and :mod:`~phantomtouch.engine.child` run the engine in
-a process of its own. The engine imports the renderer and the schema, never the server.
+Modules: :mod:`~phantomtouch.engine.front` (the API and the control side: job table,
+contacts, admission by the render budget), :mod:`~phantomtouch.engine.core` (the audio
+side: sink, queue, scheduler, voices), :mod:`~phantomtouch.engine.engine` (both in one
+process) and :mod:`~phantomtouch.engine.process` with :mod:`~phantomtouch.engine.child`
+and :mod:`~phantomtouch.engine.link` (the audio side in a process of its own),
+:mod:`~phantomtouch.engine.clock` (frames and server time),
+:mod:`~phantomtouch.engine.commands` (the bounded queue),
+:mod:`~phantomtouch.engine.scheduler` (the audio callback),
+:mod:`~phantomtouch.engine.voices` (pattern voices), :mod:`~phantomtouch.engine.contacts`
+(contact voices) and :mod:`~phantomtouch.engine.board` (their builder),
+:mod:`~phantomtouch.engine.mixer` (limiter, output stage, meters),
+:mod:`~phantomtouch.engine.sinks` (null, capture), :mod:`~phantomtouch.engine.soundcard`
+(PortAudio), :mod:`~phantomtouch.engine.shared` (what crosses processes without a
+message), :mod:`~phantomtouch.engine.jobs`, :mod:`~phantomtouch.engine.events` and
+:mod:`~phantomtouch.engine.log` (what was played), :mod:`~phantomtouch.engine.status`,
+:mod:`~phantomtouch.engine.checks`. ``docs/engine.md`` draws the whole. The engine imports
+the renderer and the schema, never the server.
 """
 
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.engine import Engine, EngineStatus
-from phantomtouch.engine.jobs import Job, JobState
+from phantomtouch.engine.engine import Engine
+from phantomtouch.engine.front import EngineFront
+from phantomtouch.engine.jobs import POLICIES, Job, JobState, Policy
 from phantomtouch.engine.process import ProcessEngine
 from phantomtouch.engine.sinks import CaptureSink, NullSink, Sink
 from phantomtouch.engine.soundcard import (
@@ -34,15 +41,19 @@ from phantomtouch.engine.soundcard import (
     list_output_devices,
     open_default_sink,
 )
+from phantomtouch.engine.status import EngineStatus
 
 __all__ = [
+    "POLICIES",
     "CaptureSink",
     "ContactSettings",
     "Engine",
+    "EngineFront",
     "EngineStatus",
     "Job",
     "JobState",
     "NullSink",
+    "Policy",
     "ProcessEngine",
     "Sink",
     "SinkSpec",

@@ -43,6 +43,35 @@ def check_law(law: object) -> str:
     return law
 
 
+def contact_amplitude(device: DeviceProfile, intensity: object, carrier: object) -> float:
+    """Voice amplitude of a relative intensity (None: Table I "low" for the carrier)."""
+    max_db = device.safety.max_level_db
+    if intensity is None:
+        level_db = table_i_level_db("low", carrier)
+        if level_db > max_db:
+            raise ParameterError(
+                f"intensity=None gives Table I 'low' = {level_db:g} dB re 1 µm/s²; the "
+                f"device allows at most safety.max_level_db={max_db:g} dB"
+            )
+        return amplitude_for_level(level_db, device)
+    relative = check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
+    if relative == 0.0:
+        return 0.0
+    return amplitude_for_level(max_db + 20.0 * math.log10(relative), device)
+
+
+def check_contact_carrier(device: DeviceProfile, carrier: object) -> CarrierModel:
+    """A carrier the device's sample rate can play (None: a 100 Hz sine)."""
+    if carrier is None:
+        return SineCarrier()
+    if not isinstance(carrier, SineCarrier | NoiseCarrier | CombinedCarrier):
+        raise ParameterError(
+            f"carrier={carrier!r} must be a SineCarrier, NoiseCarrier or CombinedCarrier"
+        )
+    check_carrier_frequencies(carrier, device.sample_rate_hz)
+    return carrier
+
+
 class ContactBoard:
     """Contacts that are down, and how to build, move and release them.
 
@@ -96,31 +125,12 @@ class ContactBoard:
         return self._burst_shape * np.float32(amplitude)
 
     def amplitude(self, intensity: object, carrier: object) -> float:
-        """Voice amplitude of a relative intensity (None: Table I "low" for the carrier)."""
-        max_db = self.device.safety.max_level_db
-        if intensity is None:
-            level_db = table_i_level_db("low", carrier)
-            if level_db > max_db:
-                raise ParameterError(
-                    f"intensity=None gives Table I 'low' = {level_db:g} dB re 1 µm/s²; the "
-                    f"device allows at most safety.max_level_db={max_db:g} dB"
-                )
-            return amplitude_for_level(level_db, self.device)
-        relative = check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
-        if relative == 0.0:
-            return 0.0
-        return amplitude_for_level(max_db + 20.0 * math.log10(relative), self.device)
+        """Voice amplitude of a relative intensity (see :func:`contact_amplitude`)."""
+        return contact_amplitude(self.device, intensity, carrier)
 
     def check_carrier(self, carrier: object) -> CarrierModel:
-        """A carrier the device's sample rate can play (None: a 100 Hz sine)."""
-        if carrier is None:
-            return SineCarrier()
-        if not isinstance(carrier, SineCarrier | NoiseCarrier | CombinedCarrier):
-            raise ParameterError(
-                f"carrier={carrier!r} must be a SineCarrier, NoiseCarrier or CombinedCarrier"
-            )
-        check_carrier_frequencies(carrier, self.device.sample_rate_hz)
-        return carrier
+        """A carrier the device's sample rate can play (see :func:`check_contact_carrier`)."""
+        return check_contact_carrier(self.device, carrier)
 
     def target(
         self, x_cm: object, y_cm: object, *, amplitude: float, law: str, frame: int | None

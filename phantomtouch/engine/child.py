@@ -1,131 +1,187 @@
-"""The engine process's side of :class:`~phantomtouch.engine.process.ProcessEngine`.
+"""The engine process: one audio callback that does all of its Python work.
 
-:func:`serve` runs in the child: it opens the sink a
-:class:`~phantomtouch.engine.soundcard.SinkSpec` names, builds a real
-:class:`~phantomtouch.engine.Engine` and answers the host's calls from the pipe, one at a
-time. Messages the host sent without waiting for an answer and before its last
-``stop_all`` are dropped; a thread applies ``stop_all`` as soon as the host raises its
-mark. Plans arrive once and are kept under the host's key; contact moves and the clock
-go through shared memory (:mod:`phantomtouch.engine.shared`). When the pipe closes (the
-host is gone), the engine fades out and the child ends.
+:func:`serve` runs in the child of :class:`~phantomtouch.engine.process.ProcessEngine`.
+It opens the sink a :class:`~phantomtouch.engine.soundcard.SinkSpec` names, builds a
+:class:`~phantomtouch.engine.core.Core`, measures what a voice costs and reports ready;
+once told to start, it starts the sink, and from then on its main thread only waits (in a
+call that holds no interpreter lock) for the host to leave. Everything else happens in
+the audio callback, at the start of each block (:meth:`_Child.intake`):
+
+1. report what the last block did (events to the host, figures and a heartbeat into
+   shared memory);
+2. apply a ``stop_all`` the host raised in shared memory: every message sent before it
+   is void;
+3. read the host's messages from a non-blocking pipe and apply them, while the time
+   spent stays within ``INTAKE_SHARE`` of the block's playing time (at least one
+   message a block; the rest wait for the next block);
+4. take the newest contact positions from shared memory.
+
+So the callback never waits for the interpreter lock: no other thread of this process
+runs Python code while audio plays. When the host's pipe closes (the host is gone), the
+engine fades out and the process ends.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import logging
 import os
 import sys
 import threading
-from collections.abc import Callable
+import time
 from multiprocessing.connection import Connection
 from typing import Any
 
 from phantomtouch.engine.clock import SampleClock
-from phantomtouch.engine.engine import Engine
-from phantomtouch.engine.jobs import Job
-from phantomtouch.engine.shared import MoveSlots, SharedClock
+from phantomtouch.engine.contacts import ContactSettings
+from phantomtouch.engine.core import Core, measure_voice_cost
+from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
+from phantomtouch.engine.link import FrameReader, NonBlockingWriter, encode, widen
+from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.sinks import CaptureSink
 from phantomtouch.engine.soundcard import SinkSpec
+from phantomtouch.renderer.carriers import adopt_noise_loop
+from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger(__name__)
 
-SWITCH_INTERVAL_S = 0.001
-"""How soon a thread of the engine process that holds the interpreter lock is asked to
-hand it over, s (Python's default, 5 ms, is longer than a block of 128 frames): the
-audio callback waits at most about this long for the lock."""
+INTAKE_SHARE = 0.15
+"""Share of a block's playing time the callback spends on the host's messages."""
+READ_BYTES = 1 << 18
+"""Most bytes read from the host's pipe per block."""
+LOAD_EVERY_BLOCKS = 64
+"""Blocks between two computations of the render-load percentiles."""
 
 
 class _Child:
-    """The engine process: a real Engine served over a pipe."""
+    """The engine process's state, used by its audio callback."""
 
     def __init__(
-        self, conn: Connection, engine: Engine, spec: SinkSpec, mark: Any, slots: MoveSlots
+        self,
+        core: Core,
+        reader: FrameReader,
+        writer: NonBlockingWriter,
+        mark: Any,
+        slots: MoveSlots,
+        status: StatusBlock,
     ) -> None:
-        self.conn = conn
-        self.engine = engine
-        self.spec = spec
+        self.core = core
+        self.reader = reader
+        self.writer = writer
         self.mark = mark
         self.slots = slots
+        self.status = status
+        self.geometry = Geometry.for_device(core.device)
         self.handled_mark = 0
-        self.stop_lock = threading.Lock()
         self.plans: dict[int, Plan] = {}
-        self.handlers: dict[str, Callable[..., Any]] = {
-            "schedule": self.schedule,
-            "contact_down": self.contact_down,
-            "contact_up": self.contact_up,
-            "release_owner": self.release_owner,
-        }
+        self.leave = threading.Event()
+        period_s = core.device.block_frames / core.device.sample_rate_hz
+        self.budget_s = INTAKE_SHARE * period_s
+        self.blocks = 0
+        self.figures: dict[str, Any] = {}
 
-    def apply_stop_all(self) -> None:
-        with self.stop_lock:
-            mark = self.mark.value
-            if mark > self.handled_mark:
-                self.handled_mark = mark
-                self.engine.stop_all()
-                self.slots.unbind_all()
+    # -- the audio callback -----------------------------------------------------------
 
-    def schedule(self, plan_key: int, plan: Plan | None, forget: list[int], **kwargs: Any) -> Job:
-        """``Engine.schedule`` with the plan sent once and kept under its key."""
-        for key in forget:
-            self.plans.pop(key, None)
-        if plan is not None:
-            self.plans[plan_key] = plan
-        return self.engine.schedule(self.plans[plan_key], **kwargs)
+    def intake(self) -> None:
+        """At the start of each block (see the module docstring)."""
+        began = time.perf_counter()
+        self.report()
+        self.check_mark()
+        reader = self.reader
+        reader.fill(READ_BYTES)
+        while (message := reader.next()) is not None:
+            self.check_mark()
+            self.apply(message)
+            if time.perf_counter() - began > self.budget_s:
+                break
+        if reader.closed and reader.pending_bytes == 0:
+            self.leave.set()  # the host is gone
+        self.slots.drain(self.core.board.post_checked)
 
-    def contact_down(self, *args: Any, slot: tuple[int, int], **kwargs: Any) -> None:
-        """``Engine.contact_down``, then the contact's moves come through its slot."""
-        self.engine.contact_down(*args, **kwargs)
-        owner, contact = args[0], args[1]
-        self.slots.bind(slot[0], slot[1], owner, contact)
+    def report(self) -> None:
+        core = self.core
+        scheduler = core.scheduler
+        self.status.beat(time.monotonic(), scheduler.frames)
+        events = core.events()
+        if events:
+            self.writer.send(events)
+        else:
+            self.writer.flush()
+        self.blocks += 1
+        if self.blocks % LOAD_EVERY_BLOCKS == 1:
+            self.figures = core.figures()
+        else:
+            figures = self.figures
+            mixer = scheduler.mixer
+            figures.update(
+                now_frames=scheduler.frames,
+                active_voices=scheduler.active_voices,
+                underruns=core.sink.underruns,
+                late_commands=scheduler.late_commands,
+                muted_blocks=mixer.muted_blocks,
+                limited_blocks=mixer.limited_blocks,
+                peak=mixer.peak,
+                queue_depth=core.queue.depth,
+                levels=mixer.levels,
+                callback_errors=scheduler.callback_errors,
+            )
+        self.figures["dropped_reports"] = self.writer.dropped
+        self.figures["running"] = core.running
+        self.status.write(self.figures)
 
-    def contact_up(self, owner: str, contact: str, **kwargs: Any) -> None:
-        self.slots.unbind(owner, contact)
-        self.engine.contact_up(owner, contact, **kwargs)
+    def check_mark(self) -> None:
+        mark = int(self.mark.value)
+        if mark > self.handled_mark:
+            self.handled_mark = mark
+            self.core.stop_all()
+            self.slots.unbind_all()
 
-    def release_owner(self, owner: str) -> None:
-        self.slots.unbind(owner)
-        self.engine.release_owner(owner)
+    def apply(self, message: tuple[Any, ...]) -> None:
+        kind, seq = message[0], message[1]
+        if kind == "close":
+            self.leave.set()
+            return
+        if kind == "noise":
+            adopt_noise_loop(message[2], message[3])
+            return
+        if seq < self.handled_mark:
+            return  # sent before a stop_all: void
+        core = self.core
+        try:
+            if kind == "start":
+                _, _, job_id, key, plan, forget, owner, frame = message
+                for old in forget:
+                    self.plans.pop(old, None)
+                if plan is not None:
+                    self.plans[key] = dataclasses.replace(
+                        plan, device=core.device, geometry=self.geometry
+                    )
+                core.start_job(job_id, self.plans[key], owner, frame)
+            elif kind == "release":
+                core.release_job(*message[2:])
+            elif kind == "down":
+                _, _, owner, contact, slot, kwargs = message
+                core.contact_down(core.board.prepare_down(owner, contact, **kwargs))
+                self.slots.bind(slot[0], slot[1], owner, contact)
+            elif kind == "up":
+                _, _, owner, contact, kwargs = message
+                self.slots.unbind(owner, contact)
+                core.board.up(owner, contact, **kwargs)
+            elif kind == "release_owner":
+                self.slots.unbind(message[2])
+                core.board.release_owner(message[2])
+        except Exception as exc:  # checked by the host; a failure here is a bug, not a stop
+            core.scheduler.callback_errors += 1
+            core.scheduler.last_error = exc
 
-    def watch_stop_all(self, wake: Any) -> None:
-        while True:
-            wake.wait()
-            wake.clear()
-            self.apply_stop_all()
-
-    def serve(self) -> None:
-        while True:
-            try:
-                seq, method, args, kwargs, answer = self.conn.recv()
-            except (EOFError, OSError):  # the host is gone: fade out and leave
-                self.close()
-                return
-            self.apply_stop_all()
-            if method == "close":
-                self.close()
-                self.conn.send((True, None))
-                return
-            if not answer and seq < self.handled_mark:
-                continue  # sent before a stop_all: void
-            try:
-                attribute = self.handlers.get(method) or getattr(self.engine, method)
-                result = attribute(*args, **kwargs) if callable(attribute) else attribute
-                reply = (True, result)
-            except Exception as exc:
-                if not answer:
-                    logger.warning("engine process: %s failed: %s", method, exc)
-                    continue
-                reply = (False, exc)
-            if answer:
-                self.conn.send(reply)
-
-    def close(self) -> None:
-        self.engine.close()
-        sink = self.engine.sink
-        if isinstance(sink, CaptureSink) and self.spec.wav_path is not None:
-            sink.write_wav(self.spec.wav_path)
+    def close(self, spec: SinkSpec) -> None:
+        self.core.close(fade=True)
+        sink = self.core.sink
+        if isinstance(sink, CaptureSink) and spec.wav_path is not None:
+            sink.write_wav(spec.wav_path)
 
 
 def raise_priority(priority: int | None) -> None:
@@ -138,13 +194,31 @@ def raise_priority(priority: int | None) -> None:
         logger.info("engine process keeps normal priority: %s", exc)
 
 
+def _wait_for_start(child: _Child) -> bool:
+    """Apply the host's messages until it says ``start_sink`` (True) or ``close``."""
+    reader = child.reader
+    os.set_blocking(reader.fd, True)
+    try:
+        while not reader.closed:
+            reader.fill(READ_BYTES)
+            while (message := reader.next()) is not None:
+                if message[0] == "start_sink":
+                    return True
+                if message[0] == "close":
+                    return False
+                child.apply(message)
+        return False
+    finally:
+        os.set_blocking(reader.fd, False)
+
+
 def serve(
-    conn: Connection,
+    commands: Connection,
+    reports: Connection,
     device_json: str,
     spec: SinkSpec,
     options: dict[str, Any],
     mark: Any,
-    wake: Any,
     priority: int | None,
     shared: dict[str, Any],
 ) -> None:
@@ -152,26 +226,26 @@ def serve(
 
     Parameters
     ----------
-    conn : Connection
-        The pipe to the host: requests ``(seq, method, args, kwargs, answer)`` in, answers
-        ``(ok, result or exception)`` out.
+    commands : Connection
+        The host's messages (read end; framed by :mod:`phantomtouch.engine.link`).
+    reports : Connection
+        Where the engine reports (write end): first ``("ready", voice_cost, backend,
+        output_device)`` or ``("failed", exception)``, then lists of events.
     device_json : str
         The device profile as JSON.
     spec : SinkSpec
     options : dict
-        Keyword arguments of :class:`~phantomtouch.engine.Engine`.
+        ``queue_capacity``, ``max_voices``, ``contact``, ``render_ahead_frames``,
+        ``voice_cost`` (None: measure it).
     mark : multiprocessing.Value
         Sequence number of the host's last ``stop_all``.
-    wake : multiprocessing.Event
-        Set by the host with every ``stop_all``.
     priority : int or None
         SCHED_FIFO priority for this process's threads.
     shared : dict
-        The shared memory: ``clock`` (a :class:`~phantomtouch.engine.shared.SharedClock`'s
-        array), ``slots`` and ``slot_count`` (:class:`~phantomtouch.engine.shared.MoveSlots`).
+        The shared memory: ``clock``, ``slots`` and ``slot_count``, ``status``.
     """
     raise_priority(priority)
-    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    report_fd = reports.fileno()
     try:
         device = DeviceProfile.model_validate_json(device_json)
         clock = SampleClock(
@@ -179,13 +253,37 @@ def serve(
             publish=SharedClock(device.sample_rate_hz, shared["clock"]).publish,
         )
         slots = MoveSlots(shared["slot_count"], shared["slots"])
-        engine = Engine(device, spec.open(device), clock=clock, **options)
-        engine.take_positions(slots)
+        status = StatusBlock(device.channels, shared["status"])
+        sink = spec.open(device)
+        core = Core(
+            device,
+            sink,
+            settings=options["contact"] or ContactSettings(),
+            # admission is the host's: the queue only bounds what it let through
+            queue_capacity=options["queue_capacity"] + 2 * options["contact_slots"] + 1,
+            rings=min(options["max_voices"], RENDER_AHEAD_RINGS),
+            chunk_frames=options["render_ahead_frames"],
+            clock=clock,
+        )
+        cost = options["voice_cost"]
+        if cost is None:
+            cost = measure_voice_cost(device, cost_plan(device)) if sink.realtime else 0.0
     except Exception as exc:
-        conn.send((False, exc))
+        os.write(report_fd, encode(("failed", exc)))
         return
+    widen(commands.fileno())
+    child = _Child(
+        core, FrameReader(commands.fileno()), NonBlockingWriter(report_fd), mark, slots, status
+    )
+    core.on_block(child.intake)
+    os.set_blocking(report_fd, True)
+    os.write(report_fd, encode(("ready", cost, sink.backend, sink.output_device)))
+    os.set_blocking(report_fd, False)
     gc.freeze()  # what start-up made is never scanned again: collections stay short
-    conn.send((True, None))
-    child = _Child(conn, engine, spec, mark, slots)
-    threading.Thread(target=child.watch_stop_all, args=(wake,), daemon=True).start()
-    child.serve()
+    if not _wait_for_start(child):
+        core.close(fade=False)
+        return
+    sys.setswitchinterval(0.001)
+    core.start()
+    child.leave.wait()
+    child.close(spec)

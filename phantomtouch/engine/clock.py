@@ -18,6 +18,8 @@ FOLLOW = 1.0 / 256.0
 """Fraction of a late arrival the clock moves towards per block."""
 RESYNC_S = 0.05
 """A callback this much later than the model re-anchors the clock, s."""
+LATENCY_FOLLOW = 1.0 / 16.0
+"""Fraction of a new output-latency reading the latency moves towards per block."""
 
 
 class SampleClock:
@@ -46,6 +48,7 @@ class SampleClock:
     ) -> None:
         self.sample_rate_hz = int(sample_rate_hz)
         self._latency_s = 0.0
+        self._dac_seen = False
         self._anchor: tuple[int, float] = (0, time.monotonic() if now_s is None else now_s)
         self._publish = publish
         self._changed()
@@ -69,11 +72,19 @@ class SampleClock:
         self._anchor = (int(frame), float(now_s))
         self._changed()
 
-    def observe(self, frame: int, now_s: float) -> None:
+    def observe(self, frame: int, now_s: float, dac_delay_s: float | None = None) -> None:
         """The block starting at ``frame`` is computed at ``now_s`` (audio callback).
 
-        Constant time, no allocation beyond one tuple.
+        ``dac_delay_s``, when the sound card tells it (PortAudio's ``outputBufferDacTime``
+        less its ``currentTime``), is how long until this block's first frame reaches the
+        converter: the output latency follows it (smoothed over about 16 blocks; the
+        first reading is taken as it is). Constant time, no allocation beyond one tuple.
         """
+        if dac_delay_s is not None and 0.0 < dac_delay_s < 1.0:
+            if self._dac_seen:
+                self._latency_s += (dac_delay_s - self._latency_s) * LATENCY_FOLLOW
+            else:
+                self._latency_s, self._dac_seen = dac_delay_s, True
         anchor_frame, anchor_s = self._anchor
         predicted_s = anchor_s + (frame - anchor_frame) / self.sample_rate_hz
         late_s = now_s - predicted_s

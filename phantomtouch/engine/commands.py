@@ -41,13 +41,15 @@ class ReleaseCommand:
     """Begin ``voice``'s release at ``frame`` (None: at the block that applies it).
 
     ``transient`` is an optional lift-off burst, shape (frames,), float32, played at the
-    release frame on the voice's channels.
+    release frame on the voice's channels. ``fade_frames`` shortens the fade-out (a
+    stolen voice); None keeps the voice's own release length.
     """
 
     seq: int
     voice: Voice
     frame: int | None
     transient: object | None = None
+    fade_frames: int | None = None
 
 
 Command = StartCommand | ReleaseCommand
@@ -125,10 +127,17 @@ class CommandQueue:
         return self.push(make, bounded=True)
 
     def push_release(
-        self, voice: Voice, frame: int | None, transient: object | None = None
+        self,
+        voice: Voice,
+        frame: int | None,
+        transient: object | None = None,
+        *,
+        fade_frames: int | None = None,
     ) -> ReleaseCommand:
         """Queue the release of ``voice``; never refused."""
-        return self.push(lambda seq: ReleaseCommand(seq, voice, frame, transient), bounded=False)
+        return self.push(
+            lambda seq: ReleaseCommand(seq, voice, frame, transient, fade_frames), bounded=False
+        )
 
     def mark_stop_all(self) -> int:
         """Void every command pushed so far and everything playing; never refused."""

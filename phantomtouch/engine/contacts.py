@@ -192,8 +192,10 @@ class ContactVoice(Voice):
             self._add_burst(self._down_burst, self._unit, frame)
             self._down_burst = None
 
-    def release(self, frame: int, transient: object | None = None) -> None:
-        super().release(frame)
+    def release(
+        self, frame: int, transient: object | None = None, fade_frames: int | None = None
+    ) -> None:
+        super().release(frame, None, fade_frames)
         if isinstance(transient, np.ndarray):
             self._add_burst(transient, self._unit, frame)
 

@@ -1,51 +1,58 @@
-"""The real-time engine: patterns and live contacts played on the armband's sound card.
+"""The engine in this process: the control side and the audio side share a process.
 
-Every public method may be called from any thread: it builds small commands under the
-engine's lock (never taken by the audio callback) and pushes them into a bounded queue
-that the callback drains at the start of each block (:mod:`phantomtouch.engine.scheduler`).
-A housekeeping thread collects what the callback reports (job states, the stimulus log)
-every 50 ms; the query methods collect it too. See the README for an example.
+:class:`Engine` is :class:`~phantomtouch.engine.front.EngineFront` (the API, job table,
+contacts, admission) over a :class:`~phantomtouch.engine.core.Core` (sink, scheduler,
+voices) in the same process: commands are pushed straight into the core's bounded queue,
+which the audio callback drains at the start of each block. A housekeeping thread takes
+what the callback reports (job states, the stimulus log) every 50 ms.
+
+In a process that does other Python work (a web server), the callback waits for the
+interpreter lock that work holds; :class:`~phantomtouch.engine.ProcessEngine` runs the
+same engine in a process of its own. See the README for an example.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
-import time
-import uuid
 from pathlib import Path
+from typing import Any
 
-from phantomtouch.engine.board import ContactBoard
-from phantomtouch.engine.checks import check_ahead, check_frame, check_id, check_int, check_seconds
+from phantomtouch.engine.checks import check_int, check_range
 from phantomtouch.engine.clock import SampleClock
-from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.events import Reporter
-from phantomtouch.engine.jobs import Job, JobRecord, JobState, JobTable, resolve_plan
-from phantomtouch.engine.log import StimulusLog
-from phantomtouch.engine.scheduler import Scheduler
-from phantomtouch.engine.shared import MoveSlots
+from phantomtouch.engine.core import Core, measure_voice_cost
+from phantomtouch.engine.front import (
+    MAX_VOICES,
+    RENDER_BUDGET,
+    ContactRecord,
+    EngineFront,
+    check_frame_number,
+    check_server_time,
+)
+from phantomtouch.engine.jobs import JobState, Policy
 from phantomtouch.engine.sinks import NullSink, Sink
-from phantomtouch.engine.status import EngineFront, EngineStatus
-from phantomtouch.engine.voices import PatternVoice
 from phantomtouch.errors import DeviceError, ParameterError
-from phantomtouch.renderer.plan import Plan
+from phantomtouch.renderer.plan import Plan, plan
+from phantomtouch.renderer.presets import preset
 from phantomtouch.schema.device import DeviceProfile
-from phantomtouch.schema.pattern import Carrier, TouchPattern
 
-MAX_SCHEDULE_AHEAD_S = 3600.0
-"""Latest start a job may ask for, s after the current frame."""
-MAX_QUEUE_CAPACITY = 1_000_000
-MAX_VOICES = 64
-"""Default of ``max_voices``: pattern voices that may sound at once. On a 2-core machine
-64 of the paper's 12 s stimuli take a fifth of a 256-frame block at p99
-(``benchmarks/bench_engine.py``), leaving room for contacts, smaller blocks and the
-host's own work; ``benchmarks/bench_server.py`` overloads the cap with taps."""
+logger = logging.getLogger("phantomtouch.engine")
+
 RENDER_AHEAD_FRAMES = 4096
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`)."""
 RENDER_AHEAD_RINGS = 64
 """Most pattern voices that render ahead at once: the engine preallocates a ring (two
 chunks, 256 KB at 8 channels) for each of ``min(max_voices, RENDER_AHEAD_RINGS)``
 voices; voices beyond render block by block."""
+HOUSEKEEPING_PERIOD_S = 0.05
+COST_PRESET = "exp1/noise-high-v3"
+"""The pattern whose voices measure what a voice costs: noise, the dearest carrier."""
+
+
+def cost_plan(device: DeviceProfile) -> Plan:
+    """A plan of the pattern that measures a voice's cost, for ``device``."""
+    return plan(preset(COST_PRESET), device)
 
 
 class Engine(EngineFront):
@@ -59,24 +66,15 @@ class Engine(EngineFront):
         Where the blocks go; the engine owns it from now on and closes it. None: a
         :class:`~phantomtouch.engine.sinks.NullSink` (use
         :func:`~phantomtouch.engine.soundcard.open_default_sink` for the sound card).
-    queue_capacity : int, 1 <= queue_capacity <= 1_000_000
-        Most jobs and touchdowns waiting to start, and most jobs scheduled or playing at
-        once; more raise EngineBusyError.
-    max_voices : int, 1 <= max_voices <= 1_000_000
-        Most pattern voices that may sound at the same time: a job whose frames would
-        overlap ``max_voices`` others is refused with EngineBusyError, so the audio
-        thread is never handed more than it can render. Jobs scheduled for later count
-        only where they overlap. The default, 64, renders in a fifth of real time on a
-        2-core machine (``MAX_VOICES``); raise it on a faster one.
-    contact : ContactSettings or None
-        Attack, release and transients of contacts (and the release of stopped jobs).
-    log_path : str, Path or None
-        Append the stimulus log (JSON lines, :mod:`phantomtouch.engine.log`) here.
+    queue_capacity, max_voices, contact, log_path, render_budget, voice_policy
+        See :class:`~phantomtouch.engine.front.EngineFront`.
     render_ahead_frames : int, >= 0
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
     clock : SampleClock or None
-        The sample clock to keep, at the device's sample rate (one that publishes itself
-        to another process, say); None: a new one.
+        The sample clock to keep, at the device's sample rate; None: a new one.
+    voice_cost : float or None
+        Render load of one pattern voice as a share of a block; None: measured when
+        the engine starts (:func:`~phantomtouch.engine.core.measure_voice_cost`).
 
     Raises
     ------
@@ -97,52 +95,57 @@ class Engine(EngineFront):
         log_path: str | Path | None = None,
         render_ahead_frames: int = RENDER_AHEAD_FRAMES,
         clock: SampleClock | None = None,
+        render_budget: float = RENDER_BUDGET,
+        voice_policy: Policy = "steal-oldest",
+        voice_cost: float | None = None,
     ) -> None:
-        if not isinstance(device, DeviceProfile):
-            raise ParameterError(f"device={device!r} must be a DeviceProfile")
-        check_int("queue_capacity", queue_capacity, 1, MAX_QUEUE_CAPACITY)
-        check_int("max_voices", max_voices, 1, MAX_QUEUE_CAPACITY)
-        self._max_voices = max_voices
-        check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
-        if contact is not None and not isinstance(contact, ContactSettings):
-            raise ParameterError(f"contact={contact!r} must be ContactSettings or None")
-        self._device = device
-        self._sink: Sink = sink if sink is not None else NullSink(device)
-        for name in ("sample_rate_hz", "block_frames", "channels"):
-            if getattr(self._sink, name) != getattr(device, name):
-                raise DeviceError(
-                    f"sink {name}={getattr(self._sink, name)} differs from the device's "
-                    f"{getattr(device, name)}"
-                )
-        self._settings = contact or ContactSettings()
-        self._queue = CommandQueue(queue_capacity)
-        self._board = ContactBoard(device, self._settings, self._queue)
+        super().__init__(
+            device,
+            queue_capacity=queue_capacity,
+            max_voices=max_voices,
+            contact=contact,
+            log_path=log_path,
+            render_budget=render_budget,
+            voice_policy=voice_policy,
+        )
         if clock is not None and (
             not isinstance(clock, SampleClock) or clock.sample_rate_hz != device.sample_rate_hz
         ):
             raise ParameterError(
                 f"clock={clock!r} must be a SampleClock at {device.sample_rate_hz} Hz or None"
             )
-        self._clock = clock if clock is not None else SampleClock(device.sample_rate_hz)
-        self._scheduler = Scheduler(
+        check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
+        if voice_cost is not None:
+            self._voice_cost = check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
+        self._core = Core(
             device,
-            self._queue,
-            self._clock,
+            sink if sink is not None else NullSink(device),
+            settings=self._settings,
+            queue_capacity=queue_capacity,
             rings=min(max_voices, RENDER_AHEAD_RINGS),
             chunk_frames=render_ahead_frames,
-            clocked=self._sink.realtime,
+            clock=clock if clock is not None else SampleClock(device.sample_rate_hz),
         )
-        self._lock = threading.RLock()
-        self._jobs = JobTable()
-        log = StimulusLog(log_path) if log_path is not None else None
-        self._reporter = Reporter(self._scheduler, self._clock, self._jobs, log, self._lock)
-        self._running = False
+        self._halt = threading.Event()
+        self._housekeeper: threading.Thread | None = None
+        self._reported_error: BaseException | None = None
         self._closed = False
+
+    @property
+    def core(self) -> Core:
+        """The audio side (sink, scheduler, voices)."""
+        return self._core
+
+    @property
+    def sink(self) -> Sink:
+        """The sink the engine plays into (owned by the engine)."""
+        return self._core.sink
 
     # -- life cycle -------------------------------------------------------------------
 
     def start(self) -> None:
-        """Start the sink and the housekeeping thread (no-op when running).
+        """Measure a voice's cost (unless given), start the sink and the housekeeping
+        thread (no-op when running).
 
         Raises
         ------
@@ -150,18 +153,18 @@ class Engine(EngineFront):
             The engine is closed, or the sink cannot start.
         """
         with self._lock:
-            self._check_open()
-            if self._running:
+            if self._closed:
+                raise DeviceError("the engine is closed")
+            if self._core.running:
                 return
-            self._clock.restart(self._scheduler.frames, time.monotonic())
-            self._reporter.start()
-            try:
-                self._sink.start(self._scheduler.render)
-            except BaseException:
-                self._reporter.stop()
-                raise
-            self._clock.output_latency_s = max(0.0, float(self._sink.output_latency_s))
-            self._running = True
+            if self._voice_cost <= 0.0 and self._core.sink.realtime:
+                self._voice_cost = measure_voice_cost(self._device, cost_plan(self._device))
+            self._core.start()
+            self._halt.clear()
+            self._housekeeper = threading.Thread(
+                target=self._housekeep, name="phantomtouch-engine-housekeeping", daemon=True
+            )
+            self._housekeeper.start()
 
     def close(self) -> None:
         """Fade everything out, stop and close the sink, flush the log. Idempotent.
@@ -173,323 +176,87 @@ class Engine(EngineFront):
             if self._closed:
                 return
             self._closed = True
-            running, self._running = self._running, False
         try:
-            if running and self._sink.realtime:
-                self._fade_out()
-            self._sink.close()
+            self._core.close(fade=True)
         finally:
-            self._reporter.close()
+            self._halt.set()
+            if self._housekeeper is not None:
+                self._housekeeper.join()
+            self._collect()
+            self._ledger.close()
 
-    def _fade_out(self) -> None:
-        self.stop_all()
-        block_s = self.block_frames / self.sample_rate_hz
-        deadline = time.monotonic() + self._settings.release_s + 4 * block_s + 0.05
-        while self._scheduler.active_voices and time.monotonic() < deadline:
-            time.sleep(block_s)
-        time.sleep(2 * block_s)  # let the last (silent) block reach the output
+    def _housekeep(self) -> None:
+        while not self._halt.wait(HOUSEKEEPING_PERIOD_S):
+            self._collect()
 
-    def _check_open(self) -> None:
-        if self._closed:
-            raise DeviceError("the engine is closed")
+    def _collect(self) -> None:
+        """Take what the callback reported; log a new callback error."""
+        with self._lock:
+            events = self._core.events()
+        self._apply_events(events)
+        error = self._core.scheduler.last_error
+        if error is not None and error is not self._reported_error:
+            self._reported_error = error
+            logger.error("audio callback failed; voices dropped", exc_info=error)
 
     # -- clock ------------------------------------------------------------------------
 
     @property
-    def sink(self) -> Sink:
-        """The sink the engine plays into (owned by the engine)."""
-        return self._sink
-
-    @property
     def now_frames(self) -> int:
-        """The sample clock: frames handed to the sink so far."""
-        return self._scheduler.frames
-
-    def server_time_s(self) -> float:
-        """The server clock, s (``time.monotonic()``)."""
-        return time.monotonic()
+        return self._core.scheduler.frames
 
     def frames_at(self, server_time_s: float) -> int:
-        """The frame that leaves the sound card at ``server_time_s`` (server clock)."""
-        return self._clock.frames_at(check_seconds("server_time_s", server_time_s))
+        return self._core.clock.frames_at(check_server_time(server_time_s))
 
     def time_at(self, frame: int) -> float:
-        """Server time, s, at which ``frame`` leaves the sound card."""
-        return self._clock.time_at(check_int("frame", frame, -(1 << 62), 1 << 62))
+        return self._core.clock.time_at(check_frame_number(frame))
 
-    # -- jobs -------------------------------------------------------------------------
+    def _next_block_frame(self) -> int:
+        return self._core.scheduler.next_block_frame()
 
-    def schedule(
-        self,
-        pattern: TouchPattern | Plan,
-        *,
-        start_frame: int | None = None,
-        owner: str | None = None,
-    ) -> Job:
-        """Play a pattern from ``start_frame`` on, sample-exact.
+    def _check_ready(self) -> None:
+        if self._closed:
+            raise DeviceError("the engine is closed")
 
-        Parameters
-        ----------
-        pattern : TouchPattern or Plan
-            A plan must be made for this engine's device.
-        start_frame : int or None
-            Frame of the pattern's first sample, at most ``MAX_SCHEDULE_AHEAD_S`` ahead;
-            a frame that has passed when the command arrives starts at once (counted in
-            ``late_commands``). None: as soon as possible, at the next block.
-        owner : str or None
-            The client it belongs to (1-64 characters), for the log and job states.
-
-        Returns
-        -------
-        Job
-
-        Raises
-        ------
-        ParameterError
-            The pattern cannot be planned, or an argument is out of range.
-        EngineBusyError
-            ``queue_capacity`` jobs and touchdowns are already waiting, or
-            ``queue_capacity`` jobs are scheduled or playing.
-        DeviceError
-            The engine is closed.
-        """
-        self._check_open()
-        resolved = resolve_plan(pattern, self._device)
-        frame = check_frame("start_frame", start_frame)
-        if owner is not None:
-            check_id("owner", owner)
-        if frame is not None:
-            check_ahead(frame, self.now_frames, self.sample_rate_hz, MAX_SCHEDULE_AHEAD_S)
-        voice = PatternVoice(
-            resolved,
-            job_id=uuid.uuid4().hex,
-            owner=owner,
-            release_frames=self._board.release_frames,
-        )
-        with self._lock:
-            self._check_open()
-            self._reporter.drain()
-            first = self._scheduler.next_block_frame() if frame is None else frame
-            self._jobs.check_room(
-                first, resolved.frames, jobs=self._queue.capacity, voices=self._max_voices
-            )
-            self._queue.push_start(voice, first, frame is None)
-            self._jobs.add(
-                JobRecord(
-                    voice=voice,
-                    job_id=voice.job_id,
-                    owner=owner,
-                    requested_start_frame=first,
-                    frames=resolved.frames,
-                    duration_s=resolved.duration_s,
-                )
-            )
-        return Job(
-            job_id=voice.job_id,
-            start_frame=first,
-            frames=resolved.frames,
-            duration_s=resolved.duration_s,
-            summary=resolved.summary(),
-        )
+    # -- the audio side, in this process ----------------------------------------------
 
     def job_state(self, job_id: str) -> JobState | None:
-        """The state of a job, or None if unknown (or too old: the last 1000 are kept)."""
-        with self._lock:
-            self._reporter.drain()
-            record = self._jobs.get(job_id) if isinstance(job_id, str) else None
-            return None if record is None else record.snapshot()
+        self._collect()
+        return super().job_state(job_id)
 
-    def stop(self, job_id: str) -> bool:
-        """Stop a job: it fades out over ``contact.release_s`` (or never starts).
+    def _send_start(self, job_id: str, plan: Plan, owner: str | None, frame: int | None) -> None:
+        self._core.start_job(job_id, plan, owner, frame)
 
-        Returns
-        -------
-        bool
-            False if the job is unknown or already over (finished or stopped).
-        """
-        with self._lock:
-            self._reporter.drain()
-            record = self._jobs.get(job_id) if isinstance(job_id, str) else None
-            if record is None or record.voice is None or record.state in ("finished", "stopped"):
-                return False
-            self._queue.push_release(record.voice, None)
-            self._jobs.mark_stopped(record)
-            return True
+    def _send_release(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
+        self._core.release_job(job_id, frame, fade_frames)
 
-    def stop_all(self) -> None:
-        """Everything off: every job and every contact of every client fades out.
+    def _send_down(self, owner: str, contact: str, record: ContactRecord, **kw: Any) -> None:
+        self._core.contact_down(self._core.board.prepare_down(owner, contact, **kw))
 
-        Never refused, never raises EngineBusyError: it does not queue behind other
-        commands. Jobs and touchdowns accepted before this call never start.
-        """
-        with self._lock:
-            self._queue.mark_stop_all()
-            self._board.forget_all()
-            self._jobs.stop_all()
-
-    # -- contacts ---------------------------------------------------------------------
-
-    def contact_down(
+    def _send_move(
         self,
         owner: str,
         contact: str,
-        x_cm: float,
-        y_cm: float,
-        *,
-        intensity: float | None = None,
-        carrier: Carrier | None = None,
-        law: str = "power",
-        normal_velocity_m_s: float | None = None,
-        at_frame: int | None = None,
+        record: ContactRecord,
+        intensity: float | None,
+        frame: int | None,
     ) -> None:
-        """A contact touches down at (x_cm, y_cm) and vibrates there until ``up``.
+        self._core.board.post_checked(owner, contact, record.x_cm, record.y_cm, intensity, frame)
 
-        Parameters
-        ----------
-        owner : str, 1-64 characters
-            The client (connection) the contact belongs to.
-        contact : str, 1-64 characters
-            The client's id for the contact. A contact that is already down is replaced
-            (the old one fades out, the new one fades in).
-        x_cm, y_cm : float, finite, |value| <= 1000
-            Position; outside the layout it is projected onto it.
-        intensity : float or None, 0 <= intensity <= 1
-            Relative amplitude, 1 = the device's ``safety.max_level_db`` (as
-            ``TouchPattern.intensity``). None: the paper's Table I "low" level for the
-            carrier.
-        carrier : SineCarrier, NoiseCarrier, CombinedCarrier or None
-            None: a 100 Hz sine.
-        law : {"power", "linear", "log"}
-        normal_velocity_m_s : float or None, |value| <= 10
-            Speed of the hand towards the skin: adds an impact transient scaled by it
-            (see :mod:`phantomtouch.engine.contacts`). None: no transient.
-        at_frame : int or None
-            Frame of touchdown; None: the next block.
+    def _send_up(self, owner: str, contact: str, record: ContactRecord | None, **kw: Any) -> None:
+        self._core.board.up(owner, contact, **kw)
 
-        Raises
-        ------
-        ParameterError
-            An argument is out of range (the message names it).
-        EngineBusyError
-            The queue is full, or ``contact.max_contacts`` contacts are down.
-        DeviceError
-            The engine is closed.
-        """
-        self._check_open()
-        voice = self._board.prepare_down(
-            owner,
-            contact,
-            x_cm,
-            y_cm,
-            intensity=intensity,
-            carrier=carrier,
-            law=law,
-            normal_velocity_m_s=normal_velocity_m_s,
-            at_frame=at_frame,
+    def _send_release_owner(self, owner: str, records: list[ContactRecord]) -> None:
+        self._core.board.release_owner(owner)
+
+    def _send_stop_all(self, records: list[ContactRecord]) -> None:
+        self._core.stop_all()
+
+    def _figures(self) -> dict[str, Any]:
+        figures = self._core.figures()
+        figures.update(
+            backend=self._core.sink.backend,
+            output_device=self._core.sink.output_device,
+            state="closed" if self._closed else "running" if figures["running"] else "starting",
         )
-        with self._lock:
-            self._check_open()
-            frame = voice.down_target.frame
-            first = self._scheduler.next_block_frame() if frame is None else frame
-            self._board.down(voice, first, frame is None)
-
-    def contact_move(
-        self,
-        owner: str,
-        contact: str,
-        x_cm: float,
-        y_cm: float,
-        *,
-        intensity: float | None = None,
-        at_frame: int | None = None,
-    ) -> None:
-        """The contact's newest position (and intensity); latest wins, nothing queues.
-
-        The gains ramp from where the last block ended to this position across the
-        block that contains ``at_frame`` (None: the next block).
-
-        Raises
-        ------
-        ParameterError
-            An argument is out of range.
-        ProtocolError
-            The contact is not down.
-        """
-        with self._lock:
-            self._board.move(owner, contact, x_cm, y_cm, intensity=intensity, at_frame=at_frame)
-
-    def contact_up(
-        self,
-        owner: str,
-        contact: str,
-        *,
-        normal_velocity_m_s: float | None = None,
-        at_frame: int | None = None,
-    ) -> None:
-        """Lift-off: the contact fades out over ``contact.release_s``.
-
-        A contact that is not down is ignored (``up`` is idempotent). With
-        ``normal_velocity_m_s``, a lift-off transient is added at the last position.
-        Never refused when the queue is full.
-
-        Raises
-        ------
-        ParameterError
-            An argument is out of range (ids, ``normal_velocity_m_s``, ``at_frame``).
-        """
-        with self._lock:
-            self._board.up(
-                owner, contact, normal_velocity_m_s=normal_velocity_m_s, at_frame=at_frame
-            )
-
-    def release_owner(self, owner: str) -> None:
-        """Release every contact of a client that went away (with the release ramp).
-
-        Never refused; unknown owners are ignored.
-        """
-        with self._lock:
-            self._board.release_owner(owner)
-
-    def take_positions(self, slots: MoveSlots) -> None:
-        """Apply, at the start of every block, the positions written into ``slots``.
-
-        For :class:`~phantomtouch.engine.process.ProcessEngine`, whose host writes moves
-        into shared memory: the audio callback posts each new one like
-        :meth:`contact_move` (the host has checked them).
-        """
-        post = self._board.post_checked
-        self._scheduler.intake = lambda: slots.drain(post)
-
-    # -- monitoring -------------------------------------------------------------------
-
-    def status(self) -> EngineStatus:
-        """A snapshot of clock, voices, levels and counters."""
-        with self._lock:
-            self._reporter.drain()
-            contacts = self._board.positions()
-            running = self._running
-        scheduler = self._scheduler
-        mixer = scheduler.mixer
-        load_p99, load_max = scheduler.render_load()
-        return EngineStatus(
-            backend=self._sink.backend,
-            output_device=self._sink.output_device,
-            sample_rate_hz=self.sample_rate_hz,
-            block_frames=self.block_frames,
-            channels=self.channels,
-            now_frames=scheduler.frames,
-            active_voices=scheduler.active_voices,
-            active_contacts=contacts,
-            levels=[float(level) for level in mixer.levels],
-            peak=float(mixer.peak),
-            underruns=int(self._sink.underruns),
-            late_commands=scheduler.late_commands,
-            muted_blocks=mixer.muted_blocks,
-            limited_blocks=mixer.limited_blocks,
-            output_latency_s=self._clock.output_latency_s,
-            queue_depth=self._queue.depth,
-            queue_capacity=self._queue.capacity,
-            running=running,
-            render_load_p99=load_p99,
-            render_load_max=load_max,
-        )
+        return figures

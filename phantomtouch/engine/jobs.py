@@ -11,13 +11,17 @@ from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
-from phantomtouch.engine.voices import PatternVoice
 from phantomtouch.errors import EngineBusyError, ParameterError
 from phantomtouch.renderer.plan import Plan, plan
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
 
 JobStateName = Literal["scheduled", "playing", "finished", "stopped"]
+Policy = Literal["refuse", "steal-oldest", "steal-quietest"]
+POLICIES: tuple[Policy, ...] = ("refuse", "steal-oldest", "steal-quietest")
+"""What happens to a job beyond the voice budget: refused (EngineBusyError), or the
+oldest or the quietest sounding job fades out to make room (as game audio engines steal
+voices)."""
 HISTORY_JOBS = 1000
 """Jobs that are over and still answered by :meth:`Engine.job_state`."""
 
@@ -84,18 +88,28 @@ class JobState:
 
 @dataclass
 class JobRecord:
-    """The control side's mutable view of one job (under the engine's lock)."""
+    """The control side's mutable view of one job (under the engine's lock).
 
-    voice: PatternVoice | None
+    ``plan`` is dropped once the job is over; a ``stolen`` job was faded out to make
+    room for another and no longer counts against the voice budget.
+    """
+
+    plan: Plan | None
     job_id: str
     owner: str | None
     requested_start_frame: int
     frames: int
     duration_s: float
+    amplitude: float = 1.0
     state: JobStateName = "scheduled"
     start_frame: int | None = None
     end_frame: int | None = None
     late: bool = False
+    stolen: bool = False
+
+    @property
+    def first_frame(self) -> int:
+        return self.requested_start_frame if self.start_frame is None else self.start_frame
 
     def snapshot(self) -> JobState:
         start = self.requested_start_frame if self.start_frame is None else self.start_frame
@@ -134,40 +148,56 @@ class JobTable:
         """Jobs scheduled or playing (not stopping, not over)."""
         return len(self._live)
 
-    def overlapping(self, start_frame: int, end_frame: int) -> int:
-        """Jobs not over (stopping ones included) that sound within [start, end) frames."""
-        count = 0
+    def _sounding(self, start_frame: int, end_frame: int) -> list[JobRecord]:
+        """Jobs not over and not stolen that sound within [start, end) frames."""
+        found = []
         for table in (self._live, self._stopping):
             for record in table.values():
-                first = (
-                    record.requested_start_frame
-                    if record.start_frame is None
-                    else record.start_frame
-                )
-                if first < end_frame and first + record.frames > start_frame:
-                    count += 1
-        return count
+                first = record.first_frame
+                last = first + record.frames if record.end_frame is None else record.end_frame
+                if not record.stolen and first < end_frame and last > start_frame:
+                    found.append(record)
+        return found
 
-    def check_room(self, start_frame: int, frames: int, *, jobs: int, voices: int) -> None:
-        """Refuse a job when ``jobs`` are scheduled or playing already, or when it would
-        sound together with ``voices`` others anywhere in its frames.
+    def overlapping(self, start_frame: int, end_frame: int) -> int:
+        """Jobs not over (stopping ones included, stolen ones not) within [start, end)."""
+        return len(self._sounding(start_frame, end_frame))
+
+    def admit(
+        self, start_frame: int, frames: int, *, jobs: int, voices: int, policy: Policy
+    ) -> list[JobRecord]:
+        """Make room for a job of ``frames`` from ``start_frame``, or refuse it.
+
+        Refused when ``jobs`` are scheduled or playing already. When it would sound
+        together with ``voices`` others, ``policy`` decides: ``refuse``, or the jobs to
+        steal (the oldest started, or the quietest, among those sounding at its start)
+        are returned; the caller fades them out.
 
         Raises
         ------
         EngineBusyError
-            Naming the limit (``queue_capacity`` or ``max_voices``) and the count.
+            Naming the limit (``queue_capacity`` or the voice budget) and the count.
         """
         if len(self._live) >= jobs:
             raise EngineBusyError(
                 f"the engine is full: {len(self._live)} jobs are scheduled or playing; "
                 f"at most queue_capacity={jobs}"
             )
-        sounding = self.overlapping(start_frame, start_frame + frames)
-        if sounding >= voices:
+        sounding = self._sounding(start_frame, start_frame + frames)
+        excess = len(sounding) - voices + 1
+        if excess <= 0:
+            return []
+        at_start = [r for r in sounding if r.first_frame <= start_frame and r.state != "stopped"]
+        if policy == "refuse" or len(at_start) < excess:
             raise EngineBusyError(
-                f"{sounding} pattern voices would sound at once from frame {start_frame}; "
-                f"at most max_voices={voices}"
+                f"{len(sounding)} pattern voices would sound at once from frame {start_frame}; "
+                f"the voice budget allows {voices} (voice policy {policy!r})"
             )
+        if policy == "steal-oldest":
+            at_start.sort(key=lambda r: (r.first_frame, r.job_id))
+        else:
+            at_start.sort(key=lambda r: (r.amplitude, r.first_frame))
+        return at_start[:excess]
 
     def add(self, record: JobRecord) -> None:
         self._live[record.job_id] = record
@@ -175,9 +205,10 @@ class JobTable:
     def get(self, job_id: str) -> JobRecord | None:
         return self._live.get(job_id) or self._stopping.get(job_id) or self._over.get(job_id)
 
-    def mark_stopped(self, record: JobRecord) -> None:
-        """The job was asked to stop; the callback will silence it."""
+    def mark_stopped(self, record: JobRecord, *, stolen: bool = False) -> None:
+        """The job was asked to stop (or ``stolen``); the callback will silence it."""
         record.state = "stopped"
+        record.stolen = record.stolen or stolen
         if self._live.pop(record.job_id, None) is not None:
             self._stopping[record.job_id] = record
 
@@ -185,9 +216,16 @@ class JobTable:
         for record in list(self._live.values()):
             self.mark_stopped(record)
 
+    def forget_all(self, frame: int) -> None:
+        """Every job not over is over from ``frame`` (the engine that played them is gone)."""
+        for record in [*self._live.values(), *self._stopping.values()]:
+            record.state = "stopped"
+            record.end_frame = max(frame, record.first_frame)
+            self.retire(record)
+
     def retire(self, record: JobRecord) -> None:
         """Move a job that is over into the bounded history."""
-        record.voice = None
+        record.plan = None
         self._live.pop(record.job_id, None)
         self._stopping.pop(record.job_id, None)
         self._over[record.job_id] = record

@@ -1,89 +1,138 @@
 """The engine in a process of its own, for hosts whose other Python work holds the GIL.
 
-The audio callback needs the interpreter lock for every block. In a process that also
-serves web requests, a thread busy with Python work (JSON, pydantic) holds the lock for
-a switch interval (5 ms) at a time, longer than a 2.67 ms block of 128 frames:
-``benchmarks/bench_engine.py`` measures the underruns that follow, and how they vanish
-when the engine runs in a process of its own. :class:`ProcessEngine` is that remedy
-with the :class:`~phantomtouch.engine.Engine` API: a child process (``spawn``) owns the
-sink and a real ``Engine``; this process keeps a thin proxy.
+The audio callback needs the interpreter lock for every block; in a process that also
+serves web requests it waits for it. :class:`ProcessEngine` keeps the control side here
+(:class:`~phantomtouch.engine.front.EngineFront`: the API, the job table, the contacts,
+admission) and runs the audio side in a child process (``spawn``,
+:mod:`phantomtouch.engine.child`), whose callback is the only thread there that does
+Python work. Nothing here ever waits for the child:
 
-- Calls that answer (``schedule``, ``contact_down``, ``stop``, ``job_state``,
-  ``status``, ``now_frames``) are sent through a pipe and wait for the child's answer,
-  errors included (a round trip of some tens of microseconds). The child answers in
-  order, and whoever reads an answer hands it to the call it belongs to: a thread that
-  waits, or a coroutine awaiting ``schedule_async``, whose answers the running event
-  loop reads as they arrive (:mod:`phantomtouch.engine.pipe`). A plan crosses the pipe
-  once: the child keeps the last ``PLAN_CACHE`` plans under a key.
-- ``time_at`` and ``frames_at`` read the engine's clock from shared memory, and
-  ``contact_move`` writes the newest position into the contact's slot in shared memory,
-  which the audio callback reads every block (:mod:`phantomtouch.engine.shared`): no
-  message, so a stream of moves costs the caller a few microseconds each.
-- ``contact_up`` and ``release_owner`` are checked here and sent without waiting.
-- ``stop_all`` raises a mark in shared memory and wakes a thread in the child: it gets
-  through even when the pipe is backed up, and voids everything sent before it.
-- When this process dies, the pipe closes and the child fades out and exits: nothing
-  keeps vibrating after its host is gone.
+- commands (a job's start with its plan, sent once per plan; releases; touchdowns) go
+  through an :class:`~phantomtouch.engine.link.Outbox` whose thread writes them into a
+  pipe; the callback reads them at the start of each block within a time budget;
+- ``stop_all`` raises a sequence mark in shared memory that the callback reads first:
+  every message sent before it is void, whatever the pipe holds;
+- contact moves and the sample clock go through shared memory
+  (:mod:`phantomtouch.engine.shared`), and so do the engine's figures and a heartbeat
+  (:class:`~phantomtouch.engine.shared.StatusBlock`): ``status()`` reads them;
+- a thread reads the child's reports (job starts and ends) into the job table.
 
-A sink cannot cross processes, so the child opens the one a :class:`SinkSpec` names.
+A watchdog notices within ``STALL_S`` when the child dies or stops calling back
+(killed, stopped, hung, its sound card gone): the engine's ``state`` says so, new work
+is refused with DeviceError, every job and contact is dropped (``on_fault`` is told),
+and a new child is started, again and again (``RETRY_MAX_S``) until its sound card
+opens. When this process dies, the pipe closes and the child fades out and ends.
 """
 
 from __future__ import annotations
 
-import itertools
+import contextlib
+import dataclasses
+import logging
 import multiprocessing
+import os
+import select
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from phantomtouch.engine.checks import (
-    check_frame,
-    check_id,
-    check_int,
-    check_range,
-    check_seconds,
-)
+from phantomtouch.engine.checks import check_int
 from phantomtouch.engine.child import serve
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.engine import MAX_VOICES, RENDER_AHEAD_FRAMES
-from phantomtouch.engine.jobs import Job, JobState, resolve_plan
-from phantomtouch.engine.pipe import RequestPipe
-from phantomtouch.engine.shared import MoveSlots, SharedClock
+from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
+from phantomtouch.engine.front import (
+    MAX_VOICES,
+    RENDER_BUDGET,
+    ContactRecord,
+    EngineFront,
+    check_frame_number,
+    check_server_time,
+)
+from phantomtouch.engine.jobs import Policy
+from phantomtouch.engine.link import Outbox, encode, read_frames
+from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.soundcard import SinkSpec
-from phantomtouch.engine.status import EngineFront, EngineStatus
-from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError, ProtocolError
+from phantomtouch.errors import DeviceError, EngineBusyError
+from phantomtouch.renderer.carriers import noise_key, noise_loop
 from phantomtouch.renderer.plan import Plan
-from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
-from phantomtouch.schema.pattern import Carrier, TouchPattern
+from phantomtouch.schema.pattern import Carrier, NoiseCarrier, PolylinePath, SineCarrier
+
+logger = logging.getLogger("phantomtouch.engine")
 
 START_TIMEOUT_S = 60.0
 """Longest wait for the child to import, open its sink and answer."""
 CLOSE_TIMEOUT_S = 10.0
-PLAN_CACHE = 256
-"""Plans the engine process keeps, so that a pattern played again is not sent again."""
+STALL_S = 0.5
+"""A running engine process that has not called back for this long is stalled."""
+WATCH_PERIOD_S = 0.1
+RETRY_FIRST_S = 0.5
+RETRY_MAX_S = 5.0
+"""A restart that fails (the sound card is gone) is tried again after 0.5 s, then after
+twice as long each time, at most every 5 s."""
+PLAN_CACHE_BYTES = 32 << 20
+"""Plans kept by the engine process, by their size on the wire."""
+NOISE_LOOPS = 8
+"""Noise loops the engine process keeps (as the renderer's cache does)."""
 REALTIME_PRIORITY = 1
-"""SCHED_FIFO priority of the engine process's own threads: the lowest real-time one,
-below the audio callback's (JACK gives its clients server priority - 5), above every
-ordinary thread, so a thread that holds the interpreter lock the callback waits for is
-not preempted by the host's work."""
+"""SCHED_FIFO priority of the engine process's threads (above every ordinary thread)."""
+
+_BLANK_PATH = PolylinePath(points_cm=[(0.0, 0.0)])
+
+
+def slim(plan: Plan) -> Plan:
+    """The plan without what the engine process has already: device, geometry, and the
+    pattern's path (the timelines carry the resolved path)."""
+    pattern = plan.pattern.model_copy(update={"path": _BLANK_PATH})
+    return dataclasses.replace(plan, pattern=pattern, device=None, geometry=None)  # type: ignore[arg-type]
+
+
+@dataclasses.dataclass
+class _Child:
+    """One engine process and what is shared with it."""
+
+    process: Any
+    outbox: Outbox
+    reports_fd: int
+    clock: SharedClock
+    slots: MoveSlots
+    status: StatusBlock
+    mark: Any
+    voice_cost: float
+    backend: str
+    output_device: str | None
+    seq: int = 0
+    plans: OrderedDict[int, tuple[int, Plan, int]] = dataclasses.field(
+        default_factory=OrderedDict
+    )  # id(plan): key, plan, bytes
+    plan_bytes: int = 0
+    forget: list[int] = dataclasses.field(default_factory=list)
+    noise: OrderedDict[Any, None] = dataclasses.field(default_factory=OrderedDict)
+    reader: threading.Thread | None = None
 
 
 class ProcessEngine(EngineFront):
-    """:class:`~phantomtouch.engine.Engine`'s API, with the engine in a child process.
+    """:class:`~phantomtouch.engine.Engine`'s API, with the audio side in a child process.
 
     Parameters
     ----------
     device : DeviceProfile
     sink : SinkSpec or None
         The sink the child opens; None: ``SinkSpec("default")``.
-    queue_capacity, max_voices, contact, log_path, render_ahead_frames
-        As for :class:`~phantomtouch.engine.Engine` (the child writes the log).
+    queue_capacity, max_voices, contact, log_path, render_budget, voice_policy
+        See :class:`~phantomtouch.engine.front.EngineFront` (the log is written here).
+    render_ahead_frames : int, >= 0
     realtime_priority : int or None, 1 <= realtime_priority <= 99
-        SCHED_FIFO priority of the child's own threads (see ``REALTIME_PRIORITY``);
-        None, or no permission for it: ordinary scheduling.
+        SCHED_FIFO priority of the child's threads; None, or no permission for it:
+        ordinary scheduling.
+    voice_cost : float or None
+        As for :class:`~phantomtouch.engine.Engine` (None: the child measures it).
+    on_fault : callable or None
+        Called as ``on_fault(state)`` (``"gone"`` or ``"stalled"``) from the watchdog
+        thread once every job and contact was dropped, before the restart.
 
     Notes
     -----
@@ -109,287 +158,384 @@ class ProcessEngine(EngineFront):
         log_path: str | Path | None = None,
         render_ahead_frames: int = RENDER_AHEAD_FRAMES,
         realtime_priority: int | None = REALTIME_PRIORITY,
+        render_budget: float = RENDER_BUDGET,
+        voice_policy: Policy = "steal-oldest",
+        voice_cost: float | None = None,
+        on_fault: Callable[[str], None] | None = None,
     ) -> None:
-        if not isinstance(device, DeviceProfile):
-            raise ParameterError(f"device={device!r} must be a DeviceProfile")
+        super().__init__(
+            device,
+            queue_capacity=queue_capacity,
+            max_voices=max_voices,
+            contact=contact,
+            log_path=log_path,
+            render_budget=render_budget,
+            voice_policy=voice_policy,
+        )
         if realtime_priority is not None:
             check_int("realtime_priority", realtime_priority, 1, 99)
-        spec = sink if sink is not None else SinkSpec()
-        self._device = device
-        self._lock = threading.Lock()  # the state kept here
-        self._down: dict[tuple[str, str], tuple[int, int]] = {}  # slot, generation
-        self._clock = SharedClock(device.sample_rate_hz)
-        max_contacts = (contact or ContactSettings()).max_contacts
-        self._slots = MoveSlots(max_contacts)
-        self._plans: OrderedDict[int, tuple[int, Plan]] = OrderedDict()  # id(plan): key, plan
-        self._plan_keys = itertools.count(1)
-        self._forget: list[int] = []
-        context = multiprocessing.get_context("spawn")
-        self._mark = context.Value("q", 0, lock=False)
-        self._wake = context.Event()
-        conn, child_conn = context.Pipe()
-        options = {
+        check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
+        self._spec = sink if sink is not None else SinkSpec()
+        self._priority = realtime_priority
+        self._options = {
             "queue_capacity": queue_capacity,
             "max_voices": max_voices,
             "contact": contact,
-            "log_path": None if log_path is None else str(log_path),
             "render_ahead_frames": render_ahead_frames,
+            "voice_cost": voice_cost,
+            "contact_slots": self._settings.max_contacts,
         }
-        self._process = context.Process(
+        self.on_fault = on_fault
+        self._state = "starting"
+        self._started = False
+        self._restarts = 0
+        self._halt = threading.Event()
+        self._child = self._spawn()
+        self._voice_cost = self._child.voice_cost
+        self._watchdog = threading.Thread(
+            target=self._watch, name="phantomtouch-engine-watchdog", daemon=True
+        )
+        self._watchdog.start()
+
+    # -- the child --------------------------------------------------------------------
+
+    def _spawn(self) -> _Child:
+        context = multiprocessing.get_context("spawn")
+        device = self._device
+        clock = SharedClock(device.sample_rate_hz)
+        slots = MoveSlots(self._settings.max_contacts)
+        status = StatusBlock(device.channels)
+        mark = context.Value("q", 0, lock=False)
+        commands_in, commands_out = context.Pipe(duplex=False)
+        reports_in, reports_out = context.Pipe(duplex=False)
+        process = context.Process(
             target=serve,
             args=(
-                child_conn,
+                commands_in,
+                reports_out,
                 device.model_dump_json(),
-                spec,
-                options,
-                self._mark,
-                self._wake,
-                realtime_priority,
-                {"clock": self._clock.raw, "slots": self._slots.raw, "slot_count": max_contacts},
+                self._spec,
+                self._options,
+                mark,
+                self._priority,
+                {
+                    "clock": clock.raw,
+                    "slots": slots.raw,
+                    "slot_count": slots.capacity,
+                    "status": status.raw,
+                },
             ),
             name="phantomtouch-engine",
             daemon=True,
         )
-        self._process.start()
-        child_conn.close()
-        if not conn.poll(START_TIMEOUT_S):
-            self._process.kill()
-            raise DeviceError(f"the engine process did not start within {START_TIMEOUT_S:g} s")
-        ok, error = conn.recv()
-        if not ok:
-            self._process.join(CLOSE_TIMEOUT_S)
-            raise error
-        self._pipe = RequestPipe(conn)
+        process.start()
+        commands_in.close()
+        reports_out.close()
+        reports_fd = os.dup(reports_in.fileno())
+        reports_in.close()
+        commands_fd = os.dup(commands_out.fileno())
+        commands_out.close()
+        try:
+            ready = self._first_report(reports_fd, process)
+        except BaseException:
+            os.close(reports_fd)
+            os.close(commands_fd)
+            process.kill()
+            process.join(CLOSE_TIMEOUT_S)
+            raise
+        child = _Child(
+            process=process,
+            outbox=Outbox(commands_fd),
+            reports_fd=reports_fd,
+            clock=clock,
+            slots=slots,
+            status=status,
+            mark=mark,
+            voice_cost=float(ready[1]),
+            backend=str(ready[2]),
+            output_device=ready[3],
+        )
+        child.reader = threading.Thread(
+            target=self._read_reports, args=(child,), name="phantomtouch-reports", daemon=True
+        )
+        child.reader.start()
+        return child
+
+    @staticmethod
+    def _first_report(fd: int, process: Any) -> Any:
+        deadline = time.monotonic() + START_TIMEOUT_S
+        frames = read_frames(fd)
+        while True:
+            readable, _, _ = select.select([fd], [], [], 0.2)
+            if readable:
+                break
+            if not process.is_alive():
+                raise DeviceError("the engine process ended while starting")
+            if time.monotonic() > deadline:
+                raise DeviceError(f"the engine process did not start within {START_TIMEOUT_S:g} s")
+        message = next(frames, None)
+        if message is None:
+            raise DeviceError("the engine process ended while starting")
+        if message[0] == "failed":
+            raise message[1]
+        return message
+
+    def _read_reports(self, child: _Child) -> None:
+        for events in read_frames(child.reports_fd):
+            self._apply_events(events)
+
+    def _send(self, message: tuple[Any, ...]) -> None:
+        """Queue a message for the child (the caller holds the lock; seq is message[1])."""
+        if not self._child.outbox.put(encode(message)):
+            raise EngineBusyError(
+                "the engine process is not taking commands (its pipe is full); retry later"
+            )
+
+    def _next_seq(self) -> int:
+        self._child.seq += 1
+        return self._child.seq
+
+    # -- faults -----------------------------------------------------------------------
+
+    @property
+    def state(self) -> str:
+        """``starting``, ``running``, ``stalled``, ``gone``, ``restarting`` or ``closed``."""
+        return self._state
+
+    def _watch(self) -> None:
+        while not self._halt.wait(WATCH_PERIOD_S):
+            if self._state != "running":
+                continue
+            child = self._child
+            if not child.process.is_alive():
+                self._fault("gone")
+            elif time.monotonic() - child.status.read()["beat_s"] > STALL_S:
+                self._fault("stalled")
+
+    def _fault(self, state: str) -> None:
+        """Drop everything, tell ``on_fault``, replace the child."""
+        logger.error("the engine process is %s; restarting it", state)
+        with self._lock:
+            self._state = state
+            self._jobs.forget_all(self.now_frames)
+            self._contacts.clear()
+        if self.on_fault is not None:
+            try:
+                self.on_fault(state)
+            except Exception:
+                logger.exception("on_fault failed")
+        self._end(self._child, kill=True)
+        delay_s = RETRY_FIRST_S
+        while not self._halt.is_set():
+            with self._lock:
+                self._state = "restarting"
+            try:
+                child = self._spawn()
+                child.outbox.put(encode(("start_sink", 0)))
+            except Exception as exc:  # the sound card may be gone: try again, less often
+                logger.error("the engine process could not be restarted: %s", exc)
+                with self._lock:
+                    self._state = "gone"
+                self._halt.wait(delay_s)
+                delay_s = min(RETRY_MAX_S, 2 * delay_s)
+                continue
+            with self._lock:
+                self._child = child
+                self._restarts += 1
+            self._wait_running(child)
+            if self._state == "running":
+                return
+            self._end(child, kill=True)
+            self._halt.wait(delay_s)
+            delay_s = min(RETRY_MAX_S, 2 * delay_s)
+
+    def _wait_running(self, child: _Child) -> None:
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while not child.status.read()["running"]:
+            if not child.process.is_alive() or time.monotonic() > deadline:
+                with self._lock:
+                    self._state = "gone"
+                return
+            time.sleep(0.01)
+        with self._lock:
+            if not self._halt.is_set():
+                self._state = "running"
+
+    def _end(self, child: _Child, *, kill: bool) -> None:
+        if kill:
+            with contextlib.suppress(OSError, ValueError):
+                child.process.kill()
+        child.process.join(CLOSE_TIMEOUT_S)
+        if child.process.is_alive():
+            child.process.kill()
+            child.process.join()
+        child.outbox.close(0.1)
+        if child.reader is not None:
+            child.reader.join(1.0)
+        with contextlib.suppress(OSError):
+            os.close(child.reports_fd)
+
+    # -- life cycle -------------------------------------------------------------------
 
     @property
     def pid(self) -> int | None:
         """Process id of the engine process."""
-        return self._process.pid
-
-    def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
-        return self._pipe.call(method, *args, **kwargs)
-
-    def _post(self, method: str, *args: Any, **kwargs: Any) -> None:
-        self._pipe.post(method, *args, **kwargs)
-
-    # -- life cycle
+        return self._child.process.pid
 
     def start(self) -> None:
-        """Start the child's sink (see :meth:`Engine.start`)."""
-        self._call("start")
+        """Start the child's sink and wait until it plays (no-op when running)."""
+        with self._lock:
+            if self._state == "closed":
+                raise DeviceError("the engine is closed")
+            if self._started:
+                return
+            self._started = True
+            child = self._child
+            self._send(("start_sink", 0))
+        self._wait_running(child)
+        if self._state != "running":
+            raise DeviceError("the engine process did not start playing")
 
     def close(self) -> None:
         """Fade out, close the child's engine and sink, end the child. Idempotent."""
-        if not self._pipe.close(CLOSE_TIMEOUT_S):
-            return
-        self._process.join(CLOSE_TIMEOUT_S)
-        if self._process.is_alive():
-            self._process.kill()
-            self._process.join()
+        with self._lock:
+            if self._state == "closed":
+                return
+            self._state = "closed"
+            self._halt.set()
+            child = self._child
+            child.outbox.put(encode(("close", 0)))
+        child.outbox.close(CLOSE_TIMEOUT_S)
+        self._watchdog.join()
+        self._end(child, kill=False)
+        self._ledger.close()
 
-    # -- clock
+    # -- clock ------------------------------------------------------------------------
 
     @property
     def now_frames(self) -> int:
-        return int(self._call("now_frames"))
-
-    def server_time_s(self) -> float:
-        """The server clock, s (``time.monotonic()``, the same in both processes)."""
-        return time.monotonic()
+        return int(self._child.status.read()["now_frames"])
 
     def frames_at(self, server_time_s: float) -> int:
-        """See :meth:`Engine.frames_at` (the clock is read from shared memory)."""
-        return self._clock.frames_at(check_seconds("server_time_s", server_time_s))
+        return self._child.clock.frames_at(check_server_time(server_time_s))
 
     def time_at(self, frame: int) -> float:
-        """See :meth:`Engine.time_at` (the clock is read from shared memory)."""
-        return self._clock.time_at(check_int("frame", frame, -(1 << 62), 1 << 62))
+        return self._child.clock.time_at(check_frame_number(frame))
 
-    # -- jobs
+    def _next_block_frame(self) -> int:
+        return self.now_frames + self.block_frames
 
-    def schedule(
-        self,
-        pattern: TouchPattern | Plan,
-        *,
-        start_frame: int | None = None,
-        owner: str | None = None,
-    ) -> Job:
-        """See :meth:`Engine.schedule`; the pattern is planned here, not in the child."""
-        resolved, request = self._schedule_request(pattern)
-        try:
-            job: Job = self._call("schedule", *request, start_frame=start_frame, owner=owner)
-        except BaseException:
-            self._schedule_failed(resolved, request)
-            raise
-        return job
+    def _check_ready(self) -> None:
+        state = self._state
+        if state in ("running", "starting"):
+            return
+        if state == "closed":
+            raise DeviceError("the engine is closed")
+        raise DeviceError(f"the engine process is {state}; it is being restarted, retry shortly")
 
-    async def schedule_async(
-        self,
-        pattern: TouchPattern | Plan,
-        *,
-        start_frame: int | None = None,
-        owner: str | None = None,
-    ) -> Job:
-        """:meth:`schedule` for a coroutine: the event loop goes on while the child works.
+    # -- the audio side, over the pipe ------------------------------------------------
 
-        The answer is read by the running loop when it arrives, so a server can accept the
-        next request while the engine process schedules this one.
-        """
-        resolved, request = self._schedule_request(pattern)
-        try:
-            job: Job = await self._pipe.call_async(
-                "schedule", *request, start_frame=start_frame, owner=owner
+    def _noise(self, carrier: Carrier | None) -> None:
+        """Send the noise loop a carrier needs, unless the child has it."""
+        if carrier is None or isinstance(carrier, SineCarrier):
+            return
+        assert isinstance(carrier, NoiseCarrier) or hasattr(carrier, "low_hz")
+        key = noise_key(carrier.low_hz, carrier.high_hz, carrier.seed, self.sample_rate_hz)
+        sent = self._child.noise
+        if key in sent:
+            sent.move_to_end(key)
+            return
+        self._send(("noise", 0, key, noise_loop(*key)))
+        sent[key] = None
+        while len(sent) > NOISE_LOOPS:
+            sent.popitem(last=False)
+
+    def _send_start(self, job_id: str, plan: Plan, owner: str | None, frame: int | None) -> None:
+        child = self._child
+        self._noise(plan.pattern.carrier)
+        known = child.plans.get(id(plan))
+        if known is not None and known[1] is plan:
+            child.plans.move_to_end(id(plan))
+            key, sent = known[0], None
+        else:
+            key, sent = self._next_seq(), slim(plan)
+        forget, child.forget = child.forget, []
+        message = ("start", self._next_seq(), job_id, key, sent, forget, owner, frame)
+        frame_bytes = encode(message)
+        if not child.outbox.put(frame_bytes):
+            child.forget = forget + child.forget
+            raise EngineBusyError(
+                "the engine process is not taking commands (its pipe is full); retry later"
             )
-        except BaseException:
-            self._schedule_failed(resolved, request)
-            raise
-        return job
+        if sent is not None:
+            size = len(frame_bytes)
+            child.plans[id(plan)] = (key, plan, size)
+            child.plan_bytes += size
+            while child.plan_bytes > PLAN_CACHE_BYTES and len(child.plans) > 1:
+                old_key, _, old_size = child.plans.popitem(last=False)[1]
+                child.forget.append(old_key)
+                child.plan_bytes -= old_size
 
-    def _schedule_request(self, pattern: TouchPattern | Plan) -> tuple[Plan, tuple[Any, ...]]:
-        """The plan, and the child's arguments: its key, the plan unless sent already,
-        and the keys of plans the child may forget."""
-        resolved = resolve_plan(pattern, self._device)
-        with self._lock:
-            known = self._plans.get(id(resolved))
-            if known is not None and known[1] is resolved:
-                self._plans.move_to_end(id(resolved))
-                key, sent = known[0], None
-            else:
-                key, sent = next(self._plan_keys), resolved
-                self._plans[id(resolved)] = (key, resolved)
-                while len(self._plans) > PLAN_CACHE:
-                    self._forget.append(self._plans.popitem(last=False)[1][0])
-            forget, self._forget = self._forget, []
-        return resolved, (key, sent, forget)
+    def _send_release(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
+        with contextlib.suppress(EngineBusyError):  # a full pipe: the job ends on its own
+            self._send(("release", self._next_seq(), job_id, frame, fade_frames))
 
-    def _schedule_failed(self, resolved: Plan, request: tuple[Any, ...]) -> None:
-        key, sent, forget = request
-        with self._lock:
-            self._forget.extend(forget)  # the child may not have seen them
-            if sent is not None:  # nor this plan: send it again next time
-                self._plans.pop(id(resolved), None)
-                self._forget.append(key)
-
-    def job_state(self, job_id: str) -> JobState | None:
-        return self._call("job_state", job_id)
-
-    def stop(self, job_id: str) -> bool:
-        return bool(self._call("stop", job_id))
-
-    def stop_all(self) -> None:
-        """See :meth:`Engine.stop_all`; never waits for the child."""
-        if not self._pipe.raise_mark(self._mark):
-            return  # closed
-        with self._lock:
-            for slot, _ in self._down.values():
-                self._slots.release(slot)
-            self._down.clear()
-        self._wake.set()
-
-    # -- contacts
-
-    def contact_down(
-        self,
-        owner: str,
-        contact: str,
-        x_cm: float,
-        y_cm: float,
-        *,
-        intensity: float | None = None,
-        carrier: Carrier | None = None,
-        law: str = "power",
-        normal_velocity_m_s: float | None = None,
-        at_frame: int | None = None,
-    ) -> None:
-        """See :meth:`Engine.contact_down`; the contact gets a slot for its moves."""
-        key = (owner, contact)
-        with self._lock:
-            held = self._down.pop(key, None)
-            slot = held[0] if held is not None else None
-            fresh = self._slots.allocate() if slot is None else (slot, self._slots.renew())
+    def _send_down(self, owner: str, contact: str, record: ContactRecord, **kw: Any) -> None:
+        slots = self._child.slots
+        if record.slot is None:
+            fresh = slots.allocate()
             if fresh is None:
-                raise EngineBusyError(
-                    f"{len(self._down)} contacts are down; at most "
-                    f"max_contacts={self._slots.capacity}"
-                )
+                raise EngineBusyError(f"all {slots.capacity} contact slots are taken")
+        else:
+            fresh = (record.slot[0], slots.renew())
         try:
-            self._call(
-                "contact_down",
-                owner,
-                contact,
-                x_cm,
-                y_cm,
-                intensity=intensity,
-                carrier=carrier,
-                law=law,
-                normal_velocity_m_s=normal_velocity_m_s,
-                at_frame=at_frame,
-                slot=fresh,
-            )
+            self._noise(kw["carrier"])
+            self._send(("down", self._next_seq(), owner, contact, fresh, kw))
         except BaseException:
-            with self._lock:
-                if held is not None:  # the contact that was down stays down
-                    self._down[key] = held
-                else:
-                    self._slots.release(fresh[0])
+            if record.slot is None:
+                slots.release(fresh[0])
             raise
-        with self._lock:
-            self._down[key] = fresh
+        record.slot = fresh
 
-    def contact_move(
+    def _send_move(
         self,
         owner: str,
         contact: str,
-        x_cm: float,
-        y_cm: float,
-        *,
-        intensity: float | None = None,
-        at_frame: int | None = None,
+        record: ContactRecord,
+        intensity: float | None,
+        frame: int | None,
     ) -> None:
-        """See :meth:`Engine.contact_move`; checked here, written into the contact's slot."""
-        check_id("owner", owner)
-        check_id("contact", contact)
-        check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
-        check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
-        if intensity is not None:
-            check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
-        frame = check_frame("at_frame", at_frame)
-        with self._lock:
-            held = self._down.get((owner, contact))
-            if held is None:
-                raise ProtocolError(
-                    f"contact={contact!r} of owner={owner!r} is not down: expected down, got move"
-                )
-            self._slots.write(held[0], held[1], float(x_cm), float(y_cm), intensity, frame)
+        if record.slot is not None:
+            slot, generation = record.slot
+            self._child.slots.write(slot, generation, record.x_cm, record.y_cm, intensity, frame)
 
-    def contact_up(
-        self,
-        owner: str,
-        contact: str,
-        *,
-        normal_velocity_m_s: float | None = None,
-        at_frame: int | None = None,
-    ) -> None:
-        """See :meth:`Engine.contact_up`; checked here, sent without waiting."""
-        check_id("owner", owner)
-        check_id("contact", contact)
-        if normal_velocity_m_s is not None:
-            check_range("normal_velocity_m_s", normal_velocity_m_s, -10.0, 10.0, "m/s")
-        check_frame("at_frame", at_frame)
-        with self._lock:
-            held = self._down.pop((owner, contact), None)
-            if held is not None:
-                self._slots.release(held[0])
-        self._post(
-            "contact_up", owner, contact, normal_velocity_m_s=normal_velocity_m_s, at_frame=at_frame
+    def _send_up(self, owner: str, contact: str, record: ContactRecord | None, **kw: Any) -> None:
+        if record is not None and record.slot is not None:
+            self._child.slots.release(record.slot[0])
+        with contextlib.suppress(EngineBusyError):
+            self._send(("up", self._next_seq(), owner, contact, kw))
+
+    def _send_release_owner(self, owner: str, records: list[ContactRecord]) -> None:
+        for record in records:
+            if record.slot is not None:
+                self._child.slots.release(record.slot[0])
+        with contextlib.suppress(EngineBusyError):
+            self._send(("release_owner", self._next_seq(), owner))
+
+    def _send_stop_all(self, records: list[ContactRecord]) -> None:
+        child = self._child
+        for record in records:
+            if record.slot is not None:
+                child.slots.release(record.slot[0])
+        child.mark.value = self._next_seq()
+
+    def _figures(self) -> dict[str, Any]:
+        figures = self._child.status.read()
+        figures.update(
+            backend=self._child.backend,
+            output_device=self._child.output_device,
+            state=self._state,
+            restarts=self._restarts,
+            running=figures["running"] and self._state == "running",
         )
-
-    def release_owner(self, owner: str) -> None:
-        """See :meth:`Engine.release_owner`; sent without waiting."""
-        with self._lock:
-            for key in [key for key in self._down if key[0] == owner]:
-                self._slots.release(self._down.pop(key)[0])
-        self._post("release_owner", owner)
-
-    def status(self) -> EngineStatus:
-        return self._call("status")
+        return figures

@@ -68,8 +68,11 @@ class Scheduler:
         Wall time of each of the last calls of :meth:`render` over the playing time of
         the frames it rendered (a ring).
     intake : callable or None
-        Called at the start of every block, after the commands: posts what arrives
-        outside the queue (contact positions another process writes).
+        Called at the start of every block, before its commands apply: the engine
+        process takes its messages and contact positions here.
+    dac_delay : callable or None
+        Returns the time from now until the block being rendered reaches the sound
+        card's converter, s, when the sink knows it (None otherwise).
     """
 
     def __init__(
@@ -98,6 +101,7 @@ class Scheduler:
         self.last_error: BaseException | None = None
         self.events: deque[tuple[Any, ...]] = deque()
         self.intake: Callable[[], None] | None = None
+        self.dac_delay: Callable[[], float | None] | None = None
         self._voices: list[Voice] = []
         self._waiting: list[tuple[int, int, Voice]] = []
         self._stop_seen = 0
@@ -118,7 +122,8 @@ class Scheduler:
         """Fill ``out`` (frames, channels), float32, with the next frames (the callback)."""
         began_s = time.monotonic()
         if self.clocked:
-            self.clock.observe(self.frames, began_s)
+            delay = self.dac_delay
+            self.clock.observe(self.frames, began_s, None if delay is None else delay())
         self._render_blocks(out)
         playing_s = out.shape[0] / self.clock.sample_rate_hz
         self.render_loads[self._timed % RENDER_TIMES] = (time.monotonic() - began_s) / playing_s
@@ -148,6 +153,8 @@ class Scheduler:
     def _block(self, out: np.ndarray) -> None:
         start = self.frames
         end = start + out.shape[0]
+        if self.intake is not None:
+            self.intake()
         self._apply_commands(start, end)
         self.drained_frame = start
         waiting = self._waiting
@@ -155,8 +162,6 @@ class Scheduler:
             frame, _, voice = heapq.heappop(waiting)
             if voice.state == WAITING:
                 self._begin(voice, frame, late=False)
-        if self.intake is not None:
-            self.intake()
         out.fill(0.0)
         if self._voices:
             self.contact_gains.apply(self._voices, start, end, self.work)
@@ -230,7 +235,7 @@ class Scheduler:
             if voice.state == WAITING and frame <= voice.start_frame:
                 self._cancel(voice, frame)
             elif voice.state != DONE:
-                voice.release(frame, command.transient)
+                voice.release(frame, command.transient, command.fade_frames)
                 if voice.state == PLAYING:
                     self.events.append(("release", voice, frame))
 

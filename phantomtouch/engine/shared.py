@@ -186,3 +186,68 @@ class MoveSlots:
             intensity = None if math.isnan(row[4]) else float(row[4])
             frame = None if math.isnan(row[5]) else int(row[5])
             post(bound[0], bound[1], float(row[2]), float(row[3]), intensity, frame)
+
+
+STATUS_FIELDS = (
+    "beat_s",
+    "now_frames",
+    "active_voices",
+    "underruns",
+    "late_commands",
+    "muted_blocks",
+    "limited_blocks",
+    "peak",
+    "output_latency_s",
+    "queue_depth",
+    "running",
+    "render_load_p99",
+    "render_load_max",
+    "callback_errors",
+    "dropped_reports",
+)
+
+
+class StatusBlock:
+    """The engine process's figures, written by its audio callback at every block.
+
+    ``beat_s`` is the server time of the last block: the host tells from it whether
+    audio still flows. Figures are for monitoring, read without a lock (each is one
+    aligned float64, so a read never sees half a value; a snapshot may mix two blocks).
+
+    Parameters
+    ----------
+    channels : int
+    raw : multiprocessing RawArray of float64, or None
+        The shared memory (as passed to the child); None: allocate it.
+    """
+
+    def __init__(self, channels: int, raw: Any = None) -> None:
+        self.channels = int(channels)
+        size = len(STATUS_FIELDS) + self.channels
+        self.raw = raw if raw is not None else _raw(size)
+        self._values = np.frombuffer(self.raw, dtype=np.float64)
+        self._index = {name: i for i, name in enumerate(STATUS_FIELDS)}
+
+    def write(self, figures: dict[str, Any]) -> None:
+        """Write figures (the engine process's callback); names not listed are ignored."""
+        values = self._values
+        for name, i in self._index.items():
+            value = figures.get(name)
+            if value is not None:
+                values[i] = float(value)
+        levels = figures.get("levels")
+        if levels is not None:
+            values[len(STATUS_FIELDS) :] = levels
+
+    def beat(self, now_s: float, frames: int) -> None:
+        """Mark a block: its time and first frame (the callback, every block)."""
+        self._values[0] = now_s
+        self._values[1] = frames
+
+    def read(self) -> dict[str, Any]:
+        """Every figure, with ``levels`` a list of floats."""
+        values = self._values.copy()
+        figures: dict[str, Any] = {name: float(values[i]) for name, i in self._index.items()}
+        figures["levels"] = [float(v) for v in values[len(STATUS_FIELDS) :]]
+        figures["running"] = figures["running"] > 0.0
+        return figures

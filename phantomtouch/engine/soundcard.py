@@ -177,6 +177,7 @@ class SoundDeviceSink:
         self._render: RenderFn | None = None
         self.flags = sd.CallbackFlags()
         self._underruns = 0
+        self._dac_delay_s: float | None = None
         try:
             self._stream = sd.OutputStream(
                 samplerate=self.sample_rate_hz,
@@ -222,7 +223,13 @@ class SoundDeviceSink:
     def output_latency_s(self) -> float:
         return float(self._stream.latency)
 
+    def dac_delay_s(self) -> float | None:
+        """Time from the current callback until its first frame reaches the converter,
+        s (PortAudio's ``outputBufferDacTime - currentTime``; None before the first)."""
+        return self._dac_delay_s
+
     def _callback(self, outdata: np.ndarray, frames: int, time_info: Any, status: Any) -> None:
+        self._dac_delay_s = time_info.outputBufferDacTime - time_info.currentTime
         if status:
             self.flags |= status
             if status.output_underflow:

@@ -3,75 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from types import TracebackType
-from typing import TYPE_CHECKING, Any, Self
-
-from phantomtouch.schema.device import DeviceProfile
-
-if TYPE_CHECKING:
-    from phantomtouch.engine.jobs import Job
-    from phantomtouch.renderer.plan import Plan
-    from phantomtouch.schema.pattern import TouchPattern
-
-
-class EngineFront:
-    """What :class:`Engine` and its process proxy share: the device's figures, and use as
-    a context manager (``start`` on entry, ``close`` on exit)."""
-
-    _device: DeviceProfile
-
-    def start(self) -> None:
-        raise NotImplementedError
-
-    def schedule(
-        self,
-        pattern: TouchPattern | Plan,
-        *,
-        start_frame: int | None = None,
-        owner: str | None = None,
-    ) -> Job:
-        raise NotImplementedError
-
-    async def schedule_async(
-        self,
-        pattern: TouchPattern | Plan,
-        *,
-        start_frame: int | None = None,
-        owner: str | None = None,
-    ) -> Job:
-        """:meth:`schedule` for a coroutine (an engine in this process answers at once)."""
-        return self.schedule(pattern, start_frame=start_frame, owner=owner)
-
-    def close(self) -> None:
-        raise NotImplementedError
-
-    def __enter__(self) -> Self:
-        self.start()
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
-    @property
-    def device(self) -> DeviceProfile:
-        return self._device
-
-    @property
-    def sample_rate_hz(self) -> int:
-        return self._device.sample_rate_hz
-
-    @property
-    def block_frames(self) -> int:
-        return self._device.block_frames
-
-    @property
-    def channels(self) -> int:
-        return self._device.channels
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -109,6 +41,19 @@ class EngineStatus:
         p99 and largest wall time the audio callback took for a block, over the last
         4096 blocks, as a fraction of the block's playing time (1.0: the output underruns
         unless it has more buffered).
+    state : {"running", "starting", "stalled", "gone", "closed"}
+        Whether audio flows: ``stalled`` (the engine process stopped calling back) and
+        ``gone`` (it died) last until it is restarted.
+    voice_capacity : int
+        Pattern voices admitted at once: ``render_budget`` over ``voice_cost``, at most
+        ``max_voices``.
+    voice_cost : float
+        Measured render load of one pattern voice, a fraction of a block's playing time.
+    render_budget : float
+    callback_errors : int
+        Blocks replaced by silence because rendering raised.
+    restarts : int
+        Times the engine process was restarted after it died or stalled.
     """
 
     backend: str
@@ -131,6 +76,12 @@ class EngineStatus:
     running: bool
     render_load_p99: float
     render_load_max: float
+    state: str
+    voice_capacity: int
+    voice_cost: float
+    render_budget: float
+    callback_errors: int
+    restarts: int
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -114,10 +114,18 @@ class Voice:
         self.start_frame = frame
         self.state = PLAYING
 
-    def release(self, frame: int, transient: object | None = None) -> None:
-        """Begin the release at ``frame``; an earlier release already asked for stands."""
+    def release(
+        self, frame: int, transient: object | None = None, fade_frames: int | None = None
+    ) -> None:
+        """Begin the release at ``frame``; an earlier release already asked for stands.
+
+        ``fade_frames`` (>= 1) sets the length of a fade-out that begins here (a stolen
+        voice); a fade already under way keeps its length, so the gain never steps.
+        """
         if self.release_frame is None or frame < self.release_frame:
             self.release_frame = frame
+            if fade_frames is not None:
+                self.release_frames = max(1, int(fade_frames))
 
     def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
         """Add this voice's frames ``block_start ..`` into ``mix`` (frames, channels).

@@ -109,14 +109,35 @@ def noise_loop(low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) ->
     return loop
 
 
+NoiseKey = tuple[float, float, int, int]
+"""``(low_hz, high_hz, seed, sample_rate_hz)`` of a noise loop."""
+_ADOPTED: dict[NoiseKey, np.ndarray] = {}
+
+
+def noise_key(low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) -> NoiseKey:
+    return (float(low_hz), float(high_hz), int(seed), int(sample_rate_hz))
+
+
+def adopt_noise_loop(key: NoiseKey, loop: np.ndarray) -> None:
+    """Use ``loop`` (computed by :func:`noise_loop` elsewhere, e.g. in another process)
+    for ``key`` from now on; the oldest of more than ``_NOISE_TABLES`` is forgotten."""
+    _ADOPTED.pop(key, None)
+    _ADOPTED[key] = loop
+    while len(_ADOPTED) > _NOISE_TABLES:
+        del _ADOPTED[next(iter(_ADOPTED))]
+
+
 class NoiseSource:
     """Seeded band-limited Gaussian noise, RMS 1/sqrt(2), a loop of ``NOISE_PERIOD_FRAMES``.
 
-    Frame ``n`` is frame ``n mod NOISE_PERIOD_FRAMES`` of :func:`noise_loop`.
+    Frame ``n`` is frame ``n mod NOISE_PERIOD_FRAMES`` of :func:`noise_loop` (or of the
+    same loop adopted with :func:`adopt_noise_loop`).
     """
 
     def __init__(self, low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) -> None:
-        self._loop = noise_loop(float(low_hz), float(high_hz), int(seed), int(sample_rate_hz))
+        key = noise_key(low_hz, high_hz, seed, sample_rate_hz)
+        adopted = _ADOPTED.get(key)
+        self._loop = adopted if adopted is not None else noise_loop(*key)
 
     def block(self, start_frame: int, frames: int) -> np.ndarray:
         at = start_frame % NOISE_PERIOD_FRAMES

@@ -200,13 +200,13 @@ def test_a_job_stopped_before_it_starts_never_sounds(
 
 def test_max_voices_bounds_the_voices_that_sound_at_once_not_those_scheduled() -> None:
     sink = CaptureSink(DEVICE)
-    with Engine(DEVICE, sink, max_voices=3) as engine:
+    with Engine(DEVICE, sink, max_voices=3, voice_policy="refuse") as engine:
         first = engine.schedule(stroke(), start_frame=100 * BLOCK)
         frames = first.frames
         # Two more overlap the first one (one starts in its middle): three sound at once.
         engine.schedule(stroke(), start_frame=100 * BLOCK)
         engine.schedule(stroke(), start_frame=100 * BLOCK + frames // 2)
-        with pytest.raises(EngineBusyError, match="max_voices=3"):
+        with pytest.raises(EngineBusyError, match="the voice budget allows 3"):
             engine.schedule(stroke(), start_frame=100 * BLOCK + frames // 2)
         # Jobs that start after the first two end overlap only the third: accepted.
         later = 100 * BLOCK + frames

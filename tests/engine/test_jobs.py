@@ -11,7 +11,7 @@ from phantomtouch.renderer import plan
 
 def record(job_id: str) -> JobRecord:
     return JobRecord(
-        voice=None, job_id=job_id, owner=None, requested_start_frame=0, frames=10, duration_s=0.1
+        plan=None, job_id=job_id, owner=None, requested_start_frame=0, frames=10, duration_s=0.1
     )
 
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -41,8 +43,8 @@ STROKE = TouchPattern.model_validate(
 )
 
 
-def wait_until(condition: Callable[[], bool]) -> None:
-    deadline = time.monotonic() + 10.0
+def wait_until(condition: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
     while not condition():
         assert time.monotonic() < deadline, "timed out waiting for the engine process"
         time.sleep(0.01)
@@ -98,8 +100,9 @@ def test_the_engine_process_answers_like_the_engine() -> None:
     finally:
         engine.close()
         engine.close()
+    assert engine.status().state == "closed"
     with pytest.raises(DeviceError, match="closed"):
-        engine.status()
+        engine.schedule(STROKE)
 
 
 def test_stop_all_gets_through_before_anything_sent_after_it() -> None:
@@ -216,7 +219,7 @@ def test_contacts_get_slots_up_to_max_contacts() -> None:
 
 
 def test_plans_sent_once_are_kept_and_forgotten_in_turn(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(process, "PLAN_CACHE", 2)
+    monkeypatch.setattr(process, "PLAN_CACHE_BYTES", 1)  # one plan at a time
     patterns = [STROKE.model_copy(update={"speed_cm_s": 10.0 + 5 * k}) for k in range(5)]
     plans = [plan(pattern, DEVICE) for pattern in patterns]
     with ProcessEngine(DEVICE, SinkSpec("null"), max_voices=100) as engine:
@@ -278,18 +281,56 @@ def test_closing_answers_what_waits_and_refuses_what_comes_after() -> None:
     asyncio.run(schedule_then_close())
 
 
-def test_a_coroutine_waiting_on_an_engine_process_that_died_gets_a_device_error() -> None:
-    engine = ProcessEngine(DEVICE, SinkSpec("null"))
+def test_an_engine_process_killed_is_noticed_refused_and_restarted() -> None:
+    faults: list[str] = []
+    engine = ProcessEngine(DEVICE, SinkSpec("null"), on_fault=faults.append)
     try:
         engine.start()
+        job = engine.schedule(STROKE)
+        engine.contact_down("a", "1", 1.0, 2.0)
+        old_pid = engine.pid
+        assert old_pid is not None
+        os.kill(old_pid, signal.SIGKILL)
+        began = time.monotonic()
+        wait_until(lambda: engine.state != "running", timeout_s=1.0)
+        assert time.monotonic() - began < 1.0
+        assert faults == ["gone"]
+        assert engine.job_state(job.job_id).state == "stopped"  # type: ignore[union-attr]
+        assert engine.status().active_contacts == []
+        if engine.state != "running":  # refused with a clear error while it restarts
+            with pytest.raises(DeviceError, match="restart"):
+                engine.schedule(STROKE)
+        began = time.monotonic()
+        engine.stop_all()  # never waits, whatever the engine's state
+        assert time.monotonic() - began < 0.1
+        wait_until(lambda: engine.state == "running", timeout_s=30.0)
+        assert engine.pid != old_pid and engine.status().restarts == 1
+        again = engine.schedule(STROKE)
+        wait_until(lambda: engine.job_state(again.job_id).state == "playing")  # type: ignore[union-attr]
+    finally:
+        engine.close()
 
-        async def schedule_after_death() -> None:
-            await engine.schedule_async(STROKE)  # the loop reads the pipe from now on
-            engine._process.kill()
-            engine._process.join()
-            with pytest.raises(DeviceError, match="gone"):
-                await asyncio.wait_for(engine.schedule_async(STROKE), timeout=10)
 
-        asyncio.run(schedule_after_death())
+def test_an_engine_process_stopped_is_noticed_and_replaced() -> None:
+    faults: list[str] = []
+    engine = ProcessEngine(DEVICE, SinkSpec("null"), on_fault=faults.append)
+    try:
+        engine.start()
+        engine.schedule(STROKE)
+        old_pid = engine.pid
+        assert old_pid is not None
+        os.kill(old_pid, signal.SIGSTOP)
+        try:
+            began = time.monotonic()
+            engine.stop_all()
+            status = engine.status()  # answered at once from shared memory
+            assert time.monotonic() - began < 0.1 and status.state == "running"
+            wait_until(lambda: engine.state != "running", timeout_s=1.5)
+            assert faults == ["stalled"]
+        finally:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(old_pid, signal.SIGCONT)
+        wait_until(lambda: engine.state == "running", timeout_s=30.0)
+        assert engine.pid != old_pid
     finally:
         engine.close()

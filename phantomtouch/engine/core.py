@@ -1,0 +1,241 @@
+"""The audio side of the engine: sink, scheduler, voices, and the commands that reach them.
+
+:class:`Core` is what plays: it owns the sink, the sample clock, the bounded command
+queue, the scheduler that the audio callback runs and the voices it renders. It keeps no
+job table and makes no admission decisions: those belong to the control side
+(:mod:`phantomtouch.engine.front`), which checks every argument before a command gets
+here. The in-thread :class:`~phantomtouch.engine.Engine` calls a core directly; the
+engine process (:mod:`phantomtouch.engine.child`) calls its core from inside the audio
+callback, so that there nothing but the callback does Python work.
+
+What the callback did comes back as plain events (:meth:`Core.events`), tuples that cross
+a process boundary as they are:
+
+- ``("start", "job", job_id, frame, late)``
+- ``("start", "contact", (owner, contact), frame, late, x_cm, y_cm, amplitude)``
+- ``("release", kind, key, frame, silent_from)``: a fade-out begins at ``frame``
+- ``("end", kind, key, frame)``: silent from ``frame``
+- ``("cancel", kind, key, frame)``: voided before it started
+- ``("stop_all", frame)``
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from phantomtouch.engine.board import ContactBoard
+from phantomtouch.engine.clock import SampleClock
+from phantomtouch.engine.commands import CommandQueue
+from phantomtouch.engine.contacts import ContactSettings, ContactVoice
+from phantomtouch.engine.scheduler import Scheduler
+from phantomtouch.engine.sinks import Sink
+from phantomtouch.engine.voices import DONE, PatternVoice
+from phantomtouch.errors import DeviceError
+from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema.device import DeviceProfile
+
+Event = tuple[Any, ...]
+
+
+class Core:
+    """Sink, clock, queue, scheduler and voices of one engine.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+    sink : Sink
+        Owned from now on (closed by :meth:`close`); its sample rate, block size and
+        channels must be the device's.
+    settings : ContactSettings
+    queue_capacity : int, >= 1
+        Voices that may wait to start at once (see :class:`CommandQueue`).
+    rings : int, >= 0
+        Render-ahead rings for pattern voices.
+    chunk_frames : int, >= 0
+        Frames a pattern voice renders ahead at a time; 0 renders every block directly.
+    clock : SampleClock
+
+    Raises
+    ------
+    DeviceError
+        The sink's sample rate, block size or channels differ from the device's.
+    """
+
+    def __init__(
+        self,
+        device: DeviceProfile,
+        sink: Sink,
+        *,
+        settings: ContactSettings,
+        queue_capacity: int,
+        rings: int,
+        chunk_frames: int,
+        clock: SampleClock,
+    ) -> None:
+        for name in ("sample_rate_hz", "block_frames", "channels"):
+            if getattr(sink, name) != getattr(device, name):
+                raise DeviceError(
+                    f"sink {name}={getattr(sink, name)} differs from the device's "
+                    f"{getattr(device, name)}"
+                )
+        self.device = device
+        self.sink = sink
+        self.settings = settings
+        self.clock = clock
+        self.queue = CommandQueue(queue_capacity)
+        self.board = ContactBoard(device, settings, self.queue)
+        self.scheduler = Scheduler(
+            device, self.queue, clock, rings=rings, chunk_frames=chunk_frames, clocked=sink.realtime
+        )
+        self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
+        self.running = False
+        self._jobs: dict[str, PatternVoice] = {}
+
+    # -- life cycle (control thread) --------------------------------------------------
+
+    def start(self) -> None:
+        """Anchor the clock and start the sink (the callback runs from now on)."""
+        self.clock.restart(self.scheduler.frames, time.monotonic())
+        self.sink.start(self.scheduler.render)
+        self.clock.output_latency_s = max(0.0, float(self.sink.output_latency_s))
+        self.running = True
+
+    def close(self, fade: bool) -> None:
+        """Fade out what sounds (with ``fade`` and a real-time sink), close the sink."""
+        running, self.running = self.running, False
+        if running and fade and self.sink.realtime:
+            self.stop_all()
+            block_s = self.device.block_frames / self.device.sample_rate_hz
+            deadline = time.monotonic() + self.settings.release_s + 4 * block_s + 0.05
+            while self.scheduler.active_voices and time.monotonic() < deadline:
+                time.sleep(block_s)
+            time.sleep(2 * block_s)  # let the last (silent) block reach the output
+        self.sink.close()
+
+    # -- commands (checked by the caller) ---------------------------------------------
+
+    def start_job(self, job_id: str, plan: Plan, owner: str | None, frame: int | None) -> None:
+        """Play ``plan`` from ``frame`` (None: the next block)."""
+        voice = PatternVoice(
+            plan, job_id=job_id, owner=owner, release_frames=self.board.release_frames
+        )
+        first = self.scheduler.next_block_frame() if frame is None else frame
+        self.queue.push_start(voice, first, frame is None)
+        self._jobs[job_id] = voice
+
+    def release_job(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
+        """Fade a job out from ``frame`` over ``fade_frames`` (None: ``release_s``)."""
+        voice = self._jobs.get(job_id)
+        if voice is not None and voice.state != DONE:
+            self.queue.push_release(voice, frame, fade_frames=fade_frames)
+
+    def contact_down(self, voice: ContactVoice) -> None:
+        """Start a contact voice built by ``board.prepare_down``."""
+        frame = voice.down_target.frame
+        first = self.scheduler.next_block_frame() if frame is None else frame
+        self.board.down(voice, first, frame is None)
+
+    def stop_all(self) -> None:
+        """Void every command so far; everything that sounds fades out."""
+        self.queue.mark_stop_all()
+        self.board.forget_all()
+
+    def on_block(self, before: Callable[[], None] | None) -> None:
+        """Call ``before()`` at the start of every block, before its commands apply."""
+        self.scheduler.intake = before
+
+    # -- what happened (control thread, or the callback after a block) ----------------
+
+    def events(self) -> list[Event]:
+        """What the callback did since the last call, as plain tuples (module docstring)."""
+        raw = self.scheduler.events
+        out: list[Event] = []
+        while raw:
+            event = raw.popleft()
+            kind = event[0]
+            if kind == "stop_all":
+                out.append(("stop_all", event[1]))
+                continue
+            voice, frame = event[1], event[2]
+            if isinstance(voice, PatternVoice):
+                key: Any = voice.job_id
+                what = "job"
+                if kind in ("end", "cancel"):
+                    self._jobs.pop(voice.job_id, None)
+            else:
+                key = (voice.owner, voice.contact)
+                what = "contact"
+            if kind == "start":
+                if isinstance(voice, ContactVoice):
+                    target = voice.down_target
+                    late = bool(event[3])
+                    position = (target.x_cm, target.y_cm, target.amplitude)
+                    out.append(("start", what, key, frame, late, *position))
+                else:
+                    out.append(("start", what, key, frame, bool(event[3])))
+            elif kind == "release":
+                out.append(("release", what, key, frame, voice.silent_from))
+            else:
+                out.append((kind, what, key, frame))
+        return out
+
+    def figures(self) -> dict[str, Any]:
+        """Clock, voices, levels and counters (any thread; a consistent-enough look)."""
+        scheduler = self.scheduler
+        mixer = scheduler.mixer
+        load_p99, load_max = scheduler.render_load()
+        return {
+            "now_frames": scheduler.frames,
+            "active_voices": scheduler.active_voices,
+            "levels": [float(level) for level in mixer.levels],
+            "peak": float(mixer.peak),
+            "underruns": int(self.sink.underruns),
+            "late_commands": scheduler.late_commands,
+            "muted_blocks": mixer.muted_blocks,
+            "limited_blocks": mixer.limited_blocks,
+            "output_latency_s": self.clock.output_latency_s,
+            "queue_depth": self.queue.depth,
+            "running": self.running,
+            "render_load_p99": load_p99,
+            "render_load_max": load_max,
+            "callback_errors": scheduler.callback_errors,
+        }
+
+
+def measure_voice_cost(device: DeviceProfile, plan: Plan, *, voices: int = 16) -> float:
+    """Render load one pattern voice adds, as a fraction of a block's playing time.
+
+    Renders 64 blocks with ``voices`` copies of ``plan`` and 64 without, through a
+    scheduler like the callback's, and returns the difference per voice (the median of
+    three tries; at least 1e-4). Run before the sink starts.
+    """
+    from phantomtouch.engine.sinks import NullSink
+
+    block = np.zeros((device.block_frames, device.channels), dtype=np.float32)
+    period_s = device.block_frames / device.sample_rate_hz
+    tries = []
+    for _ in range(3):
+        core = Core(
+            device,
+            NullSink(device),
+            settings=ContactSettings(),
+            queue_capacity=voices + 1,
+            rings=voices,
+            chunk_frames=4096,
+            clock=SampleClock(device.sample_rate_hz),
+        )
+        core.scheduler.clocked = False
+        timings = []
+        for count in (0, voices):
+            for k in range(count):
+                core.start_job(f"cost-{k}", plan, None, None)
+            began = time.perf_counter()
+            for _ in range(64):
+                core.scheduler.render(block)
+            timings.append((time.perf_counter() - began) / 64)
+        tries.append((timings[1] - timings[0]) / voices / period_s)
+    return max(1e-4, float(np.median(tries)))

@@ -1,0 +1,217 @@
+"""Framed messages over the pipes between the host and the engine process.
+
+A message is a pickled object behind its length (4 bytes, little-endian). Neither side
+ever waits for the other:
+
+- the host hands messages to an :class:`Outbox`, whose thread writes them into the
+  pipe; when the engine process does not read (it hangs, or it is gone), the outbox
+  fills to its bound and refuses more, and the caller sees a busy engine;
+- the engine process reads what has arrived from a non-blocking pipe
+  (:class:`FrameReader`, inside its audio callback) and writes its reports through a
+  :class:`NonBlockingWriter`, which keeps what the pipe cannot take for the next block.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import pickle
+import struct
+import threading
+from collections import deque
+from typing import Any
+
+_HEADER = struct.Struct("<I")
+MAX_MESSAGE_BYTES = 1 << 30
+PIPE_BYTES = 1 << 20
+"""Pipe buffer asked for (Linux ``F_SETPIPE_SZ``; the system's ``pipe-max-size``, 1 MB by
+default, caps it): a plan or a noise loop crosses in a few reads."""
+
+
+def encode(message: Any) -> bytes:
+    """A message as a frame: its length, then its pickle."""
+    payload = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    return _HEADER.pack(len(payload)) + payload
+
+
+def widen(fd: int) -> None:
+    """Ask for a larger pipe buffer (no-op where the system does not offer it)."""
+    set_size = getattr(fcntl, "F_SETPIPE_SZ", None)
+    if set_size is None:
+        return
+    with contextlib.suppress(OSError):
+        fcntl.fcntl(fd, set_size, PIPE_BYTES)
+
+
+class FrameReader:
+    """Reads frames from a non-blocking pipe, a bounded number of bytes at a time.
+
+    Parameters
+    ----------
+    fd : int
+        The read end; made non-blocking here.
+    """
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        os.set_blocking(fd, False)
+        self._buffer = bytearray()
+        self.closed = False
+
+    def fill(self, max_bytes: int) -> None:
+        """Read what has arrived, at most ``max_bytes``; sets :attr:`closed` at EOF."""
+        try:
+            data = os.read(self.fd, max_bytes)
+        except BlockingIOError:
+            return
+        except OSError:
+            self.closed = True
+            return
+        if not data:
+            self.closed = True
+        self._buffer += data
+
+    def next(self) -> Any | None:
+        """The next whole message, or None."""
+        buffer = self._buffer
+        if len(buffer) < _HEADER.size:
+            return None
+        (size,) = _HEADER.unpack_from(buffer)
+        end = _HEADER.size + size
+        if len(buffer) < end:
+            return None
+        payload = bytes(buffer[_HEADER.size : end])
+        del buffer[:end]
+        return pickle.loads(payload)
+
+    @property
+    def pending_bytes(self) -> int:
+        return len(self._buffer)
+
+
+class NonBlockingWriter:
+    """Writes frames into a non-blocking pipe; what does not fit waits for :meth:`flush`.
+
+    Parameters
+    ----------
+    fd : int
+    max_pending_bytes : int
+        More waiting than this and new frames are dropped (counted in :attr:`dropped`).
+    """
+
+    def __init__(self, fd: int, max_pending_bytes: int = 1 << 20) -> None:
+        self.fd = fd
+        os.set_blocking(fd, False)
+        self._pending = bytearray()
+        self._max = max_pending_bytes
+        self.dropped = 0
+        self.broken = False
+
+    def send(self, message: Any) -> None:
+        frame = encode(message)
+        if len(self._pending) + len(frame) > self._max:
+            self.dropped += 1
+            return
+        self._pending += frame
+        self.flush()
+
+    def flush(self) -> None:
+        """Write what the pipe takes now."""
+        if not self._pending or self.broken:
+            return
+        try:
+            written = os.write(self.fd, self._pending)
+        except BlockingIOError:
+            return
+        except OSError:
+            self.broken = True
+            return
+        del self._pending[:written]
+
+
+class Outbox:
+    """The host's messages to the engine process, written by a thread of their own.
+
+    Parameters
+    ----------
+    fd : int
+        The write end of the pipe (blocking).
+    max_bytes : int
+        Most bytes waiting; :meth:`put` refuses more.
+    """
+
+    def __init__(self, fd: int, max_bytes: int = 64 << 20) -> None:
+        self._fd = fd
+        self._max = max_bytes
+        self._frames: deque[bytes] = deque()
+        self._bytes = 0
+        self._ready = threading.Condition()
+        self._closed = False
+        self.broken = False
+        self._thread = threading.Thread(target=self._run, name="phantomtouch-outbox", daemon=True)
+        self._thread.start()
+
+    @property
+    def waiting_bytes(self) -> int:
+        return self._bytes
+
+    def put(self, frame: bytes) -> bool:
+        """Queue a frame (see :func:`encode`); False when the outbox is full or closed."""
+        with self._ready:
+            if self._closed or self.broken or self._bytes + len(frame) > self._max:
+                return False
+            self._frames.append(frame)
+            self._bytes += len(frame)
+            self._ready.notify()
+            return True
+
+    def _run(self) -> None:
+        while True:
+            with self._ready:
+                while not self._frames and not self._closed:
+                    self._ready.wait()
+                if not self._frames:
+                    return
+                frame = self._frames.popleft()
+            try:
+                view = memoryview(frame)
+                while view:
+                    written = os.write(self._fd, view)
+                    view = view[written:]
+            except OSError:
+                with self._ready:
+                    self.broken = True
+                    self._frames.clear()
+                    self._bytes = 0
+                return
+            with self._ready:
+                self._bytes -= len(frame)
+
+    def close(self, timeout_s: float) -> None:
+        """Write what waits (at most ``timeout_s``), then stop the thread."""
+        with self._ready:
+            self._closed = True
+            self._ready.notify()
+        self._thread.join(timeout_s)
+
+
+def read_frames(fd: int) -> Any:
+    """Yield the messages of a blocking pipe until EOF (the host's reader thread)."""
+    buffer = bytearray()
+    while True:
+        try:
+            data = os.read(fd, 1 << 16)
+        except OSError:
+            return
+        if not data:
+            return
+        buffer += data
+        while len(buffer) >= _HEADER.size:
+            (size,) = _HEADER.unpack_from(buffer)
+            end = _HEADER.size + size
+            if len(buffer) < end:
+                break
+            payload = bytes(buffer[_HEADER.size : end])
+            del buffer[:end]
+            yield pickle.loads(payload)
