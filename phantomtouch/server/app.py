@@ -7,6 +7,7 @@ on shut-down.
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -47,12 +48,16 @@ def _lifespan(settings: Settings, metrics: Metrics) -> Any:
             else DeviceProfile.default()
         )
         store = PatternStore.open(settings.db_path)
+        faults: list[Service] = []
         try:
-            engine = open_engine(settings, device)
+            engine = open_engine(settings, device, lambda state: faults[0].engine_fault(state))
         except BaseException:
             store.close()
             raise
-        app.state.service = Service(settings, device, engine, store, metrics)
+        service = Service(settings, device, engine, store, metrics)
+        service.loop = asyncio.get_running_loop()
+        faults.append(service)
+        app.state.service = service
         logger.info("phantomtouch: %s; patterns in %s", describe_output(engine), store.path)
         metrics.watch_engine(lambda: engine.status().to_dict())
         try:

@@ -12,7 +12,7 @@ from phantomtouch.server.service import Service
 from phantomtouch.server.store import PatternStore
 
 if TYPE_CHECKING:
-    from phantomtouch.server.engine_access import AnyEngine
+    from phantomtouch.engine import EngineFront
 
 
 # The dependencies are ``async`` so that FastAPI calls them on the event loop instead of
@@ -28,7 +28,7 @@ async def get_service(connection: HTTPConnection) -> Service:
     return get_service_now(connection)
 
 
-async def get_engine(connection: HTTPConnection) -> AnyEngine:
+async def get_engine(connection: HTTPConnection) -> EngineFront:
     return get_service_now(connection).engine
 
 
@@ -38,7 +38,7 @@ async def get_store(connection: HTTPConnection) -> PatternStore:
 
 ServiceDep = Annotated[Service, Depends(get_service)]
 if TYPE_CHECKING:
-    EngineDep = AnyEngine
+    EngineDep = EngineFront
 else:
     EngineDep = Annotated[Any, Depends(get_engine)]
 StoreDep = Annotated[PatternStore, Depends(get_store)]

@@ -87,6 +87,31 @@ class _EngineCollector(Collector):
         load.add_metric(["0.99"], status["render_load_p99"])
         load.add_metric(["1"], status["render_load_max"])
         yield load
+        yield GaugeMetricFamily(
+            "phantomtouch_voice_capacity",
+            "Pattern voices admitted at once: the render budget over one voice's cost.",
+            status["voice_capacity"],
+        )
+        yield GaugeMetricFamily(
+            "phantomtouch_voice_cost",
+            "Measured render time of one pattern voice, a fraction of a block's playing time.",
+            status["voice_cost"],
+        )
+        yield GaugeMetricFamily(
+            "phantomtouch_render_budget",
+            "Share of a block's playing time pattern voices may take.",
+            status["render_budget"],
+        )
+        yield GaugeMetricFamily(
+            "phantomtouch_engine_running",
+            "1 while audio flows; 0 while the engine process is stalled, gone or restarting.",
+            1.0 if status["state"] == "running" else 0.0,
+        )
+        yield CounterMetricFamily(
+            "phantomtouch_engine_restarts",
+            "Times the engine process was restarted after it died or stalled.",
+            status["restarts"],
+        )
         channel = GaugeMetricFamily(
             "phantomtouch_channel_peak_level", "Peak per output channel.", labels=["channel"]
         )

@@ -311,8 +311,17 @@ class ClockInfo(BaseModel):
 
 
 class Health(BaseModel):
-    status: Literal["ok"] = "ok"
+    """Whether the service plays: ``degraded`` while its engine is not running."""
+
+    status: Literal["ok", "degraded"] = "ok"
     backend: str
+    engine: str = Field(
+        description="running, starting, stalled, gone, restarting or closed",
+    )
+    underruns: int = Field(description="Audio blocks the sound card missed since start.")
+    render_load_p99: float = Field(
+        description="p99 of the audio callback's time per block over its playing time."
+    )
 
 
 class Curves(BaseModel):

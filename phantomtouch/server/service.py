@@ -16,10 +16,11 @@ from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
 
 if TYPE_CHECKING:
+    import asyncio
     from collections.abc import Iterator
     from contextlib import AbstractContextManager
 
-    from phantomtouch.server.engine_access import AnyEngine
+    from phantomtouch.engine import EngineFront
 
 
 class ContactHolder(Protocol):
@@ -35,13 +36,14 @@ class Service:
 
     settings: Settings
     device: DeviceProfile
-    engine: AnyEngine
+    engine: EngineFront
     store: PatternStore
     metrics: Metrics
     plans: PlanCache = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
     holders: set[ContactHolder] = field(default_factory=set, init=False)
+    loop: asyncio.AbstractEventLoop | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
@@ -59,6 +61,15 @@ class Service:
         self.engine.stop_all()
         for holder in list(self.holders):
             holder.contacts_released("stop")
+
+    def engine_fault(self, state: str) -> None:
+        """The engine dropped every contact (its process died or stalled): tell each
+        connection, on the event loop (called from the engine's watchdog thread)."""
+        loop = self.loop
+        if loop is None or loop.is_closed():
+            return
+        for holder in list(self.holders):
+            loop.call_soon_threadsafe(holder.contacts_released, f"engine {state}")
 
     def render_slot(self) -> AbstractContextManager[None]:
         """Hold one of the ``max_concurrent_renders`` slots, or refuse with 429."""

@@ -55,7 +55,7 @@ from phantomtouch.server.ws_messages import (
 )
 
 if TYPE_CHECKING:
-    from phantomtouch.server.engine_access import AnyEngine
+    from phantomtouch.engine import EngineFront
 
 
 class SessionState(enum.Enum):
@@ -99,7 +99,7 @@ class Session:
     def __init__(self, websocket: WebSocket, service: Service) -> None:
         self.websocket = websocket
         self.service = service
-        self.engine: AnyEngine = service.engine
+        self.engine: EngineFront = service.engine
         settings = service.settings
         self.watchdog_s = settings.watchdog_s
         self.max_message_bytes = settings.max_ws_message_bytes
@@ -256,6 +256,8 @@ class Session:
                 f"contact={message.contact!r}: at most {limit} contacts per connection are down "
                 "at once; send up for one first"
             )
+        if message.carrier is not None and message.carrier.kind != "sine":
+            await asyncio.to_thread(self.engine.prepare_carrier, message.carrier)
         self.engine.contact_down(
             self.owner,
             message.contact,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import ipaddress
 from pathlib import Path
-from typing import Self
+from typing import Literal, Self
 
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -78,8 +78,23 @@ class Settings(BaseSettings):
         ge=1,
         le=4096,
         description=(
-            "Most pattern voices that may sound at once; a touch that would overlap more "
-            "is answered 503 busy, so the audio thread keeps real time."
+            "Most pattern voices that may sound at once, whatever the render budget allows."
+        ),
+    )
+    render_budget: float = Field(
+        default=0.5,
+        gt=0.0,
+        le=1.0,
+        description=(
+            "Share of an audio block's playing time that pattern voices may take to render; "
+            "the engine measures what a voice costs and admits touches within it."
+        ),
+    )
+    voice_policy: Literal["refuse", "steal-oldest", "steal-quietest"] = Field(
+        default="steal-oldest",
+        description=(
+            "A touch beyond the render budget: refused (503 busy), or the oldest or the "
+            "quietest sounding touch fades out in 5 ms to make room for it."
         ),
     )
     engine_process: bool = Field(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 from typing import TYPE_CHECKING
 
 from phantomtouch.errors import ParameterError
@@ -20,8 +21,7 @@ from phantomtouch.server.models import (
 from phantomtouch.server.store import PatternStore
 
 if TYPE_CHECKING:
-    from phantomtouch.engine import Job
-    from phantomtouch.server.engine_access import AnyEngine
+    from phantomtouch.engine import EngineFront, Job
     from phantomtouch.server.service import Service
 
 LATE_START_TOLERANCE_S = 1.0
@@ -62,7 +62,7 @@ def plan_for(pattern: TouchPattern, device: DeviceProfile) -> Plan:
     return plan(pattern, device)
 
 
-def start_frame(engine: AnyEngine, timing: Timing) -> int | None:
+def start_frame(engine: EngineFront, timing: Timing) -> int | None:
     """The engine frame a touch starts at; None: as soon as possible."""
     if timing.start_in_ms:
         return engine.frames_at(engine.server_time_s() + timing.start_in_ms / 1000.0)
@@ -82,7 +82,7 @@ def start_frame(engine: AnyEngine, timing: Timing) -> int | None:
     return engine.frames_at(max(timing.start_at_s, now_s))
 
 
-def accepted(engine: AnyEngine, job: Job) -> JobAccepted:
+def accepted(engine: EngineFront, job: Job) -> JobAccepted:
     summary = job.summary
     return JobAccepted(
         job_id=str(job.job_id),
@@ -103,10 +103,15 @@ async def schedule(
 ) -> JobAccepted:
     """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
 
-    The event loop goes on while an engine process schedules it.
+    Reading the store, planning and scheduling (which may build a noise loop) run in a
+    worker thread: the event loop never waits for them.
     """
     engine = service.engine
-    pattern = resolve(request, service.store)
-    first = start_frame(engine, request.timing())
-    job = await engine.schedule_async(service.plans.plan(pattern), start_frame=first, owner=owner)
-    return accepted(engine, job)
+    stops = engine.stop_count  # a stop that comes while this one is planned voids it
+
+    def plan_and_schedule() -> Job:
+        planned = service.plans.plan(resolve(request, service.store))
+        first = start_frame(engine, request.timing())
+        return engine.schedule(planned, start_frame=first, owner=owner, stop_count=stops)
+
+    return accepted(engine, await asyncio.to_thread(plan_and_schedule))

@@ -22,7 +22,8 @@ def test_lifespan_runs_the_engine(tmp_path: Path, engine_process: bool) -> None:
     with TestClient(app) as client:
         engine = app.state.service.engine
         assert engine.status().running
-        assert client.get("/health").json() == {"status": "ok", "backend": "null"}
+        health = client.get("/health").json()
+        assert (health["status"], health["backend"], health["engine"]) == ("ok", "null", "running")
     try:
         running = engine.status().running
     except DeviceError:  # a closed engine process answers nothing more

@@ -63,7 +63,8 @@ async def contacts_seen(observer: ClientConnection) -> list[str]:
 
 def test_rest_round_trip(live: LiveServer) -> None:
     with httpx.Client(base_url=live.url, timeout=10) as client:
-        assert client.get("/health").json() == {"status": "ok", "backend": "null"}
+        health = client.get("/health").json()
+        assert (health["status"], health["backend"], health["engine"]) == ("ok", "null", "running")
         assert client.get("/device").json()["backend"] == "null"
         assert client.put("/patterns/live-stroke", json=STROKE).status_code == 200
         assert client.get("/patterns/live-stroke").json()["speed_cm_s"] == 5.0

@@ -12,15 +12,17 @@ from tests.support.service import LONG, STROKE, make_settings
 
 
 def test_touch_is_accepted_with_its_plan(client: TestClient) -> None:
+    before_s = client.get("/clock").json()["server_time_s"]
     answer = client.post("/touch", json={**STROKE, "start_in_ms": 50})
+    after_s = client.get("/clock").json()["server_time_s"]
     assert answer.status_code == 202
     job = answer.json()
     assert job["duration_s"] == 3.12
     assert job["path_length_cm"] == 9.6
     assert job["speed_cm_s"] == 5.0
     assert job["frames"] == 149760
-    clock = client.get("/clock").json()
-    assert 0.0 < job["start_at_s"] - clock["server_time_s"] < 0.1
+    frame_s = 1 / 48000  # start times are whole frames
+    assert before_s + 0.05 - frame_s <= job["start_at_s"] <= after_s + 0.05 + frame_s
     state = client.get(f"/jobs/{job['job_id']}").json()
     assert state["state"] in ("scheduled", "playing")
     assert state["duration_s"] == 3.12
@@ -108,11 +110,28 @@ def test_full_engine_answers_503_busy(tmp_path: Path) -> None:
 
 
 def test_more_voices_than_max_voices_at_once_answer_503_busy(tmp_path: Path) -> None:
-    with TestClient(create_app(make_settings(tmp_path, max_voices=2))) as client:
+    settings = make_settings(tmp_path, max_voices=2, voice_policy="refuse")
+    with TestClient(create_app(settings)) as client:
         answers = [client.post("/touch", json=LONG) for _ in range(3)]
         assert [a.status_code for a in answers[:2]] == [202, 202]
         busy = answers[2]
         assert busy.status_code == 503
+        assert busy.headers["retry-after"] == "1"
         assert busy.json()["error"]["code"] == "busy"
-        assert "max_voices=2" in busy.json()["error"]["message"]
+        assert "the voice budget allows 2" in busy.json()["error"]["message"]
         assert client.post("/stop").status_code == 200
+
+
+def test_by_default_the_newest_touch_steals_the_oldest(tmp_path: Path) -> None:
+    with TestClient(create_app(make_settings(tmp_path, max_voices=2))) as client:
+        jobs = []
+        for _ in range(3):
+            answer = client.post("/touch", json=LONG)
+            assert answer.status_code == 202
+            jobs.append(answer.json()["job_id"])
+            deadline = time.monotonic() + 10
+            while client.get(f"/jobs/{jobs[-1]}").json()["state"] != "playing":
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+        states = [client.get(f"/jobs/{job}").json()["state"] for job in jobs]
+        assert states == ["stopped", "playing", "playing"]

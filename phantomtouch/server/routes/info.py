@@ -76,8 +76,16 @@ async def get_clock(engine: EngineDep) -> ClockInfo:
 
 @router.get("/health", response_model=Health, summary="Liveness")
 async def get_health(engine: EngineDep) -> Health:
-    """`ok` while the service runs; needs no token."""
-    return Health(backend=engine.status().to_dict()["backend"])
+    """`ok` while audio flows, `degraded` while the engine is being restarted; needs no
+    token, and never waits for the engine (its figures come from shared memory)."""
+    status = engine.status()
+    return Health(
+        status="ok" if status.state == "running" else "degraded",
+        backend=status.backend,
+        engine=status.state,
+        underruns=status.underruns,
+        render_load_p99=status.render_load_p99,
+    )
 
 
 @router.get(

@@ -13,7 +13,7 @@ from phantomtouch.server.deps import EngineDep, ServiceDep
 from phantomtouch.server.errors import NotFoundError, responses
 
 if TYPE_CHECKING:
-    from phantomtouch.server.engine_access import AnyEngine
+    from phantomtouch.engine import EngineFront
 from phantomtouch.server.models import (
     JobAccepted,
     JobInfo,
@@ -67,7 +67,7 @@ async def post_stop(service: ServiceDep) -> StopAnswer:
     return StopAnswer(server_time_s=service.engine.server_time_s())
 
 
-def job_info(engine: AnyEngine, job_id: str) -> JobInfo:
+def job_info(engine: EngineFront, job_id: str) -> JobInfo:
     """A job's state; an unknown id is :class:`NotFoundError`."""
     state = engine.job_state(job_id)
     if state is None:

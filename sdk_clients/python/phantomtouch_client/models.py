@@ -109,10 +109,13 @@ class Clock(_Answer):
 
 
 class Health(_Answer):
-    """``GET /health``."""
+    """``GET /health``: ``degraded`` while the service's engine is being restarted."""
 
-    status: Literal["ok"] = "ok"
+    status: Literal["ok", "degraded"] = "ok"
     backend: str
+    engine: str
+    underruns: int
+    render_load_p99: float
 
 
 class DeviceInfo(_Answer):
