@@ -27,6 +27,7 @@ import dataclasses
 import gc
 import logging
 import os
+import signal
 import sys
 import threading
 import time
@@ -244,6 +245,8 @@ def serve(
     shared : dict
         The shared memory: ``clock``, ``slots`` and ``slot_count``, ``status``.
     """
+    # Ctrl+C reaches the whole process group: the host closes the engine (with its fade-out)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     raise_priority(priority)
     report_fd = reports.fileno()
     try:

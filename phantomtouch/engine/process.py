@@ -316,6 +316,8 @@ class ProcessEngine(EngineFront):
         """Drop everything, tell ``on_fault``, replace the child."""
         logger.error("the engine process is %s; restarting it", state)
         with self._lock:
+            if self._halt.is_set():
+                return
             self._state = state
             self._jobs.forget_all(self.now_frames)
             self._contacts.clear()
@@ -326,22 +328,26 @@ class ProcessEngine(EngineFront):
                 logger.exception("on_fault failed")
         self._end(self._child, kill=True)
         delay_s = RETRY_FIRST_S
-        while not self._halt.is_set():
-            with self._lock:
-                self._state = "restarting"
+        while True:
+            if not self._set_state("restarting"):
+                return
             try:
                 child = self._spawn()
                 child.outbox.put(encode(("start_sink", 0)))
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
-                with self._lock:
-                    self._state = "gone"
+                self._set_state("gone")
                 self._halt.wait(delay_s)
                 delay_s = min(RETRY_MAX_S, 2 * delay_s)
                 continue
             with self._lock:
-                self._child = child
-                self._restarts += 1
+                closing = self._halt.is_set()
+                if not closing:
+                    self._child = child
+                    self._restarts += 1
+            if closing:  # closed while this one started
+                self._end(child, kill=True)
+                return
             self._wait_running(child)
             if self._state == "running":
                 return
@@ -353,13 +359,18 @@ class ProcessEngine(EngineFront):
         deadline = time.monotonic() + START_TIMEOUT_S
         while not child.status.read()["running"]:
             if not child.process.is_alive() or time.monotonic() > deadline:
-                with self._lock:
-                    self._state = "gone"
+                self._set_state("gone")
                 return
             time.sleep(0.01)
+        self._set_state("running")
+
+    def _set_state(self, state: str) -> bool:
+        """Set the state unless the engine is closing; False when it is."""
         with self._lock:
-            if not self._halt.is_set():
-                self._state = "running"
+            if self._halt.is_set():
+                return False
+            self._state = state
+            return True
 
     def _end(self, child: _Child, *, kill: bool) -> None:
         if kill:
