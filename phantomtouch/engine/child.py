@@ -36,7 +36,7 @@ from typing import Any
 
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.core import Core, measure_voice_cost
+from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
 from phantomtouch.engine.link import FrameReader, NonBlockingWriter, encode, widen
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
@@ -230,14 +230,15 @@ def serve(
     commands : Connection
         The host's messages (read end; framed by :mod:`phantomtouch.engine.link`).
     reports : Connection
-        Where the engine reports (write end): first ``("ready", voice_cost, backend,
-        output_device)`` or ``("failed", exception)``, then lists of events.
+        Where the engine reports (write end): first ``("ready", (voice_cost,
+        start_cost), backend, output_device)`` or ``("failed", exception)``, then lists
+        of events.
     device_json : str
         The device profile as JSON.
     spec : SinkSpec
     options : dict
         ``queue_capacity``, ``max_voices``, ``contact``, ``render_ahead_frames``,
-        ``voice_cost`` (None: measure it).
+        ``costs`` (``(voice_cost, start_cost)``; None: measure them), ``contact_slots``.
     mark : multiprocessing.Value
         Sequence number of the host's last ``stop_all``.
     priority : int or None
@@ -268,9 +269,9 @@ def serve(
             chunk_frames=options["render_ahead_frames"],
             clock=clock,
         )
-        cost = options["voice_cost"]
-        if cost is None:
-            cost = measure_voice_cost(device, cost_plan(device)) if sink.realtime else 0.0
+        costs = options["costs"]
+        if costs is None:
+            costs = measure_costs(device, cost_plan(device)) if sink.realtime else (0.0, 0.0)
     except Exception as exc:
         os.write(report_fd, encode(("failed", exc)))
         return
@@ -280,7 +281,7 @@ def serve(
     )
     core.on_block(child.intake)
     os.set_blocking(report_fd, True)
-    os.write(report_fd, encode(("ready", cost, sink.backend, sink.output_device)))
+    os.write(report_fd, encode(("ready", costs, sink.backend, sink.output_device)))
     os.set_blocking(report_fd, False)
     gc.freeze()  # what start-up made is never scanned again: collections stay short
     if not _wait_for_start(child):

@@ -206,36 +206,55 @@ class Core:
         }
 
 
-def measure_voice_cost(device: DeviceProfile, plan: Plan, *, voices: int = 16) -> float:
-    """Render load one pattern voice adds, as a fraction of a block's playing time.
+def measure_costs(device: DeviceProfile, plan: Plan, *, voices: int = 16) -> tuple[float, float]:
+    """What a pattern voice costs the audio callback, as fractions of a block's playing time.
 
-    Renders 64 blocks with ``voices`` copies of ``plan`` and 64 without, through a
-    scheduler like the callback's, and returns the difference per voice (the median of
-    three tries; at least 1e-4). Run before the sink starts.
+    Returns ``(voice_cost, start_cost)``: the render load one sounding voice adds (64
+    blocks with ``voices`` copies of ``plan`` against 64 without), and what one voice
+    adds to the block it begins in (``voices`` begin in one block, against an idle
+    block). Each is the median of three tries, at least 1e-4. Run before the sink starts.
     """
     from phantomtouch.engine.sinks import NullSink
 
     block = np.zeros((device.block_frames, device.channels), dtype=np.float32)
     period_s = device.block_frames / device.sample_rate_hz
-    tries = []
+    sounding, starting = [], []
     for _ in range(3):
         core = Core(
             device,
             NullSink(device),
             settings=ContactSettings(),
-            queue_capacity=voices + 1,
-            rings=voices,
+            queue_capacity=2 * voices + 1,
+            rings=2 * voices,
             chunk_frames=4096,
             clock=SampleClock(device.sample_rate_hz),
         )
         core.scheduler.clocked = False
+        render = core.scheduler.render
+        for _ in range(8):
+            render(block)
+        began = time.perf_counter()
+        render(block)
+        idle_s = time.perf_counter() - began
+        for k in range(voices):
+            core.start_job(f"start-{k}", plan, None, None)
+        began = time.perf_counter()
+        render(block)
+        starting.append((time.perf_counter() - began - idle_s) / voices / period_s)
         timings = []
         for count in (0, voices):
-            for k in range(count):
-                core.start_job(f"cost-{k}", plan, None, None)
+            if count:
+                for k in range(count):
+                    core.start_job(f"cost-{k}", plan, None, None)
+                for _ in range(8):
+                    render(block)
+            else:
+                core.stop_all()
+                for _ in range(64):
+                    render(block)
             began = time.perf_counter()
             for _ in range(64):
-                core.scheduler.render(block)
+                render(block)
             timings.append((time.perf_counter() - began) / 64)
-        tries.append((timings[1] - timings[0]) / voices / period_s)
-    return max(1e-4, float(np.median(tries)))
+        sounding.append((timings[1] - timings[0]) / voices / period_s)
+    return max(1e-4, float(np.median(sounding))), max(1e-4, float(np.median(starting)))

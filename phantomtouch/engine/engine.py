@@ -21,7 +21,7 @@ from typing import Any
 from phantomtouch.engine.checks import check_int, check_range
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.core import Core, measure_voice_cost
+from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.front import (
     MAX_VOICES,
     RENDER_BUDGET,
@@ -72,9 +72,11 @@ class Engine(EngineFront):
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
     clock : SampleClock or None
         The sample clock to keep, at the device's sample rate; None: a new one.
-    voice_cost : float or None
-        Render load of one pattern voice as a share of a block; None: measured when
-        the engine starts (:func:`~phantomtouch.engine.core.measure_voice_cost`).
+    voice_cost, start_cost : float or None
+        Render load of one sounding pattern voice, and what one adds to the block it
+        begins in, as shares of a block; None: measured when a real-time engine starts
+        (:func:`~phantomtouch.engine.core.measure_costs`). A ``voice_cost`` given alone
+        leaves the starts per block unbounded.
 
     Raises
     ------
@@ -98,6 +100,7 @@ class Engine(EngineFront):
         render_budget: float = RENDER_BUDGET,
         voice_policy: Policy = "steal-oldest",
         voice_cost: float | None = None,
+        start_cost: float | None = None,
     ) -> None:
         super().__init__(
             device,
@@ -117,6 +120,8 @@ class Engine(EngineFront):
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
         if voice_cost is not None:
             self._voice_cost = check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
+        if start_cost is not None:
+            self._start_cost = check_range("start_cost", start_cost, 1e-6, 100.0, "")
         self._core = Core(
             device,
             sink if sink is not None else NullSink(device),
@@ -158,7 +163,8 @@ class Engine(EngineFront):
             if self._core.running:
                 return
             if self._voice_cost <= 0.0 and self._core.sink.realtime:
-                self._voice_cost = measure_voice_cost(self._device, cost_plan(self._device))
+                costs = measure_costs(self._device, cost_plan(self._device))
+                self._voice_cost, self._start_cost = costs
             self._core.start()
             self._halt.clear()
             self._housekeeper = threading.Thread(

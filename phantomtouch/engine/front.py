@@ -72,6 +72,12 @@ RENDER_BUDGET = 0.5
 """Default share of a block's playing time that pattern voices may take to render."""
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
+START_SHARE = 0.2
+"""Share of a block's playing time that voices beginning in it may take (a voice's first
+block costs more than the next: it renders before the callback's spread refills)."""
+MAX_START_DELAY_S = 0.02
+"""How far a job that asks to start as soon as possible may be moved to a later block
+when the next ones already begin as many voices as they may; beyond it, it is refused."""
 
 
 @dataclass
@@ -127,6 +133,8 @@ class EngineFront:
         self._budget = float(render_budget)
         self._policy = self._check_policy(voice_policy)
         self._voice_cost = 0.0
+        self._start_cost = 0.0
+        self._starts: dict[int, int] = {}  # block index: jobs that begin in it
         self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
         self._lock = threading.RLock()
         self._jobs = JobTable()
@@ -219,6 +227,53 @@ class EngineFront:
         by_budget = self._max_voices if cost <= 0 else math.floor(self._budget / cost)
         return max(1, min(self._max_voices, by_budget))
 
+    @property
+    def starts_per_block(self) -> int:
+        """Pattern voices that may begin in one block: ``START_SHARE`` over the measured
+        cost of a voice's first block (unbounded when it is not measured)."""
+        if self._start_cost <= 0.0:
+            return 1 << 30
+        return max(1, math.floor(START_SHARE / self._start_cost))
+
+    def _place_start(self, first: int, frame: int | None) -> tuple[int, int | None]:
+        """The block a job begins in, within the budget of starts per block.
+
+        Returns the job's first frame and the frame to send (None: as soon as possible).
+        A job for a given frame keeps it or is refused; one as soon as possible may move
+        up to ``MAX_START_DELAY_S`` later.
+        """
+        per_block = self.starts_per_block
+        if per_block >= 1 << 30:
+            return first, frame
+        size = self.block_frames
+        starts = self._starts
+        now_block = self.now_frames // size
+        for old in [b for b in starts if b < now_block]:
+            del starts[old]
+        block = first // size
+        if frame is not None:
+            if starts.get(block, 0) >= per_block:
+                raise EngineBusyError(
+                    f"{per_block} pattern voices already begin in the block of "
+                    f"start_frame={frame} (what one block can begin at once); choose "
+                    "another frame"
+                )
+            starts[block] = starts.get(block, 0) + 1
+            return first, frame
+        last = block + max(1, math.ceil(MAX_START_DELAY_S * self.sample_rate_hz / size))
+        while starts.get(block, 0) >= per_block:
+            block += 1
+            if block > last:
+                raise EngineBusyError(
+                    f"{per_block} pattern voices begin in every block of the next "
+                    f"{MAX_START_DELAY_S * 1000:g} ms (what one block can begin at once); "
+                    "retry later"
+                )
+        starts[block] = starts.get(block, 0) + 1
+        if block * size > first:
+            return block * size, block * size
+        return first, None
+
     def schedule(
         self,
         pattern: TouchPattern | Plan,
@@ -291,6 +346,8 @@ class EngineFront:
                 voices=self.voice_capacity,
                 policy=chosen,
             )
+            first, frame = self._place_start(first, frame)
+            record.requested_start_frame = first
             self._send_start(job_id, resolved, owner, frame)
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
@@ -588,6 +645,8 @@ class EngineFront:
             state=str(figures["state"]),
             voice_capacity=self.voice_capacity,
             voice_cost=self._voice_cost,
+            start_cost=self._start_cost,
+            starts_per_block=min(self.starts_per_block, 1 << 20),
             render_budget=self._budget,
             callback_errors=int(figures["callback_errors"]),
             restarts=int(figures.get("restarts", 0)),

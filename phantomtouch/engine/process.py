@@ -101,7 +101,7 @@ class _Child:
     slots: MoveSlots
     status: StatusBlock
     mark: Any
-    voice_cost: float
+    costs: tuple[float, float]
     backend: str
     output_device: str | None
     seq: int = 0
@@ -128,8 +128,8 @@ class ProcessEngine(EngineFront):
     realtime_priority : int or None, 1 <= realtime_priority <= 99
         SCHED_FIFO priority of the child's threads; None, or no permission for it:
         ordinary scheduling.
-    voice_cost : float or None
-        As for :class:`~phantomtouch.engine.Engine` (None: the child measures it).
+    voice_cost, start_cost : float or None
+        As for :class:`~phantomtouch.engine.Engine` (None: the child measures them).
     on_fault : callable or None
         Called as ``on_fault(state)`` (``"gone"`` or ``"stalled"``) from the watchdog
         thread once every job and contact was dropped, before the restart.
@@ -161,6 +161,7 @@ class ProcessEngine(EngineFront):
         render_budget: float = RENDER_BUDGET,
         voice_policy: Policy = "steal-oldest",
         voice_cost: float | None = None,
+        start_cost: float | None = None,
         on_fault: Callable[[str], None] | None = None,
     ) -> None:
         super().__init__(
@@ -182,7 +183,7 @@ class ProcessEngine(EngineFront):
             "max_voices": max_voices,
             "contact": contact,
             "render_ahead_frames": render_ahead_frames,
-            "voice_cost": voice_cost,
+            "costs": None if voice_cost is None else (voice_cost, start_cost or 0.0),
             "contact_slots": self._settings.max_contacts,
         }
         self.on_fault = on_fault
@@ -191,7 +192,7 @@ class ProcessEngine(EngineFront):
         self._restarts = 0
         self._halt = threading.Event()
         self._child = self._spawn()
-        self._voice_cost = self._child.voice_cost
+        self._voice_cost, self._start_cost = self._child.costs
         self._watchdog = threading.Thread(
             target=self._watch, name="phantomtouch-engine-watchdog", daemon=True
         )
@@ -251,7 +252,7 @@ class ProcessEngine(EngineFront):
             slots=slots,
             status=status,
             mark=mark,
-            voice_cost=float(ready[1]),
+            costs=(float(ready[1][0]), float(ready[1][1])),
             backend=str(ready[2]),
             output_device=ready[3],
         )

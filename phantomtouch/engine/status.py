@@ -49,6 +49,10 @@ class EngineStatus:
         ``max_voices``.
     voice_cost : float
         Measured render load of one pattern voice, a fraction of a block's playing time.
+    start_cost : float
+        What a voice adds to the block it begins in, a fraction of its playing time.
+    starts_per_block : int
+        Pattern voices that may begin in one block.
     render_budget : float
     callback_errors : int
         Blocks replaced by silence because rendering raised.
@@ -79,6 +83,8 @@ class EngineStatus:
     state: str
     voice_capacity: int
     voice_cost: float
+    start_cost: float
+    starts_per_block: int
     render_budget: float
     callback_errors: int
     restarts: int

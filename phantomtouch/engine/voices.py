@@ -19,8 +19,10 @@ length), so a pattern voice renders ``chunk_frames`` (default 4096) frames at a 
 a ring of two chunks taken from a preallocated :class:`RingPool`, and the callback adds
 slices of it. The scheduler spreads the refills of all voices evenly over the blocks.
 The samples are the same: the block renderer gives identical samples however its output
-is cut into blocks. With the pool empty, or ``chunk_frames`` 0, a voice renders each
-block directly.
+is cut into blocks. A voice that runs dry (one that just began, before its turn for a
+chunk) renders only the frames it is missing, so that many voices beginning in one block
+do not each render a whole chunk there. With the pool empty, or ``chunk_frames`` 0, a
+voice renders each block directly.
 """
 
 from __future__ import annotations
@@ -234,15 +236,20 @@ class PatternVoice(Voice):
         ahead = self._write - self._read
         return ahead if ahead <= self._ring.shape[0] - self._chunk else None
 
-    def refill(self) -> None:
+    def refill(self, frames: int | None = None) -> None:
+        """Render the next chunk (or only ``frames``) into the ring."""
         assert self._ring is not None
-        frames = min(self._chunk, self._renderer.remaining_frames)
-        at = self._write % self._ring.shape[0]
-        piece = self._ring[at : at + frames]
-        self._renderer.render_into(piece)
-        lo, hi = self._renderer.active_span
-        self._write += frames
-        self._spans.append((self._write, lo, hi))
+        ring = self._ring
+        size = ring.shape[0]
+        left = min(self._chunk if frames is None else frames, self._renderer.remaining_frames)
+        while left > 0:  # two pieces where the ring wraps
+            at = self._write % size
+            piece = min(left, size - at)
+            self._renderer.render_into(ring[at : at + piece])
+            lo, hi = self._renderer.active_span
+            self._write += piece
+            self._spans.append((self._write, lo, hi))
+            left -= piece
 
     def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
         frames = mix.shape[0]
@@ -273,20 +280,22 @@ class PatternVoice(Voice):
         ring = self._ring
         assert ring is not None
         count = dest.shape[0]
-        while self._write - self._read < count:
-            self.refill()
+        missing = count - (self._write - self._read)
+        if missing > 0:  # run dry (a voice that just began): render only what is missing
+            self.refill(missing)
         read = self._read
         spans = self._spans
         while spans[0][0] <= read:  # chunks played out (the one being read stays)
             spans.popleft()
-        end, lo, hi = spans[0]
-        if end < read + count and len(spans) > 1:  # the read reaches the next chunk
-            _, next_lo, next_hi = spans[1]
-            if next_hi > next_lo:
-                lo, hi = (next_lo, next_hi) if hi <= lo else (min(lo, next_lo), max(hi, next_hi))
+        size, channels = ring.shape
+        lo, hi = channels, 0
+        for end, span_lo, span_hi in spans:  # the pieces this read reaches
+            if span_hi > span_lo:
+                lo, hi = min(lo, span_lo), max(hi, span_hi)
+            if end >= read + count:
+                break
         if hi <= lo:
             return  # silent here
-        size, channels = ring.shape
         at = read % size
         first = min(count, size - at)
         if 2 * (hi - lo) > channels:  # a contiguous add of all channels beats a strided one

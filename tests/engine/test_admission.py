@@ -136,3 +136,29 @@ def test_a_job_planned_across_a_stop_is_void_and_never_plays() -> None:
         recording = pull_to(sink, 40 * BLOCK)
         assert engine.job_state(after.job_id).state == "playing"  # type: ignore[union-attr]
         assert np.any(recording[30 * BLOCK :])
+
+
+def test_voices_beginning_at_once_are_spread_over_blocks_within_the_start_budget() -> None:
+    sink = CaptureSink(DEVICE)
+    # a voice's first block costs 0.1 of a block: START_SHARE (0.2) lets 2 begin per block
+    with Engine(DEVICE, sink, voice_cost=1e-4, start_cost=0.1) as engine:
+        assert engine.starts_per_block == 2
+        delay_blocks = -(-round(0.02 * DEVICE.sample_rate_hz) // BLOCK)  # MAX_START_DELAY_S
+        starts = [
+            engine.schedule(hold(0.0, 0.0)).start_frame for _ in range(2 * (delay_blocks + 1))
+        ]
+        first_block = starts[0] // BLOCK  # the next block (nothing has played yet)
+        expected = [(first_block + k // 2) * BLOCK for k in range(len(starts))]
+        assert starts == expected
+        with pytest.raises(EngineBusyError, match="2 pattern voices begin in every block"):
+            engine.schedule(hold(0.0, 0.0))
+        # a job for a given frame keeps it, or is refused when its block is full
+        at = (first_block + 50) * BLOCK + 17
+        engine.schedule(hold(0.0, 0.0), start_frame=at)
+        engine.schedule(hold(0.0, 0.0), start_frame=at + 1)
+        with pytest.raises(EngineBusyError, match="already begin in the block"):
+            engine.schedule(hold(0.0, 0.0), start_frame=at + 2)
+        recording = pull_to(sink, (first_block + delay_blocks + 2) * BLOCK)
+    # each voice began at its frame: the first block sounds, nothing before it
+    assert not np.any(recording[: first_block * BLOCK])
+    assert np.any(recording[first_block * BLOCK : (first_block + 1) * BLOCK])
