@@ -328,6 +328,7 @@ class ProcessEngine(EngineFront):
             except Exception:
                 logger.exception("on_fault failed")
         self._end(self._child, kill=True)
+        self._options["costs"] = (self._voice_cost, self._start_cost)  # measured once
         delay_s = RETRY_FIRST_S
         while True:
             if not self._set_state("restarting"):

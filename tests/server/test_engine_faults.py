@@ -67,10 +67,10 @@ def engine_pid(server: LiveServer) -> int:
     raise AssertionError("no engine process found")
 
 
-def wait_for(condition: Callable[[], bool], timeout_s: float) -> None:
+def wait_for(condition: Callable[[], bool], timeout_s: float, server: LiveServer) -> None:
     deadline = time.monotonic() + timeout_s
     while not condition():
-        assert time.monotonic() < deadline, "timed out"
+        assert time.monotonic() < deadline, f"timed out; the server said:\n{server.log()[-4000:]}"
         time.sleep(0.02)
 
 
@@ -89,7 +89,7 @@ def test_kill_9_then_stop_answers_refuses_then_restarts(live: LiveServer) -> Non
         stop = client.post("/stop", timeout=RESPONSIVE_S)
         assert stop.status_code == 200 and stop.json()["stopped"] is True
         began = time.monotonic()
-        wait_for(lambda: health(client)["status"] == "degraded", timeout_s=3.0)
+        wait_for(lambda: health(client)["status"] == "degraded", timeout_s=3.0, server=live)
         noticed_s = time.monotonic() - began
         assert noticed_s < 1.5, f"noticed after {noticed_s:.2f} s"
         assert client.get(f"/jobs/{job}").json()["state"] == "stopped"
@@ -98,13 +98,14 @@ def test_kill_9_then_stop_answers_refuses_then_restarts(live: LiveServer) -> Non
             assert refused.status_code == 503
             assert refused.json()["error"]["code"] == "device"
             assert "restart" in refused.json()["error"]["message"]
-        wait_for(lambda: health(client)["engine"] == "running", timeout_s=60.0)
+        wait_for(lambda: health(client)["engine"] == "running", timeout_s=60.0, server=live)
         assert engine_pid(live) != old
         again = client.post("/touch", json={"preset": "vr/tap"})
         assert again.status_code == 202
         wait_for(
             lambda: client.get(f"/jobs/{again.json()['job_id']}").json()["state"] == "finished",
             timeout_s=10.0,
+            server=live,
         )
         assert "phantomtouch_engine_restarts_total 1.0" in client.get("/metrics").text
 
@@ -124,12 +125,12 @@ def test_sigstop_leaves_every_other_request_answered(live: LiveServer) -> None:
             ]:
                 answer = client.request(method, route, timeout=RESPONSIVE_S)
                 assert answer.status_code == 200, (route, answer.text)
-            wait_for(lambda: health(client)["engine"] != "running", timeout_s=3.0)
+            wait_for(lambda: health(client)["engine"] != "running", timeout_s=3.0, server=live)
             assert health(client)["status"] == "degraded"
         finally:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(old, signal.SIGCONT)
-        wait_for(lambda: health(client)["engine"] == "running", timeout_s=60.0)
+        wait_for(lambda: health(client)["engine"] == "running", timeout_s=60.0, server=live)
         assert engine_pid(live) != old
 
 
@@ -143,4 +144,4 @@ def test_touches_sent_before_a_stop_are_stopped_and_fall_silent(live: LiveServer
             metrics = client.get("/metrics").text
             return "phantomtouch_active_voices 0.0" in metrics
 
-        wait_for(silent, timeout_s=2.0)  # released within the release ramp (80 ms)
+        wait_for(silent, timeout_s=2.0, server=live)  # released within the release ramp (80 ms)
