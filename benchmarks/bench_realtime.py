@@ -21,8 +21,10 @@ Each reports the engine's underruns (the delta of ``phantomtouch_underruns`` in
 highest p99 and max scraped once a second during the scenario; it is a trailing window of
 the engine, so before each scenario the service rests until that window has forgotten the
 previous one), the most voices seen, requests answered by status (the client's count for
-``/touch``, and the server's own counters), and ``GET /health`` latency sampled at 10 Hz.
-The yardstick, measured in this process, is a numpy copy of one 128 x 8 block.
+``/touch``, and the server's own counters), ``GET /health`` latency sampled at 10 Hz, and
+how many cores were busy, in all and with programs other than the benchmark's (another
+user of the machine makes every figure worse). The yardstick, measured in this process,
+is a numpy copy of one 128 x 8 block.
 
 Run: ``python benchmarks/bench_realtime.py [--quick] [--seconds 60] [--scenarios d,a,b,c]
 [--json PATH]`` (about 4 minutes with the defaults; ``--quick``: well under a minute, with
@@ -136,6 +138,7 @@ async def measure(
     try:
         before = await load.metrics(connection)
         xruns_before = xruns.xruns
+        cpu_before = load.cpu_seconds()
         started = time.monotonic()
         deadline = started + seconds
         done, health, samples = await asyncio.gather(
@@ -144,6 +147,7 @@ async def measure(
             load.sample_metrics(port, deadline, 1.0),
         )
         elapsed_s = time.monotonic() - started
+        cpu_after = load.cpu_seconds()
         await asyncio.sleep(TAIL_S)
         after = await load.metrics(connection)
         xruns_after = xruns.xruns
@@ -156,8 +160,13 @@ async def measure(
     underruns = None
     if before["underruns"] is not None and after["underruns"] is not None:
         underruns = int(after["underruns"] - before["underruns"])
+    machine_s, ours_s = (
+        after - before for after, before in zip(cpu_after, cpu_before, strict=True)
+    )
     return {
         "seconds": elapsed_s,
+        "busy_cores": machine_s / elapsed_s,
+        "busy_cores_others": max(0.0, machine_s - ours_s) / elapsed_s,
         "underruns": underruns,
         "jack_xruns": xruns_after - xruns_before,
         "render_load_p99": highest(samples, "render_load_p99"),
@@ -307,8 +316,8 @@ def load_text(result: dict[str, Any]) -> str:
 def table(results: dict[str, Any]) -> str:
     lines = [
         "| scenario | s | underruns | JACK xruns | render load p99 | max | voices max "
-        "| /touch answered | /health p50 / p99 ms | load |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| /touch answered | /health p50 / p99 ms | load | busy cores (others) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key, r in results["scenarios"].items():
         health = r["health"]
@@ -317,7 +326,7 @@ def table(results: dict[str, Any]) -> str:
             f"| {r['jack_xruns']} | {percent(r['render_load_p99'])} "
             f"| {percent(r['render_load_max'])} | {number(r['voices_max'], 0)} "
             f"| {touch_statuses(r)} | {number(health['p50_ms'])} / {number(health['p99_ms'])} "
-            f"| {load_text(r)} |"
+            f"| {load_text(r)} | {r['busy_cores']:.1f} ({r['busy_cores_others']:.1f}) |"
         )
     return "\n".join(lines)
 

@@ -9,7 +9,9 @@ deadline and every request has a timeout.
 - :func:`paced_touches`: ``POST /touch`` at a fixed rate over one connection;
 - :func:`sample_health`, :func:`sample_metrics`: what the service answers during the load;
 - :func:`flood`: ``wrk`` posting touches as fast as 16 connections can;
-- :func:`start_hogs`: processes that keep every core busy at normal priority.
+- :func:`start_hogs`: processes that keep every core busy at normal priority;
+- :func:`cpu_seconds`: CPU time of the whole machine and of this process tree, to tell how
+  much of it other programs took during a scenario.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import os
 import re
 import subprocess
 import sys
@@ -365,3 +368,36 @@ def stop(processes: list[subprocess.Popen[bytes]]) -> None:
         if process.poll() is None:
             process.kill()
         process.wait()
+
+
+# -- the machine -----------------------------------------------------------------------
+
+
+def cpu_seconds() -> tuple[float, float]:
+    """CPU seconds spent so far by the whole machine and by this process and its descendants.
+
+    The machine's figure is every core's busy time (``/proc/stat`` without idle and
+    iowait); the tree's counts live descendants (the service, its engine process, JACK)
+    and, through ``cutime``/``cstime``, the children already waited for (hogs, wrk).
+    """
+    tick_s = 1.0 / os.sysconf("SC_CLK_TCK")
+    ticks = [int(t) for t in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
+    machine_s = (sum(ticks) - ticks[3] - ticks[4]) * tick_s
+    parents: dict[int, int] = {}
+    spent: dict[int, int] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        pid = int(entry.name)
+        parents[pid] = int(fields[1])
+        spent[pid] = sum(int(f) for f in fields[11:15])  # utime stime cutime cstime
+    tree, frontier = set(), [os.getpid()]
+    while frontier:
+        pid = frontier.pop()
+        tree.add(pid)
+        frontier += [child for child, parent in parents.items() if parent == pid]
+    return machine_s, sum(spent.get(pid, 0) for pid in tree) * tick_s
