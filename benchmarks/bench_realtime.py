@@ -160,9 +160,7 @@ async def measure(
     underruns = None
     if before["underruns"] is not None and after["underruns"] is not None:
         underruns = int(after["underruns"] - before["underruns"])
-    machine_s, ours_s = (
-        after - before for after, before in zip(cpu_after, cpu_before, strict=True)
-    )
+    machine_s, ours_s = (end - start for start, end in zip(cpu_before, cpu_after, strict=True))
     return {
         "seconds": elapsed_s,
         "busy_cores": machine_s / elapsed_s,
@@ -381,6 +379,21 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
         "block_copy_us": block_copy_us(args.period_frames),
         "period_frames": args.period_frames,
         "sample_rate_hz": SAMPLE_RATE_HZ,
+        "config": {
+            name: getattr(args, name)
+            for name in (
+                "seconds",
+                "flood_seconds",
+                "quiet_seconds",
+                "hands",
+                "move_hz",
+                "touch_rate",
+                "touch_connections",
+                "flood_connections",
+                "hogs",
+                "health_hz",
+            )
+        },
         "scenarios": {},
     }
     block_s = args.period_frames / SAMPLE_RATE_HZ
@@ -407,6 +420,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
         results["render_load_window_s"] = window_s
         if args.rest_seconds is None:
             args.rest_seconds = (window_s or 11.0) + 1.0
+        results["config"]["rest_seconds"] = args.rest_seconds
         loads = {
             "d": (args.quiet_seconds, idle()),
             "a": (args.seconds, hands_and_touches(port, args)),
@@ -475,6 +489,10 @@ def main() -> None:
         f"{number(results['render_load_window_s'])} s, rest {args.rest_seconds:g} s\n"
     )
     print(table(results))
+    print(
+        "\ntarget: 0 underruns and 0 xruns in a, b and c; the flood's excess refused (503) or "
+        "stolen; render load p99 <= 25 % of the period"
+    )
 
 
 if __name__ == "__main__":
