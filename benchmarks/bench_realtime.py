@@ -30,7 +30,8 @@ Run: ``python benchmarks/bench_realtime.py [--quick] [--seconds 60] [--scenarios
 [--json PATH]`` (about 4 minutes with the defaults; ``--quick``: well under a minute, with
 short rests, so its render load figures overlap). Needs ``jackd`` (Debian ``jackd2``),
 ``wrk`` for scenario c, and JACK-Client. Nothing is asserted: the figures depend on the
-machine and on what else it runs (see the load average printed with them).
+machine and on what else it runs (see the load average printed with them). The loads are
+in ``realtime_load.py``, the table in ``realtime_report.py``.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from typing import Any
 
 import numpy as np
 import realtime_load as load
+from realtime_report import TITLES, number, table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
 
@@ -259,77 +261,20 @@ def wrk_flood(wrk: str, port: int, folder: Path, args: argparse.Namespace) -> Lo
     return run
 
 
-# -- report ----------------------------------------------------------------------------
-
-TITLES = {
-    "d": "quiet (no load)",
-    "a": "4 hands at 90 Hz + 50 touches/s",
-    "b": "same + CPU hog on every core",
-    "c": "wrk flood of POST /touch",
-}
-
-
-def percent(fraction: float | None) -> str:
-    return "—" if fraction is None else f"{fraction:.0%}"
-
-
-def number(value: float | None, digits: int = 1) -> str:
-    return "—" if value is None else f"{value:.{digits}f}"
-
-
-def statuses_text(statuses: dict[str, int]) -> str:
-    return ", ".join(f"{n} × {s}" for s, n in sorted(statuses.items())) or "—"
-
-
-def touch_statuses(result: dict[str, Any]) -> str:
-    """The client's count of /touch answers, else the server's (for the wrk flood)."""
-    if "touches" in result:
-        return statuses_text(result["touches"]["statuses"])
-    by_status = {
-        key.rsplit(" ", 1)[1]: n
-        for key, n in result["server_requests"].items()
-        if key.startswith("POST /touch ")
-    }
-    return statuses_text(by_status)
-
-
-def load_text(result: dict[str, Any]) -> str:
-    parts = []
-    if "hands" in result:
-        h, t = result["hands"], result["touches"]
-        parts.append(f"{h['moves_per_s_per_hand']:.0f} moves/s/hand, {t['per_s']:.0f} touches/s")
-        if h["errors"]:
-            parts.append(f"{h['errors']} WS errors")
-    if "cpu_hogs" in result:
-        parts.append(f"{result['cpu_hogs']} hogs")
-    if "wrk" in result:
-        w = result["wrk"]
-        parts.append(
-            f"wrk {number(w['requests_per_s'], 0)} req/s, {w['non_2xx_3xx']} non-2xx/3xx"
-            + (f", socket errors {w['socket_errors']}" if w["socket_errors"] else "")
-        )
-    return "; ".join(parts) or "—"
-
-
-def table(results: dict[str, Any]) -> str:
-    lines = [
-        "| scenario | s | underruns | JACK xruns | render load p99 | max | voices max "
-        "| /touch answered | /health p50 / p99 ms | load | busy cores (others) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for key, r in results["scenarios"].items():
-        health = r["health"]
-        lines.append(
-            f"| ({key}) {TITLES[key]} | {r['seconds']:.0f} | {number(r['underruns'], 0)} "
-            f"| {r['jack_xruns']} | {percent(r['render_load_p99'])} "
-            f"| {percent(r['render_load_max'])} | {number(r['voices_max'], 0)} "
-            f"| {touch_statuses(r)} | {number(health['p50_ms'])} / {number(health['p99_ms'])} "
-            f"| {load_text(r)} | {r['busy_cores']:.1f} ({r['busy_cores_others']:.1f}) |"
-        )
-    return "\n".join(lines)
-
-
 # -- main ------------------------------------------------------------------------------
+
+
+def within(kind: Callable[[str], float], low: float, high: float) -> Callable[[str], Any]:
+    """An argparse type: ``kind(text)`` between ``low`` and ``high`` (every run stays bounded)."""
+
+    def parse(text: str) -> float:
+        value = kind(text)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{text}: must be between {low:g} and {high:g}")
+        return value
+
+    parse.__name__ = getattr(kind, "__name__", "value")
+    return parse
 
 
 def parse_args() -> argparse.Namespace:
@@ -337,23 +282,38 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument(
         "--quick", action="store_true", help="short scenarios and rests (a smoke run)"
     )
-    parser.add_argument("--seconds", type=float, help="length of scenarios a and b (default 60)")
-    parser.add_argument("--flood-seconds", type=float, help="length of scenario c (default 10)")
-    parser.add_argument("--quiet-seconds", type=float, help="length of scenario d (default 10)")
+    parser.add_argument(
+        "--seconds", type=within(float, 0.5, 600), help="length of scenarios a and b (default 60)"
+    )
+    parser.add_argument(
+        "--flood-seconds", type=within(float, 1, 120), help="length of scenario c (default 10)"
+    )
+    parser.add_argument(
+        "--quiet-seconds", type=within(float, 0.5, 600), help="length of scenario d (default 10)"
+    )
     parser.add_argument(
         "--rest-seconds",
-        type=float,
+        type=within(float, 0, 120),
         help="rest before each scenario (default: the render load window plus 1 s)",
     )
     parser.add_argument("--scenarios", default="d,a,b,c", help="which, in order (default d,a,b,c)")
-    parser.add_argument("--period-frames", type=int, default=128, help="JACK period = engine block")
-    parser.add_argument("--hands", type=int, default=4)
-    parser.add_argument("--move-hz", type=float, default=90.0)
-    parser.add_argument("--touch-rate", type=float, default=50.0, help="POST /touch per second")
-    parser.add_argument("--touch-connections", type=int, default=2)
-    parser.add_argument("--flood-connections", type=int, default=16)
-    parser.add_argument("--hogs", type=int, default=os.cpu_count() or 2, help="CPU hog processes")
-    parser.add_argument("--health-hz", type=float, default=10.0)
+    parser.add_argument(
+        "--period-frames",
+        type=within(int, 16, 4096),
+        default=128,
+        help="JACK period = engine block",
+    )
+    parser.add_argument("--hands", type=within(int, 1, 16), default=4)
+    parser.add_argument("--move-hz", type=within(float, 1, 1000), default=90.0)
+    parser.add_argument(
+        "--touch-rate", type=within(float, 1, 1000), default=50.0, help="POST /touch per second"
+    )
+    parser.add_argument("--touch-connections", type=within(int, 1, 64), default=2)
+    parser.add_argument("--flood-connections", type=within(int, 1, 256), default=16)
+    parser.add_argument(
+        "--hogs", type=within(int, 1, 64), default=os.cpu_count() or 2, help="CPU hog processes"
+    )
+    parser.add_argument("--health-hz", type=within(float, 0.5, 100), default=10.0)
     parser.add_argument("--json", type=Path, help="also write the results to this file")
     args = parser.parse_args()
     scale = 0.1 if args.quick else 1.0
@@ -364,6 +324,8 @@ def parse_args() -> argparse.Namespace:
     unknown = [s for s in args.scenarios if s not in TITLES]
     if unknown:
         parser.error(f"--scenarios: unknown {unknown}; choose from {sorted(TITLES)}")
+    if args.json is not None and not args.json.parent.is_dir():
+        parser.error(f"--json: {args.json}: the folder {args.json.parent} does not exist")
     if args.quick and args.rest_seconds is None:
         args.rest_seconds = 1.0
     return args
