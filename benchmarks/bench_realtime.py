@@ -1,0 +1,461 @@
+"""Glitches of the whole path under load: the service on a real audio server, as users run it.
+
+The benchmark starts its own JACK server (dummy driver, 48 kHz, 128-frame periods, 8
+outputs, a name of its own) and ``phantomtouch serve --output system`` on it, as a
+subprocess on a free loopback port with a device profile whose block is the JACK period.
+It talks to the service only over HTTP and WebSocket (``docs/protocol.md``) and counts
+JACK's xruns with a client of its own that runs no Python code in JACK's cycle.
+
+Scenarios (run in the order given by ``--scenarios``; default ``d,a,b,c``):
+
+- ``d`` quiet: no load (10 s), for comparison;
+- ``a`` hands + touches: 4 WebSocket hands moving along ellipses at 90 Hz, and 50
+  ``POST /touch`` ``vr/tap`` per second over 2 connections (60 s);
+- ``b`` the same while busy Python loops, one per core at normal priority, keep every
+  core busy (a stand-in for a VR game on the same PC);
+- ``c`` flood: ``wrk -t1 -c16`` posts ``vr/tap`` touches as fast as it can (10 s); the
+  excess must be refused (503 ``busy``) or stolen, never heard as a glitch.
+
+Each reports the engine's underruns (the delta of ``phantomtouch_underruns`` in
+``/metrics``), JACK's xruns, the engine's render load (``phantomtouch_render_load``: the
+highest p99 and max scraped once a second during the scenario; it is a trailing window of
+the engine, so before each scenario the service rests until that window has forgotten the
+previous one), the most voices seen, requests answered by status (the client's count for
+``/touch``, and the server's own counters), ``GET /health`` latency sampled at 10 Hz, and
+how many cores were busy, in all and with programs other than the benchmark's (another
+user of the machine makes every figure worse). The yardstick, measured in this process,
+is a numpy copy of one 128 x 8 block.
+
+Run: ``python benchmarks/bench_realtime.py [--quick] [--seconds 60] [--scenarios d,a,b,c]
+[--json PATH]`` (about 4 minutes with the defaults; ``--quick``: well under a minute, with
+short rests, so its render load figures overlap). Needs ``jackd`` (Debian ``jackd2``),
+``wrk`` for scenario c, and JACK-Client. Nothing is asserted: the figures depend on the
+machine and on what else it runs (see the load average printed with them). The loads are
+in ``realtime_load.py``, the table in ``realtime_report.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import realtime_load as load
+from realtime_report import TITLES, number, table
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
+
+from tests.support.jack import JackServer, JackXrunCounter
+from tests.support.live_server import HOST, LiveServer
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE_RATE_HZ = 48000
+CHANNELS = 8
+TAIL_S = 0.5
+"""After the load, the engine's counters are read once more this much later."""
+
+Load = Callable[[float], Awaitable[dict[str, Any]]]
+"""A load: given the deadline (monotonic clock), what it did."""
+
+
+class Service(LiveServer):
+    """``phantomtouch serve --output system`` started as a user starts it (console script)."""
+
+    def command(self) -> list[str]:
+        script = Path(sys.executable).with_name("phantomtouch")
+        head = [str(script)] if script.exists() else [sys.executable, "-m", "phantomtouch"]
+        return [
+            *head,
+            "serve",
+            "--output",
+            "system",
+            "--host",
+            HOST,
+            "--port",
+            str(self.port),
+            "--db",
+            str(self.db_path),
+            *self.args,
+        ]
+
+
+def block_copy_us(frames: int, copies: int = 50_000) -> float:
+    """Median time of ``block.copy()`` for one ``frames`` x 8 float32 block, in µs."""
+    block = np.zeros((frames, CHANNELS), dtype=np.float32)
+    times = np.empty(copies)
+    for k in range(copies):
+        started = time.perf_counter()
+        block.copy()
+        times[k] = time.perf_counter() - started
+    return float(np.median(times) * 1e6)
+
+
+# -- one scenario ----------------------------------------------------------------------
+
+
+async def rest(port: int, seconds: float) -> None:
+    """``POST /stop``, wait (10 s at most) until no voice plays, then ``seconds`` more."""
+    connection = load.HttpConnection(port)
+    try:
+        await load.timed_request(connection, "POST", "/stop")
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            figures = await load.metrics(connection)
+            if figures is None or not figures["active_voices"]:
+                break
+            await asyncio.sleep(0.1)
+    finally:
+        connection.close()
+    await asyncio.sleep(seconds)
+
+
+def counter_delta(before: dict[str, int], after: dict[str, int]) -> dict[str, int]:
+    keys = sorted(set(before) | set(after))
+    return {
+        k: after.get(k, 0) - before.get(k, 0) for k in keys if after.get(k, 0) > before.get(k, 0)
+    }
+
+
+def highest(samples: list[dict[str, Any]], key: str) -> float | None:
+    values = [s[key] for s in samples if s[key] is not None]
+    return max(values) if values else None
+
+
+async def measure(
+    port: int, xruns: JackXrunCounter, seconds: float, make_load: Load, args: argparse.Namespace
+) -> dict[str, Any]:
+    """Rest, then run ``make_load`` for ``seconds`` while sampling ``/health`` and ``/metrics``."""
+    await rest(port, args.rest_seconds)
+    connection = load.HttpConnection(port)
+    try:
+        before = await load.metrics(connection)
+        xruns_before = xruns.xruns
+        cpu_before = load.cpu_seconds()
+        started = time.monotonic()
+        deadline = started + seconds
+        done, health, samples = await asyncio.gather(
+            make_load(deadline),
+            load.sample_health(port, deadline, 1.0 / args.health_hz),
+            load.sample_metrics(port, deadline, 1.0),
+        )
+        elapsed_s = time.monotonic() - started
+        cpu_after = load.cpu_seconds()
+        await asyncio.sleep(TAIL_S)
+        after = await load.metrics(connection)
+        xruns_after = xruns.xruns
+    finally:
+        connection.close()
+    if before is None or after is None:
+        raise RuntimeError("the service did not answer GET /metrics around the scenario")
+    samples.append(after)
+    latencies = health["latencies_s"]
+    underruns = None
+    if before["underruns"] is not None and after["underruns"] is not None:
+        underruns = int(after["underruns"] - before["underruns"])
+    machine_s, ours_s = (end - start for start, end in zip(cpu_before, cpu_after, strict=True))
+    return {
+        "seconds": elapsed_s,
+        "busy_cores": machine_s / elapsed_s,
+        "busy_cores_others": max(0.0, machine_s - ours_s) / elapsed_s,
+        "underruns": underruns,
+        "jack_xruns": xruns_after - xruns_before,
+        "render_load_p99": highest(samples, "render_load_p99"),
+        "render_load_max": highest(samples, "render_load_max"),
+        "voices_max": highest(samples, "active_voices"),
+        "server_requests": counter_delta(before["requests"], after["requests"]),
+        "health": {
+            "samples": len(latencies),
+            "statuses": health["statuses"],
+            "p50_ms": ms(load.percentile(latencies, 0.50)),
+            "p99_ms": ms(load.percentile(latencies, 0.99)),
+            "max_ms": ms(max(latencies, default=None)),
+        },
+        **done,
+    }
+
+
+def ms(seconds: float | None) -> float | None:
+    return None if seconds is None else seconds * 1e3
+
+
+# -- the loads -------------------------------------------------------------------------
+
+
+def idle() -> Load:
+    async def run(deadline: float) -> dict[str, Any]:
+        await asyncio.sleep(max(0.0, deadline - time.monotonic()))
+        return {}
+
+    return run
+
+
+def hands_and_touches(port: int, args: argparse.Namespace) -> Load:
+    async def run(deadline: float) -> dict[str, Any]:
+        per_connection = args.touch_rate / args.touch_connections
+        touchers = [
+            load.paced_touches(port, per_connection, deadline)
+            for _ in range(args.touch_connections)
+        ]
+        hands = [load.hand(port, k, args.move_hz, deadline) for k in range(args.hands)]
+        results = await asyncio.gather(*touchers, *hands)
+        touches, moved = results[: len(touchers)], results[len(touchers) :]
+        statuses: dict[str, int] = {}
+        for t in touches:
+            for status, n in t["statuses"].items():
+                statuses[status] = statuses.get(status, 0) + n
+        latencies = [s for t in touches for s in t["latencies_s"]]
+        seconds = max(h["seconds"] for h in moved)
+        errors = [e for h in moved for e in h["errors"]]
+        return {
+            "touches": {
+                "sent": len(latencies),
+                "per_s": len(latencies) / seconds,
+                "statuses": statuses,
+                "p50_ms": ms(load.percentile(latencies, 0.50)),
+                "p99_ms": ms(load.percentile(latencies, 0.99)),
+            },
+            "hands": {
+                "count": len(moved),
+                "moves": sum(h["moves"] for h in moved),
+                "moves_per_s_per_hand": sum(h["moves"] for h in moved) / seconds / len(moved),
+                "skipped_frames": sum(h["skipped"] for h in moved),
+                "errors": len(errors),
+                "first_error": errors[0] if errors else None,
+            },
+        }
+
+    return run
+
+
+def with_hogs(inner: Load, hogs: list[Any], count: int) -> Load:
+    async def run(deadline: float) -> dict[str, Any]:
+        hogs.extend(load.start_hogs(count, deadline - time.monotonic() + 5.0))
+        try:
+            return {"cpu_hogs": count, **await inner(deadline)}
+        finally:
+            load.stop(hogs)
+            hogs.clear()
+
+    return run
+
+
+def wrk_flood(wrk: str, port: int, folder: Path, args: argparse.Namespace) -> Load:
+    async def run(deadline: float) -> dict[str, Any]:
+        seconds = deadline - time.monotonic()
+        return {
+            "wrk": await load.flood(
+                wrk, port, folder, connections=args.flood_connections, seconds=seconds
+            )
+        }
+
+    return run
+
+
+# -- main ------------------------------------------------------------------------------
+
+
+def within(kind: Callable[[str], float], low: float, high: float) -> Callable[[str], Any]:
+    """An argparse type: ``kind(text)`` between ``low`` and ``high`` (every run stays bounded)."""
+
+    def parse(text: str) -> float:
+        value = kind(text)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{text}: must be between {low:g} and {high:g}")
+        return value
+
+    parse.__name__ = getattr(kind, "__name__", "value")
+    return parse
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--quick", action="store_true", help="short scenarios and rests (a smoke run)"
+    )
+    parser.add_argument(
+        "--seconds", type=within(float, 0.5, 600), help="length of scenarios a and b (default 60)"
+    )
+    parser.add_argument(
+        "--flood-seconds", type=within(float, 1, 120), help="length of scenario c (default 10)"
+    )
+    parser.add_argument(
+        "--quiet-seconds", type=within(float, 0.5, 600), help="length of scenario d (default 10)"
+    )
+    parser.add_argument(
+        "--rest-seconds",
+        type=within(float, 0, 120),
+        help="rest before each scenario (default: the render load window plus 1 s)",
+    )
+    parser.add_argument("--scenarios", default="d,a,b,c", help="which, in order (default d,a,b,c)")
+    parser.add_argument(
+        "--period-frames",
+        type=within(int, 16, 4096),
+        default=128,
+        help="JACK period = engine block",
+    )
+    parser.add_argument("--hands", type=within(int, 1, 16), default=4)
+    parser.add_argument("--move-hz", type=within(float, 1, 1000), default=90.0)
+    parser.add_argument(
+        "--touch-rate", type=within(float, 1, 1000), default=50.0, help="POST /touch per second"
+    )
+    parser.add_argument("--touch-connections", type=within(int, 1, 64), default=2)
+    parser.add_argument("--flood-connections", type=within(int, 1, 256), default=16)
+    parser.add_argument(
+        "--hogs", type=within(int, 1, 64), default=os.cpu_count() or 2, help="CPU hog processes"
+    )
+    parser.add_argument("--health-hz", type=within(float, 0.5, 100), default=10.0)
+    parser.add_argument("--json", type=Path, help="also write the results to this file")
+    args = parser.parse_args()
+    scale = 0.1 if args.quick else 1.0
+    args.seconds = args.seconds or 60.0 * scale
+    args.flood_seconds = args.flood_seconds or max(1.0, 10.0 * scale)
+    args.quiet_seconds = args.quiet_seconds or max(1.0, 10.0 * scale)
+    args.scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
+    unknown = [s for s in args.scenarios if s not in TITLES]
+    if unknown:
+        parser.error(f"--scenarios: unknown {unknown}; choose from {sorted(TITLES)}")
+    if args.json is not None and not args.json.parent.is_dir():
+        parser.error(f"--json: {args.json}: the folder {args.json.parent} does not exist")
+    if args.quick and args.rest_seconds is None:
+        args.rest_seconds = 1.0
+    return args
+
+
+def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, Any]:
+    wrk = shutil.which("wrk")
+    if "c" in args.scenarios and wrk is None:
+        raise SystemExit("bench_realtime: scenario c needs wrk (Debian package wrk)")
+    results: dict[str, Any] = {
+        "cpus": os.cpu_count(),
+        "load_avg_1min": os.getloadavg()[0],
+        "block_copy_us": block_copy_us(args.period_frames),
+        "period_frames": args.period_frames,
+        "sample_rate_hz": SAMPLE_RATE_HZ,
+        "config": {
+            name: getattr(args, name)
+            for name in (
+                "seconds",
+                "flood_seconds",
+                "quiet_seconds",
+                "hands",
+                "move_hz",
+                "touch_rate",
+                "touch_connections",
+                "flood_connections",
+                "hogs",
+                "health_hz",
+            )
+        },
+        "scenarios": {},
+    }
+    block_s = args.period_frames / SAMPLE_RATE_HZ
+    profile = folder / "device.toml"
+    profile.write_text(
+        f"sample_rate_hz = {SAMPLE_RATE_HZ}\nblock_frames = {args.period_frames}\n", "utf-8"
+    )
+    env = {"PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    jack = JackServer(sample_rate_hz=SAMPLE_RATE_HZ, period_frames=args.period_frames).start()
+    xruns = service = None
+    try:
+        xruns = JackXrunCounter(jack)
+        service = Service(
+            folder / "patterns.db",
+            env=env,
+            args=("--device", str(profile)),
+            log_path=folder / "service.log",
+        )
+        service.start()
+        port = service.port
+        results["jack_server"] = jack.name
+        results["device"] = check_device(port, args.period_frames)
+        window_s = load.render_load_window_s(metrics_text(port), block_s)
+        results["render_load_window_s"] = window_s
+        if args.rest_seconds is None:
+            args.rest_seconds = (window_s or 11.0) + 1.0
+        results["config"]["rest_seconds"] = args.rest_seconds
+        loads = {
+            "d": (args.quiet_seconds, idle()),
+            "a": (args.seconds, hands_and_touches(port, args)),
+            "b": (args.seconds, with_hogs(hands_and_touches(port, args), hogs, args.hogs)),
+            "c": (args.flood_seconds, wrk_flood(wrk or "wrk", port, folder, args)),
+        }
+        for key in args.scenarios:
+            seconds, make_load = loads[key]
+            print(f"({key}) {TITLES[key]}: {seconds:g} s ...", file=sys.stderr, flush=True)
+            results["scenarios"][key] = asyncio.run(measure(port, xruns, seconds, make_load, args))
+        results["load_avg_1min_after"] = os.getloadavg()[0]
+    except Exception:
+        if service is not None:
+            print(service.log()[-3000:], file=sys.stderr)
+        raise
+    finally:
+        load.stop(hogs)
+        if service is not None:
+            service.stop()
+        if xruns is not None:
+            xruns.close()
+        jack.stop()
+    return results
+
+
+def metrics_text(port: int) -> str:
+    import httpx
+
+    return httpx.get(f"http://{HOST}:{port}/metrics", timeout=load.REQUEST_TIMEOUT_S).text
+
+
+def check_device(port: int, period_frames: int) -> dict[str, Any]:
+    """The service's ``GET /device``; refuses to go on unless it plays on JACK at our period."""
+    import httpx
+
+    device: dict[str, Any] = httpx.get(f"http://{HOST}:{port}/device", timeout=5.0).json()
+    found = (device.get("backend"), device.get("output_device"), device.get("block_frames"))
+    if found != ("sounddevice", "system", period_frames):
+        raise RuntimeError(
+            f"the service is not on JACK's system output at {period_frames}: {found}"
+        )
+    return {k: device[k] for k in ("backend", "output_device", "block_frames", "sample_rate_hz")}
+
+
+def main() -> None:
+    args = parse_args()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # clean up as on Ctrl+C
+    hogs: list[Any] = []
+    try:
+        with tempfile.TemporaryDirectory(prefix="bench-realtime-") as folder:
+            results = run(args, Path(folder), hogs)
+    except KeyboardInterrupt:
+        raise SystemExit(
+            "bench_realtime: interrupted; every process it started is stopped"
+        ) from None
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2), encoding="utf-8")
+    print(
+        f"machine: {results['cpus']} cpus, load average {results['load_avg_1min']:.2f} -> "
+        f"{results['load_avg_1min_after']:.2f}; JACK dummy {SAMPLE_RATE_HZ} Hz, "
+        f"{args.period_frames}-frame periods ({args.period_frames / SAMPLE_RATE_HZ * 1e3:.2f} ms)"
+    )
+    print(
+        f"yardstick: numpy copy of one {args.period_frames} x {CHANNELS} block "
+        f"{results['block_copy_us']:.2f} µs; render load window "
+        f"{number(results['render_load_window_s'])} s, rest {args.rest_seconds:g} s\n"
+    )
+    print(table(results))
+    print(
+        "\ntarget: 0 underruns and 0 xruns in a, b and c; the flood's excess refused (503) or "
+        "stolen; render load p99 <= 25 % of the period"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,73 @@
+"""The Markdown table of ``bench_realtime.py``: one row per scenario, ``—`` where a figure
+is missing (a service that does not report it)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+TITLES = {
+    "d": "quiet (no load)",
+    "a": "4 hands at 90 Hz + 50 touches/s",
+    "b": "same + CPU hog on every core",
+    "c": "wrk flood of POST /touch",
+}
+
+
+def percent(fraction: float | None) -> str:
+    return "—" if fraction is None else f"{fraction:.0%}"
+
+
+def number(value: float | None, digits: int = 1) -> str:
+    return "—" if value is None else f"{value:.{digits}f}"
+
+
+def statuses_text(statuses: dict[str, int]) -> str:
+    return ", ".join(f"{n} × {s}" for s, n in sorted(statuses.items())) or "—"
+
+
+def touch_statuses(result: dict[str, Any]) -> str:
+    """The client's count of /touch answers, else the server's (for the wrk flood)."""
+    if "touches" in result:
+        return statuses_text(result["touches"]["statuses"])
+    by_status = {
+        key.rsplit(" ", 1)[1]: n
+        for key, n in result["server_requests"].items()
+        if key.startswith("POST /touch ")
+    }
+    return statuses_text(by_status)
+
+
+def load_text(result: dict[str, Any]) -> str:
+    parts = []
+    if "hands" in result:
+        h, t = result["hands"], result["touches"]
+        parts.append(f"{h['moves_per_s_per_hand']:.0f} moves/s/hand, {t['per_s']:.0f} touches/s")
+        if h["errors"]:
+            parts.append(f"{h['errors']} WS errors")
+    if "cpu_hogs" in result:
+        parts.append(f"{result['cpu_hogs']} hogs")
+    if "wrk" in result:
+        w = result["wrk"]
+        parts.append(
+            f"wrk {number(w['requests_per_s'], 0)} req/s, {w['non_2xx_3xx']} non-2xx/3xx"
+            + (f", socket errors {w['socket_errors']}" if w["socket_errors"] else "")
+        )
+    return "; ".join(parts) or "—"
+
+
+def table(results: dict[str, Any]) -> str:
+    lines = [
+        "| scenario | s | underruns | JACK xruns | render load p99 | max | voices max "
+        "| /touch answered | /health p50 / p99 ms | load | busy cores (others) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for key, r in results["scenarios"].items():
+        health = r["health"]
+        lines.append(
+            f"| ({key}) {TITLES[key]} | {r['seconds']:.0f} | {number(r['underruns'], 0)} "
+            f"| {r['jack_xruns']} | {percent(r['render_load_p99'])} "
+            f"| {percent(r['render_load_max'])} | {number(r['voices_max'], 0)} "
+            f"| {touch_statuses(r)} | {number(health['p50_ms'])} / {number(health['p99_ms'])} "
+            f"| {load_text(r)} | {r['busy_cores']:.1f} ({r['busy_cores_others']:.1f}) |"
+        )
+    return "\n".join(lines)

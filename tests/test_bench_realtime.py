@@ -1,0 +1,66 @@
+"""``benchmarks/bench_realtime.py`` runs end to end: JACK, the service, its loads, its report.
+
+A smoke run (2 s of hands and touches, a 1 s ``wrk`` flood): it checks that every figure
+was measured and that the loads reached the service, never how fast anything was.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.support.jack import unavailable
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.slow
+def test_the_realtime_benchmark_measures_every_figure(tmp_path: Path) -> None:
+    if shutil.which("jackd") is None:
+        unavailable("jackd not found (Debian package jackd2)")
+    if shutil.which("wrk") is None:
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail("the load tool is required under CI: wrk not found (Debian package wrk)")
+        pytest.skip("wrk not found (Debian package wrk)")
+    report = tmp_path / "realtime.json"
+    command = [sys.executable, str(ROOT / "benchmarks" / "bench_realtime.py"), "--quick"]
+    command += ["--seconds", "2", "--flood-seconds", "1", "--scenarios", "a,c"]
+    command += ["--json", str(report)]
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+    }
+    result = subprocess.run(command, capture_output=True, text=True, timeout=240, env=env)
+    assert result.returncode == 0, result.stderr[-3000:]
+
+    results = json.loads(report.read_text(encoding="utf-8"))
+    assert results["device"] == {
+        "backend": "sounddevice",
+        "output_device": "system",
+        "block_frames": 128,
+        "sample_rate_hz": 48000,
+    }
+    for key in ("a", "c"):
+        scenario = results["scenarios"][key]
+        assert scenario["underruns"] >= 0
+        assert scenario["jack_xruns"] >= 0
+        assert 0.0 < scenario["render_load_p99"] <= scenario["render_load_max"]
+        assert scenario["health"]["samples"] > 0
+        assert scenario["health"]["p50_ms"] <= scenario["health"]["p99_ms"]
+    hands = results["scenarios"]["a"]
+    assert hands["hands"]["count"] == 4 and hands["hands"]["moves"] > 0
+    touches = hands["touches"]["statuses"]
+    assert sum(touches.values()) == hands["touches"]["sent"] > 0
+    assert hands["server_requests"].get("POST /touch 202", 0) >= touches.get("202", 0) > 0
+    flood = results["scenarios"]["c"]["wrk"]
+    assert flood["requests_per_s"] > 0
+    assert sum(flood["statuses"].values()) == flood["requests"]
+    answered = sum(n for s, n in flood["statuses"].items() if not s.startswith(("2", "3")))
+    assert answered == flood["non_2xx_3xx"]
+    assert "| (a) " in result.stdout and "| (c) " in result.stdout
