@@ -148,20 +148,14 @@ class _Child:
         if kind == "noise":
             adopt_noise_loop(message[2], message[3])
             return
+        if kind == "start":
+            self.start(message)
+            return
         if seq < self.handled_mark:
             return  # sent before a stop_all: void
         core = self.core
         try:
-            if kind == "start":
-                _, _, job_id, key, plan, forget, owner, frame = message
-                for old in forget:
-                    self.plans.pop(old, None)
-                if plan is not None:
-                    self.plans[key] = dataclasses.replace(
-                        plan, device=core.device, geometry=self.geometry
-                    )
-                core.start_job(job_id, self.plans[key], owner, frame)
-            elif kind == "release":
+            if kind == "release":
                 core.release_job(*message[2:])
             elif kind == "down":
                 _, _, owner, contact, slot, kwargs = message
@@ -175,8 +169,29 @@ class _Child:
                 self.slots.unbind(message[2])
                 core.board.release_owner(message[2])
         except Exception as exc:  # checked by the host; a failure here is a bug, not a stop
-            core.scheduler.callback_errors += 1
-            core.scheduler.last_error = exc
+            self.failed(exc)
+
+    def start(self, message: tuple[Any, ...]) -> None:
+        """A job's start: its plan is kept even when the start itself is void (the host
+        sends a plan once), and a job that does not start is reported cancelled."""
+        _, seq, job_id, key, plan, forget, owner, frame = message
+        core = self.core
+        for old in forget:
+            self.plans.pop(old, None)
+        if plan is not None:
+            self.plans[key] = dataclasses.replace(plan, device=core.device, geometry=self.geometry)
+        if seq >= self.handled_mark:  # else sent before a stop_all: void
+            try:
+                core.start_job(job_id, self.plans[key], owner, frame)
+                return
+            except Exception as exc:
+                self.failed(exc)
+        self.writer.send([("cancel", "job", job_id, core.scheduler.frames)])
+
+    def failed(self, exc: Exception) -> None:
+        scheduler = self.core.scheduler
+        scheduler.callback_errors += 1
+        scheduler.last_error = exc
 
     def close(self, spec: SinkSpec) -> None:
         self.core.close(fade=True)

@@ -189,11 +189,16 @@ class Outbox:
                 self._bytes -= len(frame)
 
     def close(self, timeout_s: float) -> None:
-        """Write what waits (at most ``timeout_s``), then stop the thread."""
+        """Write what waits (at most ``timeout_s``), stop the thread, close the pipe
+        (left open while a write still blocks: it ends when the reader is gone)."""
         with self._ready:
             self._closed = True
             self._ready.notify()
         self._thread.join(timeout_s)
+        if not self._thread.is_alive() and self._fd >= 0:
+            with contextlib.suppress(OSError):
+                os.close(self._fd)
+            self._fd = -1
 
 
 def read_frames(fd: int) -> Any:

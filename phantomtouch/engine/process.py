@@ -322,6 +322,7 @@ class ProcessEngine(EngineFront):
             self._state = state
             self._jobs.forget_all(self.now_frames)
             self._contacts.clear()
+            self._starts.clear()  # the next engine process counts frames from 0
         if self.on_fault is not None:
             try:
                 self.on_fault(state)

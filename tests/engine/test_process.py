@@ -334,3 +334,16 @@ def test_an_engine_process_stopped_is_noticed_and_replaced() -> None:
         assert engine.pid != old_pid
     finally:
         engine.close()
+
+
+def test_a_plan_sent_with_a_start_that_a_stop_voids_is_kept_for_the_next_start() -> None:
+    planned = plan(STROKE, DEVICE)
+    with ProcessEngine(DEVICE, SinkSpec("null")) as engine:
+        for _ in range(3):
+            voided = engine.schedule(planned)  # the plan crosses with this start ...
+            engine.stop_all()  # ... which the stop voids before the engine reads it
+            assert engine.job_state(voided.job_id).state == "stopped"  # type: ignore[union-attr]
+            again = engine.schedule(planned)  # sent by its key alone
+            wait_for_state(engine, again.job_id, "playing")
+            engine.stop_all()
+        assert engine.status().callback_errors == 0
