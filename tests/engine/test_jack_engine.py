@@ -75,12 +75,16 @@ def over_jack(
     seconds: float = 8.0,
     *,
     max_voices: int = MAX_VOICES,
+    voice_cost: float | None = None,
 ) -> Iterator[Session]:
-    """An engine on JACK's "system" device, recorded; MARKER plays at frame 0."""
+    """An engine on JACK's "system" device, recorded; MARKER plays at frame 0.
+
+    ``voice_cost`` given: no costs are measured, and voices may begin in any number.
+    """
     sink = SoundDeviceSink(device, "system")
     recorder = JackRecorder(server, channels=8, max_frames=int(seconds * RATE))
     assert len(recorder.connect_from("PortAudio")) == 8
-    engine = Engine(device, sink, max_voices=max_voices)
+    engine = Engine(device, sink, max_voices=max_voices, voice_cost=voice_cost)
     session = Session(engine, recorder)
     try:
         engine.schedule(MARKER, start_frame=0)
@@ -184,8 +188,9 @@ def test_lifted_contacts_are_silent_within_the_release_time(jack_server: JackSer
 def test_a_hundred_full_level_voices_never_exceed_the_ceiling(jack_server: JackServer) -> None:
     device = DeviceProfile(safety=SafetyLimits(ceiling=0.5))
     loud = stroke(intensity=1.0, path={"kind": "polyline", "points_cm": [[1.9, 7.2]]})
-    # 60 pattern voices at once: above the default cap, which this test lifts.
-    with over_jack(jack_server, device, max_voices=60) as session:
+    # 60 pattern voices beginning at once: above the default cap and the voice and start
+    # budgets, which this test lifts.
+    with over_jack(jack_server, device, max_voices=60, voice_cost=1e-4) as session:
         engine = session.engine
         start = engine.now_frames + RATE // 2
         jobs = [engine.schedule(loud, start_frame=start) for _ in range(60)]

@@ -222,7 +222,7 @@ def test_plans_sent_once_are_kept_and_forgotten_in_turn(monkeypatch: pytest.Monk
     monkeypatch.setattr(process, "PLAN_CACHE_BYTES", 1)  # one plan at a time
     patterns = [STROKE.model_copy(update={"speed_cm_s": 10.0 + 5 * k}) for k in range(5)]
     plans = [plan(pattern, DEVICE) for pattern in patterns]
-    with ProcessEngine(DEVICE, SinkSpec("null"), max_voices=100) as engine:
+    with ProcessEngine(DEVICE, SinkSpec("null"), max_voices=100, voice_cost=1e-4) as engine:
         for round_ in range(3):
             for k, planned in enumerate(plans[: 2 + round_]):
                 job = engine.schedule(planned, start_frame=engine.now_frames + 48000 * 30)
@@ -232,7 +232,9 @@ def test_plans_sent_once_are_kept_and_forgotten_in_turn(monkeypatch: pytest.Monk
 
 def test_answers_reach_coroutines_and_threads_that_wait_at_once() -> None:
     plans = [plan(STROKE.model_copy(update={"speed_cm_s": 10.0 + k}), DEVICE) for k in range(6)]
-    with ProcessEngine(DEVICE, SinkSpec("null"), queue_capacity=40, max_voices=100) as engine:
+    with ProcessEngine(
+        DEVICE, SinkSpec("null"), queue_capacity=40, max_voices=100, voice_cost=1e-4
+    ) as engine:  # no start budget: 60 jobs begin in one block
         later = engine.now_frames + 48000 * 60
 
         async def schedule_all() -> list[object]:

@@ -18,6 +18,11 @@ STATUS = {
     "levels": [0.25, 0.0],
     "render_load_p99": 0.125,
     "render_load_max": 0.5,
+    "voice_capacity": 40,
+    "voice_cost": 0.0125,
+    "render_budget": 0.5,
+    "state": "stalled",
+    "restarts": 1,
 }
 
 
@@ -63,6 +68,11 @@ def test_engine_figures_are_read_at_scrape_time() -> None:
     assert 'phantomtouch_channel_peak_level{channel="1"} 0.25' in text
     assert 'phantomtouch_render_load{quantile="0.99"} 0.125' in text
     assert 'phantomtouch_render_load{quantile="1"} 0.5' in text
+    assert "phantomtouch_voice_capacity 40.0" in text
+    assert "phantomtouch_voice_cost 0.0125" in text
+    assert "phantomtouch_render_budget 0.5" in text
+    assert "phantomtouch_engine_running 0.0" in text
+    assert "phantomtouch_engine_restarts_total 1.0" in text
     metrics.watch_engine(None)
     assert "phantomtouch_active_voices" not in metrics.exposition().decode()
 
