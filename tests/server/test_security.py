@@ -10,7 +10,6 @@ and no touch is answered 202.
 from __future__ import annotations
 
 import json
-import re
 import socket
 from collections.abc import Iterator
 from typing import Any
@@ -22,6 +21,7 @@ from websockets.sync.client import ClientConnection, connect
 from websockets.typing import Origin
 
 from tests.support.live_server import HOST, LiveServer
+from tests.support.metrics import sample, scrape
 from tests.support.service import LONG
 
 EVIL = "https://evil.example"
@@ -50,22 +50,19 @@ def metrics(live: LiveServer) -> str:
     return httpx.get(f"{live.url}/metrics").text
 
 
-def sample(text: str, name: str, **labels: str) -> float:
-    selector = ",".join(f'{key}="{value}"' for key, value in labels.items())
-    pattern = rf"^{name}{{{selector}}} (\S+)$" if labels else rf"^{name} (\S+)$"
-    match = re.search(pattern, text, re.MULTILINE)
-    return float(match.group(1)) if match else 0.0
+def accepted(live: LiveServer) -> float:
+    """How many touches the service answered 202."""
+    return scrape(
+        live.url, "phantomtouch_http_requests_total", method="POST", route="/touch", status="202"
+    )
 
 
-def silent(live: LiveServer) -> None:
-    """Nothing sounds and no touch was ever accepted."""
+def silent(live: LiveServer, accepted_before: float) -> None:
+    """Nothing sounds and no touch was accepted since ``accepted_before`` was read."""
     text = metrics(live)
     assert sample(text, "phantomtouch_active_voices") == 0
     assert sample(text, "phantomtouch_active_contacts") == 0
-    accepted = sample(
-        text, "phantomtouch_http_requests_total", route="/touch", method="POST", status="202"
-    )
-    assert accepted == 0
+    assert accepted(live) == accepted_before
 
 
 def own_origin(live: LiveServer) -> str:
@@ -113,26 +110,28 @@ def hello_down(ws: ClientConnection) -> list[dict[str, Any]]:
 def test_simple_request_touch_from_another_origin_is_refused(
     live: LiveServer, content_type: str | None
 ) -> None:
+    before = accepted(live)
     headers = {"Origin": EVIL}
     if content_type is not None:
         headers["Content-Type"] = content_type
     refused = post(live, "/touch", headers)
     assert refused.status_code == 403
     assert refused.json()["error"]["fields"][0]["field"] == "origin"
-    silent(live)
+    silent(live, before)
 
 
 @pytest.mark.parametrize("content_type", ["text/plain", "application/x-www-form-urlencoded", None])
 def test_simple_request_body_is_415_even_without_origin(
     live: LiveServer, content_type: str | None
 ) -> None:
+    before = accepted(live)
     headers = {} if content_type is None else {"Content-Type": content_type}
     refused = post(live, "/touch", headers)
     assert refused.status_code == 415
     error = refused.json()["error"]
     assert error["code"] == "unsupported_media_type"
     assert error["fields"][0]["field"] == "content-type"
-    silent(live)
+    silent(live, before)
 
 
 def test_stop_from_another_origin_is_refused(live: LiveServer) -> None:
@@ -155,11 +154,12 @@ def test_preflight_from_another_origin_is_refused(live: LiveServer) -> None:
 
 
 def test_websocket_from_another_origin_is_refused(live: LiveServer) -> None:
+    before = accepted(live)
     with pytest.raises(InvalidStatus) as refused, connect(live.ws_url, origin=Origin(EVIL)):
         pass
     assert refused.value.response.status_code == 403
     assert b"forbidden_origin" in refused.value.response.body
-    silent(live)
+    silent(live, before)
 
 
 @pytest.mark.parametrize(
@@ -167,6 +167,7 @@ def test_websocket_from_another_origin_is_refused(live: LiveServer) -> None:
     [("GET", "/health"), ("GET", "/device"), ("GET", "/patterns"), ("POST", "/touch")],
 )
 def test_rebound_host_is_refused(live: LiveServer, method: str, path: str) -> None:
+    before = accepted(live)
     host = f"evil.example:{live.port}"
     headers = {"Host": host, "Content-Type": "application/json", "Origin": f"http://{host}"}
     refused = httpx.request(method, f"{live.url}{path}", headers=headers, content=BODY)
@@ -176,14 +177,15 @@ def test_rebound_host_is_refused(live: LiveServer, method: str, path: str) -> No
         "value": host,
         "message": refused.json()["error"]["message"],
     }
-    silent(live)
+    silent(live, before)
 
 
 def test_rebound_host_websocket_is_refused(live: LiveServer) -> None:
+    before = accepted(live)
     host = f"evil.example:{live.port}"
     status, answer = handshake(live, {"Host": host, "Origin": f"http://{host}"})
     assert status == 421, answer
-    silent(live)
+    silent(live, before)
 
 
 def test_refusals_are_counted(live: LiveServer) -> None:
@@ -217,12 +219,15 @@ def test_json_touch_and_stop_from_allowed_origins_are_served(
     headers = {"Content-Type": "application/json"}
     if origin is not None:
         headers["Origin"] = own_origin(live) if origin == "own" else origin
+    before = accepted(live)
     try:
-        accepted = post(live, "/touch", headers)
-        assert accepted.status_code == 202, accepted.text
+        touch = post(live, "/touch", headers)
+        assert touch.status_code == 202, touch.text
+        assert scrape(live.url, "phantomtouch_active_voices") == 1
     finally:
         stopped = post(live, "/stop", {k: v for k, v in headers.items() if k == "Origin"}, b"")
     assert stopped.status_code == 200, stopped.text
+    assert accepted(live) == before + 1
 
 
 def test_configured_origin_passes_its_preflight(live: LiveServer) -> None:
