@@ -14,7 +14,8 @@ The exception tree the server adds below the package root::
         ├── UnauthorizedError            401 unauthorized (WebSocket: close 1008)
         ├── ForbiddenOriginError         403 forbidden_origin (WebSocket: handshake refused)
         ├── UnknownHostError             421 unknown_host (WebSocket: handshake refused)
-        └── UnsupportedMediaTypeError    415 unsupported_media_type
+        ├── UnsupportedMediaTypeError    415 unsupported_media_type
+        └── StoredPatternError           500 stored_pattern (the library's row, not the request)
 
 pydantic's ``ValidationError`` and FastAPI's ``RequestValidationError`` are 422 ``invalid``
 with one ``fields`` entry per problem. :func:`install` registers the handlers; the
@@ -49,6 +50,7 @@ ErrorCode = Literal[
     "forbidden_origin",
     "unknown_host",
     "unsupported_media_type",
+    "stored_pattern",
     "not_found",
     "method_not_allowed",
     "too_large",
@@ -130,6 +132,13 @@ class UnsupportedMediaTypeError(ServiceError):
 
     status_code = 415
     code: ErrorCode = "unsupported_media_type"
+
+
+class StoredPatternError(ServiceError):
+    """A row of the pattern library that no longer reads as a pattern: the server's fault."""
+
+    status_code = 500
+    code: ErrorCode = "stored_pattern"
 
 
 class FieldProblem(BaseModel):
@@ -337,6 +346,7 @@ RESPONSES: dict[int | str, dict[str, Any]] = {
     415: _response("A request body not sent as `application/json` (`unsupported_media_type`)."),
     422: _response("A field is out of range or malformed (`invalid`); `fields` name each."),
     429: _response("Too many requests at once (`rate_limited`); retry after `Retry-After`."),
+    500: _response("A stored pattern no longer reads as a pattern (`stored_pattern`)."),
     503: _response("The engine's command queue is full (`busy`) or the sound card failed."),
 }
 """Documented error responses, picked per route with :func:`responses`."""
