@@ -23,11 +23,13 @@ import soundfile
 from pydantic import ValidationError
 from tqdm import tqdm
 
-from phantomtouch.errors import PhantomTouchError
+from phantomtouch.errors import DeviceError, PhantomTouchError
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error, limits
 
+EXIT_FAILURE = 1
+"""The command could not do its work (``serve``: the pattern library cannot be opened)."""
 EXIT_USAGE = 2
 _BLOCK_FRAMES = 1 << 15
 
@@ -122,7 +124,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
     from phantomtouch.server import Settings
-    from phantomtouch.server.serve import serve
+    from phantomtouch.server.serve import check_library, serve
 
     options = {
         "host": args.host,
@@ -136,6 +138,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         settings = Settings(**{k: v for k, v in options.items() if v is not None})
     except ValidationError as exc:
         raise PhantomTouchError(f"invalid settings: {describe_validation_error(exc)}") from exc
+    try:
+        check_library(settings)
+    except DeviceError as exc:
+        print(f"phantomtouch serve: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
     serve(settings)
     return 0

@@ -25,6 +25,13 @@ from phantomtouch.server.bodies import merge_components
 from phantomtouch.server.engine_access import describe_output, open_engine
 from phantomtouch.server.limits import BodyLimitMiddleware, TokenMiddleware
 from phantomtouch.server.metrics import Metrics, MetricsMiddleware
+from phantomtouch.server.origin import (
+    ContentTypeMiddleware,
+    HostOriginMiddleware,
+    HostPolicy,
+    OriginPolicy,
+    Refusals,
+)
 from phantomtouch.server.routes import info, patterns, render, touch, web, ws
 from phantomtouch.server.service import Service
 from phantomtouch.server.settings import Settings
@@ -116,7 +123,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.include_router(module.router)
     if web.STATIC_DIR.is_dir():
         app.mount("/static", StaticFiles(directory=web.STATIC_DIR), name="static")
+    refusals = Refusals(metrics)
+    # Outermost last: metrics, Host and Origin, CORS, token, content type, body size.
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
+    app.add_middleware(ContentTypeMiddleware, refusals=refusals)
     if settings.token is not None:
         app.add_middleware(TokenMiddleware, token=settings.token)
     if settings.cors_origins:
@@ -126,6 +136,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_methods=["GET", "POST", "PUT", "DELETE"],
             allow_headers=["Authorization", "Content-Type", "Accept"],
         )
+    app.add_middleware(
+        HostOriginMiddleware,
+        hosts=HostPolicy.build(settings.host, settings.allowed_hosts),
+        origins=OriginPolicy.build(settings.cors_origins),
+        refusals=refusals,
+    )
     app.add_middleware(MetricsMiddleware, metrics=metrics)
     app.openapi = _openapi(app, settings)  # type: ignore[method-assign]
     return app

@@ -48,7 +48,7 @@ PatternNameParam = Annotated[
         min_length=1,
         max_length=64,
         pattern=PATTERN_NAME_REGEX,
-        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters.",
+        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters; not '.' or '..'.",
         examples=["my-stroke"],
     ),
 ]

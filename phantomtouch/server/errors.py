@@ -11,7 +11,11 @@ The exception tree the server adds below the package root::
         ├── NotFoundError                404 not_found
         ├── TooLargeError                413 too_large   (WebSocket: close 1009)
         ├── RateLimitedError             429 rate_limited (WebSocket: close 1008 if repeated)
-        └── UnauthorizedError            401 unauthorized (WebSocket: close 1008)
+        ├── UnauthorizedError            401 unauthorized (WebSocket: close 1008)
+        ├── ForbiddenOriginError         403 forbidden_origin (WebSocket: handshake refused)
+        ├── UnknownHostError             421 unknown_host (WebSocket: handshake refused)
+        ├── UnsupportedMediaTypeError    415 unsupported_media_type
+        └── StoredPatternError           500 stored_pattern (the library's row, not the request)
 
 pydantic's ``ValidationError`` and FastAPI's ``RequestValidationError`` are 422 ``invalid``
 with one ``fields`` entry per problem. :func:`install` registers the handlers; the
@@ -43,6 +47,10 @@ from phantomtouch.errors import (
 ErrorCode = Literal[
     "invalid",
     "unauthorized",
+    "forbidden_origin",
+    "unknown_host",
+    "unsupported_media_type",
+    "stored_pattern",
     "not_found",
     "method_not_allowed",
     "too_large",
@@ -56,7 +64,8 @@ ErrorCode = Literal[
 WS_CLOSE_UNSUPPORTED_DATA = 1003
 """A binary frame: the protocol is JSON text."""
 WS_CLOSE_POLICY_VIOLATION = 1008
-"""Missing or wrong token, or the message rate limit exceeded again and again."""
+"""Missing or wrong token, a refused handshake where the server cannot answer it with an
+HTTP status, or the message rate limit exceeded again and again."""
 WS_CLOSE_MESSAGE_TOO_BIG = 1009
 """A message over ``max_ws_message_bytes``."""
 
@@ -102,6 +111,34 @@ class UnauthorizedError(ServiceError):
     status_code = 401
     code: ErrorCode = "unauthorized"
     headers: ClassVar[Mapping[str, str]] = {"WWW-Authenticate": "Bearer"}
+
+
+class ForbiddenOriginError(ServiceError):
+    """A browser request or WebSocket handshake from a web page of another origin."""
+
+    status_code = 403
+    code: ErrorCode = "forbidden_origin"
+
+
+class UnknownHostError(ServiceError):
+    """A ``Host`` the service does not answer to (DNS rebinding, a misdirected request)."""
+
+    status_code = 421
+    code: ErrorCode = "unknown_host"
+
+
+class UnsupportedMediaTypeError(ServiceError):
+    """A request body not declared as ``application/json``."""
+
+    status_code = 415
+    code: ErrorCode = "unsupported_media_type"
+
+
+class StoredPatternError(ServiceError):
+    """A row of the pattern library that no longer reads as a pattern: the server's fault."""
+
+    status_code = 500
+    code: ErrorCode = "stored_pattern"
 
 
 class FieldProblem(BaseModel):
@@ -306,8 +343,10 @@ RESPONSES: dict[int | str, dict[str, Any]] = {
     401: _response("A token is required and was missing or wrong (`unauthorized`)."),
     404: _response("Unknown job, pattern or preset (`not_found`)."),
     413: _response("Request body over the size limit (`too_large`)."),
+    415: _response("A request body not sent as `application/json` (`unsupported_media_type`)."),
     422: _response("A field is out of range or malformed (`invalid`); `fields` name each."),
     429: _response("Too many requests at once (`rate_limited`); retry after `Retry-After`."),
+    500: _response("A stored pattern no longer reads as a pattern (`stored_pattern`)."),
     503: _response("The engine's command queue is full (`busy`) or the sound card failed."),
 }
 """Documented error responses, picked per route with :func:`responses`."""

@@ -7,6 +7,7 @@ WebSocket checks its token itself, after accepting, so that it can close with 10
 from __future__ import annotations
 
 import hmac
+import json
 from urllib.parse import parse_qs
 
 from starlette.datastructures import Headers
@@ -28,20 +29,29 @@ def is_open_path(path: str) -> bool:
 
 
 def token_matches(scope: Scope, token: str) -> bool:
-    """Whether the request carries ``token``: ``Authorization: Bearer`` or ``?token=``."""
+    """Whether the request carries ``token``: ``Authorization: Bearer`` or ``?token=``.
+
+    Both sides are compared as bytes with ``hmac.compare_digest`` (its time does not depend
+    on where they differ; ``str`` with non-ASCII characters it refuses): the header as it
+    came off the wire, the query value percent-decoded as UTF-8, the token as UTF-8.
+    """
+    expected = token.encode()
     header = Headers(scope=scope).get("authorization", "")
     scheme, _, given = header.partition(" ")
-    if scheme.lower() == "bearer" and hmac.compare_digest(given.strip(), token):
+    if scheme.lower() == "bearer" and hmac.compare_digest(
+        given.strip().encode("latin-1"), expected
+    ):
         return True
     if scope["type"] == "websocket":
         query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
-        return any(hmac.compare_digest(value, token) for value in query.get("token", []))
+        return any(
+            hmac.compare_digest(value.encode(), expected) for value in query.get("token", [])
+        )
     return False
 
 
 async def send_problem(send: Send, problem: Problem) -> None:
-    import json
-
+    """Answer an HTTP request with ``problem`` (its status, headers and error body)."""
     body = json.dumps(problem.body()).encode()
     headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
     headers += [(k.lower().encode(), v.encode()) for k, v in problem.headers.items()]

@@ -158,6 +158,13 @@ class Metrics:
         self.ws_connections = Counter(
             "phantomtouch_ws_connections", "WebSocket connections accepted.", registry=self.registry
         )
+        self.refused_requests = Counter(
+            "phantomtouch_refused_requests",
+            "Requests and WebSocket handshakes refused for their Host, Origin or content "
+            "type (check: host, origin, content_type; transport: http, websocket).",
+            ["check", "transport"],
+            registry=self.registry,
+        )
         self._engine = _EngineCollector()
         self.registry.register(self._engine)
 

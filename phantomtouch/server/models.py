@@ -24,14 +24,21 @@ from pydantic.config import JsonDict
 from phantomtouch.schema import TouchPattern
 from phantomtouch.schema.device import Actuator
 
-PATTERN_NAME_REGEX = r"^[A-Za-z0-9._-]{1,64}$"
+PATTERN_NAME_REGEX = (
+    r"^(?:[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}"
+    r"|\.[A-Za-z0-9_-][A-Za-z0-9._-]{0,62}"
+    r"|\.\.[A-Za-z0-9._-]{1,62})$"
+)
+"""1 to 64 letters, digits, '.', '_' and '-', except '.' and '..': clients that normalise
+URLs turn ``/patterns/..`` into ``/``, so such a name could never be reached. (Written
+without look-ahead, which pydantic's regex engine lacks.)"""
 PatternName = Annotated[
     str,
     Field(
         min_length=1,
         max_length=64,
         pattern=PATTERN_NAME_REGEX,
-        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters.",
+        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters; not '.' or '..'.",
         examples=["my-stroke"],
     ),
 ]

@@ -7,6 +7,7 @@ from typing import Any
 
 from phantomtouch.server.app import create_app
 from phantomtouch.server.settings import Settings
+from phantomtouch.server.store import PatternStore
 
 
 def log_config() -> dict[str, Any]:
@@ -20,6 +21,18 @@ def log_config() -> dict[str, Any]:
         "propagate": False,
     }
     return config
+
+
+def check_library(settings: Settings) -> None:
+    """Open and close the pattern library once, before uvicorn starts.
+
+    Raises
+    ------
+    DeviceError
+        The library cannot be opened (:class:`~phantomtouch.server.store.DamagedStoreError`
+        if the file is damaged); ``serve`` then stops with that one line.
+    """
+    PatternStore.open(settings.db_path).close()
 
 
 def serve(settings: Settings) -> None:

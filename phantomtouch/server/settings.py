@@ -7,6 +7,7 @@ public bind address without a token) is refused before the engine or the socket 
 from __future__ import annotations
 
 import ipaddress
+import re
 from pathlib import Path
 from typing import Literal, Self
 
@@ -14,6 +15,7 @@ from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 _LOOPBACK_NAMES = {"localhost", "ip6-localhost", "ip6-loopback"}
+_HOST_NAME = re.compile(r"\*|\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_-]+(\.[A-Za-z0-9_-]+)*\.?")
 
 
 def default_db_path() -> Path:
@@ -58,7 +60,18 @@ class Settings(BaseSettings):
         description="Bearer token every request must carry (required off loopback).",
     )
     cors_origins: list[str] = Field(
-        default_factory=list, description="Origins allowed to call the API from a browser."
+        default_factory=list,
+        description=(
+            "Web page origins besides the service's own allowed to call the API from a "
+            "browser (CORS), e.g. 'http://localhost:5173'; '*' allows every page."
+        ),
+    )
+    allowed_hosts: list[str] = Field(
+        default_factory=list,
+        description=(
+            "Host names the service answers to besides localhost, 127.0.0.1, [::1] and the "
+            "bound address (any IP address when bound to 0.0.0.0 or ::); '*' allows any."
+        ),
     )
     max_body_bytes: int = Field(default=1 << 20, ge=1024, le=64 << 20)
     max_ws_message_bytes: int = Field(default=64 << 10, ge=256, le=16 << 20)
@@ -115,6 +128,17 @@ class Settings(BaseSettings):
             if origin != "*" and not origin.startswith(("http://", "https://")):
                 raise ValueError(f"cors_origins: {origin!r} must be '*' or start with http(s)://")
         return origins
+
+    @field_validator("allowed_hosts")
+    @classmethod
+    def _hosts(cls, hosts: list[str]) -> list[str]:
+        for host in hosts:
+            if not _HOST_NAME.fullmatch(host):
+                raise ValueError(
+                    f"allowed_hosts: {host!r} must be a host name or address without scheme "
+                    "or port, e.g. 'armband.local', '192.168.1.20' or '[fe80::1]'"
+                )
+        return [host.lower().rstrip(".") for host in hosts]
 
     @field_validator("output_device")
     @classmethod

@@ -3,19 +3,32 @@
 WAL journal and ``synchronous=FULL``: a committed ``PUT`` survives the process being
 killed (and a power cut). One connection shared by the worker threads, guarded by a lock;
 each call is one short transaction.
+
+A row that no longer reads as a pattern (edited by hand, or stored by a version that
+accepted what this one refuses) is the library's fault, not the request's: ``list``
+leaves it out and logs it, ``get`` raises :class:`StoredPatternError` (500); the other
+rows stay usable, and ``PUT`` or ``DELETE`` of that name mends it.
 """
 
 from __future__ import annotations
 
 import json
+import logging
+import shlex
 import sqlite3
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema import TouchPattern
+from phantomtouch.server.errors import StoredPatternError
+from phantomtouch.server.models import PlanSummary
+
+logger = logging.getLogger("phantomtouch.server.store")
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS patterns (
@@ -25,6 +38,29 @@ CREATE TABLE IF NOT EXISTS patterns (
     updated_unix_s REAL NOT NULL
 )
 """
+
+
+class DamagedStoreError(DeviceError):
+    """The pattern store's file is there but is not a readable SQLite database."""
+
+    def __init__(self, path: Path, reason: str) -> None:
+        aside = shlex.quote(f"{path}.damaged")
+        super().__init__(
+            f"the pattern library {str(path)!r} is damaged ({reason}): move it aside "
+            f"(mv {shlex.quote(str(path))} {aside}) and start again for an empty library, "
+            "or choose another with --db"
+        )
+        self.path = path
+
+
+def unreadable(name: str, exc: ValidationError) -> str:
+    """Why the stored row ``name`` no longer reads, and how to mend it."""
+    first = exc.errors(include_url=False)[0]
+    where = ".".join(str(part) for part in first["loc"]) or "the row"
+    return (
+        f"pattern={name!r}: the stored row no longer reads as a pattern "
+        f"({where}: {first['msg']}); PUT it again or DELETE it"
+    )
 
 
 class PatternStore:
@@ -41,8 +77,10 @@ class PatternStore:
 
         Raises
         ------
+        DamagedStoreError
+            The file is there but is not a readable SQLite database.
         DeviceError
-            The file cannot be created or is not a database.
+            The file cannot be created or opened.
         """
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -51,6 +89,10 @@ class PatternStore:
             db.execute("PRAGMA synchronous=FULL")
             db.execute("PRAGMA busy_timeout=5000")
             db.execute(_SCHEMA)
+        except sqlite3.DatabaseError as exc:
+            if isinstance(exc, sqlite3.OperationalError):
+                raise DeviceError(f"cannot open the pattern store {str(path)!r}: {exc}") from exc
+            raise DamagedStoreError(path, str(exc)) from exc
         except (OSError, sqlite3.Error) as exc:
             raise DeviceError(f"cannot open the pattern store {str(path)!r}: {exc}") from exc
         return cls(db, path)
@@ -60,17 +102,43 @@ class PatternStore:
             self._db.close()
 
     def list(self) -> list[tuple[str, dict[str, Any]]]:
-        """Every stored pattern's name and summary, sorted by name."""
+        """Every readable stored pattern's name and summary, sorted by name.
+
+        A row whose pattern or summary no longer reads is left out and logged.
+        """
         with self._lock:
-            rows = self._db.execute("SELECT name, summary FROM patterns ORDER BY name").fetchall()
-        return [(name, json.loads(summary)) for name, summary in rows]
+            rows = self._db.execute(
+                "SELECT name, pattern, summary FROM patterns ORDER BY name"
+            ).fetchall()
+        listed = []
+        for name, pattern, summary in rows:
+            try:
+                TouchPattern.model_validate_json(pattern)
+                PlanSummary.model_validate_json(summary)
+            except ValidationError as exc:
+                logger.warning("%s; left out of GET /patterns", unreadable(name, exc))
+                continue
+            listed.append((name, json.loads(summary)))
+        return listed
 
     def get(self, name: str) -> TouchPattern | None:
+        """The pattern stored as ``name``, or None.
+
+        Raises
+        ------
+        StoredPatternError
+            The row is there but no longer reads as a pattern.
+        """
         with self._lock:
             row = self._db.execute(
                 "SELECT pattern FROM patterns WHERE name = ?", (name,)
             ).fetchone()
-        return None if row is None else TouchPattern.model_validate_json(row[0])
+        if row is None:
+            return None
+        try:
+            return TouchPattern.model_validate_json(row[0])
+        except ValidationError as exc:
+            raise StoredPatternError(unreadable(name, exc), field="pattern", value=name) from exc
 
     def put(self, name: str, pattern: TouchPattern, summary: dict[str, Any]) -> bool:
         """Store ``pattern`` under ``name``; True if the name was new."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from fastapi import FastAPI, Request
 from fastapi.testclient import TestClient
 
@@ -88,3 +89,26 @@ def test_web_page_and_its_files_answer_without_the_token() -> None:
         assert client.get("/static/app.js").status_code == 200
         assert client.get("/device").status_code == 401, "the API still needs the token"
         assert client.get("/staticfile").status_code == 401, "only the /static/ folder is open"
+
+
+@pytest.mark.parametrize("given", ["é", "Ã©", "t" * 23 + "é"])
+def test_non_ascii_token_is_401_not_500(given: str) -> None:
+    app = _app()
+    app.add_middleware(TokenMiddleware, token=TOKEN)
+    with TestClient(app) as client:
+        refused = client.post(
+            "/echo", content=b"{}", headers={"Authorization": f"Bearer {given}".encode()}
+        )
+    assert refused.status_code == 401
+    assert refused.json()["error"]["code"] == "unauthorized"
+
+
+def test_non_ascii_token_matches_when_it_is_the_token() -> None:
+    token = "jeton-secret-été-0123"
+    app = _app()
+    app.add_middleware(TokenMiddleware, token=token)
+    with TestClient(app) as client:
+        good = client.post(
+            "/echo", content=b"{}", headers={"Authorization": f"Bearer {token}".encode()}
+        )
+    assert good.status_code == 200

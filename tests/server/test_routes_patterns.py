@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import sqlite3
 from pathlib import Path
 
+import pytest
 from fastapi.testclient import TestClient
 
-from phantomtouch.server import create_app
+from phantomtouch.server import Settings, create_app
 from tests.support.service import STROKE, make_settings
 
 
@@ -33,6 +35,46 @@ def test_names_from_a_safe_set(client: TestClient) -> None:
         answer = client.put(f"/patterns/{name}", json=STROKE)
         assert answer.status_code == 422, name
         assert answer.json()["error"]["fields"][0]["field"] == "name"
+
+
+@pytest.mark.parametrize("name", [".", ".."])
+def test_dot_segments_are_not_names(client: TestClient, name: str) -> None:
+    encoded = name.replace(".", "%2E")
+    answer = client.put(f"/patterns/{encoded}", json=STROKE)
+    assert answer.status_code == 422, "a client that normalises URLs could never reach it"
+    assert answer.json()["error"]["fields"][0]["field"] == "name"
+    touch = client.post("/touch", json={"pattern": name})
+    assert touch.status_code == 422
+    assert touch.json()["error"]["fields"][0]["field"] == "pattern"
+
+
+@pytest.mark.parametrize("name", [".a", "..a", "...", "a..", "-", "a" * 64, ".." + "a" * 62])
+def test_names_with_dots_that_are_not_dot_segments(client: TestClient, name: str) -> None:
+    assert client.put(f"/patterns/{name}", json=STROKE).status_code == 200, name
+    assert client.get(f"/patterns/{name}").status_code == 200
+
+
+def test_unreadable_row_is_a_server_error_and_the_rest_stays_usable(
+    client: TestClient, settings: Settings
+) -> None:
+    client.put("/patterns/good", json=STROKE)
+    client.put("/patterns/bad", json=STROKE)
+    with sqlite3.connect(settings.db_path) as db:
+        db.execute("UPDATE patterns SET pattern = '{\"speed_cm_s\": 5}' WHERE name = 'bad'")
+    assert [p["name"] for p in client.get("/patterns").json()] == ["good"]
+    for answer in (
+        client.get("/patterns/bad"),
+        client.post("/patterns/bad/play"),
+        client.post("/touch", json={"pattern": "bad"}),
+    ):
+        assert answer.status_code == 500
+        error = answer.json()["error"]
+        assert error["code"] == "stored_pattern"
+        assert "pattern='bad': the stored row no longer reads as a pattern" in error["message"]
+    assert client.post("/patterns/good/play").status_code == 202
+    assert client.put("/patterns/bad", json=STROKE).status_code == 200, "PUT mends it"
+    assert [p["name"] for p in client.get("/patterns").json()] == ["bad", "good"]
+    client.post("/stop")
 
 
 def test_only_playable_patterns_are_stored(client: TestClient) -> None:

@@ -60,3 +60,16 @@ def test_ctrl_c_fades_out_and_exits_without_a_traceback(tmp_path: Path) -> None:
     output = log.read_text()
     assert "Traceback" not in output and "KeyboardInterrupt" not in output, output
     assert "Application shutdown complete" in output
+
+
+def test_damaged_library_is_one_line_and_exit_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    db = tmp_path / "patterns.db"
+    db.write_bytes(bytes(range(256)) * 32)
+    assert main(["serve", "--port", "8765", "--db", str(db), "--output", "null"]) == 1
+    captured = capsys.readouterr()
+    assert captured.out == "", "nothing starts"
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    assert str(db) in lines[0] and "move it aside" in lines[0]

@@ -48,6 +48,9 @@ def test_public_bind_with_token_is_allowed() -> None:
         ("token", "short", "at least 16 characters"),
         ("cors_origins", ["ftp://x"], "must be '\\*' or start with http"),
         ("max_body_bytes", 10, "greater than or equal to 1024"),
+        ("allowed_hosts", ["http://armband.local"], "without scheme or port"),
+        ("allowed_hosts", ["armband.local:8000"], "without scheme or port"),
+        ("allowed_hosts", [""], "without scheme or port"),
     ],
 )
 def test_nonsense_is_refused(field: str, value: object, expected: str) -> None:
@@ -58,3 +61,8 @@ def test_nonsense_is_refused(field: str, value: object, expected: str) -> None:
 def test_default_db_path_follows_xdg(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))
     assert default_db_path() == tmp_path / "phantomtouch" / "patterns.db"
+
+
+def test_allowed_hosts_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("PHANTOMTOUCH_ALLOWED_HOSTS", '["Armband.Local.", "[fe80::1]", "10.0.0.7"]')
+    assert Settings().allowed_hosts == ["armband.local", "[fe80::1]", "10.0.0.7"]

@@ -24,7 +24,8 @@ def make_settings(tmp_path: Path, **changes: Any) -> Settings:
     """Settings for an in-process test: null output, the test's own database.
 
     The engine runs in a thread of the test process (it starts in milliseconds); the
-    live-server tests run the default, the engine in a process of its own.
+    live-server tests run the default, the engine in a process of its own. The service
+    answers to ``testserver``, the host name ``TestClient`` sends.
     """
-    options = {"engine_process": False, **changes}
+    options = {"engine_process": False, "allowed_hosts": ["testserver"], **changes}
     return Settings(db_path=tmp_path / "patterns.db", output_device="null", **options)

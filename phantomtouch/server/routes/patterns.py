@@ -40,7 +40,7 @@ def list_patterns(store: StoreDep) -> list[PatternInfo]:
     "/{name}",
     response_model=TouchPattern,
     response_model_exclude_unset=True,
-    responses=responses(401, 404, 422),
+    responses=responses(401, 404, 422, 500),
     summary="One stored pattern",
 )
 def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
@@ -51,7 +51,7 @@ def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
 @router.put(
     "/{name}",
     response_model=PatternInfo,
-    responses=responses(401, 413, 422),
+    responses=responses(401, 413, 415, 422),
     summary="Store a pattern",
     openapi_extra=PATTERN_BODY_OPENAPI,
 )
@@ -84,7 +84,7 @@ def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
     "/{name}/play",
     status_code=202,
     response_model=JobAccepted,
-    responses=responses(401, 404, 413, 422, 503),
+    responses=responses(401, 404, 413, 415, 422, 500, 503),
     summary="Play a stored pattern",
     openapi_extra=PLAY_BODY_OPENAPI,
 )

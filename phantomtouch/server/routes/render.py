@@ -76,7 +76,7 @@ def _chunks(file: IO[bytes]) -> Iterator[bytes]:
             ),
             "content": {WAV_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}},
         },
-        **responses(401, 404, 413, 422, 429),
+        **responses(401, 404, 413, 415, 422, 429, 500),
     },
     summary="Render a touch offline",
     openapi_extra=TOUCH_BODY_OPENAPI,

@@ -38,7 +38,7 @@ JobIdParam = Annotated[
     "/touch",
     status_code=202,
     response_model=JobAccepted,
-    responses=responses(401, 404, 413, 422, 503),
+    responses=responses(401, 404, 413, 415, 422, 500, 503),
     summary="Play a touch",
     openapi_extra=TOUCH_BODY_OPENAPI,
 )
