@@ -39,8 +39,15 @@ def test_openapi_documents_error_bodies(client: TestClient) -> None:
         "$ref": "#/components/schemas/ErrorBody"
     }
     body = touch["requestBody"]["content"]["application/json"]["schema"]
-    assert len(body["oneOf"]) == 3
-    for name in ("PatternTouch", "PresetTouch", "NamedTouch", "TouchPattern", "ErrorBody"):
+    assert len(body["oneOf"]) == 4, "three shapes and the deprecated `pattern`"
+    for name in (
+        "PatternTouch",
+        "PresetTouch",
+        "NamedTouch",
+        "LegacyNamedTouch",
+        "TouchPattern",
+        "ErrorBody",
+    ):
         assert name in document["components"]["schemas"]
     assert "HTTPValidationError" not in document["components"]["schemas"]
     assert "/ws" not in document["paths"] and "/" not in document["paths"]

@@ -183,7 +183,7 @@ export class Designer {
         ? { preset: source.name, overrides: changes } : { preset: source.name };
     }
     if (source.kind === "saved" && Object.keys(overrides).length === 0) {
-      return { pattern: source.name };
+      return { stored: source.name };
     }
     return this.pattern();
   }
