@@ -24,7 +24,7 @@ from phantomtouch.server.bodies import merge_components
 from phantomtouch.server.engine_access import describe_output, open_engine
 from phantomtouch.server.limits import BodyLimitMiddleware, TokenMiddleware
 from phantomtouch.server.metrics import Metrics, MetricsMiddleware
-from phantomtouch.server.routes import info, patterns, render, touch, web, ws
+from phantomtouch.server.routes import docs, info, patterns, render, touch, web, ws
 from phantomtouch.server.service import Service
 from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
@@ -98,6 +98,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         description=DESCRIPTION,
         lifespan=_lifespan(settings, metrics),
         separate_input_output_schemas=False,
+        docs_url=None,
+        redoc_url=None,
         openapi_tags=[
             {"name": "touch", "description": "Play and stop touches."},
             {"name": "patterns", "description": "The pattern library (SQLite)."},
@@ -107,8 +109,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     errors.install(app)
-    for module in (touch, patterns, render, info, ws, web):
+    for module in (touch, patterns, render, info, ws, web, docs):
         app.include_router(module.router)
+    app.mount(docs.ASSETS_PATH, StaticFiles(directory=docs.ASSETS_DIR), name="docs-assets")
     if web.STATIC_DIR.is_dir():
         app.mount("/static", StaticFiles(directory=web.STATIC_DIR), name="static")
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
