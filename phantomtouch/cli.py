@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -32,6 +33,8 @@ EXIT_FAILURE = 1
 """The command could not do its work (``serve``: the pattern library cannot be opened)."""
 EXIT_USAGE = 2
 _BLOCK_FRAMES = 1 << 15
+_WAV_HEADER_BYTES = 4096
+"""Room for a WAV file's header chunks, bytes (generous: libsndfile writes ~150)."""
 
 
 def _load_device(path: str | None) -> DeviceProfile:
@@ -76,9 +79,43 @@ def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None 
         save_plot(plan, traces, plot_path)
 
 
+def _check_plot_path(path: str) -> None:
+    """Refuse a ``--plot`` file matplotlib cannot write, before anything is rendered."""
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError as exc:
+        raise PhantomTouchError(
+            "--plot needs matplotlib: install phantomtouch with the plot extra"
+        ) from exc
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in formats:
+        raise PhantomTouchError(
+            f"--plot {path!r}: the file name must end in an image format "
+            f"({', '.join('.' + f for f in sorted(formats))}), e.g. .png"
+        )
+    if not Path(path).parent.is_dir():
+        raise PhantomTouchError(
+            f"--plot {path!r}: the folder {str(Path(path).parent)!r} is missing"
+        )
+
+
+def _projection_note(plan: Plan) -> str | None:
+    """A sentence on path points moved onto the layout, or None when there were none."""
+    if plan.projected_points == 0:
+        return None
+    return (
+        f"{plan.projected_points} path point(s) lay outside the actuator layout and were "
+        f"projected onto it (up to {plan.max_projection_cm:.2f} cm); "
+        '"outside": "error" refuses such a pattern instead'
+    )
+
+
 def _cmd_render(args: argparse.Namespace) -> int:
     if (args.pattern is None) == (args.preset is None):
         raise PhantomTouchError("give a PATTERN.json file or --preset NAME (one of them)")
+    if args.plot is not None:
+        _check_plot_path(args.plot)
     pattern = preset(args.preset) if args.preset else _load_pattern(args.pattern)
     plan = plan_at(pattern, _load_device(args.device), sample_rate_hz=args.sample_rate)
     write_wav(plan, args.output, plot_path=args.plot)
@@ -90,6 +127,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"channels at {plan.sample_rate_hz} Hz; path {plan.path_length_cm:.3f} cm at "
             f"{plan.speed_cm_s:.3f} cm/s"
         )
+    note = _projection_note(plan)
+    if note is not None:
+        print(f"phantomtouch: note: {note}", file=sys.stderr)
     return 0
 
 
@@ -104,19 +144,39 @@ def _cmd_presets(args: argparse.Namespace) -> int:
     return 0
 
 
+def wav_bytes(plan: Plan) -> int:
+    """Size of a plan's float32 WAV file, bytes (samples plus room for the header)."""
+    return plan.frames * plan.channels * 4 + _WAV_HEADER_BYTES
+
+
 def _cmd_stimuli(args: argparse.Namespace) -> int:
+    from phantomtouch.manifest import row, write_manifest
+
     names = [n for n in preset_names() if n.startswith(f"{args.set}/")]
     out_dir = Path(args.output)
-    out_dir.mkdir(parents=True, exist_ok=True)
     device = _load_device(args.device)
-    manifest = {}
+    plans = {name: plan_at(preset(name), device) for name in names}
+    needed = sum(wav_bytes(plan) for plan in plans.values())
+    out_dir.mkdir(parents=True, exist_ok=True)
+    free = shutil.disk_usage(out_dir).free
+    if needed > free:
+        raise PhantomTouchError(
+            f"--output {str(out_dir)!r}: {len(names)} stimuli need {needed / 1e6:.0f} MB, "
+            f"only {free / 1e6:.0f} MB are free there"
+        )
+    print(
+        f"phantomtouch: rendering {len(names)} stimuli, {needed / 1e6:.0f} MB of WAV files, "
+        f"into {out_dir}",
+        file=sys.stderr,
+    )
+    rows = []
     for name in tqdm(names, desc=f"{args.set} stimuli", unit="stimulus", file=sys.stderr):
-        plan = plan_at(preset(name), device)
+        plan = plans[name]
         file_name = name.split("/", 1)[1] + ".wav"
         write_wav(plan, out_dir / file_name)
-        manifest[name] = {"file": file_name, **plan.summary()}
-    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2), encoding="utf-8")
-    print(f"{len(names)} stimuli in {out_dir}")
+        rows.append(row(name, file_name, preset(name), plan))
+    json_path, csv_path = write_manifest(rows, out_dir)
+    print(f"{len(names)} stimuli in {out_dir}; factors in {json_path.name} and {csv_path.name}")
     return 0
 
 
@@ -124,7 +184,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
     from phantomtouch.server import Settings
-    from phantomtouch.server.serve import check_library, serve
+    from phantomtouch.server.serve import check_library, check_port_free, serve
 
     options = {
         "host": args.host,
@@ -143,6 +203,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     except DeviceError as exc:
         print(f"phantomtouch serve: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    check_port_free(settings.host, settings.port)
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
     serve(settings)
     return 0

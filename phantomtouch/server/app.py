@@ -32,7 +32,7 @@ from phantomtouch.server.origin import (
     OriginPolicy,
     Refusals,
 )
-from phantomtouch.server.routes import info, patterns, render, touch, web, ws
+from phantomtouch.server.routes import docs, info, patterns, render, touch, web, ws
 from phantomtouch.server.service import Service
 from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
@@ -110,6 +110,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         description=DESCRIPTION,
         lifespan=_lifespan(settings, metrics),
         separate_input_output_schemas=False,
+        docs_url=None,
+        redoc_url=None,
         openapi_tags=[
             {"name": "touch", "description": "Play and stop touches."},
             {"name": "patterns", "description": "The pattern library (SQLite)."},
@@ -119,8 +121,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     errors.install(app)
-    for module in (touch, patterns, render, info, ws, web):
+    for module in (touch, patterns, render, info, ws, web, docs):
         app.include_router(module.router)
+    app.mount(docs.ASSETS_PATH, StaticFiles(directory=docs.ASSETS_DIR), name="docs-assets")
     if web.STATIC_DIR.is_dir():
         app.mount("/static", StaticFiles(directory=web.STATIC_DIR), name="static")
     refusals = Refusals(metrics)

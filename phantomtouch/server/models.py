@@ -2,7 +2,11 @@
 
 A *touch request* has three shapes, told apart by their keys: a whole ``TouchPattern``
 (``path`` ...), a preset with optional ``overrides`` (``preset``), or a stored pattern
-(``pattern``). Each may carry ``start_in_ms`` or ``start_at_s``.
+(``stored``: its name in the library). Each may carry ``start_in_ms`` or ``start_at_s``.
+
+``pattern`` is the deprecated name of ``stored`` (protocol 1 as first published): it is
+still accepted, marked ``deprecated`` in the OpenAPI schema, and answered exactly as
+``stored``; ``stored`` and ``pattern`` together are refused.
 """
 
 from __future__ import annotations
@@ -179,40 +183,87 @@ class NamedTouch(Timing):
     model_config = ConfigDict(
         extra="forbid",
         frozen=True,
-        json_schema_extra={**_NOT_BOTH_STARTS, "examples": [{"pattern": "my-stroke"}]},
+        json_schema_extra={**_NOT_BOTH_STARTS, "examples": [{"stored": "my-stroke"}]},
     )
 
-    pattern: PatternName
+    stored: PatternName
+
+
+class LegacyNamedTouch(Timing):
+    """Deprecated: ``pattern`` is the old name of ``stored`` (a :class:`NamedTouch`)."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        frozen=True,
+        json_schema_extra={
+            **_NOT_BOTH_STARTS,
+            "deprecated": True,
+            "examples": [{"pattern": "my-stroke"}],
+        },
+    )
+
+    pattern: PatternName = Field(
+        description="Deprecated name of `stored`: the name of a stored pattern."
+    )
+
+    def named(self) -> NamedTouch:
+        """The same request in the current words."""
+        return NamedTouch(
+            stored=self.pattern, start_in_ms=self.start_in_ms, start_at_s=self.start_at_s
+        )
 
 
 def _touch_kind(data: Any) -> str | None:
     if isinstance(data, dict):
         if "preset" in data:
             return "preset"
-        return "named" if "pattern" in data else "touch"
+        if "stored" in data:
+            return "named"
+        return "legacy" if "pattern" in data and "path" not in data else "touch"
     if isinstance(data, PresetTouch):
         return "preset"
     if isinstance(data, NamedTouch):
         return "named"
+    if isinstance(data, LegacyNamedTouch):
+        return "legacy"
     return "touch" if isinstance(data, PatternTouch) else None
 
 
 TouchRequest = Annotated[
     Annotated[PatternTouch, Tag("touch")]
     | Annotated[PresetTouch, Tag("preset")]
-    | Annotated[NamedTouch, Tag("named")],
+    | Annotated[NamedTouch, Tag("named")]
+    | Annotated[LegacyNamedTouch, Tag("legacy")],
     Discriminator(
         _touch_kind,
         custom_error_type="invalid_touch",
         custom_error_message=(
             "expected an object: a TouchPattern (with path), a preset (with preset) "
-            "or a stored pattern (with pattern)"
+            "or a stored pattern (with stored)"
         ),
     ),
 ]
-touch_request_adapter: TypeAdapter[PatternTouch | PresetTouch | NamedTouch] = TypeAdapter(
-    TouchRequest
-)
+WireTouch = PatternTouch | PresetTouch | NamedTouch | LegacyNamedTouch
+"""A touch request as the wire may phrase it."""
+AnyTouch = PatternTouch | PresetTouch | NamedTouch
+"""A touch request in the current words (a deprecated ``pattern`` is a ``stored`` by then)."""
+touch_request_adapter: TypeAdapter[WireTouch] = TypeAdapter(TouchRequest)
+
+
+def current_words(request: WireTouch) -> AnyTouch:
+    """The request with a deprecated ``pattern`` renamed ``stored``."""
+    return request.named() if isinstance(request, LegacyNamedTouch) else request
+
+
+def parse_touch_request(body: str | bytes) -> AnyTouch:
+    """A touch request from JSON text, strictly validated, in the current words.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        The body is not one of the three shapes, or a field is out of range.
+    """
+    return current_words(touch_request_adapter.validate_json(body, strict=True))
 
 
 class PlayRequest(Timing):

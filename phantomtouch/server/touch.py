@@ -12,9 +12,9 @@ from phantomtouch.schema import DeviceProfile, TouchPattern
 from phantomtouch.server.errors import NotFoundError
 from phantomtouch.server.models import (
     MAX_START_AHEAD_S,
+    AnyTouch,
     JobAccepted,
     NamedTouch,
-    PatternTouch,
     PresetTouch,
     Timing,
 )
@@ -36,24 +36,24 @@ def preset_pattern(name: str) -> TouchPattern:
         raise NotFoundError(str(exc), field="preset", value=name) from exc
 
 
-def stored_pattern(store: PatternStore, name: str) -> TouchPattern:
-    """The stored pattern ``name``; an unknown name is a :class:`NotFoundError`."""
+def stored_pattern(store: PatternStore, name: str, *, field: str = "stored") -> TouchPattern:
+    """The stored pattern ``name``; an unknown name is a :class:`NotFoundError` on ``field``."""
     pattern = store.get(name)
     if pattern is None:
         raise NotFoundError(
-            f"pattern={name!r} is not in the pattern library (GET /patterns)",
-            field="pattern",
+            f"{field}={name!r} is not in the pattern library (GET /patterns)",
+            field=field,
             value=name,
         )
     return pattern
 
 
-def resolve(request: PatternTouch | PresetTouch | NamedTouch, store: PatternStore) -> TouchPattern:
+def resolve(request: AnyTouch, store: PatternStore) -> TouchPattern:
     """The pattern a touch request asks for."""
     if isinstance(request, PresetTouch):
         return request.apply(preset_pattern(request.preset))
     if isinstance(request, NamedTouch):
-        return stored_pattern(store, request.pattern)
+        return stored_pattern(store, request.stored)
     return request.pattern()
 
 
@@ -97,7 +97,7 @@ def accepted(engine: EngineFront, job: Job) -> JobAccepted:
 
 async def schedule(
     service: Service,
-    request: PatternTouch | PresetTouch | NamedTouch,
+    request: AnyTouch,
     *,
     owner: str | None = None,
 ) -> JobAccepted:

@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr, Validat
 from phantomtouch.schema import limits
 from phantomtouch.schema.pattern import Carrier, Law
 from phantomtouch.server.errors import ErrorCode, Problem, field_problems, invalid
-from phantomtouch.server.models import NamedTouch, PatternTouch, PresetTouch, touch_request_adapter
+from phantomtouch.server.models import AnyTouch, parse_touch_request
 
 PROTOCOL_VERSION = 1
 MAX_NORMAL_VELOCITY_M_S = 10.0
@@ -79,7 +79,7 @@ class Play(_Message):
     """``play``: a touch request (the body of ``POST /touch``) with ``type`` and ``id``."""
 
     type: Literal["play"]
-    request: PatternTouch | PresetTouch | NamedTouch
+    request: AnyTouch
 
 
 SIMPLE_TYPES: dict[str, type[_Message]] = {
@@ -144,7 +144,7 @@ def parse(text: str) -> ClientMessage:
             return Play(
                 type="play",
                 id=data.get("id"),
-                request=touch_request_adapter.validate_json(json.dumps(request), strict=True),
+                request=parse_touch_request(json.dumps(request)),
             )
     except ValidationError as exc:
         raise MessageError(invalid(field_problems(exc.errors())), message_id) from None

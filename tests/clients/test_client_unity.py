@@ -85,6 +85,7 @@ def test_unity_client_rest_routes(harness: list[str], server: LiveServer) -> Non
     assert out["WAV"] == "RIFFWAVE"
     assert 0 < int(out["PLAN_POINTS"]) <= 500
     assert float(out["STORED"]) == 20.0
+    assert float(out["STORED_JOB"]) == 20.0, "TouchRequest.Stored plays the stored pattern"
     assert out["DELETED"] == "not_found 404"
     assert out["REFUSED"].split()[0] == "invalid"
     assert int(out["METRICS_LINES"]) > 1

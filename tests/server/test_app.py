@@ -40,8 +40,15 @@ def test_openapi_documents_error_bodies(client: TestClient) -> None:
         "$ref": "#/components/schemas/ErrorBody"
     }
     body = touch["requestBody"]["content"]["application/json"]["schema"]
-    assert len(body["oneOf"]) == 3
-    for name in ("PatternTouch", "PresetTouch", "NamedTouch", "TouchPattern", "ErrorBody"):
+    assert len(body["oneOf"]) == 4, "three shapes and the deprecated `pattern`"
+    for name in (
+        "PatternTouch",
+        "PresetTouch",
+        "NamedTouch",
+        "LegacyNamedTouch",
+        "TouchPattern",
+        "ErrorBody",
+    ):
         assert name in document["components"]["schemas"]
     assert "HTTPValidationError" not in document["components"]["schemas"]
     assert "/ws" not in document["paths"] and "/" not in document["paths"]
@@ -87,3 +94,15 @@ def test_web_page(client: TestClient) -> None:
     else:
         assert page.status_code == 404
         assert page.json()["error"]["code"] == "not_found"
+
+
+def test_docs_pages_load_their_assets_from_the_service(client: TestClient) -> None:
+    for route, asset in (("/docs", "swagger-ui-bundle.js"), ("/redoc", "redoc.standalone.js")):
+        page = client.get(route)
+        assert page.status_code == 200
+        assert f'src="/static/docs/{asset}"' in page.text
+        assert "https://" not in page.text, route
+        assert "default-src 'self'" in page.headers["content-security-policy"]
+        script = client.get(f"/static/docs/{asset}")
+        assert script.status_code == 200
+        assert len(script.content) > 100_000, "the whole bundle, not a stub"

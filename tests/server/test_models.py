@@ -7,22 +7,23 @@ from pydantic import ValidationError
 
 from phantomtouch.renderer import preset
 from phantomtouch.server.models import (
+    AnyTouch,
     NamedTouch,
     PatternTouch,
     PresetTouch,
-    touch_request_adapter,
+    parse_touch_request,
 )
 
 STROKE = {"path": {"kind": "polyline", "points_cm": [[1.9, 12], [1.9, 2.4]]}, "speed_cm_s": 5}
 
 
-def parse(body: str) -> PatternTouch | PresetTouch | NamedTouch:
-    return touch_request_adapter.validate_json(body, strict=True)
+def parse(body: str) -> AnyTouch:
+    return parse_touch_request(body)
 
 
 def test_three_shapes() -> None:
     assert isinstance(parse('{"preset": "vr/tap"}'), PresetTouch)
-    assert isinstance(parse('{"pattern": "my-stroke", "start_at_s": 12.5}'), NamedTouch)
+    assert isinstance(parse('{"stored": "my-stroke", "start_at_s": 12.5}'), NamedTouch)
     touch = parse('{"path": {"kind": "polyline", "points_cm": [[1, 2]]}, "duration_s": 1}')
     assert isinstance(touch, PatternTouch)
     assert touch.pattern().duration_s == 1.0
@@ -39,16 +40,25 @@ def test_pattern_drops_timing() -> None:
 
 def test_strict_numbers() -> None:
     with pytest.raises(ValidationError) as info:
-        parse('{"pattern": "x", "start_in_ms": "5"}')
+        parse('{"stored": "x", "start_in_ms": "5"}')
     assert info.value.errors()[0]["loc"] == ("named", "start_in_ms")
 
 
 def test_not_both_starts() -> None:
     with pytest.raises(ValidationError, match="not both"):
-        parse('{"pattern": "x", "start_in_ms": 5, "start_at_s": 3}')
+        parse('{"stored": "x", "start_in_ms": 5, "start_at_s": 3}')
 
 
 def test_pattern_names_are_a_safe_set() -> None:
+    with pytest.raises(ValidationError, match="should match pattern"):
+        parse('{"stored": "../etc/passwd"}')
+
+
+def test_pattern_is_the_deprecated_name_of_stored() -> None:
+    legacy = parse('{"pattern": "my-stroke", "start_at_s": 12.5}')
+    assert legacy == NamedTouch(stored="my-stroke", start_at_s=12.5)
+    with pytest.raises(ValidationError, match="pattern"):
+        parse('{"stored": "my-stroke", "pattern": "other"}')
     with pytest.raises(ValidationError, match="should match pattern"):
         parse('{"pattern": "../etc/passwd"}')
 

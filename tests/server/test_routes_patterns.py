@@ -26,7 +26,7 @@ def test_put_get_list_delete(client: TestClient) -> None:
     assert client.delete("/patterns/my-stroke.v1").status_code == 204
     gone = client.get("/patterns/my-stroke.v1")
     assert gone.status_code == 404
-    assert gone.json()["error"]["fields"][0]["field"] == "pattern"
+    assert gone.json()["error"]["fields"][0]["field"] == "name"
     assert client.delete("/patterns/my-stroke.v1").status_code == 404
 
 

@@ -33,9 +33,22 @@ def test_preset_with_overrides_and_stored_pattern(client: TestClient) -> None:
     assert preset.status_code == 202
     assert preset.json()["speed_cm_s"] == 9.6
     assert client.put("/patterns/stroke", json=STROKE).status_code == 200
-    stored = client.post("/touch", json={"pattern": "stroke"})
+    stored = client.post("/touch", json={"stored": "stroke"})
     assert stored.status_code == 202
     assert stored.json()["path_length_cm"] == 9.6
+
+
+def test_pattern_is_a_deprecated_alias_of_stored(client: TestClient) -> None:
+    assert client.put("/patterns/stroke", json=STROKE).status_code == 200
+    legacy = client.post("/touch", json={"pattern": "stroke", "start_in_ms": 5})
+    assert legacy.status_code == 202
+    assert legacy.json()["path_length_cm"] == 9.6
+    both = client.post("/touch", json={"stored": "stroke", "pattern": "stroke"})
+    assert both.status_code == 422
+    assert both.json()["error"]["fields"][0]["field"] == "pattern"
+    schema = client.get("/openapi.json").json()["components"]["schemas"]
+    assert schema["LegacyNamedTouch"]["deprecated"] is True
+    assert schema["NamedTouch"]["required"] == ["stored"]
 
 
 def test_unknown_preset_and_pattern_are_404_naming_the_field(client: TestClient) -> None:
@@ -43,12 +56,12 @@ def test_unknown_preset_and_pattern_are_404_naming_the_field(client: TestClient)
     assert preset.status_code == 404
     assert preset.json()["error"]["fields"][0]["field"] == "preset"
     assert "exp2/curved" in preset.json()["error"]["message"], "suggests the close name"
-    pattern = client.post("/touch", json={"pattern": "nope"})
-    assert pattern.status_code == 404
-    assert pattern.json()["error"]["fields"][0] == {
-        "field": "pattern",
+    stored = client.post("/touch", json={"stored": "nope"})
+    assert stored.status_code == 404
+    assert stored.json()["error"]["fields"][0] == {
+        "field": "stored",
         "value": "nope",
-        "message": "pattern='nope' is not in the pattern library (GET /patterns)",
+        "message": "stored='nope' is not in the pattern library (GET /patterns)",
     }
 
 

@@ -218,7 +218,7 @@ def test_library_edit_save_play_and_delete(page: Any, server: str, observer: Sta
     page.click("#refresh-library")
     item = page.locator("#library li", has_text="web-test-library")
     item.get_by_role("button", name="Edit web-test-library in the designer").click()
-    wait_for_plan(page, server_plan(server, {"pattern": "web-test-library"}))
+    wait_for_plan(page, server_plan(server, {"stored": "web-test-library"}))
     assert page.input_value("#speed") == ""
 
     page.fill("#speed", "6")

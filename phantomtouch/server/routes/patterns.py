@@ -45,7 +45,7 @@ def list_patterns(store: StoreDep) -> list[PatternInfo]:
 )
 def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
     """The pattern as it was stored with `PUT`."""
-    return touch.stored_pattern(store, name)
+    return touch.stored_pattern(store, name, field="name")
 
 
 @router.put(
@@ -73,7 +73,7 @@ def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
     """Remove a stored pattern."""
     if not store.delete(name):
         raise NotFoundError(
-            f"pattern={name!r} is not in the pattern library (GET /patterns)",
+            f"name={name!r} is not in the pattern library (GET /patterns)",
             field="name",
             value=name,
         )
@@ -93,6 +93,6 @@ async def play_pattern(
     service: ServiceDep,
     timing: Annotated[PlayRequest, Depends(play_body)],
 ) -> JobAccepted:
-    """As `POST /touch` with `{"pattern": name}`; optional `start_in_ms` or `start_at_s`."""
-    request = NamedTouch(pattern=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
+    """As `POST /touch` with `{"stored": name}`; optional `start_in_ms` or `start_at_s`."""
+    request = NamedTouch(stored=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
     return await touch.schedule(service, request)

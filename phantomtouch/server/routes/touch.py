@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Annotated
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, Request
 from fastapi import Path as PathParam
 
 from phantomtouch.server import touch
@@ -15,19 +15,25 @@ from phantomtouch.server.errors import NotFoundError, responses
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
 from phantomtouch.server.models import (
+    AnyTouch,
     JobAccepted,
     JobInfo,
-    NamedTouch,
-    PatternTouch,
-    PresetTouch,
     StopAnswer,
+    current_words,
     touch_request_adapter,
 )
 
 router = APIRouter(tags=["touch"])
 
-touch_body, TOUCH_BODY_OPENAPI = strict_body(touch_request_adapter)
-TouchBody = Annotated[PatternTouch | PresetTouch | NamedTouch, Depends(touch_body)]
+_wire_touch_body, TOUCH_BODY_OPENAPI = strict_body(touch_request_adapter)
+
+
+async def touch_body(request: Request) -> AnyTouch:
+    """The touch request of the body, a deprecated ``pattern`` renamed ``stored``."""
+    return current_words(await _wire_touch_body(request))
+
+
+TouchBody = Annotated[AnyTouch, Depends(touch_body)]
 
 JobIdParam = Annotated[
     str, PathParam(min_length=1, max_length=64, description="As `POST /touch` answered it.")

@@ -7,10 +7,15 @@ import { channelColor, levelNorm } from "./units.js";
 const SVG_NS = "http://www.w3.org/2000/svg";
 const ACTUATOR_R_CM = 0.62;
 const SKIN_MARGIN_CM = 1.0;
-const PAD = { left: 2.2, right: 1.0, top: 1.5, bottom: 2.0 };
+// Room around the band for the rulers and their titles, which grow on narrow screens.
+const PAD = { left: 2.7, right: 1.6, top: 1.5, bottom: 2.0 };
 const KEY_STEP_CM = 0.2;
 const KEY_BIG_STEP_CM = 1.0;
 const DRAW_MIN_STEP_CM = 0.12;
+// Axis labels are sized in cm (the viewBox's unit) and grow when the armband is drawn so
+// small that they would fall under this many CSS pixels (a 390 px phone).
+const AXIS_LABEL_CM = 0.42;
+const MIN_LABEL_PX = 11;
 
 function el(name, attrs = {}, parent = null) {
   const node = document.createElementNS(SVG_NS, name);
@@ -46,6 +51,16 @@ export class Armband {
     svg.addEventListener("keydown", (e) => this.keyDown(e));
     svg.addEventListener("focus", () => this.showCursor(svg.matches(":focus-visible")));
     svg.addEventListener("blur", () => this.blur());
+    new ResizeObserver(() => this.scaleLabels()).observe(svg);
+  }
+
+  // --label-scale: how much the axis labels grow so that they stay readable.
+  scaleLabels() {
+    const box = this.svg.viewBox.baseVal;
+    const widthPx = this.svg.getBoundingClientRect().width;
+    if (!box || !box.width || !widthPx) return;
+    const labelPx = AXIS_LABEL_CM * (widthPx / box.width);
+    this.svg.style.setProperty("--label-scale", Math.max(1, MIN_LABEL_PX / labelPx).toFixed(3));
   }
 
   build(device) {
@@ -65,6 +80,7 @@ export class Armband {
     svg.setAttribute("viewBox", `${left} ${top} ${width} ${height}`);
     svg.setAttribute("preserveAspectRatio", "xMidYMid meet");
     svg.style.aspectRatio = `${width} / ${height}`;
+    this.scaleLabels();
 
     const defs = el("defs", {}, svg);
     const glow = el("radialGradient", { id: "glow" }, defs);

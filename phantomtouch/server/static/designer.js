@@ -183,7 +183,7 @@ export class Designer {
         ? { preset: source.name, overrides: changes } : { preset: source.name };
     }
     if (source.kind === "saved" && Object.keys(overrides).length === 0) {
-      return { pattern: source.name };
+      return { stored: source.name };
     }
     return this.pattern();
   }
@@ -275,7 +275,9 @@ export class Designer {
     }
     const curves = planned && planned.curves;
     this.ui.chart.show(curves, this.ui.channelLabels(), planned && planned.duration_s);
-    this.ui.armband.setPath(curves ? curves.positions_cm : null);
+    // A drawn path stays on the armband while its plan is refused: it is the user's work.
+    const drawn = this.source().kind === DRAWN ? this.drawn : null;
+    this.ui.armband.setPath(curves ? curves.positions_cm : drawn);
   }
 
   // --- actions -----------------------------------------------------------------------
@@ -340,14 +342,17 @@ export class Designer {
     const name = input.value.trim();
     const pattern = this.pattern();
     if (!pattern) return;
+    $("job").textContent = `Saving ${name}…`;
     try {
       await api.savePattern(name, pattern);
-      this.stored.set(name, pattern);
-      $("job").textContent = `Saved ${name} to the library.`;
-      await this.loadLibrary();
     } catch (exc) {
+      $("job").textContent = `Not saved: ${name} was refused.`;
       this.ui.showError(exc.message);
+      return;
     }
+    this.stored.set(name, pattern);
+    $("job").textContent = `Saved ${name} to the library.`;
+    await this.loadLibrary();
   }
 
   async download() {

@@ -13,7 +13,7 @@ import math
 import sys
 import time
 
-from phantomtouch_client import Session, ws_url
+from phantomtouch_client import ClientError, Session, ws_url
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -42,4 +42,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except ClientError as exc:  # the service is down or refused: one line, not a traceback
+        sys.exit(f"{sys.argv[0]}: {exc}")

@@ -15,7 +15,7 @@ import random
 import sys
 import time
 
-from phantomtouch_client import Client
+from phantomtouch_client import Client, ClientError
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,4 +49,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except ClientError as exc:  # the service is down or refused: one line, not a traceback
+        sys.exit(f"{sys.argv[0]}: {exc}")

@@ -228,7 +228,7 @@ def touch_request(
         if overrides:
             body["overrides"] = dict(overrides)
     else:
-        body = {"pattern": stored}
+        body = {"stored": stored}
     body.update(when)
     return body
 

@@ -116,6 +116,7 @@ namespace PhantomTouch.Harness
             Say("STORED", client.GetPatternAsync("unity-harness").Result.GetNumber("speed_cm_s"));
             Say("PATTERNS", Json.Serialize(client.PatternsAsync().Result));
             Say("PATTERN_JOB", client.PlayPatternAsync("unity-harness", 10).Result.GetString("job_id"));
+            Say("STORED_JOB", client.TouchAsync(TouchRequest.Stored("unity-harness")).Result.GetNumber("speed_cm_s"));
             client.DeletePatternAsync("unity-harness").Wait();
             try
             {

@@ -36,6 +36,7 @@ namespace UnityEngine
     public class Transform : Component
     {
         public Vector3 position { get; set; }
+        public Vector3 localPosition { get; set; }
         public Vector3 InverseTransformPoint(Vector3 position) { return position; }
         public Vector3 TransformPoint(Vector3 position) { return position; }
     }
@@ -52,6 +53,7 @@ namespace UnityEngine
         public Vector3(float x, float y, float z) { this.x = x; this.y = y; this.z = z; }
         public static Vector3 right { get { return new Vector3(1f, 0f, 0f); } }
         public float magnitude { get { return (float)Math.Sqrt(x * x + y * y + z * z); } }
+        public static Vector3 Lerp(Vector3 a, Vector3 b, float t) { return a; }
     }
 
     public struct Color
@@ -102,6 +104,7 @@ namespace UnityEngine
     {
         public static float Clamp01(float value) { return value < 0f ? 0f : (value > 1f ? 1f : value); }
         public static float Max(float a, float b) { return a > b ? a : b; }
+        public static float PingPong(float t, float length) { return t; }
     }
 
     public static class Time

@@ -219,6 +219,19 @@ func server_time_s() -> float:
 	return _clock_offset_s + Time.get_ticks_usec() / 1e6
 
 
+## A touch request for a preset by name (GET /presets), with optional overrides.
+static func preset(preset_name: String, overrides: Dictionary = {}) -> Dictionary:
+	var touch_request := {"preset": preset_name}
+	if not overrides.is_empty():
+		touch_request["overrides"] = overrides
+	return touch_request
+
+
+## A touch request for a pattern stored with PUT /patterns/{name}.
+static func stored(pattern_name: String) -> Dictionary:
+	return {"stored": pattern_name}
+
+
 ## A touch request for a short tap at (x_cm, y_cm): 150 Hz, like the "vr/tap" preset.
 static func tap(x_cm: float, y_cm: float, intensity: float, duration_s := 0.15) -> Dictionary:
 	return {

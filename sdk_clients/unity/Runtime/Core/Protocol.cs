@@ -53,7 +53,7 @@ namespace PhantomTouch
         /// <summary>A pattern stored with PUT /patterns/{name}.</summary>
         public static TouchRequest Stored(string name)
         {
-            return new TouchRequest(new JsonObject().With("pattern", name));
+            return new TouchRequest(new JsonObject().With("stored", name));
         }
 
         /// <summary>A TouchPattern given inline (path, speed_cm_s or duration_s, carrier ...).</summary>
