@@ -43,7 +43,12 @@ from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.plan import Plan, plan
 from phantomtouch.renderer.presets import preset
 from phantomtouch.renderer.render import render, render_blocks
-from phantomtouch.renderer.trajectory import control_gains, envelope_at, positions_at
+from phantomtouch.renderer.trajectory import (
+    control_gains,
+    envelope_at,
+    modulation_at,
+    positions_at,
+)
 from phantomtouch.renderer.voice import gain_block
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
@@ -137,7 +142,8 @@ def effective_gains(resolved: Plan) -> np.ndarray:
 
     The gain grid of :class:`~phantomtouch.renderer.voice.PatternRenderer` (every
     ``gain_update_frames`` frames from frame 0) through the renderer's own
-    :func:`~phantomtouch.renderer.voice.gain_block`, fed a carrier of ones.
+    :func:`~phantomtouch.renderer.voice.gain_block`, fed a carrier of ones times the
+    per-sample amplitude modulation, as the renderer applies it.
 
     Returns
     -------
@@ -148,9 +154,13 @@ def effective_gains(resolved: Plan) -> np.ndarray:
     frames = resolved.frames
     last = (frames - 1) // step + (1 if ramp and step > 1 else 0)
     grid_frames = np.arange(last + 1, dtype=np.float64) * step
-    grid = control_gains(resolved, grid_frames / resolved.sample_rate_hz)
+    grid = control_gains(resolved, grid_frames / resolved.sample_rate_hz, modulated=False)
     grid32 = np.ascontiguousarray(grid, dtype=np.float32)
-    return gain_block(np.ones(frames, dtype=np.float32), grid32, step, 0, ramp=ramp)
+    carrier = np.ones(frames, dtype=np.float32)
+    factor = modulation_at(resolved, np.arange(frames) / resolved.sample_rate_hz)
+    if factor is not None:
+        carrier *= factor.astype(np.float32)
+    return gain_block(carrier, grid32, step, 0, ramp=ramp)
 
 
 def intended_path(resolved: Plan, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
