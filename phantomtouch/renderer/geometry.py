@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.spatial import Delaunay, QhullError
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema.device import DeviceProfile
@@ -142,6 +141,8 @@ def _geometry(device: DeviceProfile) -> Geometry:
     if device.triangles is not None:
         triangles = np.array(device.triangles, dtype=np.intp)
     else:
+        from scipy.spatial import Delaunay, QhullError  # only custom layouts need it
+
         try:
             triangles = np.asarray(Delaunay(positions).simplices, dtype=np.intp)
         except QhullError as exc:
