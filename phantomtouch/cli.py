@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from phantomtouch.errors import PhantomTouchError
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
+from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error, limits
 
@@ -44,8 +45,12 @@ def _load_pattern(path: str) -> TouchPattern:
     return TouchPattern.model_validate_json(text)
 
 
-def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None = None) -> None:
-    """Render a plan block by block into a float32 WAV, and optionally its plot."""
+def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None = None) -> float:
+    """Render a plan block by block into a float32 WAV, and optionally its plot.
+
+    Returns the fraction of frames with a channel at the safety ceiling.
+    """
+    clipped = 0
     traces = None
     if plot_path is not None:
         from phantomtouch.plot import TraceEnvelope
@@ -66,12 +71,14 @@ def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None 
     with wav:
         for block in render_plan_blocks(plan, block_frames=_BLOCK_FRAMES):
             wav.write(block)
+            clipped += frames_at_ceiling(block, plan.device.safety.ceiling)
             if traces is not None:
                 traces.add(block)
     if traces is not None and plot_path is not None:
         from phantomtouch.plot import save_plot
 
         save_plot(plan, traces, plot_path)
+    return clipped / plan.frames
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
@@ -79,15 +86,21 @@ def _cmd_render(args: argparse.Namespace) -> int:
         raise PhantomTouchError("give a PATTERN.json file or --preset NAME (one of them)")
     pattern = preset(args.preset) if args.preset else _load_pattern(args.pattern)
     plan = plan_at(pattern, _load_device(args.device), sample_rate_hz=args.sample_rate)
-    write_wav(plan, args.output, plot_path=args.plot)
+    clipped_fraction = write_wav(plan, args.output, plot_path=args.plot)
     if args.json:
-        print(json.dumps({**plan.summary(), "output": str(args.output)}, indent=2))
+        summary = {**plan.summary(), "clipped_fraction": clipped_fraction}
+        print(json.dumps({**summary, "output": str(args.output)}, indent=2))
     else:
         print(
             f"{args.output}: {plan.duration_s:.3f} s, {plan.frames} frames x {plan.channels} "
             f"channels at {plan.sample_rate_hz} Hz; path {plan.path_length_cm:.3f} cm at "
             f"{plan.speed_cm_s:.3f} cm/s"
         )
+        if clipped_fraction > 0:
+            print(
+                f"{args.output}: {100 * clipped_fraction:.3g} % of the frames reach the safety "
+                f"ceiling {plan.device.safety.ceiling:g} and are clipped: lower the level"
+            )
     return 0
 
 

@@ -75,8 +75,27 @@ def test_render_pattern_file(tmp_path):
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["speed_cm_s"] == 7.0
+    assert summary["clipped_fraction"] == 0.0
     expected = pt.render(TouchPattern.model_validate(pattern))
     np.testing.assert_array_equal(read_wav(tmp_path / "touch.wav"), expected)
+
+
+def test_render_reports_the_frames_the_ceiling_clipped(tmp_path):
+    pattern = {
+        "path": {"kind": "polyline", "points_cm": [[0.0, 0.0]]},
+        "duration_s": 2.0,
+        "carrier": {"kind": "noise"},
+        "level_db": 150.0,
+    }
+    (tmp_path / "loud.json").write_text(json.dumps(pattern), encoding="utf-8")
+    result = run("render", "loud.json", "-o", "loud.wav", "--json", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    samples = read_wav(tmp_path / "loud.wav")
+    at_ceiling = float(np.mean((np.abs(samples) >= np.float32(1.0)).any(axis=1)))
+    assert at_ceiling > 0.0
+    assert json.loads(result.stdout)["clipped_fraction"] == at_ceiling
+    text = run("render", "loud.json", "-o", "loud.wav", cwd=tmp_path)
+    assert "reach the safety ceiling 1 and are clipped" in text.stdout
 
 
 def test_presets_lists_every_preset(tmp_path):

@@ -14,6 +14,11 @@ from phantomtouch.renderer.fir import PartitionedFir
 from phantomtouch.schema.device import DeviceProfile
 
 
+def frames_at_ceiling(block: np.ndarray, ceiling: float) -> int:
+    """Frames of an output ``block`` (frames, channels) with a channel at the ceiling."""
+    return int(np.count_nonzero((np.abs(block) >= np.float32(ceiling)).any(axis=1)))
+
+
 class OutputStage:
     """Per-channel calibration gain and FIR, then the safety ceiling.
 

@@ -228,6 +228,14 @@ class PlanSummary(BaseModel):
     amplitude: float
     projected_points: int
     max_projection_cm: float
+    clipped_fraction: float = Field(
+        ge=0.0,
+        le=1.0,
+        description=(
+            "Estimated fraction of the frames in which a channel reaches the safety ceiling "
+            "and is clipped, the pattern played alone (0: nothing clips)."
+        ),
+    )
 
 
 class JobAccepted(BaseModel):
@@ -240,6 +248,11 @@ class JobAccepted(BaseModel):
     path_length_cm: float
     speed_cm_s: float
     frames: int
+    clipped_fraction: float = Field(
+        ge=0.0,
+        le=1.0,
+        description="Estimated fraction of the frames clipped at the safety ceiling.",
+    )
 
     model_config = {
         "json_schema_extra": {
@@ -252,6 +265,7 @@ class JobAccepted(BaseModel):
                     "path_length_cm": 9.6,
                     "speed_cm_s": 5.0,
                     "frames": 149760,
+                    "clipped_fraction": 0.0,
                 }
             ]
         }

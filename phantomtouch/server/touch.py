@@ -92,6 +92,7 @@ def accepted(engine: AnyEngine, job: Job) -> JobAccepted:
         path_length_cm=summary["path_length_cm"],
         speed_cm_s=summary["speed_cm_s"],
         frames=job.frames,
+        clipped_fraction=summary["clipped_fraction"],
     )
 
 

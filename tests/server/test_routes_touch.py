@@ -116,3 +116,13 @@ def test_more_voices_than_max_voices_at_once_answer_503_busy(tmp_path: Path) -> 
         assert busy.json()["error"]["code"] == "busy"
         assert "max_voices=2" in busy.json()["error"]["message"]
         assert client.post("/stop").status_code == 200
+
+
+def test_touch_answer_says_how_much_the_ceiling_clips(client: TestClient) -> None:
+    quiet = client.post("/touch", json=STROKE).json()
+    assert quiet["clipped_fraction"] == 0.0
+    loud = {**STROKE, "carrier": {"kind": "noise"}, "level_db": 150.0}
+    answer = client.post("/touch", json=loud)
+    assert answer.status_code == 202
+    # Noise at the device's maximum level drives its peaks past the ceiling.
+    assert 0.0 < answer.json()["clipped_fraction"] < 0.05

@@ -37,6 +37,9 @@ class Job(_Answer):
     path_length_cm: float
     speed_cm_s: float
     frames: int
+    clipped_fraction: float = Field(
+        description="Estimated fraction of the frames clipped at the safety ceiling."
+    )
 
 
 class JobStatus(_Answer):
@@ -76,6 +79,8 @@ class PlanSummary(_Answer):
     amplitude: float
     projected_points: int
     max_projection_cm: float
+    clipped_fraction: float
+    """Estimated fraction of the frames clipped at the safety ceiling (0: none)."""
 
 
 class Summary(_Answer):
