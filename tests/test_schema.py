@@ -368,6 +368,14 @@ def test_unreadable_or_unparsable_profiles_are_device_errors(tmp_path):
             "gain_update_frames=0: Input should be greater than or equal to 1",
         ),
         (
+            {"gain_update_s": 0.0},
+            "gain_update_s=0.0: Input should be greater than 0",
+        ),
+        (
+            {"gain_update_s": 0.5},
+            "gain_update_s=0.5: Input should be less than or equal to 0.02",
+        ),
+        (
             {"sample_rate_hz": 1000},
             "sample_rate_hz=1000: Input should be greater than or equal to 8000",
         ),
@@ -375,3 +383,13 @@ def test_unreadable_or_unparsable_profiles_are_device_errors(tmp_path):
 )
 def test_device_profile_fields_are_validated_with_field_and_value(update, expected):
     assert expected in refusal(update, DeviceProfile)
+
+
+@pytest.mark.parametrize(
+    ("sample_rate_hz", "frames"), [(8000, 21), (44100, 118), (48000, 128), (192000, 512)]
+)
+def test_the_control_interval_is_a_time_rounded_to_frames(sample_rate_hz, frames):
+    device = DeviceProfile(sample_rate_hz=sample_rate_hz)
+    assert device.gain_step_frames == frames  # 2.667 ms at each rate
+    assert DeviceProfile(sample_rate_hz=sample_rate_hz, gain_update_frames=7).gain_step_frames == 7
+    assert DeviceProfile(sample_rate_hz=8000, gain_update_s=1e-5).gain_step_frames == 1

@@ -149,7 +149,7 @@ def effective_gains(resolved: Plan) -> np.ndarray:
     -------
     ndarray, shape (frames, channels), float32
     """
-    step = resolved.device.gain_update_frames
+    step = resolved.device.gain_step_frames
     ramp = resolved.device.gain_ramp
     frames = resolved.frames
     last = (frames - 1) // step + (1 if ramp and step > 1 else 0)

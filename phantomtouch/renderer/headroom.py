@@ -62,7 +62,7 @@ def clipped_fraction(plan: Plan) -> float:
     """
     if plan.amplitude <= 0.0:
         return 0.0
-    step = plan.device.gain_update_frames
+    step = plan.device.gain_step_frames
     points = int(min(_MAX_POINTS, max(2, -(-plan.frames // step))))
     times_s = (np.arange(points) + 0.5) * (plan.duration_s / points)
     mod = plan.pattern.modulation

@@ -4,7 +4,7 @@ Both the offline render and the engine's pattern voices use :class:`PatternRende
 so the two give the same samples. Each output sample is a pure function of its frame
 index, so the blocks of any block size concatenate to exactly the whole render.
 
-Gains are computed every ``device.gain_update_frames`` frames on a grid anchored at
+Gains are computed every ``device.gain_step_frames`` frames on a grid anchored at
 frame 0, and ramped linearly between grid points (or held, ``gain_ramp=False``).
 Amplitude modulation (eq. 2) is not on that grid: it multiplies the carrier per sample,
 so it stays exact up to the highest modulation frequency a pattern may ask for.
@@ -110,7 +110,7 @@ class PatternRenderer:
         self.position_frames = 0
         self.active_span = (0, 0)
         self._carrier: CarrierSource = make_source(plan.pattern.carrier, plan.sample_rate_hz)
-        self._step = plan.device.gain_update_frames
+        self._step = plan.device.gain_step_frames
         self._ramp = plan.device.gain_ramp
         self._frame_s = 1.0 / plan.sample_rate_hz
         mod = plan.pattern.modulation

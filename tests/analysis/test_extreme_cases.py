@@ -70,7 +70,7 @@ def test_every_speed_from_0_01_to_1000_cm_s_follows_the_path(speed_cm_s: float) 
     centroid = gain_centroid(effective_gains(resolved), resolved.geometry)
     error = np.hypot(*(centroid - points)[sounding].T)
     # never further from the path than the point moves between two gain updates
-    step_cm = speed_cm_s * DEVICE.gain_update_frames / RATE
+    step_cm = speed_cm_s * DEVICE.gain_step_frames / RATE
     assert np.max(error) <= step_cm + 1e-5  # 1e-5 cm: float32 gains
     assert np.max(error) < TWO_POINT_THRESHOLD_CM
 
