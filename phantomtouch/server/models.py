@@ -23,6 +23,7 @@ from pydantic.config import JsonDict
 
 from phantomtouch.schema import TouchPattern
 from phantomtouch.schema.device import Actuator
+from phantomtouch.schema.pattern import TIMING_RULES, not_both
 
 PATTERN_NAME_REGEX = r"^[A-Za-z0-9._-]{1,64}$"
 PatternName = Annotated[
@@ -44,12 +45,7 @@ class _Body(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-_NOT_BOTH_STARTS: JsonDict = {
-    "not": {
-        "required": ["start_in_ms", "start_at_s"],
-        "properties": {"start_in_ms": {"type": "number"}, "start_at_s": {"type": "number"}},
-    }
-}
+_NOT_BOTH_STARTS: JsonDict = not_both("start_in_ms", "start_at_s")
 
 
 class Timing(_Body):
@@ -92,7 +88,7 @@ class PatternTouch(TouchPattern, Timing):
         extra="forbid",
         frozen=True,
         json_schema_extra={
-            **_NOT_BOTH_STARTS,
+            "allOf": [_NOT_BOTH_STARTS, *TIMING_RULES],
             "examples": [
                 {
                     "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
@@ -123,7 +119,13 @@ def _optional_fields() -> dict[str, Any]:
 
 PatternOverrides: type[BaseModel] = create_model(
     "PatternOverrides",
-    __config__=ConfigDict(extra="forbid", frozen=True),
+    __config__=ConfigDict(
+        extra="forbid",
+        frozen=True,
+        json_schema_extra={
+            "allOf": [not_both("speed_cm_s", "duration_s"), not_both("level_db", "intensity")]
+        },
+    ),
     __doc__=(
         "TouchPattern fields that replace the preset's. `speed_cm_s` replaces the preset's "
         "`duration_s` (and the other way round); `level_db` replaces `intensity`."
