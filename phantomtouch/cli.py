@@ -8,12 +8,15 @@
 ``phantomtouch bench accuracy``  phantom position and level error against CPU time
 ``phantomtouch calibrate``  measure each actuator, write a corrected device profile
 
-Errors print one line naming the field, the value and the allowed range, and exit 2.
+Errors print one line: bad input (a field, its value and the allowed range; a wrong
+argument) exits 2, a failure while running (a file, the sound card, a missing extra)
+exits 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -23,25 +26,31 @@ import soundfile
 from pydantic import ValidationError
 from tqdm import tqdm
 
-from phantomtouch.errors import PhantomTouchError
+from phantomtouch import __version__
+from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error, limits
 
 EXIT_USAGE = 2
+EXIT_FAILURE = 1
 _BLOCK_FRAMES = 1 << 15
 
 
 def _load_device(path: str | None) -> DeviceProfile:
-    return DeviceProfile.load(path) if path else DeviceProfile.default()
+    """The profile at ``path`` (None: the paper's); a bad file is bad input (exit 2)."""
+    try:
+        return DeviceProfile.load(path) if path else DeviceProfile.default()
+    except DeviceError as exc:
+        raise ParameterError(str(exc)) from exc
 
 
 def _load_pattern(path: str) -> TouchPattern:
     try:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
-        raise PhantomTouchError(f"cannot read pattern file {path!r}: {exc.strerror}") from exc
+        raise ParameterError(f"cannot read pattern file {path!r}: {exc.strerror}") from exc
     return TouchPattern.model_validate_json(text)
 
 
@@ -83,7 +92,7 @@ def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None 
 
 def _cmd_render(args: argparse.Namespace) -> int:
     if (args.pattern is None) == (args.preset is None):
-        raise PhantomTouchError("give a PATTERN.json file or --preset NAME (one of them)")
+        raise ParameterError("give a PATTERN.json file or --preset NAME (one of them)")
     pattern = preset(args.preset) if args.preset else _load_pattern(args.pattern)
     plan = plan_at(pattern, _load_device(args.device), sample_rate_hz=args.sample_rate)
     clipped_fraction = write_wav(plan, args.output, plot_path=args.plot)
@@ -131,11 +140,36 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
     return 0
 
 
+def _importable(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ImportError:
+        return False
+
+
+def _require(extra: str, *modules: str) -> None:
+    """Refuse to go on without an extra's modules, naming the extra to install."""
+    missing = [m for m in modules if not _importable(m)]
+    if missing:
+        raise PhantomTouchError(
+            f"{missing[0]} is not installed: this needs the {extra} extra, "
+            f"pip install 'phantomtouch[{extra}]'"
+        )
+
+
 def _cmd_serve(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
+    _require("server", "fastapi", "uvicorn", "pydantic_settings")
     from phantomtouch.server import Settings
     from phantomtouch.server.serve import serve
+
+    if args.output != "null" and not _importable("sounddevice"):
+        print(
+            "phantomtouch serve: sounddevice is not installed (pip install "
+            "'phantomtouch[audio]'): playing to the null output, no sound card",
+            file=sys.stderr,
+        )
 
     options = {
         "host": args.host,
@@ -148,7 +182,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     try:
         settings = Settings(**{k: v for k, v in options.items() if v is not None})
     except ValidationError as exc:
-        raise PhantomTouchError(f"invalid settings: {describe_validation_error(exc)}") from exc
+        raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
     serve(settings)
     return 0
@@ -184,18 +218,26 @@ def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
     strokes = reference_strokes()
     unknown = sorted(set(args.stroke or ()) - set(strokes))
     if unknown:
-        raise PhantomTouchError(f"--stroke {unknown[0]!r} is not one of {sorted(strokes)}")
+        raise ParameterError(f"--stroke {unknown[0]!r} is not one of {sorted(strokes)}")
     if args.stroke:
         strokes = {name: strokes[name] for name in args.stroke}
     top = limits.MAX_GAIN_UPDATE_FRAMES
     if any(not 1 <= n <= top for n in args.frames):
-        raise PhantomTouchError(f"--frames {args.frames} must each be within [1, {top}]")
-    report = run_accuracy(
-        strokes,
-        default_settings(args.frames),
-        device=_load_device(args.device),
-        repeats=args.repeats,
-    )
+        raise ParameterError(f"--frames {args.frames} must each be within [1, {top}]")
+    settings = default_settings(args.frames)
+    with tqdm(
+        total=len(strokes) * (len(settings) + (0 if 1 in args.frames else 1)),
+        desc="bench accuracy",
+        unit="render",
+        file=sys.stderr,
+    ) as bar:
+        report = run_accuracy(
+            strokes,
+            settings,
+            device=_load_device(args.device),
+            repeats=args.repeats,
+            progress=lambda label: (bar.set_postfix_str(label), bar.update(1)),
+        )
     if args.plot:
         save_plot(report, args.plot)
     print(json.dumps(report.to_dict(), indent=2) if args.json else format_table(report))
@@ -229,7 +271,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             input_reference_level_db=reference,
         )
         loop = simulated_loop(device, input_scale_m_s2=scale, seed=args.seed)
-        play_record, before = loop, loop.place_sensor
+        play_record = loop
+        total = len(args.channels or device.actuators)
+        done = [0]
+
+        def before(channel: int) -> None:
+            done[0] += 1
+            print(f"calibrate: channel {channel} ({done[0]} of {total})", file=sys.stderr)
+            loop.place_sensor(channel)
+
     else:
         scale = input_scale(
             sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2,
@@ -297,6 +347,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"phantomtouch {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     serve = sub.add_parser("serve", help="run the touch service (REST and WebSocket)")
@@ -408,9 +459,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         return func(args)
     except ValidationError as exc:
         print(f"phantomtouch: invalid input: {describe_validation_error(exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    except ParameterError as exc:
+        print(f"phantomtouch: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except (PhantomTouchError, OSError) as exc:
         print(f"phantomtouch: {exc}", file=sys.stderr)
-    return EXIT_USAGE
+        return EXIT_FAILURE
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ per-frame setting measured in the same run.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -446,6 +446,7 @@ def run_accuracy(
     repeats: int = 3,
     window_s: float = DEFAULT_WINDOW_S,
     hop_s: float = DEFAULT_HOP_S,
+    progress: Callable[[str], object] | None = None,
 ) -> AccuracyReport:
     """Run the study.
 
@@ -460,6 +461,8 @@ def run_accuracy(
         Timed renders per stroke and setting; the fastest counts.
     window_s, hop_s : float
         Perception window and hop.
+    progress : callable or None
+        Called with ``"setting: stroke"`` after each stroke is measured at a setting.
     """
     base = device or DeviceProfile.default()
     strokes = strokes or reference_strokes()
@@ -474,19 +477,22 @@ def run_accuracy(
     measurements: list[Measurement] = []
     rows: list[Row] = []
     for setting in settings:
-        measured = [
-            measure(
-                name,
-                pattern,
-                setting,
-                base=base,
-                reference_gains=references[name],
-                repeats=max(1, repeats),
-                window_s=window_s,
-                hop_s=hop_s,
+        measured = []
+        for name, pattern in strokes.items():
+            measured.append(
+                measure(
+                    name,
+                    pattern,
+                    setting,
+                    base=base,
+                    reference_gains=references[name],
+                    repeats=max(1, repeats),
+                    window_s=window_s,
+                    hop_s=hop_s,
+                )
             )
-            for name, pattern in strokes.items()
-        ]
+            if progress is not None:
+                progress(f"{setting.label}: {name}")
         measurements += measured
         rows.append(_row(setting, measured))
     reference = next(r for r in rows if r.gain_update_frames == 1)
