@@ -276,8 +276,13 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         done = [0]
 
         def before(channel: int) -> None:
+            # every channel is measured, then every channel is verified
+            step = "measuring" if done[0] < total else "verifying"
+            print(
+                f"calibrate: {step} channel {channel} ({done[0] % total + 1} of {total})",
+                file=sys.stderr,
+            )
             done[0] += 1
-            print(f"calibrate: channel {channel} ({done[0]} of {total})", file=sys.stderr)
             loop.place_sensor(channel)
 
     else:

@@ -54,7 +54,7 @@ from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
 
 TWO_POINT_THRESHOLD_CM = 3.5
-"""Two-point discrimination threshold on the forearm (Weinstein 1968; ALGORITHMS.md sec. 6)."""
+"""Two-point discrimination threshold on the forearm, cm (Weinstein 1968; docs/algorithms.md)."""
 GAIN_UPDATE_FRAMES = (1, 8, 32, 128, 512)
 _MASK_ENERGY = 0.01
 """Statistics cover frames whose intended energy is at least this fraction of the peak."""

@@ -1,6 +1,6 @@
 """Triangulated actuator layouts: barycentric weights, projection, rows for 1D mode.
 
-Numerical pitfalls handled here (ALGORITHMS.md sec. 5): weights come out slightly
+Numerical pitfalls handled here (docs/algorithms.md, sec. 9): weights come out slightly
 negative on edges, so they are clipped and renormalised; a point outside the layout is
 projected onto the nearest triangle first; neighbouring triangles share their edge
 vertices, so weights agree on the edge and gains stay continuous.

@@ -11,9 +11,13 @@ def test_simulated_calibration_writes_a_verified_profile(tmp_path, capsys) -> No
     captured = capsys.readouterr()
     report = json.loads(captured.out)
     assert [c["channel"] for c in report["checks"]] == [3, 6]
-    # progress on stderr, one line per channel
-    assert "calibrate: channel 3 (1 of 2)" in captured.err
-    assert "calibrate: channel 6 (2 of 2)" in captured.err
+    # progress on stderr, one line per channel and pass
+    assert captured.err.splitlines() == [
+        "calibrate: measuring channel 3 (1 of 2)",
+        "calibrate: measuring channel 6 (2 of 2)",
+        "calibrate: verifying channel 3 (1 of 2)",
+        "calibrate: verifying channel 6 (2 of 2)",
+    ]
     assert all(c["worst_db"] <= 1.0 for c in report["checks"])
     profile = DeviceProfile.load(out)
     levels = profile.calibration.channel_level_db
