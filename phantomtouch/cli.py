@@ -116,7 +116,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
 def _cmd_presets(args: argparse.Namespace) -> int:
     names = [n for n in preset_names() if n.startswith(args.prefix or "")]
     if args.json:
-        print(json.dumps({n: plan_at(preset(n)).summary() for n in names}, indent=2))
+        plans = {n: plan_at(preset(n)) for n in names}
+        summaries = {
+            n: {**p.summary(), "clipped_fraction": p.clipped_fraction} for n, p in plans.items()
+        }
+        print(json.dumps(summaries, indent=2))
     else:
         for name in names:
             plan = plan_at(preset(name))

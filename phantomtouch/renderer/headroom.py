@@ -20,11 +20,11 @@ from functools import lru_cache
 
 import numpy as np
 
-from phantomtouch.renderer.carriers import NOISE_PERIOD_FRAMES, make_source
+from phantomtouch.renderer.carriers import NOISE_PERIOD_FRAMES, noise_loop
 from phantomtouch.renderer.output import OutputStage
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.renderer.trajectory import control_gains
-from phantomtouch.schema.pattern import Carrier, SineCarrier
+from phantomtouch.schema.pattern import Carrier, CombinedCarrier, NoiseCarrier, SineCarrier
 
 _MAX_POINTS = 4096
 """Most control times the estimate evaluates the gains at."""
@@ -37,8 +37,14 @@ _PHASES = 64
 @lru_cache(maxsize=8)
 def _sorted_magnitudes(carrier: Carrier, sample_rate_hz: int) -> np.ndarray:
     """|carrier| over one noise period (every ``_NOISE_STEP``-th frame), ascending."""
-    samples = make_source(carrier, sample_rate_hz).block(0, NOISE_PERIOD_FRAMES)
-    magnitudes = np.sort(np.abs(samples[::_NOISE_STEP].astype(np.float64)))
+    assert isinstance(carrier, NoiseCarrier | CombinedCarrier)
+    loop = noise_loop(float(carrier.low_hz), float(carrier.high_hz), carrier.seed, sample_rate_hz)
+    samples = loop[::_NOISE_STEP].astype(np.float64)  # a view of the loop, no copy of it
+    if isinstance(carrier, CombinedCarrier):  # (sine + noise) / sqrt(2), as CombinedSource
+        frames = np.arange(0, NOISE_PERIOD_FRAMES, _NOISE_STEP, dtype=np.float64)
+        cycles = frames * (carrier.freq_hz / sample_rate_hz)
+        samples = (samples + np.sin(2.0 * np.pi * (cycles - np.floor(cycles)))) / np.sqrt(2.0)
+    magnitudes = np.sort(np.abs(samples))
     magnitudes.flags.writeable = False
     return magnitudes
 

@@ -71,7 +71,8 @@ class Plan:
         How many path vertices lay outside the layout and were projected, and how far.
     clipped_fraction : float
         Estimated fraction of frames the safety ceiling clips when the pattern plays
-        alone (:mod:`~phantomtouch.renderer.headroom`); computed on first use.
+        alone (:mod:`~phantomtouch.renderer.headroom`); computed on first use, so it is
+        not part of :meth:`summary`, which the engine calls when it schedules a plan.
     """
 
     pattern: TouchPattern
@@ -115,7 +116,6 @@ class Plan:
             "amplitude": self.amplitude,
             "projected_points": self.projected_points,
             "max_projection_cm": self.max_projection_cm,
-            "clipped_fraction": self.clipped_fraction,
         }
 
 

@@ -230,12 +230,14 @@ class PlanSummary(BaseModel):
     amplitude: float
     projected_points: int
     max_projection_cm: float
-    clipped_fraction: float = Field(
+    clipped_fraction: float | None = Field(
+        default=None,
         ge=0.0,
         le=1.0,
         description=(
             "Estimated fraction of the frames in which a channel reaches the safety ceiling "
-            "and is clipped, the pattern played alone (0: nothing clips)."
+            "and is clipped, the pattern played alone (0: nothing clips; null: a pattern "
+            "stored before the estimate existed)."
         ),
     )
 

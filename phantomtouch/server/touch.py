@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer import plan, preset
@@ -82,7 +82,12 @@ def start_frame(engine: AnyEngine, timing: Timing) -> int | None:
     return engine.frames_at(max(timing.start_at_s, now_s))
 
 
-def accepted(engine: AnyEngine, job: Job) -> JobAccepted:
+def plan_summary(plan: Plan) -> dict[str, Any]:
+    """A plan's summary for an answer, with its clipping estimate."""
+    return {**plan.summary(), "clipped_fraction": plan.clipped_fraction}
+
+
+def accepted(engine: AnyEngine, job: Job, plan: Plan) -> JobAccepted:
     summary = job.summary
     return JobAccepted(
         job_id=str(job.job_id),
@@ -92,7 +97,7 @@ def accepted(engine: AnyEngine, job: Job) -> JobAccepted:
         path_length_cm=summary["path_length_cm"],
         speed_cm_s=summary["speed_cm_s"],
         frames=job.frames,
-        clipped_fraction=summary["clipped_fraction"],
+        clipped_fraction=plan.clipped_fraction,  # estimated here, once the job is scheduled
     )
 
 
@@ -109,5 +114,6 @@ async def schedule(
     engine = service.engine
     pattern = resolve(request, service.store)
     first = start_frame(engine, request.timing())
-    job = await engine.schedule_async(service.plans.plan(pattern), start_frame=first, owner=owner)
-    return accepted(engine, job)
+    plan = service.plans.plan(pattern)
+    job = await engine.schedule_async(plan, start_frame=first, owner=owner)
+    return accepted(engine, job, plan)

@@ -109,7 +109,7 @@ def post_render(
     plan = service.plans.plan(pattern)
     if accept is not None and "application/json" in accept and WAV_MEDIA_TYPE not in accept:
         with service.render_slot():
-            return RenderPlan(**plan.summary(), curves=curves(plan))
+            return RenderPlan(**touch.plan_summary(plan), curves=curves(plan))
     cap_s = service.settings.max_render_duration_s
     if plan.duration_s > cap_s:
         raise ParameterError(

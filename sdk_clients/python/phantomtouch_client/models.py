@@ -78,8 +78,9 @@ class PlanSummary(_Answer):
     amplitude: float
     projected_points: int
     max_projection_cm: float
-    clipped_fraction: float
-    """Estimated fraction of the frames clipped at the safety ceiling (0: none)."""
+    clipped_fraction: float | None = None
+    """Estimated fraction of the frames clipped at the safety ceiling (0: none; None: a
+    pattern stored before the server gave the estimate)."""
 
 
 class Summary(_Answer):
