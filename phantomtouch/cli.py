@@ -8,12 +8,15 @@
 ``phantomtouch bench accuracy``  phantom position and level error against CPU time
 ``phantomtouch calibrate``  measure each actuator, write a corrected device profile
 
-Errors print one line naming the field, the value and the allowed range, and exit 2.
+Errors print one line: bad input (a field, its value and the allowed range; a wrong
+argument) exits 2, a failure while running (a file, the sound card, a missing extra)
+exits 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import shutil
 import sys
@@ -24,8 +27,10 @@ import soundfile
 from pydantic import ValidationError
 from tqdm import tqdm
 
-from phantomtouch.errors import DeviceError, PhantomTouchError
+from phantomtouch import __version__
+from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
+from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error, limits
 
@@ -38,19 +43,27 @@ _WAV_HEADER_BYTES = 4096
 
 
 def _load_device(path: str | None) -> DeviceProfile:
-    return DeviceProfile.load(path) if path else DeviceProfile.default()
+    """The profile at ``path`` (None: the paper's); a bad file is bad input (exit 2)."""
+    try:
+        return DeviceProfile.load(path) if path else DeviceProfile.default()
+    except DeviceError as exc:
+        raise ParameterError(str(exc)) from exc
 
 
 def _load_pattern(path: str) -> TouchPattern:
     try:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
-        raise PhantomTouchError(f"cannot read pattern file {path!r}: {exc.strerror}") from exc
+        raise ParameterError(f"cannot read pattern file {path!r}: {exc.strerror}") from exc
     return TouchPattern.model_validate_json(text)
 
 
-def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None = None) -> None:
-    """Render a plan block by block into a float32 WAV, and optionally its plot."""
+def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None = None) -> float:
+    """Render a plan block by block into a float32 WAV, and optionally its plot.
+
+    Returns the fraction of frames with a channel at the safety ceiling.
+    """
+    clipped = 0
     traces = None
     if plot_path is not None:
         from phantomtouch.plot import TraceEnvelope
@@ -71,12 +84,14 @@ def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None 
     with wav:
         for block in render_plan_blocks(plan, block_frames=_BLOCK_FRAMES):
             wav.write(block)
+            clipped += frames_at_ceiling(block, plan.device.safety.ceiling)
             if traces is not None:
                 traces.add(block)
     if traces is not None and plot_path is not None:
         from phantomtouch.plot import save_plot
 
         save_plot(plan, traces, plot_path)
+    return clipped / plan.frames
 
 
 def _check_plot_path(path: str) -> None:
@@ -113,20 +128,26 @@ def _projection_note(plan: Plan) -> str | None:
 
 def _cmd_render(args: argparse.Namespace) -> int:
     if (args.pattern is None) == (args.preset is None):
-        raise PhantomTouchError("give a PATTERN.json file or --preset NAME (one of them)")
+        raise ParameterError("give a PATTERN.json file or --preset NAME (one of them)")
     if args.plot is not None:
         _check_plot_path(args.plot)
     pattern = preset(args.preset) if args.preset else _load_pattern(args.pattern)
     plan = plan_at(pattern, _load_device(args.device), sample_rate_hz=args.sample_rate)
-    write_wav(plan, args.output, plot_path=args.plot)
+    clipped_fraction = write_wav(plan, args.output, plot_path=args.plot)
     if args.json:
-        print(json.dumps({**plan.summary(), "output": str(args.output)}, indent=2))
+        summary = {**plan.summary(), "clipped_fraction": clipped_fraction}
+        print(json.dumps({**summary, "output": str(args.output)}, indent=2))
     else:
         print(
             f"{args.output}: {plan.duration_s:.3f} s, {plan.frames} frames x {plan.channels} "
             f"channels at {plan.sample_rate_hz} Hz; path {plan.path_length_cm:.3f} cm at "
             f"{plan.speed_cm_s:.3f} cm/s"
         )
+        if clipped_fraction > 0:
+            print(
+                f"{args.output}: {100 * clipped_fraction:.3g} % of the frames reach the safety "
+                f"ceiling {plan.device.safety.ceiling:g} and are clipped: lower the level"
+            )
     note = _projection_note(plan)
     if note is not None:
         print(f"phantomtouch: note: {note}", file=sys.stderr)
@@ -136,7 +157,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
 def _cmd_presets(args: argparse.Namespace) -> int:
     names = [n for n in preset_names() if n.startswith(args.prefix or "")]
     if args.json:
-        print(json.dumps({n: plan_at(preset(n)).summary() for n in names}, indent=2))
+        plans = {n: plan_at(preset(n)) for n in names}
+        summaries = {
+            n: {**p.summary(), "clipped_fraction": p.clipped_fraction} for n, p in plans.items()
+        }
+        print(json.dumps(summaries, indent=2))
     else:
         for name in names:
             plan = plan_at(preset(name))
@@ -180,11 +205,36 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
     return 0
 
 
+def _importable(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ImportError:
+        return False
+
+
+def _require(extra: str, *modules: str) -> None:
+    """Refuse to go on without an extra's modules, naming the extra to install."""
+    missing = [m for m in modules if not _importable(m)]
+    if missing:
+        raise PhantomTouchError(
+            f"{missing[0]} is not installed: this needs the {extra} extra, "
+            f"pip install 'phantomtouch[{extra}]'"
+        )
+
+
 def _cmd_serve(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
+    _require("server", "fastapi", "uvicorn", "pydantic_settings")
     from phantomtouch.server import Settings
     from phantomtouch.server.serve import check_library, check_port_free, serve
+
+    if args.output != "null" and not _importable("sounddevice"):
+        print(
+            "phantomtouch serve: sounddevice is not installed (pip install "
+            "'phantomtouch[audio]'): playing to the null output, no sound card",
+            file=sys.stderr,
+        )
 
     options = {
         "host": args.host,
@@ -197,7 +247,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     try:
         settings = Settings(**{k: v for k, v in options.items() if v is not None})
     except ValidationError as exc:
-        raise PhantomTouchError(f"invalid settings: {describe_validation_error(exc)}") from exc
+        raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
     try:
         check_library(settings)
     except DeviceError as exc:
@@ -239,18 +289,26 @@ def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
     strokes = reference_strokes()
     unknown = sorted(set(args.stroke or ()) - set(strokes))
     if unknown:
-        raise PhantomTouchError(f"--stroke {unknown[0]!r} is not one of {sorted(strokes)}")
+        raise ParameterError(f"--stroke {unknown[0]!r} is not one of {sorted(strokes)}")
     if args.stroke:
         strokes = {name: strokes[name] for name in args.stroke}
     top = limits.MAX_GAIN_UPDATE_FRAMES
     if any(not 1 <= n <= top for n in args.frames):
-        raise PhantomTouchError(f"--frames {args.frames} must each be within [1, {top}]")
-    report = run_accuracy(
-        strokes,
-        default_settings(args.frames),
-        device=_load_device(args.device),
-        repeats=args.repeats,
-    )
+        raise ParameterError(f"--frames {args.frames} must each be within [1, {top}]")
+    settings = default_settings(args.frames)
+    with tqdm(
+        total=len(strokes) * (len(settings) + (0 if 1 in args.frames else 1)),
+        desc="bench accuracy",
+        unit="render",
+        file=sys.stderr,
+    ) as bar:
+        report = run_accuracy(
+            strokes,
+            settings,
+            device=_load_device(args.device),
+            repeats=args.repeats,
+            progress=lambda label: (bar.set_postfix_str(label), bar.update(1)),
+        )
     if args.plot:
         save_plot(report, args.plot)
     print(json.dumps(report.to_dict(), indent=2) if args.json else format_table(report))
@@ -284,7 +342,20 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             input_reference_level_db=reference,
         )
         loop = simulated_loop(device, input_scale_m_s2=scale, seed=args.seed)
-        play_record, before = loop, loop.place_sensor
+        play_record = loop
+        total = len(args.channels or device.actuators)
+        done = [0]
+
+        def before(channel: int) -> None:
+            # every channel is measured, then every channel is verified
+            step = "measuring" if done[0] < total else "verifying"
+            print(
+                f"calibrate: {step} channel {channel} ({done[0] % total + 1} of {total})",
+                file=sys.stderr,
+            )
+            done[0] += 1
+            loop.place_sensor(channel)
+
     else:
         scale = input_scale(
             sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2,
@@ -352,6 +423,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"phantomtouch {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     serve = sub.add_parser("serve", help="run the touch service (REST and WebSocket)")
@@ -463,9 +535,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         return func(args)
     except ValidationError as exc:
         print(f"phantomtouch: invalid input: {describe_validation_error(exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    except ParameterError as exc:
+        print(f"phantomtouch: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except (PhantomTouchError, OSError) as exc:
         print(f"phantomtouch: {exc}", file=sys.stderr)
-    return EXIT_USAGE
+        return EXIT_FAILURE
 
 
 if __name__ == "__main__":

@@ -75,8 +75,27 @@ def test_render_pattern_file(tmp_path):
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["speed_cm_s"] == 7.0
+    assert summary["clipped_fraction"] == 0.0
     expected = pt.render(TouchPattern.model_validate(pattern))
     np.testing.assert_array_equal(read_wav(tmp_path / "touch.wav"), expected)
+
+
+def test_render_reports_the_frames_the_ceiling_clipped(tmp_path):
+    pattern = {
+        "path": {"kind": "polyline", "points_cm": [[0.0, 0.0]]},
+        "duration_s": 2.0,
+        "carrier": {"kind": "noise"},
+        "level_db": 150.0,
+    }
+    (tmp_path / "loud.json").write_text(json.dumps(pattern), encoding="utf-8")
+    result = run("render", "loud.json", "-o", "loud.wav", "--json", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    samples = read_wav(tmp_path / "loud.wav")
+    at_ceiling = float(np.mean((np.abs(samples) >= np.float32(1.0)).any(axis=1)))
+    assert at_ceiling > 0.0
+    assert json.loads(result.stdout)["clipped_fraction"] == at_ceiling
+    text = run("render", "loud.json", "-o", "loud.wav", cwd=tmp_path)
+    assert "reach the safety ceiling 1 and are clipped" in text.stdout
 
 
 def test_presets_lists_every_preset(tmp_path):
@@ -107,8 +126,11 @@ def test_stimuli_exp2_writes_four_wavs_and_a_manifest(tmp_path):
         assert entry["speed_cm_s"] == pytest.approx(pt.plan(pt.preset(name)).speed_cm_s)
 
 
-def assert_refused(result: subprocess.CompletedProcess[str], *fragments: str) -> None:
-    assert result.returncode == 2
+def assert_refused(
+    result: subprocess.CompletedProcess[str], *fragments: str, status: int = 2
+) -> None:
+    # 2: bad input (a field, an argument, a file the user named); 1: a failure while running
+    assert result.returncode == status
     assert "Traceback" not in result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
@@ -164,4 +186,49 @@ def test_degenerate_device_file_is_refused_in_one_line(tmp_path):
 
 def test_unwritable_output_is_refused_in_one_line(tmp_path):
     result = run("render", "--preset", "vr/tap", "-o", "no/such/dir/x.wav", cwd=tmp_path)
-    assert_refused(result, "no/such/dir/x.wav")
+    assert_refused(result, "no/such/dir/x.wav", status=1)
+
+
+def test_version(tmp_path):
+    result = run("--version", cwd=tmp_path)
+    assert result.returncode == 0
+    assert result.stdout.strip() == f"phantomtouch {pt.__version__}"
+
+
+def test_serve_without_the_audio_extra_says_it_plays_to_the_null_output(tmp_path):
+    code = (
+        "import sys, importlib.abc\n"
+        "class Hide(importlib.abc.MetaPathFinder):\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] == 'sounddevice':\n"
+        "            raise ModuleNotFoundError(name)\n"
+        "sys.meta_path.insert(0, Hide())\n"
+        "from phantomtouch.cli import main\n"
+        "sys.exit(main(['serve', '--port', '70000']))\n"  # refused after the warning
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 2  # the bad port, after the warning
+    assert "sounddevice is not installed" in result.stderr
+    assert "playing to the null output" in result.stderr
+
+
+def test_serve_without_the_server_extra_names_the_extra(tmp_path):
+    # The core alone: fastapi made unimportable, as in an install without [server].
+    code = (
+        "import sys, importlib.abc\n"
+        "class Hide(importlib.abc.MetaPathFinder):\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] == 'fastapi':\n"
+        "            raise ModuleNotFoundError(name)\n"
+        "sys.meta_path.insert(0, Hide())\n"
+        "from phantomtouch.cli import main\n"
+        "sys.exit(main(['serve', '--port', '8799']))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    assert "pip install 'phantomtouch[server]'" in result.stderr

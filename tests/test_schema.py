@@ -368,6 +368,14 @@ def test_unreadable_or_unparsable_profiles_are_device_errors(tmp_path):
             "gain_update_frames=0: Input should be greater than or equal to 1",
         ),
         (
+            {"gain_update_s": 0.0},
+            "gain_update_s=0.0: Input should be greater than 0",
+        ),
+        (
+            {"gain_update_s": 0.5},
+            "gain_update_s=0.5: Input should be less than or equal to 0.02",
+        ),
+        (
             {"sample_rate_hz": 1000},
             "sample_rate_hz=1000: Input should be greater than or equal to 8000",
         ),
@@ -375,3 +383,54 @@ def test_unreadable_or_unparsable_profiles_are_device_errors(tmp_path):
 )
 def test_device_profile_fields_are_validated_with_field_and_value(update, expected):
     assert expected in refusal(update, DeviceProfile)
+
+
+@pytest.mark.parametrize(
+    ("sample_rate_hz", "frames"), [(8000, 21), (44100, 118), (48000, 128), (192000, 512)]
+)
+def test_the_control_interval_is_a_time_rounded_to_frames(sample_rate_hz, frames):
+    device = DeviceProfile(sample_rate_hz=sample_rate_hz)
+    assert device.gain_step_frames == frames  # 2.667 ms at each rate
+    assert DeviceProfile(sample_rate_hz=sample_rate_hz, gain_update_frames=7).gain_step_frames == 7
+    assert DeviceProfile(sample_rate_hz=8000, gain_update_s=1e-5).gain_step_frames == 1
+
+
+# --- the JSON Schema states the rules it can ---------------------------------------------
+
+STILL = {"kind": "polyline", "points_cm": [[1.9, 7.2]]}
+KEYFRAMES = {"kind": "keyframes", "keyframes": [{"t_s": 0.0, "x_cm": 1.9, "y_cm": 7.2}]}
+SCHEMA_CASES = [
+    # (body, accepted)
+    ({"path": STILL, "duration_s": 1.0}, True),
+    ({"path": STILL, "speed_cm_s": 5.0}, True),
+    ({"path": STILL}, False),  # neither speed_cm_s nor duration_s
+    ({"path": STILL, "speed_cm_s": 5.0, "duration_s": 1.0}, False),  # both
+    ({"path": STILL, "speed_cm_s": None, "duration_s": 1.0}, True),  # null is absent
+    ({"path": KEYFRAMES}, True),
+    ({"path": KEYFRAMES, "speed_cm_s": 5.0}, False),  # keyframes carry their own times
+    ({"path": STILL, "duration_s": 1.0, "intensity": "low", "level_db": 120.0}, False),
+    ({"path": STILL, "duration_s": 1.0, "intensity": "low", "level_db": None}, True),
+    ({"path": STILL, "duration_s": 1.0, "level_db": 120.0}, True),
+    ({"path": STILL, "duration_s": 1.0, "modulation": {"freq_hz": 0.0}}, False),
+    ({"path": STILL, "duration_s": 1.0, "modulation": {"freq_hz": 1000.0}}, True),
+    ({"path": STILL, "duration_s": 1.0, "modulation": {"freq_hz": 1000.5}}, False),
+    ({"path": STILL, "duration_s": 1.0, "modulation": {"freq_hz": "stroke"}}, True),
+    ({"path": {"points_cm": [[1.9, 7.2]]}, "duration_s": 1.0}, False),  # kind is required
+    ({"path": STILL, "duration_s": 1.0, "carrier": {"freq_hz": 100.0}}, False),
+    ({"path": STILL, "duration_s": 1.0, "repeat": 2.0, "carrier": {"kind": "noise"}}, True),
+]
+
+
+@pytest.mark.parametrize(("body", "accepted"), SCHEMA_CASES)
+def test_the_json_schema_and_the_model_agree(body, accepted):
+    import jsonschema_rs  # schemathesis' validator, a dev dependency
+
+    validator = jsonschema_rs.validator_for(TouchPattern.model_json_schema())
+    assert validator.is_valid(body) is accepted
+    # The model, validated from the JSON in strict mode as the server does.
+    try:
+        TouchPattern.__pydantic_validator__.validate_json(json.dumps(body), strict=True)
+    except ValidationError:
+        assert not accepted
+    else:
+        assert accepted

@@ -26,7 +26,7 @@ per-frame setting measured in the same run.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -43,13 +43,18 @@ from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.plan import Plan, plan
 from phantomtouch.renderer.presets import preset
 from phantomtouch.renderer.render import render, render_blocks
-from phantomtouch.renderer.trajectory import control_gains, envelope_at, positions_at
+from phantomtouch.renderer.trajectory import (
+    control_gains,
+    envelope_at,
+    modulation_at,
+    positions_at,
+)
 from phantomtouch.renderer.voice import gain_block
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
 
 TWO_POINT_THRESHOLD_CM = 3.5
-"""Two-point discrimination threshold on the forearm (Weinstein 1968; ALGORITHMS.md sec. 6)."""
+"""Two-point discrimination threshold on the forearm, cm (Weinstein 1968; docs/algorithms.md)."""
 GAIN_UPDATE_FRAMES = (1, 8, 32, 128, 512)
 _MASK_ENERGY = 0.01
 """Statistics cover frames whose intended energy is at least this fraction of the peak."""
@@ -137,20 +142,25 @@ def effective_gains(resolved: Plan) -> np.ndarray:
 
     The gain grid of :class:`~phantomtouch.renderer.voice.PatternRenderer` (every
     ``gain_update_frames`` frames from frame 0) through the renderer's own
-    :func:`~phantomtouch.renderer.voice.gain_block`, fed a carrier of ones.
+    :func:`~phantomtouch.renderer.voice.gain_block`, fed a carrier of ones times the
+    per-sample amplitude modulation, as the renderer applies it.
 
     Returns
     -------
     ndarray, shape (frames, channels), float32
     """
-    step = resolved.device.gain_update_frames
+    step = resolved.device.gain_step_frames
     ramp = resolved.device.gain_ramp
     frames = resolved.frames
     last = (frames - 1) // step + (1 if ramp and step > 1 else 0)
     grid_frames = np.arange(last + 1, dtype=np.float64) * step
-    grid = control_gains(resolved, grid_frames / resolved.sample_rate_hz)
+    grid = control_gains(resolved, grid_frames / resolved.sample_rate_hz, modulated=False)
     grid32 = np.ascontiguousarray(grid, dtype=np.float32)
-    return gain_block(np.ones(frames, dtype=np.float32), grid32, step, 0, ramp=ramp)
+    carrier = np.ones(frames, dtype=np.float32)
+    factor = modulation_at(resolved, np.arange(frames) / resolved.sample_rate_hz)
+    if factor is not None:
+        carrier *= factor.astype(np.float32)
+    return gain_block(carrier, grid32, step, 0, ramp=ramp)
 
 
 def intended_path(resolved: Plan, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -436,6 +446,7 @@ def run_accuracy(
     repeats: int = 3,
     window_s: float = DEFAULT_WINDOW_S,
     hop_s: float = DEFAULT_HOP_S,
+    progress: Callable[[str], object] | None = None,
 ) -> AccuracyReport:
     """Run the study.
 
@@ -450,6 +461,8 @@ def run_accuracy(
         Timed renders per stroke and setting; the fastest counts.
     window_s, hop_s : float
         Perception window and hop.
+    progress : callable or None
+        Called with ``"setting: stroke"`` after each stroke is measured at a setting.
     """
     base = device or DeviceProfile.default()
     strokes = strokes or reference_strokes()
@@ -464,19 +477,22 @@ def run_accuracy(
     measurements: list[Measurement] = []
     rows: list[Row] = []
     for setting in settings:
-        measured = [
-            measure(
-                name,
-                pattern,
-                setting,
-                base=base,
-                reference_gains=references[name],
-                repeats=max(1, repeats),
-                window_s=window_s,
-                hop_s=hop_s,
+        measured = []
+        for name, pattern in strokes.items():
+            measured.append(
+                measure(
+                    name,
+                    pattern,
+                    setting,
+                    base=base,
+                    reference_gains=references[name],
+                    repeats=max(1, repeats),
+                    window_s=window_s,
+                    hop_s=hop_s,
+                )
             )
-            for name, pattern in strokes.items()
-        ]
+            if progress is not None:
+                progress(f"{setting.label}: {name}")
         measurements += measured
         rows.append(_row(setting, measured))
     reference = next(r for r in rows if r.gain_update_frames == 1)

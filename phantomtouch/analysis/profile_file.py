@@ -19,7 +19,10 @@ def _value(value: Any) -> str:
     if isinstance(value, int | float):
         return repr(value)
     if isinstance(value, str):
-        return json.dumps(value)  # a TOML basic string: same escapes
+        # A TOML basic string takes JSON's escapes except \uD83D\uDE00 pairs for characters
+        # beyond the BMP (TOML wants \U0001F600 or the character itself) and wants DEL
+        # escaped: write every character as it is, escape control characters and DEL.
+        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
     if isinstance(value, list):
         items = [_value(v) for v in value]
         if len(items) <= _PER_LINE and not any(isinstance(v, list) for v in value):

@@ -20,7 +20,7 @@ digital resonator is stable for every ``Q > 0`` and every ``0 < f0_hz < fs / 2``
 its gain at ``f0_hz`` is exactly the analog ``g Q``. :func:`euler_accelerations` is
 the naive explicit-Euler integration of the same equation, kept only to show where it
 fails: its poles are ``1 + T s_k``, outside the unit circle as soon as
-``2 pi f0_hz Q / fs > 1`` (ALGORITHMS.md sec. 5).
+``2 pi f0_hz Q / fs > 1`` (docs/algorithms.md, sec. 9).
 """
 
 from __future__ import annotations

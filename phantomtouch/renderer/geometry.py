@@ -1,6 +1,6 @@
 """Triangulated actuator layouts: barycentric weights, projection, rows for 1D mode.
 
-Numerical pitfalls handled here (ALGORITHMS.md sec. 5): weights come out slightly
+Numerical pitfalls handled here (docs/algorithms.md, sec. 9): weights come out slightly
 negative on edges, so they are clipped and renormalised; a point outside the layout is
 projected onto the nearest triangle first; neighbouring triangles share their edge
 vertices, so weights agree on the edge and gains stay continuous.
@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.spatial import Delaunay, QhullError
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema.device import DeviceProfile
@@ -142,6 +141,8 @@ def _geometry(device: DeviceProfile) -> Geometry:
     if device.triangles is not None:
         triangles = np.array(device.triangles, dtype=np.intp)
     else:
+        from scipy.spatial import Delaunay, QhullError  # only custom layouts need it
+
         try:
             triangles = np.asarray(Delaunay(positions).simplices, dtype=np.intp)
         except QhullError as exc:

@@ -1,5 +1,7 @@
 """The output stage after the mix: calibration, FIR correction, NaN guard, ceiling.
 
+The FIR runs as a uniformly partitioned FFT convolution (:mod:`~phantomtouch.renderer.fir`).
+
 Calibration is linear, so it is applied once to the summed signal. The engine puts a
 smooth limiter before :meth:`OutputStage.process`; the hard clip here is the last line.
 """
@@ -7,9 +9,14 @@ smooth limiter before :meth:`OutputStage.process`; the hard clip here is the las
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
+from phantomtouch.renderer.fir import PartitionedFir
 from phantomtouch.schema.device import DeviceProfile
+
+
+def frames_at_ceiling(block: np.ndarray, ceiling: float) -> int:
+    """Frames of an output ``block`` (frames, channels) with a channel at the ceiling."""
+    return int(np.count_nonzero((np.abs(block) >= np.float32(ceiling)).any(axis=1)))
 
 
 class OutputStage:
@@ -27,11 +34,7 @@ class OutputStage:
         self.muted_blocks = 0
         gains = self.channel_gains(device)
         self._gains = gains.astype(np.float32) if np.any(gains != 1.0) else None
-        self._fir: list[tuple[np.ndarray, np.ndarray]] | None = None
-        if cal.fir_taps is not None:
-            self._fir = [
-                (np.array(taps, dtype=np.float64), np.zeros(len(taps) - 1)) for taps in cal.fir_taps
-            ]
+        self._fir = None if cal.fir_taps is None else PartitionedFir(cal.fir_taps)
 
     @staticmethod
     def channel_gains(device: DeviceProfile) -> np.ndarray:
@@ -59,12 +62,14 @@ class OutputStage:
     def process(self, block: np.ndarray) -> None:
         """Calibrate and limit ``block`` in place, shape (frames, channels), float32."""
         self.calibrate(block)
-        if self._fir is not None:
-            for ch, (taps, state) in enumerate(self._fir):
-                filtered, state[:] = signal.lfilter(taps, 1.0, block[:, ch], zi=state)
-                block[:, ch] = filtered
         if block.size == 0:
             return
+        if self._fir is not None:
+            if not (np.isfinite(block.max()) and np.isfinite(block.min())):
+                # muted before NaN or Inf enters the FIR's memory
+                block[:] = 0.0
+                self.muted_blocks += 1
+            self._fir.process(block)
         high, low = block.max(), block.min()  # NaN or Inf anywhere shows in one of them
         if not (np.isfinite(high) and np.isfinite(low)):
             block[:] = 0.0

@@ -9,7 +9,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema import limits
@@ -83,6 +82,8 @@ def _spline(path: SplinePath) -> np.ndarray:
     if len(points) <= 2:
         return points
     chord = _cumulative_length(points)
+    from scipy.interpolate import CubicSpline  # only spline paths need it (0.3 s to import)
+
     spline = CubicSpline(chord, points, axis=0, bc_type="natural")
     per_segment = max(1, min(_SPLINE_SAMPLES_PER_SEGMENT, _SPLINE_MAX_SAMPLES // (len(points) - 1)))
     s = np.concatenate(

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -68,6 +69,10 @@ class Plan:
         Voice amplitude, 1.0 = full-scale sine on a nominal channel.
     projected_points, max_projection_cm
         How many path vertices lay outside the layout and were projected, and how far.
+    clipped_fraction : float
+        Estimated fraction of frames the safety ceiling clips when the pattern plays
+        alone (:mod:`~phantomtouch.renderer.headroom`); computed on first use, so it is
+        not part of :meth:`summary`, which the engine calls when it schedules a plan.
     """
 
     pattern: TouchPattern
@@ -88,6 +93,12 @@ class Plan:
     max_projection_cm: float
     forward: Timeline
     backward: Timeline | None
+
+    @cached_property
+    def clipped_fraction(self) -> float:
+        from phantomtouch.renderer.headroom import clipped_fraction  # it builds on Plan
+
+        return clipped_fraction(self)
 
     def summary(self) -> dict[str, Any]:
         """The plan as plain JSON-ready values."""

@@ -3,6 +3,11 @@
 This is the control-rate part of the renderer: positions (from the plan's timelines),
 the envelope (linear fades of eq. 1, amplitude modulation of eq. 2, keyframe
 intensity) and the resulting per-channel gains.
+
+Amplitude modulation may run at up to 1000 Hz, faster than any gain grid can follow
+(a grid of 128 frames at 48 kHz samples it at 375 Hz and aliases it), so the block
+renderer applies it per sample (:func:`modulation_at`) and takes its gains without it
+(``control_gains(..., modulated=False)``).
 """
 
 from __future__ import annotations
@@ -68,7 +73,35 @@ def _unit_clamp(values: np.ndarray) -> np.ndarray:
     return np.minimum(values, 1.0, out=values)
 
 
-def _envelope(plan: Plan, times_s: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
+def _modulation(plan: Plan, times_s: np.ndarray, tau_s: np.ndarray) -> np.ndarray | None:
+    mod = plan.pattern.modulation
+    if mod is None or mod.index <= 0:
+        return None
+    cycles = tau_s / plan.stroke_s if mod.freq_hz == "stroke" else times_s * float(mod.freq_hz)
+    cycles -= np.floor(cycles)  # the phase wrapped in float64 keeps its precision for hours
+    m = mod.index
+    return np.asarray((1.0 - m / 2.0) - (m / 2.0) * np.cos(2.0 * np.pi * cycles))
+
+
+def modulation_at(plan: Plan, times_s: np.ndarray) -> np.ndarray | None:
+    """Amplitude modulation factor of eq. 2 at absolute pattern times.
+
+    ``(1 - m/2) - (m/2) cos(2 pi f_m t)``, with ``f_m t`` replaced by the stroke-local
+    time over the stroke's length for ``freq_hz="stroke"``.
+
+    Returns
+    -------
+    ndarray, shape (n,), float64, each in [0, 1], or None
+        None when the pattern has no modulation (a factor of 1 throughout).
+    """
+    times_s = np.asarray(times_s, dtype=np.float64)
+    _, tau = _stroke_time(plan, times_s)
+    return _modulation(plan, times_s, tau)
+
+
+def _envelope(
+    plan: Plan, times_s: np.ndarray, tau_s: np.ndarray, *, modulated: bool = True
+) -> np.ndarray:
     pattern = plan.pattern
     with np.errstate(over="ignore"):  # a fade of a few 1e-300 s overflows to inf, clipped to 1
         if pattern.fade_in_s > 0:
@@ -79,11 +112,10 @@ def _envelope(plan: Plan, times_s: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
             fade = plan.stroke_s - tau_s
             fade /= pattern.fade_out_s
             env *= _unit_clamp(fade)
-    mod = pattern.modulation
-    if mod is not None and mod.index > 0:
-        cycles = tau_s / plan.stroke_s if mod.freq_hz == "stroke" else times_s * float(mod.freq_hz)
-        m = mod.index
-        env *= (1.0 - m / 2.0) - (m / 2.0) * np.cos(2.0 * np.pi * cycles)
+    if modulated:
+        factor = _modulation(plan, times_s, tau_s)
+        if factor is not None:
+            env *= factor
     env[(times_s < 0) | (times_s >= plan.duration_s)] = 0.0
     return env
 
@@ -100,8 +132,16 @@ def envelope_at(plan: Plan, times_s: np.ndarray) -> np.ndarray:
     return _envelope(plan, times_s, tau)
 
 
-def control_gains(plan: Plan, times_s: np.ndarray) -> np.ndarray:
+def control_gains(plan: Plan, times_s: np.ndarray, *, modulated: bool = True) -> np.ndarray:
     """Per-channel gains, envelope and amplitude included, at absolute pattern times.
+
+    Parameters
+    ----------
+    plan : Plan
+    times_s : ndarray, shape (n,), seconds from the pattern's start
+    modulated : bool
+        Include the amplitude modulation of eq. 2 (False: the caller applies
+        :func:`modulation_at` itself, per sample).
 
     Returns
     -------
@@ -110,7 +150,7 @@ def control_gains(plan: Plan, times_s: np.ndarray) -> np.ndarray:
     times_s = np.asarray(times_s, dtype=np.float64)
     stroke, tau = _stroke_time(plan, times_s)
     points, intensity = _positions(plan, stroke, tau)
-    env = _envelope(plan, times_s, tau)
+    env = _envelope(plan, times_s, tau, modulated=modulated)
     if intensity is not None:
         env *= intensity
     env *= plan.amplitude

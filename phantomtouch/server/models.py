@@ -27,6 +27,7 @@ from pydantic.config import JsonDict
 
 from phantomtouch.schema import TouchPattern
 from phantomtouch.schema.device import Actuator
+from phantomtouch.schema.pattern import TIMING_RULES, not_both
 
 PATTERN_NAME_REGEX = (
     r"^(?:[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}"
@@ -55,12 +56,7 @@ class _Body(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-_NOT_BOTH_STARTS: JsonDict = {
-    "not": {
-        "required": ["start_in_ms", "start_at_s"],
-        "properties": {"start_in_ms": {"type": "number"}, "start_at_s": {"type": "number"}},
-    }
-}
+_NOT_BOTH_STARTS: JsonDict = not_both("start_in_ms", "start_at_s")
 
 
 class Timing(_Body):
@@ -103,7 +99,7 @@ class PatternTouch(TouchPattern, Timing):
         extra="forbid",
         frozen=True,
         json_schema_extra={
-            **_NOT_BOTH_STARTS,
+            "allOf": [_NOT_BOTH_STARTS, *TIMING_RULES],
             "examples": [
                 {
                     "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
@@ -134,7 +130,13 @@ def _optional_fields() -> dict[str, Any]:
 
 PatternOverrides: type[BaseModel] = create_model(
     "PatternOverrides",
-    __config__=ConfigDict(extra="forbid", frozen=True),
+    __config__=ConfigDict(
+        extra="forbid",
+        frozen=True,
+        json_schema_extra={
+            "allOf": [not_both("speed_cm_s", "duration_s"), not_both("level_db", "intensity")]
+        },
+    ),
     __doc__=(
         "TouchPattern fields that replace the preset's. `speed_cm_s` replaces the preset's "
         "`duration_s` (and the other way round); `level_db` replaces `intensity`."
@@ -286,6 +288,16 @@ class PlanSummary(BaseModel):
     amplitude: float
     projected_points: int
     max_projection_cm: float
+    clipped_fraction: float | None = Field(
+        default=None,
+        ge=0.0,
+        le=1.0,
+        description=(
+            "Estimated fraction of the frames in which a channel reaches the safety ceiling "
+            "and is clipped, the pattern played alone (0: nothing clips; null: a pattern "
+            "stored before the estimate existed)."
+        ),
+    )
 
 
 class JobAccepted(BaseModel):
@@ -298,6 +310,11 @@ class JobAccepted(BaseModel):
     path_length_cm: float
     speed_cm_s: float
     frames: int
+    clipped_fraction: float = Field(
+        ge=0.0,
+        le=1.0,
+        description="Estimated fraction of the frames clipped at the safety ceiling.",
+    )
 
     model_config = {
         "json_schema_extra": {
@@ -310,6 +327,7 @@ class JobAccepted(BaseModel):
                     "path_length_cm": 9.6,
                     "speed_cm_s": 5.0,
                     "frames": 149760,
+                    "clipped_fraction": 0.0,
                 }
             ]
         }

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer import plan, preset
@@ -82,7 +82,12 @@ def start_frame(engine: EngineFront, timing: Timing) -> int | None:
     return engine.frames_at(max(timing.start_at_s, now_s))
 
 
-def accepted(engine: EngineFront, job: Job) -> JobAccepted:
+def plan_summary(plan: Plan) -> dict[str, Any]:
+    """A plan's summary for an answer, with its clipping estimate."""
+    return {**plan.summary(), "clipped_fraction": plan.clipped_fraction}
+
+
+def accepted(engine: EngineFront, job: Job, plan: Plan) -> JobAccepted:
     summary = job.summary
     return JobAccepted(
         job_id=str(job.job_id),
@@ -92,6 +97,7 @@ def accepted(engine: EngineFront, job: Job) -> JobAccepted:
         path_length_cm=summary["path_length_cm"],
         speed_cm_s=summary["speed_cm_s"],
         frames=job.frames,
+        clipped_fraction=plan.clipped_fraction,  # estimated here, once the job is scheduled
     )
 
 
@@ -109,9 +115,10 @@ async def schedule(
     engine = service.engine
     stops = engine.stop_count  # a stop that comes while this one is planned voids it
 
-    def plan_and_schedule() -> Job:
+    def plan_and_schedule() -> JobAccepted:
         planned = service.plans.plan(resolve(request, service.store))
         first = start_frame(engine, request.timing())
-        return engine.schedule(planned, start_frame=first, owner=owner, stop_count=stops)
+        job = engine.schedule(planned, start_frame=first, owner=owner, stop_count=stops)
+        return accepted(engine, job, planned)
 
-    return accepted(engine, await asyncio.to_thread(plan_and_schedule))
+    return await asyncio.to_thread(plan_and_schedule)

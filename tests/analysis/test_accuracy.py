@@ -12,6 +12,7 @@ from phantomtouch.analysis.accuracy import (
     gain_centroid,
     intended_path,
     measure,
+    meets_criteria,
     recommend,
     reference_strokes,
     run_accuracy,
@@ -155,3 +156,34 @@ def test_recommend_judges_the_twin_beyond_the_per_frame_floor() -> None:
     assert recommend(rows[1:]) is None  # no per-frame floor to judge against
     rows[1].silent_windows_twin = 1  # a setting that leaves a felt window silent fails
     assert recommend(rows) == "1"
+
+
+@pytest.mark.parametrize("sample_rate_hz", [8000, 48000, 192000])
+def test_the_default_control_interval_meets_the_criteria_at_every_rate(
+    sample_rate_hz: int,
+) -> None:
+    # The interval is a time: at 8 kHz 21 frames, at 192 kHz 512, always about 2.67 ms,
+    # so the phantom moves as far between two updates whatever the rate.
+    device = BASE.model_copy(update={"sample_rate_hz": sample_rate_hz})
+    step = device.gain_step_frames
+    assert step == round(device.gain_update_s * sample_rate_hz)
+    strokes = {name: reference_strokes()[name] for name in ("zigzag-v100", "stop-and-go")}
+    report = run_accuracy(
+        strokes, [Setting(1, True), Setting(step, True)], device=device, repeats=1
+    )
+    floor, default = report.rows
+    assert meets_criteria(default, floor), (
+        default.position_error_gains_max_cm,
+        default.level_error_gains_max_db,
+        default.position_error_twin_max_cm - floor.position_error_twin_max_cm,
+        default.level_variation_twin_db - floor.level_variation_twin_db,
+    )
+
+
+def test_a_count_of_frames_would_miss_the_criteria_at_8_khz() -> None:
+    # What the time-based interval avoids: 128 frames at 8 kHz are 16 ms.
+    device = BASE.model_copy(update={"sample_rate_hz": 8000})
+    strokes = {"zigzag-v100": reference_strokes()["zigzag-v100"]}
+    report = run_accuracy(strokes, [Setting(1, True), Setting(128, True)], device=device, repeats=1)
+    floor, frames_128 = report.rows
+    assert not meets_criteria(frames_128, floor)

@@ -20,8 +20,11 @@ def test_bench_accuracy_prints_json_and_writes_the_plot(tmp_path, capsys) -> Non
 def test_bench_accuracy_prints_a_table(capsys) -> None:
     argv = ["bench", "accuracy", "--frames", "8", "--stroke", "exp2-curved", "--repeats", "1"]
     assert main(argv) == 0
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
     assert "1 (per frame)" in out and "8 ramp" in out and "recommended default" in out
+    # progress on stderr: three renders (per frame, 8 ramp, 8 hold) of one stroke
+    assert "bench accuracy" in captured.err and "3/3" in captured.err
 
 
 @pytest.mark.parametrize(

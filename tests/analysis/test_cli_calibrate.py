@@ -8,8 +8,16 @@ def test_simulated_calibration_writes_a_verified_profile(tmp_path, capsys) -> No
     out = tmp_path / "armband.json"
     argv = ["calibrate", "--simulate", "--channels", "3", "6", "--excitation-s", "4"]
     assert main([*argv, "-o", str(out), "--json", "--seed", "5"]) == 0
-    report = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)
     assert [c["channel"] for c in report["checks"]] == [3, 6]
+    # progress on stderr, one line per channel and pass
+    assert captured.err.splitlines() == [
+        "calibrate: measuring channel 3 (1 of 2)",
+        "calibrate: measuring channel 6 (2 of 2)",
+        "calibrate: verifying channel 3 (1 of 2)",
+        "calibrate: verifying channel 6 (2 of 2)",
+    ]
     assert all(c["worst_db"] <= 1.0 for c in report["checks"])
     profile = DeviceProfile.load(out)
     levels = profile.calibration.channel_level_db

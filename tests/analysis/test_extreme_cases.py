@@ -70,7 +70,7 @@ def test_every_speed_from_0_01_to_1000_cm_s_follows_the_path(speed_cm_s: float) 
     centroid = gain_centroid(effective_gains(resolved), resolved.geometry)
     error = np.hypot(*(centroid - points)[sounding].T)
     # never further from the path than the point moves between two gain updates
-    step_cm = speed_cm_s * DEVICE.gain_update_frames / RATE
+    step_cm = speed_cm_s * DEVICE.gain_step_frames / RATE
     assert np.max(error) <= step_cm + 1e-5  # 1e-5 cm: float32 gains
     assert np.max(error) < TWO_POINT_THRESHOLD_CM
 
@@ -329,7 +329,7 @@ def test_log_law_at_zero_weight_is_silent_not_minus_infinity() -> None:
     weights = np.array([0.0, 1e-300, 5e-324, 0.5, 1.0])
     gains = apply_law(weights, "log")
     assert np.all(np.isfinite(gains)) and gains[0] == 0.0 and gains[-1] == 1.0
-    # ALGORITHMS.md sec. 2: -1.65 dB of energy mid-edge, -2.9 dB at a triangle's centroid
+    # docs/algorithms.md sec. 4: -1.65 dB of energy mid-edge, -2.87 dB at a triangle's centroid
     mid_edge = gains_at(DEVICE, 0.0, 2.4, law="log")
     assert 10 * np.log10(np.sum(mid_edge**2)) == pytest.approx(-1.65, abs=0.01)
     centroid = gains_at(DEVICE, 3.8 * 2 / 3, 4.8 / 3, law="log")  # triangle (1, 5, 6)

@@ -45,3 +45,13 @@ def test_unknown_suffix_and_unwritable_path_are_refused(tmp_path) -> None:
         write_profile(DeviceProfile.default(), tmp_path / "p.yaml")
     with pytest.raises(DeviceError, match="cannot write"):
         write_profile(DeviceProfile.default(), tmp_path / "missing" / "p.toml")
+
+
+@pytest.mark.parametrize(
+    "name", ["armband 😀", "tab\tnewline\ndel\x7f", "𝄞 clef and é", 'quote " backslash \\']
+)
+def test_any_name_round_trips_through_toml(name: str, tmp_path) -> None:
+    # Characters beyond the BMP, control characters and DEL, which TOML escapes its own way.
+    profile = DeviceProfile(name=name)
+    write_profile(profile, tmp_path / "p.toml")
+    assert DeviceProfile.load(tmp_path / "p.toml").name == name

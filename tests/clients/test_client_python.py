@@ -21,12 +21,14 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import httpx
 import numpy as np
 import pytest
 import soundfile
 from phantomtouch_client import (
     AsyncClient,
     AsyncSession,
+    Busy,
     Client,
     Clock,
     DeviceInfo,
@@ -36,6 +38,7 @@ from phantomtouch_client import (
     JobStatus,
     MalformedMessage,
     NotFound,
+    ParameterError,
     PlanSummary,
     RenderCurves,
     RenderPlan,
@@ -43,13 +46,14 @@ from phantomtouch_client import (
     SessionState,
     StopAnswer,
     Summary,
+    TouchPattern,
     Unauthorized,
     _calls,
 )
 from pydantic import BaseModel
 from websockets.asyncio.server import ServerConnection, serve
 
-from phantomtouch import ParameterError, TouchPattern
+import phantomtouch as service
 from tests.clients.live import ROOT, Observer, get, running, wait_until
 from tests.support.live_server import LiveServer
 
@@ -441,3 +445,170 @@ def test_the_client_calls_every_route_of_the_openapi_document(server: LiveServer
     assert called == routes, f"routes the client does not call: {routes - called}"
     for call in calls:
         assert any(call.method == m and re.match(p, call.path) for m, p in routes), call
+
+
+# --- the client stands alone ---------------------------------------------------------------
+
+
+def _components(schema: dict[str, Any]) -> dict[str, Any]:
+    """A model's JSON Schema as named components, as /openapi.json holds them."""
+    defs = dict(schema.pop("$defs", {}))
+    defs[schema["title"]] = schema
+    return defs
+
+
+_WORDING = {"title", "description", "examples", "discriminator"}
+
+
+def _rules(schema: Any) -> Any:
+    """A schema without its wording; a union as the set of its branches (oneOf = anyOf
+    for the disjoint, discriminated unions of the models)."""
+    if isinstance(schema, list):
+        return [_rules(item) for item in schema]
+    if not isinstance(schema, dict):
+        return schema
+    rules = {key: _rules(value) for key, value in schema.items() if key not in _WORDING}
+    if rules.get("default", 0) is None:
+        del rules["default"]  # the document leaves out null defaults: absent is null
+    branches = rules.pop("oneOf", None) or rules.pop("anyOf", None)
+    if branches is not None:
+        rules["anyOf"] = sorted(json.dumps(branch, sort_keys=True) for branch in branches)
+    return rules
+
+
+def test_the_clients_pattern_model_is_the_openapi_documents(server: LiveServer) -> None:
+    # The client keeps its own copy of the service's TouchPattern (so that it needs
+    # neither the service nor numpy): every component it uses, field by field (types,
+    # bounds, defaults, required fields, cross-field rules), is the live document's.
+    served = get(server, "/openapi.json").json()["components"]["schemas"]
+    ours = _components(TouchPattern.model_json_schema(ref_template="#/components/schemas/{model}"))
+    assert "TouchPattern" in ours and len(ours) >= 10
+    for name, schema in ours.items():
+        mine, theirs = _rules(schema), _rules(served[name])
+        assert set(mine["properties"]) == set(theirs["properties"]), name
+        for field in mine["properties"]:
+            assert mine["properties"][field] == theirs["properties"][field], (name, field)
+        assert mine == theirs, name
+
+
+def test_the_services_own_pattern_is_sent_as_it_is(client: Client) -> None:
+    pattern = service.TouchPattern.model_validate(STROKE.model_dump(exclude_unset=True))
+    assert client.touch(pattern).path_length_cm == pytest.approx(9.6, rel=1e-6)
+
+
+BLOCKER = """
+import importlib.abc, sys
+class Blocker(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in {"numpy", "scipy", "phantomtouch"}:
+            raise ImportError(f"{name} must not be needed by the client")
+sys.meta_path.insert(0, Blocker())
+"""
+
+
+def test_the_client_installs_and_runs_without_the_service_numpy_or_scipy(
+    server: LiveServer, tmp_path: Path
+) -> None:
+    # Installed alone (its dependencies, httpx, pydantic and websockets, come from this
+    # environment), with numpy, scipy and the service's package made unimportable.
+    target = tmp_path / "site"
+    install = [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index"]
+    install += ["--no-build-isolation", "--target", str(target), str(ROOT / "sdk_clients/python")]
+    subprocess.run(install, check=True, capture_output=True, timeout=300, cwd=tmp_path)
+    script = BLOCKER + (
+        "import phantomtouch_client as pc\n"
+        f"with pc.Client({server.url!r}) as pt:\n"
+        "    job = pt.touch({'path': {'kind': 'polyline', 'points_cm': [[1.9, 12], [1.9, 2.4]]},"
+        " 'speed_cm_s': 20.0})\n"
+        "    print(job.path_length_cm)\n"
+        "try:\n"
+        "    still = {'kind': 'polyline', 'points_cm': [[0, 0]]}\n"
+        "    pc.TouchPattern.model_validate({'path': still})\n"
+        "except ValueError as exc:\n"
+        "    print('refused:', 'exactly one of speed_cm_s or duration_s' in str(exc))\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in {'numpy', 'scipy'}))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-I", "-c", f"import sys; sys.path.insert(0, {str(target)!r})\n" + script],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["9.6", "refused:", "True", "[]"]
+
+
+def _answers(*responses: httpx.Response) -> tuple[httpx.MockTransport, list[httpx.Request]]:
+    sent: list[httpx.Request] = []
+    queue = list(responses)
+
+    def handler(request: httpx.Request) -> httpx.Response:
+        sent.append(request)
+        return queue.pop(0)
+
+    return httpx.MockTransport(handler), sent
+
+
+BUSY = {"error": {"code": "busy", "message": "the engine is busy", "fields": []}}
+OK = {"status": "ok", "backend": "null"}
+
+
+def test_429_and_503_are_retried_after_retry_after_a_bounded_number_of_times() -> None:
+    busy = httpx.Response(503, json=BUSY, headers={"Retry-After": "0.05"})
+    transport, sent = _answers(busy, busy, httpx.Response(200, json=OK))
+    with Client("http://test", transport=transport, retries=2) as pt:
+        started = time.monotonic()
+        assert pt.health().status == "ok"
+        assert time.monotonic() - started >= 0.1  # waited as asked, twice
+    assert len(sent) == 3
+    transport, sent = _answers(busy, busy, busy)
+    with Client("http://test", transport=transport, retries=2) as pt, pytest.raises(Busy):
+        pt.health()
+    assert len(sent) == 3  # the first try and two retries, then the refusal is raised
+
+
+def test_no_retry_without_retry_after_or_beyond_the_longest_wait() -> None:
+    for headers in ({}, {"Retry-After": "30"}):
+        limited = httpx.Response(429, json=BUSY | {"error": BUSY["error"] | {"code": "x"}})
+        limited.headers.update(headers)
+        transport, sent = _answers(limited)
+        client = Client("http://test", transport=transport, max_retry_wait_s=5.0)
+        with client as pt, pytest.raises(Exception, match="busy"):
+            pt.health()
+        assert len(sent) == 1
+    with pytest.raises(ParameterError):
+        Client("http://test", retries=-1)
+
+
+def test_async_client_retries_too() -> None:
+    busy = httpx.Response(429, json=BUSY, headers={"Retry-After": "0"})
+
+    async def main() -> None:
+        sent: list[httpx.Request] = []
+        queue = [busy, httpx.Response(200, json=OK)]
+
+        def handler(request: httpx.Request) -> httpx.Response:
+            sent.append(request)
+            return queue.pop(0)
+
+        async with AsyncClient("http://test", transport=httpx.MockTransport(handler)) as pt:
+            assert (await pt.health()).status == "ok"
+        assert len(sent) == 2
+
+    asyncio.run(main())
+
+
+def test_a_busy_engine_is_retried_after_its_retry_after(tmp_path: Path) -> None:
+    # One voice at most: while a long touch plays, the next is refused 503 busy with
+    # Retry-After: 1; the client waits that second once, then raises.
+    env = {"PHANTOMTOUCH_MAX_VOICES": "1"}
+    long = {"path": {"kind": "polyline", "points_cm": [[1.9, 7.2]]}, "duration_s": 30.0}
+    server = LiveServer(tmp_path / "patterns.db", env=env)
+    with server, Client(server.url, retries=1, max_retry_wait_s=2.0) as pt:
+        pt.touch(long)
+        started = time.monotonic()
+        with pytest.raises(Busy) as refused:
+            pt.touch(long)
+        assert refused.value.status == 503
+        assert time.monotonic() - started >= 1.0

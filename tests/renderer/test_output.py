@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 
+from phantomtouch.renderer.fir import PartitionedFir
 from phantomtouch.renderer.output import OutputStage
 from phantomtouch.schema import DeviceProfile
 
@@ -69,3 +71,57 @@ def test_fir_correction_is_continuous_across_blocks(rng):
     # float32 storage between blocks: about 1e-7 relative.
     np.testing.assert_allclose(out[:, 0], expected, rtol=0, atol=1e-6)
     np.testing.assert_array_equal(out[:, 1:], signal[:, 1:])
+
+
+def direct_form(taps: np.ndarray, signal: np.ndarray) -> np.ndarray:
+    """The FIR in direct form, float64: y[n] = sum_k taps[k] x[n - k]."""
+    return lfilter(taps, 1.0, signal.astype(np.float64))
+
+
+@pytest.mark.parametrize("n_taps", [1, 3, 127, 128, 129, 1000, 4096])
+def test_partitioned_fir_equals_the_direct_form(rng, n_taps):
+    # Taps of a calibration filter: a decaying random response, |h|_1 about 2.
+    taps = rng.standard_normal((8, n_taps)) * np.exp(-np.arange(n_taps) / (n_taps / 4 + 1))
+    taps /= np.abs(taps).sum(axis=1, keepdims=True) / 2.0
+    signal = rng.uniform(-1.0, 1.0, size=(20_000, 8)).astype(np.float32)
+    out = signal.copy()
+    fir = PartitionedFir(taps)
+    for start in range(0, len(out), 1000):
+        fir.process(out[start : start + 1000])
+    expected = np.stack([direct_form(taps[c], signal[:, c]) for c in range(8)], axis=1)
+    # The issue's criterion, 1e-6 of full scale; float32 output and complex64 partition
+    # sums give about 2e-7.
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-6)
+
+
+def test_partitioned_fir_block_wise_equals_whole_bit_for_bit(rng):
+    taps = rng.standard_normal((8, 700)) / 30.0
+    signal = rng.uniform(-1.0, 1.0, size=(6000, 8)).astype(np.float32)
+    whole = signal.copy()
+    PartitionedFir(taps).process(whole)
+    for sizes in ([1] * 300 + [5700], [16, 127, 128, 129, 1000, 4600], [333] * 18 + [6]):
+        fir, out, start = PartitionedFir(taps), signal.copy(), 0
+        for size in sizes:
+            fir.process(out[start : start + size])
+            start += size
+        assert start == len(signal)
+        np.testing.assert_array_equal(out.view(np.uint32), whole.view(np.uint32))
+
+
+def test_identity_taps_pass_samples_through_exactly(rng):
+    signal = rng.uniform(-1.0, 1.0, size=(1000, 8)).astype(np.float32)
+    out = signal.copy()
+    PartitionedFir([[1.0]] * 8).process(out)
+    np.testing.assert_array_equal(out, signal)
+
+
+def test_non_finite_input_does_not_poison_the_fir(rng):
+    taps = [[0.5, 0.25, 0.125] * 100] + [[1.0]] * 7
+    stage = OutputStage(device(calibration={"fir_taps": taps}))
+    bad = rng.uniform(-0.1, 0.1, size=(256, 8)).astype(np.float32)
+    bad[10, 0] = np.nan
+    stage.process(bad)
+    assert stage.muted_blocks == 1
+    good = rng.uniform(-0.1, 0.1, size=(256, 8)).astype(np.float32)
+    stage.process(good)
+    assert np.all(np.isfinite(good)) and np.any(good != 0.0)

@@ -7,7 +7,7 @@ import pytest
 
 import phantomtouch as pt
 from phantomtouch.renderer.carriers import make_source
-from phantomtouch.renderer.trajectory import control_gains
+from phantomtouch.renderer.trajectory import control_gains, modulation_at
 from phantomtouch.renderer.voice import PatternRenderer, gain_block
 from phantomtouch.schema import DeviceProfile, TouchPattern
 
@@ -34,14 +34,17 @@ def plan_of(carrier: dict | None = None, **device_fields) -> pt.Plan:
 
 
 def carrier_of(resolved: pt.Plan) -> np.ndarray:
-    return make_source(resolved.pattern.carrier, FS).block(0, resolved.frames).astype(np.float64)
+    """The carrier times eq. 2's modulation, which the renderer applies per sample."""
+    carrier = make_source(resolved.pattern.carrier, FS).block(0, resolved.frames)
+    factor = modulation_at(resolved, np.arange(resolved.frames) / FS)
+    return carrier.astype(np.float64) * (1.0 if factor is None else factor)
 
 
 def test_per_sample_gains_give_carrier_times_control_gains():
     resolved = plan_of(gain_update_frames=1)
     out = PatternRenderer(resolved).render(resolved.frames)
     t = np.arange(resolved.frames) / FS
-    expected = carrier_of(resolved)[:, None] * control_gains(resolved, t)
+    expected = carrier_of(resolved)[:, None] * control_gains(resolved, t, modulated=False)
     np.testing.assert_allclose(out, expected, rtol=0, atol=FLOAT32)
 
 
@@ -51,7 +54,7 @@ def test_ramped_gains_interpolate_linearly_between_grid_points(step):
     out = PatternRenderer(resolved).render(resolved.frames)
     n = np.arange(resolved.frames)
     grid_n = np.arange(0, resolved.frames + step, step)
-    grid = control_gains(resolved, grid_n / FS)
+    grid = control_gains(resolved, grid_n / FS, modulated=False)
     gains = np.column_stack([np.interp(n, grid_n, grid[:, k]) for k in range(8)])
     np.testing.assert_allclose(out, carrier_of(resolved)[:, None] * gains, atol=FLOAT32)
 
@@ -61,7 +64,7 @@ def test_held_gains_step_at_grid_points(step):
     resolved = plan_of(gain_update_frames=step, gain_ramp=False)
     out = PatternRenderer(resolved).render(resolved.frames)
     held = (np.arange(resolved.frames) // step) * step
-    gains = control_gains(resolved, held / FS)
+    gains = control_gains(resolved, held / FS, modulated=False)
     np.testing.assert_allclose(out, carrier_of(resolved)[:, None] * gains, atol=FLOAT32)
 
 

@@ -7,6 +7,7 @@ import threading
 from pathlib import Path
 
 import numpy as np
+import pytest
 import soundfile
 from fastapi.testclient import TestClient
 
@@ -78,3 +79,19 @@ def test_renders_beyond_the_slots_are_429(tmp_path: Path) -> None:
         assert answer.headers["retry-after"] == "1"
         assert "max_concurrent_renders=1" in answer.json()["error"]["message"]
         assert client.post("/render", json={"preset": "vr/tap"}).status_code == 200
+
+
+def test_wav_answer_counts_its_clipped_frames_and_json_estimates_them(
+    client: TestClient,
+) -> None:
+    loud = {**STROKE, "carrier": {"kind": "noise"}, "level_db": 150.0}
+    answer = client.post("/render", json=loud)
+    assert answer.status_code == 200
+    samples, _ = soundfile.read(io.BytesIO(answer.content), dtype="float32")
+    at_ceiling = np.mean((np.abs(samples) >= np.float32(1.0)).any(axis=1))
+    assert at_ceiling > 0.0
+    assert float(answer.headers["X-Clipped-Fraction"]) == pytest.approx(at_ceiling, rel=1e-5)
+    estimate = client.post("/render", json=loud, headers=JSON).json()["clipped_fraction"]
+    assert estimate == plan(TouchPattern(**loud)).clipped_fraction > 0.0
+    quiet = client.post("/render", json=STROKE)
+    assert float(quiet.headers["X-Clipped-Fraction"]) == 0.0

@@ -148,3 +148,13 @@ def test_by_default_the_newest_touch_steals_the_oldest(tmp_path: Path) -> None:
                 time.sleep(0.01)
         states = [client.get(f"/jobs/{job}").json()["state"] for job in jobs]
         assert states == ["stopped", "playing", "playing"]
+
+
+def test_touch_answer_says_how_much_the_ceiling_clips(client: TestClient) -> None:
+    quiet = client.post("/touch", json=STROKE).json()
+    assert quiet["clipped_fraction"] == 0.0
+    loud = {**STROKE, "carrier": {"kind": "noise"}, "level_db": 150.0}
+    answer = client.post("/touch", json=loud)
+    assert answer.status_code == 202
+    # Noise at the device's maximum level drives its peaks past the ceiling.
+    assert 0.0 < answer.json()["clipped_fraction"] < 0.05

@@ -49,7 +49,9 @@ def _preset_summaries(device: DeviceProfile) -> tuple[PresetInfo, ...]:
     return tuple(
         PresetInfo(
             name=name,
-            summary=PlanSummary(**touch.plan_for(touch.preset_pattern(name), device).summary()),
+            summary=PlanSummary(
+                **touch.plan_summary(touch.plan_for(touch.preset_pattern(name), device))
+            ),
         )
         for name in preset_names()
     )

@@ -61,7 +61,7 @@ def put_pattern(
     service: ServiceDep,
 ) -> PatternInfo:
     """Store (or replace) a pattern; it is planned first, so only playable patterns are kept."""
-    summary = service.plans.plan(pattern).summary()
+    summary = touch.plan_summary(service.plans.plan(pattern))
     service.store.put(name, pattern, summary)
     return PatternInfo(name=name, summary=PlanSummary(**summary))
 

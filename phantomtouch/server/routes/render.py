@@ -13,6 +13,7 @@ from fastapi.responses import StreamingResponse
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer import render_plan_blocks
+from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.renderer.trajectory import control_gains, positions_at
 from phantomtouch.server import touch
@@ -43,7 +44,11 @@ def curves(plan: Plan, *, points: int = MAX_CURVE_POINTS) -> Curves:
     )
 
 
-def _wav_file(plan: Plan) -> IO[bytes]:
+CLIPPED_HEADER = "X-Clipped-Fraction"
+"""Response header of a WAV render: the fraction of its frames at the safety ceiling."""
+
+
+def _wav_file(plan: Plan) -> tuple[IO[bytes], float]:
     spool = tempfile.SpooledTemporaryFile(max_size=_SPOOL_BYTES)  # noqa: SIM115 (streamed, closed by _chunks)
     with soundfile.SoundFile(
         spool,
@@ -53,10 +58,12 @@ def _wav_file(plan: Plan) -> IO[bytes]:
         subtype="FLOAT",
         format="WAV",
     ) as wav:
+        clipped = 0
         for block in render_plan_blocks(plan, block_frames=_WAV_BLOCK_FRAMES):
             wav.write(block)
+            clipped += frames_at_ceiling(block, plan.device.safety.ceiling)
     spool.seek(0)
-    return spool
+    return spool, clipped / plan.frames
 
 
 def _chunks(file: IO[bytes]) -> Iterator[bytes]:
@@ -75,6 +82,13 @@ def _chunks(file: IO[bytes]) -> Iterator[bytes]:
                 "the plan and its gain curves (at most 500 points)."
             ),
             "content": {WAV_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}},
+            "headers": {
+                CLIPPED_HEADER: {
+                    "description": "Fraction of the WAV's frames with a channel at the "
+                    "safety ceiling (clipped), 0 to 1.",
+                    "schema": {"type": "number", "minimum": 0, "maximum": 1},
+                }
+            },
         },
         **responses(401, 404, 413, 415, 422, 429, 500),
     },
@@ -95,7 +109,7 @@ def post_render(
     plan = service.plans.plan(pattern)
     if accept is not None and "application/json" in accept and WAV_MEDIA_TYPE not in accept:
         with service.render_slot():
-            return RenderPlan(**plan.summary(), curves=curves(plan))
+            return RenderPlan(**touch.plan_summary(plan), curves=curves(plan))
     cap_s = service.settings.max_render_duration_s
     if plan.duration_s > cap_s:
         raise ParameterError(
@@ -103,9 +117,12 @@ def post_render(
             "(max_render_duration_s); ask with 'Accept: application/json' for the plan alone"
         )
     with service.render_slot():
-        wav = _wav_file(plan)
+        wav, clipped_fraction = _wav_file(plan)
     return StreamingResponse(
         _chunks(wav),
         media_type=WAV_MEDIA_TYPE,
-        headers={"Content-Disposition": 'attachment; filename="touch.wav"'},
+        headers={
+            "Content-Disposition": 'attachment; filename="touch.wav"',
+            CLIPPED_HEADER: f"{clipped_fraction:.6g}",
+        },
     )

@@ -15,10 +15,9 @@
         finger.up()
 
 :class:`AsyncClient` and :class:`AsyncSession` are the asyncio twins. Patterns are
-:class:`phantomtouch.TouchPattern`; errors derive from :class:`ClientError`.
+:class:`TouchPattern` (the service's model, kept in this package: the client needs
+neither the service nor numpy); errors derive from :class:`ClientError`.
 """
-
-from phantomtouch import TouchPattern
 
 from phantomtouch_client.connection import Backoff, SessionState
 from phantomtouch_client.contact import Contact
@@ -32,6 +31,7 @@ from phantomtouch_client.errors import (
     MalformedMessage,
     MethodNotAllowed,
     NotFound,
+    ParameterError,
     RateLimited,
     ReplyTimeout,
     TooLarge,
@@ -55,6 +55,7 @@ from phantomtouch_client.models import (
     Welcome,
     touch_request,
 )
+from phantomtouch_client.pattern import TouchPattern
 from phantomtouch_client.rest import AsyncClient, Client, ws_url
 from phantomtouch_client.session import AsyncSession
 from phantomtouch_client.sync_session import Session, SyncContact
@@ -82,6 +83,7 @@ __all__ = [
     "MalformedMessage",
     "MethodNotAllowed",
     "NotFound",
+    "ParameterError",
     "PlanSummary",
     "RateLimited",
     "Released",

@@ -13,7 +13,6 @@ from typing import Any, Generic, TypeVar
 from urllib.parse import quote
 
 import httpx
-from phantomtouch import TouchPattern
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from phantomtouch_client.errors import TransportError, error_from_response
@@ -30,6 +29,7 @@ from phantomtouch_client.models import (
     pattern_json,
     timing,
 )
+from phantomtouch_client.pattern import TouchPattern
 
 T = TypeVar("T")
 M = TypeVar("M", bound=BaseModel)

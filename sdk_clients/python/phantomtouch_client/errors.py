@@ -2,42 +2,40 @@
 
 ::
 
-    PhantomTouchError                         phantomtouch's root
-    └── ClientError                           every error this client raises
-        ├── TransportError                    the server could not be reached or answered garbage
-        │   └── ConnectionLost                the WebSocket closed while a reply was awaited
-        ├── ReplyTimeout(TimeoutError)        no reply in time
-        └── ApiError                          the server refused a request (REST or WebSocket)
-            ├── InvalidRequest(ParameterError)    code "invalid": a field is out of range
-            ├── MalformedMessage(ProtocolError)   code "invalid_json" or "unknown_type"
-            ├── Unauthorized                      code "unauthorized": token missing or wrong
-            ├── NotFound                          code "not_found": unknown job, pattern, preset
-            ├── TooLarge                          code "too_large"
-            ├── RateLimited                       code "rate_limited"
-            ├── MethodNotAllowed                  code "method_not_allowed"
-            ├── Busy(EngineBusyError)             code "busy": the engine's queue is full
-            └── DeviceFailed(DeviceError)         code "device": the sound card failed
+    ClientError                               every error this client raises
+    ├── ParameterError(ValueError)            an argument is out of range (checked locally)
+    ├── TransportError                        the server could not be reached or answered garbage
+    │   └── ConnectionLost                    the WebSocket closed while a reply was awaited
+    ├── ReplyTimeout(TimeoutError)            no reply in time
+    └── ApiError                              the server refused a request (REST or WebSocket)
+        ├── InvalidRequest(ParameterError)    code "invalid": a field is out of range
+        ├── MalformedMessage                  code "invalid_json" or "unknown_type"
+        ├── Unauthorized                      code "unauthorized": token missing or wrong
+        ├── NotFound                          code "not_found": unknown job, pattern, preset
+        ├── TooLarge                          code "too_large"
+        ├── RateLimited                       code "rate_limited"
+        ├── MethodNotAllowed                  code "method_not_allowed"
+        ├── Busy                              code "busy": the engine's queue is full
+        └── DeviceFailed                      code "device": the sound card failed
 
 REST errors and WebSocket ``error`` replies carry the same ``code`` and map to the same
 class; ``status`` is the HTTP status, or ``None`` for a WebSocket reply. Errors of httpx and
 websockets are re-raised as :class:`TransportError` with the original as ``__cause__``.
+The client stands alone: it does not import the service's ``phantomtouch`` package, so
+its errors are its own (the service's ``ParameterError`` is a ``ValueError`` too).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from phantomtouch import (
-    DeviceError,
-    EngineBusyError,
-    ParameterError,
-    PhantomTouchError,
-    ProtocolError,
-)
 
-
-class ClientError(PhantomTouchError):
+class ClientError(Exception):
     """Root of every error raised by phantomtouch_client."""
+
+
+class ParameterError(ClientError, ValueError):
+    """An argument is out of range or malformed; the message names it and its value."""
 
 
 class TransportError(ClientError):
@@ -83,7 +81,7 @@ class InvalidRequest(ApiError, ParameterError):
     """A field is out of range or malformed; ``fields`` names each one."""
 
 
-class MalformedMessage(ApiError, ProtocolError):
+class MalformedMessage(ApiError):
     """The server could not read a WebSocket message (``invalid_json``, ``unknown_type``)."""
 
 
@@ -107,11 +105,11 @@ class MethodNotAllowed(ApiError):
     """The route has no such method."""
 
 
-class Busy(ApiError, EngineBusyError):
+class Busy(ApiError):
     """The engine's command queue is full; the command was not accepted. Retry later."""
 
 
-class DeviceFailed(ApiError, DeviceError):
+class DeviceFailed(ApiError):
     """The service's sound card failed."""
 
 

@@ -1,7 +1,7 @@
 """What the server answers, and the one builder of touch requests.
 
-Patterns are :class:`phantomtouch.TouchPattern` itself, validated here before they are
-sent, so a bad pattern fails in the caller's process with the message the server would
+Patterns are :class:`~phantomtouch_client.pattern.TouchPattern`, validated here before
+they are sent, so a bad pattern fails in the caller's process with the message the server would
 give. Answers are parsed into the small models below; they accept fields a newer server
 adds (``extra="allow"``), so a client keeps working across server versions.
 """
@@ -11,11 +11,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, Literal, TypeAlias
 
-from phantomtouch import ParameterError, TouchPattern
-from phantomtouch.schema import describe_validation_error, error_items
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from phantomtouch_client.errors import InvalidRequest
+from phantomtouch_client.errors import InvalidRequest, ParameterError
+from phantomtouch_client.pattern import TouchPattern
 
 JobState = Literal["scheduled", "playing", "finished", "stopped"]
 JobId: TypeAlias = str
@@ -37,6 +36,9 @@ class Job(_Answer):
     path_length_cm: float
     speed_cm_s: float
     frames: int
+    clipped_fraction: float = Field(
+        description="Estimated fraction of the frames clipped at the safety ceiling."
+    )
 
 
 class JobStatus(_Answer):
@@ -76,6 +78,9 @@ class PlanSummary(_Answer):
     amplitude: float
     projected_points: int
     max_projection_cm: float
+    clipped_fraction: float | None = None
+    """Estimated fraction of the frames clipped at the safety ceiling (0: none; None: a
+    pattern stored before the server gave the estimate)."""
 
 
 class Summary(_Answer):
@@ -170,18 +175,49 @@ class Released(_Answer):
     contacts: list[str] = Field(default_factory=list)
 
 
+def _location(loc: tuple[int | str, ...]) -> str:
+    parts: list[str] = []
+    for item in loc:
+        parts.append(f"[{item}]" if isinstance(item, int) else ("." if parts else "") + item)
+    return "".join(parts) or "body"
+
+
+def error_items(exc: ValidationError) -> list[dict[str, Any]]:
+    """One dict per problem, as the server's ``fields``: ``field``, ``value``, ``message``."""
+    return [
+        {
+            "field": _location(err["loc"]),
+            "value": err.get("input"),
+            "message": err["msg"].removeprefix("Value error, "),
+        }
+        for err in exc.errors(include_url=False)
+    ]
+
+
+def describe(fields: list[dict[str, Any]]) -> str:
+    """``field=value: message`` for each problem, as the server words its refusals."""
+
+    def short(value: Any) -> str:
+        text = repr(value)
+        return text if len(text) <= 80 else text[:77] + "..."
+
+    return "; ".join(f"{f['field']}={short(f['value'])}: {f['message']}" for f in fields)
+
+
 def pattern_json(pattern: TouchPattern | Mapping[str, Any]) -> dict[str, Any]:
     """A pattern as the JSON object the server reads, validated on the way.
 
     Raises :class:`InvalidRequest` (a ``ValueError``) naming each bad field.
     """
+    if isinstance(pattern, BaseModel) and not isinstance(pattern, TouchPattern):
+        # e.g. the service's own phantomtouch.TouchPattern: its JSON is the same
+        pattern = pattern.model_dump(mode="json", exclude_unset=True)
     if not isinstance(pattern, TouchPattern):
         try:
             pattern = TouchPattern.model_validate(pattern)
         except ValidationError as exc:
-            raise InvalidRequest(
-                describe_validation_error(exc), code="invalid", fields=error_items(exc)
-            ) from exc
+            fields = error_items(exc)
+            raise InvalidRequest(describe(fields), code="invalid", fields=fields) from exc
     body: dict[str, Any] = pattern.model_dump(mode="json", exclude_unset=True)
     return body
 

@@ -6,15 +6,18 @@ themselves are described once, in :mod:`phantomtouch_client._calls`.
 
 from __future__ import annotations
 
+import asyncio
+import time
 from collections.abc import Mapping
+from datetime import UTC, datetime
+from email.utils import parsedate_to_datetime
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 import httpx
-from phantomtouch import TouchPattern
 
 from phantomtouch_client import _calls
-from phantomtouch_client.errors import ReplyTimeout, TransportError
+from phantomtouch_client.errors import ParameterError, ReplyTimeout, TransportError
 from phantomtouch_client.models import (
     Clock,
     DeviceInfo,
@@ -28,6 +31,7 @@ from phantomtouch_client.models import (
     Summary,
     touch_request,
 )
+from phantomtouch_client.pattern import TouchPattern
 
 if TYPE_CHECKING:
     from phantomtouch_client.session import AsyncSession
@@ -50,11 +54,53 @@ def auth_headers(token: str | None) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}"} if token else {}
 
 
+RETRY_STATUSES = frozenset({429, 503})
+"""Refusals that say "not now": too many requests, the engine busy (not accepted)."""
+
+
+def retry_after_s(response: httpx.Response) -> float | None:
+    """Seconds ``Retry-After`` asks to wait (a number or an HTTP date), None without one."""
+    value = response.headers.get("Retry-After")
+    if value is None:
+        return None
+    try:
+        return max(0.0, float(value))
+    except ValueError:
+        pass
+    try:
+        when = parsedate_to_datetime(value)
+    except (TypeError, ValueError):
+        return None
+    return max(0.0, (when - datetime.now(UTC)).total_seconds())
+
+
 class _Base:
-    def __init__(self, base_url: str, token: str | None, timeout_s: float) -> None:
+    def __init__(
+        self,
+        base_url: str,
+        token: str | None,
+        timeout_s: float,
+        retries: int,
+        max_retry_wait_s: float,
+    ) -> None:
+        if retries < 0 or max_retry_wait_s < 0:
+            raise ParameterError(
+                f"retries={retries!r} and max_retry_wait_s={max_retry_wait_s!r} must be >= 0"
+            )
         self.base_url = base_url.rstrip("/")
         self.token = token
         self.timeout_s = timeout_s
+        self.retries = retries
+        self.max_retry_wait_s = max_retry_wait_s
+
+    def _retry_wait_s(self, response: httpx.Response, attempt: int) -> float | None:
+        """How long to wait before retrying ``response``, or None to give up."""
+        if response.status_code not in RETRY_STATUSES or attempt >= self.retries:
+            return None
+        wait_s = retry_after_s(response)
+        if wait_s is None or wait_s > self.max_retry_wait_s:
+            return None
+        return wait_s
 
     def _request_args(self, call: _calls.Call[Any]) -> dict[str, Any]:
         args: dict[str, Any] = {"headers": {"Accept": call.accept}}
@@ -79,7 +125,9 @@ class Client(_Base):
     'scheduled'
 
     ``token`` is the service token (required when the service listens off loopback);
-    ``timeout_s`` bounds every request. ``transport`` is handed to httpx (for tests).
+    ``timeout_s`` bounds every request. A 429 or 503 answer with a ``Retry-After`` of at
+    most ``max_retry_wait_s`` is retried after that wait, ``retries`` times at most; then
+    (or with a longer wait) it is raised. ``transport`` is handed to httpx (for tests).
     """
 
     def __init__(
@@ -88,9 +136,11 @@ class Client(_Base):
         *,
         token: str | None = None,
         timeout_s: float = 10.0,
+        retries: int = 2,
+        max_retry_wait_s: float = 5.0,
         transport: httpx.BaseTransport | None = None,
     ) -> None:
-        super().__init__(base_url, token, timeout_s)
+        super().__init__(base_url, token, timeout_s, retries, max_retry_wait_s)
         self._http = httpx.Client(
             base_url=self.base_url,
             headers=auth_headers(token),
@@ -113,11 +163,17 @@ class Client(_Base):
         self._http.close()
 
     def _run(self, call: _calls.Call[T]) -> T:
-        try:
-            response = self._http.request(call.method, call.path, **self._request_args(call))
-        except httpx.HTTPError as exc:
-            raise self._failed(call, exc) from exc
-        return call.parse(response)
+        attempt = 0
+        while True:
+            try:
+                response = self._http.request(call.method, call.path, **self._request_args(call))
+            except httpx.HTTPError as exc:
+                raise self._failed(call, exc) from exc
+            wait_s = self._retry_wait_s(response, attempt)
+            if wait_s is None:
+                return call.parse(response)
+            attempt += 1
+            time.sleep(wait_s)
 
     def session(self, **options: Any) -> Session:
         """A WebSocket session with this client's address and token (not yet connected).
@@ -241,9 +297,11 @@ class AsyncClient(_Base):
         *,
         token: str | None = None,
         timeout_s: float = 10.0,
+        retries: int = 2,
+        max_retry_wait_s: float = 5.0,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
-        super().__init__(base_url, token, timeout_s)
+        super().__init__(base_url, token, timeout_s, retries, max_retry_wait_s)
         self._http = httpx.AsyncClient(
             base_url=self.base_url,
             headers=auth_headers(token),
@@ -266,11 +324,19 @@ class AsyncClient(_Base):
         await self._http.aclose()
 
     async def _run(self, call: _calls.Call[T]) -> T:
-        try:
-            response = await self._http.request(call.method, call.path, **self._request_args(call))
-        except httpx.HTTPError as exc:
-            raise self._failed(call, exc) from exc
-        return call.parse(response)
+        attempt = 0
+        while True:
+            try:
+                response = await self._http.request(
+                    call.method, call.path, **self._request_args(call)
+                )
+            except httpx.HTTPError as exc:
+                raise self._failed(call, exc) from exc
+            wait_s = self._retry_wait_s(response, attempt)
+            if wait_s is None:
+                return call.parse(response)
+            attempt += 1
+            await asyncio.sleep(wait_s)
 
     def session(self, **options: Any) -> AsyncSession:
         """A WebSocket session with this client's address and token (not yet connected).
