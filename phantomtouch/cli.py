@@ -105,12 +105,12 @@ def _check_plot_path(path: str) -> None:
     formats = FigureCanvasBase.get_supported_filetypes()
     suffix = Path(path).suffix.lower().lstrip(".")
     if suffix not in formats:
-        raise PhantomTouchError(
+        raise ParameterError(
             f"--plot {path!r}: the file name must end in an image format "
             f"({', '.join('.' + f for f in sorted(formats))}), e.g. .png"
         )
     if not Path(path).parent.is_dir():
-        raise PhantomTouchError(
+        raise ParameterError(
             f"--plot {path!r}: the folder {str(Path(path).parent)!r} is missing"
         )
 
@@ -185,7 +185,7 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     free = shutil.disk_usage(out_dir).free
     if needed > free:
-        raise PhantomTouchError(
+        raise ParameterError(
             f"--output {str(out_dir)!r}: {len(names)} stimuli need {needed / 1e6:.0f} MB, "
             f"only {free / 1e6:.0f} MB are free there"
         )

@@ -88,7 +88,7 @@ def test_a_port_in_use_is_refused_before_the_banner(tmp_path: Path) -> None:
             check=False,
         )
     assert result.stdout == "", "no 'serving' banner for a server that cannot start"
-    assert_refused(result, f"port={port}", "in use")
+    assert_refused(result, f"port={port}", "in use", status=1)  # a failure while running
 
 
 @pytest.mark.parametrize(

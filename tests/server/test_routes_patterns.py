@@ -43,9 +43,9 @@ def test_dot_segments_are_not_names(client: TestClient, name: str) -> None:
     answer = client.put(f"/patterns/{encoded}", json=STROKE)
     assert answer.status_code == 422, "a client that normalises URLs could never reach it"
     assert answer.json()["error"]["fields"][0]["field"] == "name"
-    touch = client.post("/touch", json={"pattern": name})
+    touch = client.post("/touch", json={"stored": name})
     assert touch.status_code == 422
-    assert touch.json()["error"]["fields"][0]["field"] == "pattern"
+    assert touch.json()["error"]["fields"][0]["field"] == "stored"
 
 
 @pytest.mark.parametrize("name", [".a", "..a", "...", "a..", "-", "a" * 64, ".." + "a" * 62])
