@@ -23,11 +23,18 @@ def log_config() -> dict[str, Any]:
 
 
 def serve(settings: Settings) -> None:
-    """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly)."""
+    """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly).
+
+    Requests uvicorn cannot parse are answered with the service's JSON error body
+    (:mod:`phantomtouch.server.wire`).
+    """
     import uvicorn
+
+    from phantomtouch.server.wire import JsonErrorProtocol
 
     uvicorn.run(
         create_app(settings),
+        http=JsonErrorProtocol,
         host=settings.host,
         port=settings.port,
         ws_max_size=settings.max_ws_message_bytes,

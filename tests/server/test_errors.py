@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import BaseModel, Field, TypeAdapter, ValidationError
 
 from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError, ProtocolError
 from phantomtouch.server import errors
 from phantomtouch.server.errors import (
+    MAX_FIELDS,
     NotFoundError,
     RateLimitedError,
     TooLargeError,
@@ -119,3 +122,13 @@ def test_unknown_route_and_method() -> None:
         assert wrong.status_code == 405
         assert wrong.headers["allow"] == "PUT"
         assert wrong.json()["error"]["code"] == "method_not_allowed"
+
+
+def test_many_problems_list_a_bounded_number_and_count_the_rest() -> None:
+    with pytest.raises(ValidationError) as info:
+        TypeAdapter(list[int]).validate_json(json.dumps(["x"] * 5000), strict=True)
+    problem = describe(info.value)
+    assert len(problem.fields) == MAX_FIELDS
+    assert [f["field"] for f in problem.fields[:2]] == ["[0]", "[1]"]
+    assert "and 4980 more problems (5000 in all" in problem.message
+    assert len(json.dumps(problem.body())) < 8 * 1024
