@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from phantomtouch.errors import ParameterError
@@ -36,13 +37,17 @@ def preset_pattern(name: str) -> TouchPattern:
         raise NotFoundError(str(exc), field="preset", value=name) from exc
 
 
-def stored_pattern(store: PatternStore, name: str) -> TouchPattern:
-    """The stored pattern ``name``; an unknown name is a :class:`NotFoundError`."""
+def stored_pattern(store: PatternStore, name: str, *, field: str = "pattern") -> TouchPattern:
+    """The stored pattern ``name``; an unknown name is a :class:`NotFoundError`.
+
+    ``field`` is what the request called the name: ``name`` in the path of
+    ``/patterns/{name}``, ``pattern`` in a touch request.
+    """
     pattern = store.get(name)
     if pattern is None:
         raise NotFoundError(
-            f"pattern={name!r} is not in the pattern library (GET /patterns)",
-            field="pattern",
+            f"{field}={name!r} is not in the pattern library (GET /patterns)",
+            field=field,
             value=name,
         )
     return pattern
@@ -95,18 +100,42 @@ def accepted(engine: AnyEngine, job: Job) -> JobAccepted:
     )
 
 
+def _still_playing(engine: AnyEngine) -> Callable[[str], bool]:
+    def still_playing(job_id: str) -> bool:
+        state = engine.job_state(job_id)
+        return state is not None and state.state in ("scheduled", "playing")
+
+    return still_playing
+
+
 async def schedule(
     service: Service,
     request: PatternTouch | PresetTouch | NamedTouch,
     *,
+    client: str,
     owner: str | None = None,
 ) -> JobAccepted:
     """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
 
-    The event loop goes on while an engine process schedules it.
+    ``client`` is whose quotas it counts against (:mod:`phantomtouch.server.quotas`). The
+    event loop goes on while an engine process schedules it.
     """
     engine = service.engine
     pattern = resolve(request, service.store)
     first = start_frame(engine, request.timing())
-    job = await engine.schedule_async(service.plans.plan(pattern), start_frame=first, owner=owner)
+    planned = service.plans.plan(pattern)
+    now_s = engine.server_time_s()
+    hold = service.voices.reserve(
+        client,
+        now_s=now_s,
+        start_s=now_s if first is None else engine.time_at(first),
+        duration_s=planned.duration_s,
+        still_playing=_still_playing(engine),
+    )
+    try:
+        job = await engine.schedule_async(planned, start_frame=first, owner=owner)
+    except BaseException:
+        service.voices.cancel(hold)
+        raise
+    service.voices.confirm(hold, str(job.job_id), engine.time_at(job.start_frame) + job.duration_s)
     return accepted(engine, job)

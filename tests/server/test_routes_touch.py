@@ -108,7 +108,8 @@ def test_full_engine_answers_503_busy(tmp_path: Path) -> None:
 
 
 def test_more_voices_than_max_voices_at_once_answer_503_busy(tmp_path: Path) -> None:
-    with TestClient(create_app(make_settings(tmp_path, max_voices=2))) as client:
+    settings = make_settings(tmp_path, max_voices=2, max_voices_per_client=3)
+    with TestClient(create_app(settings)) as client:
         answers = [client.post("/touch", json=LONG) for _ in range(3)]
         assert [a.status_code for a in answers[:2]] == [202, 202]
         busy = answers[2]
