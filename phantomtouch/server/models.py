@@ -311,8 +311,13 @@ class ClockInfo(BaseModel):
 
 
 class Health(BaseModel):
-    status: Literal["ok"] = "ok"
+    """``ok``; or ``degraded`` with the part that fails named (the service still runs)."""
+
+    status: Literal["ok", "degraded"] = "ok"
     backend: str
+    storage: str | None = Field(
+        default=None, description="Why the pattern store fails (only when it does)."
+    )
 
 
 class Curves(BaseModel):

@@ -74,10 +74,15 @@ async def get_clock(engine: EngineDep) -> ClockInfo:
     )
 
 
-@router.get("/health", response_model=Health, summary="Liveness")
-async def get_health(engine: EngineDep) -> Health:
-    """`ok` while the service runs; needs no token."""
-    return Health(backend=engine.status().to_dict()["backend"])
+@router.get("/health", response_model=Health, response_model_exclude_none=True, summary="Liveness")
+async def get_health(service: ServiceDep) -> Health:
+    """`ok` while the service runs; `degraded` naming the part that fails (`storage`: the
+    pattern store's disk is full or its file damaged). Needs no token."""
+    backend = service.engine.status().to_dict()["backend"]
+    problem = service.store.problem
+    if problem is None:
+        return Health(backend=backend)
+    return Health(status="degraded", backend=backend, storage=problem)
 
 
 @router.get(
