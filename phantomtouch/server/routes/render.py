@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-import tempfile
-from collections.abc import Iterator
-from typing import IO, Annotated
+from contextlib import ExitStack
+from typing import Annotated
 
 import numpy as np
-import soundfile
 from fastapi import APIRouter, Header, Response
 from fastapi.responses import StreamingResponse
 
 from phantomtouch.errors import ParameterError
-from phantomtouch.renderer import render_plan_blocks
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.renderer.trajectory import control_gains, positions_at
 from phantomtouch.server import touch
@@ -20,13 +17,11 @@ from phantomtouch.server.deps import ServiceDep
 from phantomtouch.server.errors import responses
 from phantomtouch.server.models import Curves, RenderPlan
 from phantomtouch.server.routes.touch import TOUCH_BODY_OPENAPI, TouchBody
+from phantomtouch.server.wav import wav_bytes, wav_stream
 
 router = APIRouter(tags=["render"])
 
 MAX_CURVE_POINTS = 500
-_WAV_BLOCK_FRAMES = 1 << 15
-_SPOOL_BYTES = 16 << 20
-_CHUNK_BYTES = 1 << 20
 WAV_MEDIA_TYPE = "audio/wav"
 
 
@@ -43,28 +38,6 @@ def curves(plan: Plan, *, points: int = MAX_CURVE_POINTS) -> Curves:
     )
 
 
-def _wav_file(plan: Plan) -> IO[bytes]:
-    spool = tempfile.SpooledTemporaryFile(max_size=_SPOOL_BYTES)  # noqa: SIM115 (streamed, closed by _chunks)
-    with soundfile.SoundFile(
-        spool,
-        "w",
-        samplerate=plan.sample_rate_hz,
-        channels=plan.channels,
-        subtype="FLOAT",
-        format="WAV",
-    ) as wav:
-        for block in render_plan_blocks(plan, block_frames=_WAV_BLOCK_FRAMES):
-            wav.write(block)
-    spool.seek(0)
-    return spool
-
-
-def _chunks(file: IO[bytes]) -> Iterator[bytes]:
-    with file:
-        while chunk := file.read(_CHUNK_BYTES):
-            yield chunk
-
-
 @router.post(
     "/render",
     response_model=RenderPlan,
@@ -76,7 +49,7 @@ def _chunks(file: IO[bytes]) -> Iterator[bytes]:
             ),
             "content": {WAV_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}},
         },
-        **responses(401, 404, 413, 422, 429),
+        **responses(401, 404, 413, 422, 429, 503),
     },
     summary="Render a touch offline",
     openapi_extra=TOUCH_BODY_OPENAPI,
@@ -88,8 +61,9 @@ def post_render(
 ) -> Response | RenderPlan:
     """Render a touch request as the engine would play it (timing fields are ignored).
 
-    WAV renders are capped at `max_render_duration_s` (default 600 s); a few run at once
-    (`max_concurrent_renders`), more are refused with 429.
+    WAV renders are capped at `max_render_duration_s` (default 600 s) and stream as they
+    are rendered; a few run at once (`max_concurrent_renders`, each until its download
+    ends or its client leaves), more are refused with 429.
     """
     pattern = touch.resolve(request, service.store)
     plan = service.plans.plan(pattern)
@@ -102,10 +76,13 @@ def post_render(
             f"duration_s={plan.duration_s:.6g}: a WAV render lasts at most {cap_s:g} s "
             "(max_render_duration_s); ask with 'Accept: application/json' for the plan alone"
         )
-    with service.render_slot():
-        wav = _wav_file(plan)
+    slot = ExitStack()
+    slot.enter_context(service.render_slot())
     return StreamingResponse(
-        _chunks(wav),
+        wav_stream(plan, slot.close),
         media_type=WAV_MEDIA_TYPE,
-        headers={"Content-Disposition": 'attachment; filename="touch.wav"'},
+        headers={
+            "Content-Disposition": 'attachment; filename="touch.wav"',
+            "Content-Length": str(wav_bytes(plan)),
+        },
     )
