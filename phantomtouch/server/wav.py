@@ -1,8 +1,8 @@
 """A plan's render as a float32 WAV stream: header first, then blocks as they are rendered.
 
 Nothing is written to disk and only one block is held at a time: a download that its
-client abandons costs nothing once the server notices (the stream's generator is closed
-and the render slot handed back). The header is complete up front because a plan knows
+client abandons costs nothing once the server notices (the stream is closed, the render
+slot handed back). The header is complete up front because a plan knows
 its frame count: ``RIFF``/``WAVE``, a ``fmt`` chunk for IEEE float (format 3, 32 bits),
 a ``fact`` chunk with the frame count, then the ``data`` chunk.
 """
@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import struct
 import weakref
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncGenerator, Callable, Iterator
 
 import numpy as np
+from starlette.concurrency import run_in_threadpool
 
 from phantomtouch.renderer import render_plan_blocks
 from phantomtouch.renderer.plan import Plan
@@ -59,11 +60,12 @@ def wav_bytes(plan: Plan) -> int:
     return HEADER_BYTES + plan.frames * plan.channels * _SAMPLE_BYTES
 
 
-def wav_stream(plan: Plan, release: Callable[[], None]) -> Iterator[bytes]:
+def wav_stream(plan: Plan, release: Callable[[], None]) -> AsyncGenerator[bytes, None]:
     """The WAV of ``plan`` chunk by chunk; ``release()`` once when it is over.
 
-    ``release`` runs when the stream is exhausted, closed (its client gone) or dropped
-    without ever being started.
+    Each block is rendered in a worker thread. ``release`` runs when the stream is
+    exhausted, closed (``aclose()``: its client gone) or dropped without ever being
+    started.
     """
     once = _Once(release)
     stream = _chunks(plan, once)
@@ -81,12 +83,18 @@ class _Once:
             release()
 
 
-def _chunks(plan: Plan, release: Callable[[], None]) -> Iterator[bytes]:
+async def _chunks(plan: Plan, release: Callable[[], None]) -> AsyncGenerator[bytes, None]:
     try:
         yield wav_header(
             frames=plan.frames, channels=plan.channels, sample_rate_hz=plan.sample_rate_hz
         )
-        for block in render_plan_blocks(plan, block_frames=BLOCK_FRAMES):
-            yield np.ascontiguousarray(block, dtype="<f4").tobytes()
+        blocks = render_plan_blocks(plan, block_frames=BLOCK_FRAMES)
+        while (chunk := await run_in_threadpool(_next_chunk, blocks)) is not None:
+            yield chunk
     finally:
         release()
+
+
+def _next_chunk(blocks: Iterator[np.ndarray]) -> bytes | None:
+    block = next(blocks, None)
+    return None if block is None else np.ascontiguousarray(block, dtype="<f4").tobytes()

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import io
+from collections.abc import AsyncIterator
 
 import numpy as np
 import soundfile
@@ -19,10 +22,14 @@ def test_header_is_what_libsndfile_reads() -> None:
     assert (info.channels, info.samplerate, info.frames, info.subtype) == (8, 48_000, 0, "FLOAT")
 
 
+async def collect(stream: AsyncIterator[bytes]) -> bytes:
+    return b"".join([chunk async for chunk in stream])
+
+
 def test_the_stream_is_the_offline_render_and_releases_its_slot() -> None:
     planned = plan(preset("vr/tap"))
     released: list[int] = []
-    data = b"".join(wav_stream(planned, lambda: released.append(1)))
+    data = asyncio.run(collect(wav_stream(planned, lambda: released.append(1))))
     assert len(data) == wav_bytes(planned)
     samples, rate_hz = soundfile.read(io.BytesIO(data), dtype="float32")
     assert rate_hz == planned.sample_rate_hz
@@ -33,8 +40,22 @@ def test_the_stream_is_the_offline_render_and_releases_its_slot() -> None:
 def test_a_stream_abandoned_early_or_never_started_releases_its_slot() -> None:
     planned = plan(preset("exp2/curved"))
     released: list[str] = []
-    started = wav_stream(planned, lambda: released.append("started"))
-    next(started)
-    started.close()  # what the server does when the client leaves
+
+    async def abandon() -> None:
+        stream = wav_stream(planned, lambda: released.append("cancelled"))
+
+        async def download() -> None:
+            async for _ in stream:
+                await asyncio.sleep(10)  # a client that stopped reading
+
+        task = asyncio.create_task(download())
+        await asyncio.sleep(0.1)
+        task.cancel()  # what the server does when the client leaves ...
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        await stream.aclose()  # ... and then, in the response's background task
+        assert released == ["cancelled"], "at once, not when collected"
+
+    asyncio.run(abandon())
     wav_stream(planned, lambda: released.append("never"))  # dropped at once
-    assert sorted(released) == ["never", "started"]
+    assert released == ["cancelled", "never"]

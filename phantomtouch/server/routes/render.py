@@ -8,6 +8,7 @@ from typing import Annotated
 import numpy as np
 from fastapi import APIRouter, Header, Response
 from fastapi.responses import StreamingResponse
+from starlette.background import BackgroundTask
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.plan import Plan
@@ -78,8 +79,10 @@ def post_render(
         )
     slot = ExitStack()
     slot.enter_context(service.render_slot())
+    stream = wav_stream(plan, slot.close)
     return StreamingResponse(
-        wav_stream(plan, slot.close),
+        stream,
+        background=BackgroundTask(stream.aclose),  # runs also when the client has left
         media_type=WAV_MEDIA_TYPE,
         headers={
             "Content-Disposition": 'attachment; filename="touch.wav"',
