@@ -117,13 +117,19 @@ def ping_flood(ws_url: str, limit_s: float = 4.0, most: int = 400_000) -> dict[s
     return asyncio.run(flood())
 
 
-def invalid_bodies(url: str, count: int = 5) -> list[tuple[int, int]]:
-    """POST ``count`` bodies of :data:`BAD_POINTS` points, the last one invalid.
+def large_bodies(url: str, count: int = 5, valid: bool = False) -> list[tuple[int, int]]:
+    """POST ``count`` bodies of :data:`BAD_POINTS` points, the last one not a number.
 
-    Returns each answer's status and length in bytes.
+    With ``valid`` every point is valid and the touch is refused after validation for a
+    start time too far ahead (the yardstick of reading such a body). Returns each
+    answer's status and length in bytes.
     """
-    points: list[list[Any]] = [[1.9, 2.0]] * (BAD_POINTS - 1) + [["x", 2.0]]
-    body = {"path": {"kind": "polyline", "points_cm": points}, "speed_cm_s": 5}
+    points: list[list[Any]] = [[1.9, 2.0]] * BAD_POINTS
+    body: dict[str, Any] = {"path": {"kind": "polyline", "points_cm": points}, "speed_cm_s": 5}
+    if valid:
+        body["start_at_s"] = 1e6
+    else:
+        body["path"]["points_cm"] = [*points[:-1], ["x", 2.0]]
     with httpx.Client(base_url=url, timeout=30) as client:
         answers = [client.post("/touch", json=body) for _ in range(count)]
     return [(answer.status_code, len(answer.content)) for answer in answers]
