@@ -265,9 +265,24 @@ def _problem(field: str, value: Any, message: str) -> dict[str, Any]:
     return {"field": field, "value": _short_value(value), "message": message}
 
 
-def _guess_field(message: str) -> str:
-    head = message.split("=", 1)[0].split(" ", 1)[0] if "=" in message.split(" ", 1)[0] else ""
-    return head or "body"
+def _field_and_value(message: str) -> tuple[str, Any]:
+    """The field and value a renderer message starts with (``"name=value: why"``).
+
+    The value is read back as JSON (numbers, ``true``) or as a quoted string (``'x'``);
+    one that is neither (a tuple, a long text) is None.
+    """
+    head = message.split(" ", 1)[0]
+    if "=" not in head:
+        return "body", None
+    field, _, text = head.partition("=")
+    text = text.rstrip(":;,")
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"":
+        return field, text[1:-1]
+    try:
+        value = json.loads(text)
+    except ValueError:
+        return field, None
+    return field, value if isinstance(value, int | float | bool) else None
 
 
 def describe(exc: BaseException) -> Problem:
@@ -284,7 +299,8 @@ def describe(exc: BaseException) -> Problem:
         return Problem(503, "device", str(exc))
     if isinstance(exc, ParameterError | ProtocolError | PhantomTouchError):
         message = str(exc)
-        return Problem(422, "invalid", message, [_problem(_guess_field(message), None, message)])
+        field, value = _field_and_value(message)
+        return Problem(422, "invalid", message, [_problem(field, value, message)])
     raise TypeError(f"no mapping for {type(exc).__name__}") from exc
 
 
@@ -292,14 +308,17 @@ def problem_response(problem: Problem) -> JSONResponse:
     return JSONResponse(problem.body(), status_code=problem.status_code, headers=problem.headers)
 
 
+_METHODS = ("DELETE", "GET", "HEAD", "PATCH", "POST", "PUT")
+
+
 def _allowed_methods(request: Request) -> str:
-    """The methods the app's routes answer on the request's path (for ``Allow``)."""
-    methods: set[str] = set()
-    for route in request.app.router.routes:
-        route_methods = getattr(route, "methods", None)
-        if route_methods and route.matches(request.scope)[0] is not Match.NONE:
-            methods |= route_methods
-    return ", ".join(sorted(methods))
+    """The methods some route of the app answers on the request's path (for ``Allow``)."""
+    allowed = []
+    for method in _METHODS:
+        scope = {**request.scope, "method": method}
+        if any(route.matches(scope)[0] is Match.FULL for route in request.app.router.routes):
+            allowed.append(method)
+    return ", ".join(allowed)
 
 
 async def _http_exception(request: Request, exc: Exception) -> JSONResponse:
