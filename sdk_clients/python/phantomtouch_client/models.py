@@ -109,10 +109,11 @@ class Clock(_Answer):
 
 
 class Health(_Answer):
-    """``GET /health``."""
+    """``GET /health``: ``degraded`` with ``storage`` saying why the pattern store fails."""
 
-    status: Literal["ok"] = "ok"
+    status: Literal["ok", "degraded"] = "ok"
     backend: str
+    storage: str | None = None
 
 
 class DeviceInfo(_Answer):
