@@ -101,10 +101,15 @@ class VoiceLedger:
             return hold
 
     def confirm(self, hold: Hold, job_id: str, end_s: float) -> None:
-        """The touch was scheduled as ``job_id``, ending at ``end_s``."""
+        """The touch was scheduled as ``job_id``, ending at ``end_s``.
+
+        A touch asked for as soon as possible starts a few milliseconds after the
+        reservation; it keeps the end it reserved, so that touches that just fit a quota
+        still fit once scheduled.
+        """
         with self._lock:
             hold.job_id = job_id
-            hold.end_s = end_s
+            hold.end_s = min(hold.end_s, end_s)
 
     def cancel(self, hold: Hold) -> None:
         """The touch was not scheduled after all: give its place back."""

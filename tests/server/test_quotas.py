@@ -64,3 +64,11 @@ def test_a_cancelled_reservation_gives_its_place_back() -> None:
     ledger.cancel(hold)
     assert ledger.holding("a", 0.0) == (0, 0.0)
     ledger.reserve("a", now_s=0.0, start_s=0.0, duration_s=5.0, still_playing=playing)
+
+
+def test_touches_that_just_fit_still_fit_once_scheduled_a_little_later() -> None:
+    ledger = VoiceLedger(voices_per_client=10, voice_seconds_per_client=14_400.0)
+    for k in range(2):
+        hold = ledger.reserve("a", now_s=0.0, start_s=0.0, duration_s=7200.0, still_playing=playing)
+        ledger.confirm(hold, f"long{k}", 0.02 + 7200.0)  # started 20 ms after the request
+    assert ledger.holding("a", 0.0) == (2, 14_400.0)
