@@ -110,9 +110,7 @@ def _check_plot_path(path: str) -> None:
             f"({', '.join('.' + f for f in sorted(formats))}), e.g. .png"
         )
     if not Path(path).parent.is_dir():
-        raise ParameterError(
-            f"--plot {path!r}: the folder {str(Path(path).parent)!r} is missing"
-        )
+        raise ParameterError(f"--plot {path!r}: the folder {str(Path(path).parent)!r} is missing")
 
 
 def _projection_note(plan: Plan) -> str | None:

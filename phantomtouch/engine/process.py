@@ -34,6 +34,7 @@ import os
 import select
 import threading
 import time
+import weakref
 from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
@@ -105,9 +106,9 @@ class _Child:
     backend: str
     output_device: str | None
     seq: int = 0
-    plans: OrderedDict[int, tuple[int, Plan, int]] = dataclasses.field(
+    plans: OrderedDict[int, tuple[int, weakref.ref[Plan], int]] = dataclasses.field(
         default_factory=OrderedDict
-    )  # id(plan): key, plan, bytes
+    )  # id(plan): key, the plan (not kept alive here), bytes the engine process keeps
     plan_bytes: int = 0
     forget: list[int] = dataclasses.field(default_factory=list)
     noise: OrderedDict[Any, None] = dataclasses.field(default_factory=OrderedDict)
@@ -467,11 +468,14 @@ class ProcessEngine(EngineFront):
     def _send_start(self, job_id: str, plan: Plan, owner: str | None, frame: int | None) -> None:
         child = self._child
         self._noise(plan.pattern.carrier)
-        known = child.plans.get(id(plan))
-        if known is not None and known[1] is plan:
-            child.plans.move_to_end(id(plan))
+        known = child.plans.pop(id(plan), None)
+        if known is not None and known[1]() is plan:
+            child.plans[id(plan)] = known  # the most recently used
             key, sent = known[0], None
         else:
+            if known is not None:  # a plan gone since, whose id this one has
+                child.forget.append(known[0])
+                child.plan_bytes -= known[2]
             key, sent = self._next_seq(), slim(plan)
         forget, child.forget = child.forget, []
         message = ("start", self._next_seq(), job_id, key, sent, forget, owner, frame)
@@ -483,7 +487,7 @@ class ProcessEngine(EngineFront):
             )
         if sent is not None:
             size = len(frame_bytes)
-            child.plans[id(plan)] = (key, plan, size)
+            child.plans[id(plan)] = (key, weakref.ref(plan), size)
             child.plan_bytes += size
             while child.plan_bytes > PLAN_CACHE_BYTES and len(child.plans) > 1:
                 old_key, _, old_size = child.plans.popitem(last=False)[1]

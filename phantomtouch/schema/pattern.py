@@ -58,6 +58,7 @@ class PolylinePath(_Model):
     points_cm: list[Point] = Field(
         min_length=1,
         max_length=limits.MAX_PATH_POINTS,
+        fail_fast=True,
         description="Points (x_cm, y_cm); one point is a touch that does not move.",
     )
 
@@ -75,7 +76,7 @@ class SplinePath(_Model):
     """A smooth curve (natural cubic spline, chord-length parameter) through the points."""
 
     kind: Literal["spline"] = "spline"
-    points_cm: list[Point] = Field(min_length=2, max_length=limits.MAX_PATH_POINTS)
+    points_cm: list[Point] = Field(min_length=2, max_length=limits.MAX_PATH_POINTS, fail_fast=True)
 
 
 class Keyframe(_Model):
@@ -93,7 +94,9 @@ class KeyframePath(_Model):
     """Timed keyframes: variable speed, pauses and full stops."""
 
     kind: Literal["keyframes"] = "keyframes"
-    keyframes: list[Keyframe] = Field(min_length=1, max_length=limits.MAX_PATH_POINTS)
+    keyframes: list[Keyframe] = Field(
+        min_length=1, max_length=limits.MAX_PATH_POINTS, fail_fast=True
+    )
 
     @model_validator(mode="after")
     def _increasing(self) -> Self:

@@ -13,11 +13,14 @@ from typing import Any, TypeVar
 
 from fastapi import Request
 from pydantic import TypeAdapter
+from starlette.concurrency import run_in_threadpool
 
 T = TypeVar("T")
 
 REF_TEMPLATE = "#/components/schemas/{model}"
 _COMPONENTS: dict[str, Any] = {}
+THREAD_BODY_BYTES = 64 << 10
+"""Bodies at least this long are validated in a worker thread."""
 
 
 def strict_body(
@@ -35,7 +38,9 @@ def strict_body(
         if not raw and not required:
             assert default is not None
             return default
-        return adapter.validate_json(raw, strict=True)
+        if len(raw) < THREAD_BODY_BYTES:
+            return adapter.validate_json(raw, strict=True)
+        return await run_in_threadpool(adapter.validate_json, raw, strict=True)
 
     extra = {
         "requestBody": {

@@ -36,7 +36,14 @@ async def get_store(connection: HTTPConnection) -> PatternStore:
     return get_service_now(connection).store
 
 
+async def get_client(connection: HTTPConnection) -> str:
+    """Whose quotas an HTTP request counts against: its client's address."""
+    address = connection.client
+    return f"address:{address.host if address is not None else 'unknown'}"
+
+
 ServiceDep = Annotated[Service, Depends(get_service)]
+ClientDep = Annotated[str, Depends(get_client)]
 if TYPE_CHECKING:
     EngineDep = EngineFront
 else:

@@ -10,31 +10,38 @@ The exception tree the server adds below the package root::
     └── ServiceError                     (this module)
         ├── NotFoundError                404 not_found
         ├── TooLargeError                413 too_large   (WebSocket: close 1009)
-        ├── RateLimitedError             429 rate_limited (WebSocket: close 1008 if repeated)
+        ├── RateLimitedError             429 rate_limited (WebSocket: close 1008 if sustained)
+        ├── QuotaError                   429 quota       (one client's fair share is used up)
+        ├── StorageError                 503 storage     (the pattern store is full or damaged)
         ├── UnauthorizedError            401 unauthorized (WebSocket: close 1008)
         ├── ForbiddenOriginError         403 forbidden_origin (WebSocket: handshake refused)
         ├── UnknownHostError             421 unknown_host (WebSocket: handshake refused)
         ├── UnsupportedMediaTypeError    415 unsupported_media_type
         └── StoredPatternError           500 stored_pattern (the library's row, not the request)
 
+A client that leaves before its request body has arrived is no error of the service:
+it is counted with status 499 and nothing is logged.
+
 pydantic's ``ValidationError`` and FastAPI's ``RequestValidationError`` are 422 ``invalid``
-with one ``fields`` entry per problem. :func:`install` registers the handlers; the
+with one ``fields`` entry per problem, at most :data:`MAX_FIELDS` of them (the message says
+how many more there were). :func:`install` registers the handlers; the
 WebSocket session asks :func:`describe` for the same code and message.
 """
 
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, Field, ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.requests import ClientDisconnect
+from starlette.routing import Match
 
 from phantomtouch.errors import (
     DeviceError,
@@ -55,7 +62,9 @@ ErrorCode = Literal[
     "method_not_allowed",
     "too_large",
     "rate_limited",
+    "quota",
     "busy",
+    "storage",
     "device",
     "invalid_json",
     "unknown_type",
@@ -65,7 +74,7 @@ WS_CLOSE_UNSUPPORTED_DATA = 1003
 """A binary frame: the protocol is JSON text."""
 WS_CLOSE_POLICY_VIOLATION = 1008
 """Missing or wrong token, a refused handshake where the server cannot answer it with an
-HTTP status, or the message rate limit exceeded again and again."""
+HTTP status, or the message rate limit exceeded for a second on end."""
 WS_CLOSE_MESSAGE_TOO_BIG = 1009
 """A message over ``max_ws_message_bytes``."""
 
@@ -103,6 +112,21 @@ class RateLimitedError(ServiceError):
     status_code = 429
     code: ErrorCode = "rate_limited"
     headers: ClassVar[Mapping[str, str]] = {"Retry-After": "1"}
+
+
+class QuotaError(ServiceError):
+    """One client's share (contacts, voices, voice-seconds ahead) is used up; others go on."""
+
+    status_code = 429
+    code: ErrorCode = "quota"
+    headers: ClassVar[Mapping[str, str]] = {"Retry-After": "1"}
+
+
+class StorageError(ServiceError):
+    """The pattern store cannot be read or written: its disk is full or its file damaged."""
+
+    status_code = 503
+    code: ErrorCode = "storage"
 
 
 class UnauthorizedError(ServiceError):
@@ -195,6 +219,8 @@ class Problem:
         return {"error": {"code": self.code, "message": self.message, "fields": self.fields}}
 
 
+MAX_FIELDS = 20
+"""Most ``fields`` entries in one answer; the message counts the rest."""
 _MAX_VALUE_CHARS = 120
 _LOCATION_PREFIXES = {"body", "query", "path", "header", "cookie"}
 _UNION_TAGS = {"touch", "preset", "named"}
@@ -228,9 +254,12 @@ def _location(loc: Sequence[int | str], *, tags: set[str]) -> str:
 
 
 def field_problems(errors: Sequence[Any], *, tags: set[str] = _UNION_TAGS) -> list[dict[str, Any]]:
-    """pydantic error dicts as ``[{field, value, message}]`` (union tags and ``body`` dropped)."""
+    """pydantic error dicts as ``[{field, value, message}]`` (union tags and ``body`` dropped).
+
+    Only the first :data:`MAX_FIELDS` errors are described.
+    """
     problems = []
-    for err in errors:
+    for err in errors[:MAX_FIELDS]:
         missing = err.get("type") == "missing"
         problems.append(
             {
@@ -242,36 +271,61 @@ def field_problems(errors: Sequence[Any], *, tags: set[str] = _UNION_TAGS) -> li
     return problems
 
 
-def _summary(problems: list[dict[str, Any]]) -> str:
+def _summary(problems: list[dict[str, Any]], total: int) -> str:
     parts = []
-    for item in problems:
+    for item in problems[:MAX_FIELDS]:
         if item["value"] is None and item["message"] == "Field required":
             parts.append(f"{item['field']}: field required")
         else:
             parts.append(f"{item['field']}={json.dumps(item['value'])}: {item['message']}")
+    more = total - len(parts)
+    if more > 0:
+        parts.append(f"and {more} more problems ({total} in all; the first {len(parts)} listed)")
     return "; ".join(parts) or "invalid request"
 
 
-def invalid(problems: list[dict[str, Any]]) -> Problem:
-    """A 422 ``invalid`` problem from field problems."""
-    return Problem(422, "invalid", _summary(problems), problems)
+def invalid(problems: list[dict[str, Any]], *, total: int | None = None) -> Problem:
+    """A 422 ``invalid`` problem from field problems (``total``: all problems found)."""
+    shown = problems[:MAX_FIELDS]
+    return Problem(422, "invalid", _summary(shown, total or len(problems)), shown)
+
+
+def validation_problem(exc: ValidationError | RequestValidationError) -> Problem:
+    """A validation error as a 422 ``invalid`` problem with at most :data:`MAX_FIELDS` fields."""
+    if isinstance(exc, ValidationError):
+        return invalid(field_problems(exc.errors(include_url=False)), total=exc.error_count())
+    errors = exc.errors()
+    return invalid(field_problems(errors), total=len(errors))
 
 
 def _problem(field: str, value: Any, message: str) -> dict[str, Any]:
     return {"field": field, "value": _short_value(value), "message": message}
 
 
-def _guess_field(message: str) -> str:
-    head = message.split("=", 1)[0].split(" ", 1)[0] if "=" in message.split(" ", 1)[0] else ""
-    return head or "body"
+def _field_and_value(message: str) -> tuple[str, Any]:
+    """The field and value a renderer message starts with (``"name=value: why"``).
+
+    The value is read back as JSON (numbers, ``true``) or as a quoted string (``'x'``);
+    one that is neither (a tuple, a long text) is None.
+    """
+    head = message.split(" ", 1)[0]
+    if "=" not in head:
+        return "body", None
+    field, _, text = head.partition("=")
+    text = text.rstrip(":;,")
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"":
+        return field, text[1:-1]
+    try:
+        value = json.loads(text)
+    except ValueError:
+        return field, None
+    return field, value if isinstance(value, int | float | bool) else None
 
 
 def describe(exc: BaseException) -> Problem:
     """The one mapping from an exception to its status, code, message and fields."""
-    if isinstance(exc, RequestValidationError):
-        return invalid(field_problems(exc.errors()))
-    if isinstance(exc, ValidationError):
-        return invalid(field_problems(exc.errors(include_url=False)))
+    if isinstance(exc, RequestValidationError | ValidationError):
+        return validation_problem(exc)
     if isinstance(exc, ServiceError):
         message = str(exc)
         fields = [] if exc.field is None else [_problem(exc.field, exc.value, message)]
@@ -282,7 +336,8 @@ def describe(exc: BaseException) -> Problem:
         return Problem(503, "device", str(exc))
     if isinstance(exc, ParameterError | ProtocolError | PhantomTouchError):
         message = str(exc)
-        return Problem(422, "invalid", message, [_problem(_guess_field(message), None, message)])
+        field, value = _field_and_value(message)
+        return Problem(422, "invalid", message, [_problem(field, value, message)])
     raise TypeError(f"no mapping for {type(exc).__name__}") from exc
 
 
@@ -290,13 +345,17 @@ def problem_response(problem: Problem) -> JSONResponse:
     return JSONResponse(problem.body(), status_code=problem.status_code, headers=problem.headers)
 
 
+_METHODS = ("DELETE", "GET", "HEAD", "PATCH", "POST", "PUT")
+
+
 def _allowed_methods(request: Request) -> str:
-    """The methods the OpenAPI document lists for the request's path (for ``Allow``)."""
-    path = request.url.path
-    for template, operations in request.app.openapi()["paths"].items():
-        if re.fullmatch(re.sub(r"\{[^}]+\}", "[^/]+", template), path):
-            return ", ".join(sorted(method.upper() for method in operations))
-    return ""
+    """The methods some route of the app answers on the request's path (for ``Allow``)."""
+    allowed = []
+    for method in _METHODS:
+        scope = {**request.scope, "method": method}
+        if any(route.matches(scope)[0] is Match.FULL for route in request.app.router.routes):
+            allowed.append(method)
+    return ", ".join(allowed)
 
 
 async def _http_exception(request: Request, exc: Exception) -> JSONResponse:
@@ -327,12 +386,22 @@ async def _described(request: Request, exc: Exception) -> JSONResponse:
     return problem_response(describe(exc))
 
 
+CLIENT_CLOSED_REQUEST = 499
+"""Status counted for a request whose client left before its body arrived (no one reads
+the answer; the status nginx uses for the same case)."""
+
+
+async def _client_gone(request: Request, exc: Exception) -> Response:
+    return Response(status_code=CLIENT_CLOSED_REQUEST)
+
+
 def install(app: FastAPI) -> None:
     """Register the handlers: every refusal leaves the service as an :class:`ErrorBody`."""
     app.add_exception_handler(RequestValidationError, _described)
     app.add_exception_handler(ValidationError, _described)
     app.add_exception_handler(PhantomTouchError, _described)
     app.add_exception_handler(StarletteHTTPException, _http_exception)
+    app.add_exception_handler(ClientDisconnect, _client_gone)
 
 
 def _response(description: str) -> dict[str, Any]:
@@ -345,9 +414,16 @@ RESPONSES: dict[int | str, dict[str, Any]] = {
     413: _response("Request body over the size limit (`too_large`)."),
     415: _response("A request body not sent as `application/json` (`unsupported_media_type`)."),
     422: _response("A field is out of range or malformed (`invalid`); `fields` name each."),
-    429: _response("Too many requests at once (`rate_limited`); retry after `Retry-After`."),
+    429: _response(
+        "Too many requests at once (`rate_limited`), or this client's share of the voices "
+        "is used up (`quota`, the message names which); retry after `Retry-After`."
+    ),
     500: _response("A stored pattern no longer reads as a pattern (`stored_pattern`)."),
-    503: _response("The engine's command queue is full (`busy`) or the sound card failed."),
+    503: _response(
+        "The engine is full and its voice policy refuses (`busy`), the engine is restarting "
+        "or the sound card failed (`device`), or the pattern store is full or damaged "
+        "(`storage`)."
+    ),
 }
 """Documented error responses, picked per route with :func:`responses`."""
 

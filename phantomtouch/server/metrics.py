@@ -70,7 +70,7 @@ class _EngineCollector(Collector):
         )
         yield GaugeMetricFamily(
             "phantomtouch_peak_level",
-            "Peak sample of the last block (full scale 1).",
+            "Largest absolute output sample since the engine started (full scale 1).",
             status["peak"],
         )
         yield GaugeMetricFamily(
@@ -113,7 +113,9 @@ class _EngineCollector(Collector):
             status["restarts"],
         )
         channel = GaugeMetricFamily(
-            "phantomtouch_channel_peak_level", "Peak per output channel.", labels=["channel"]
+            "phantomtouch_channel_peak_level",
+            "Largest absolute sample per output channel in the last block (full scale 1).",
+            labels=["channel"],
         )
         for k, level in enumerate(status["levels"], start=1):
             channel.add_metric([str(k)], level)
@@ -127,7 +129,8 @@ class Metrics:
         self.registry = CollectorRegistry(auto_describe=True)
         self.requests = Counter(
             "phantomtouch_http_requests",
-            "HTTP requests by route template, method and status.",
+            "HTTP requests by route template, method and status (499: the client left "
+            "before its request arrived whole).",
             ["route", "method", "status"],
             registry=self.registry,
         )
@@ -153,6 +156,16 @@ class Metrics:
         self.ws_watchdog_releases = Counter(
             "phantomtouch_ws_watchdog_releases",
             "Times a silent connection's contacts were released by the watchdog.",
+            registry=self.registry,
+        )
+        self.ws_dropped = Counter(
+            "phantomtouch_ws_dropped_messages",
+            "WebSocket messages dropped unanswered: over the connection's message rate.",
+            registry=self.registry,
+        )
+        self.ws_flood_closes = Counter(
+            "phantomtouch_ws_flood_closes",
+            "WebSocket connections closed (1008) for staying over their message rate.",
             registry=self.registry,
         )
         self.ws_connections = Counter(

@@ -387,7 +387,9 @@ class ClockInfo(BaseModel):
 
 
 class Health(BaseModel):
-    """Whether the service plays: ``degraded`` while its engine is not running."""
+    """``ok``; or ``degraded`` with the part that fails named (the service still runs):
+    ``engine`` while the engine process is being restarted, ``storage`` when the pattern
+    store fails."""
 
     status: Literal["ok", "degraded"] = "ok"
     backend: str
@@ -397,6 +399,9 @@ class Health(BaseModel):
     underruns: int = Field(description="Audio blocks the sound card missed since start.")
     render_load_p99: float = Field(
         description="p99 of the audio callback's time per block over its playing time."
+    )
+    storage: str | None = Field(
+        default=None, description="Why the pattern store fails (only when it does)."
     )
 
 

@@ -65,11 +65,20 @@ def check_port_free(host: str, port: int) -> None:
 
 
 def serve(settings: Settings) -> None:
-    """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly)."""
+    """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly).
+
+    Requests uvicorn cannot parse are answered with the service's JSON error body, and
+    WebSocket frames are parsed at the pace their session handles them
+    (:mod:`phantomtouch.server.wire`).
+    """
     import uvicorn
+
+    from phantomtouch.server.wire import FairWebSocketProtocol, JsonErrorProtocol
 
     uvicorn.run(
         create_app(settings),
+        http=JsonErrorProtocol,
+        ws=FairWebSocketProtocol,
         host=settings.host,
         port=settings.port,
         ws_max_size=settings.max_ws_message_bytes,

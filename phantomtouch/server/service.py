@@ -12,6 +12,7 @@ from phantomtouch.schema import DeviceProfile
 from phantomtouch.server.errors import RateLimitedError
 from phantomtouch.server.metrics import Metrics
 from phantomtouch.server.plans import PlanCache
+from phantomtouch.server.quotas import VoiceLedger
 from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
 
@@ -40,6 +41,7 @@ class Service:
     store: PatternStore
     metrics: Metrics
     plans: PlanCache = field(init=False)
+    voices: VoiceLedger = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
     holders: set[ContactHolder] = field(default_factory=set, init=False)
@@ -48,6 +50,9 @@ class Service:
     def __post_init__(self) -> None:
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
         self.plans = PlanCache(self.device)
+        self.voices = VoiceLedger(
+            self.settings.voices_per_client, self.settings.max_voice_seconds_per_client
+        )
 
     def new_owner(self) -> str:
         """A unique owner id for one WebSocket connection's contacts and jobs."""

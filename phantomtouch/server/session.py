@@ -9,8 +9,12 @@ In ``OPEN`` each text frame is parsed and handled at once, in arrival order: ``m
 goes straight to the engine's contact mailbox (latest wins, nothing queues here). Each
 contact has its own two states, up and down; a step that its state does not allow is
 answered with ``error`` ("expected X, got Y") and the session goes on. Malformed frames
-are answered with ``error`` too. Only a binary frame (1003), a frame over the size
-limit (1009), a missing token or a rate limit broken again and again (1008) close it.
+are answered with ``error`` too, frames nested too deeply to read included. Only a
+binary frame (1003), a frame over the size limit (1009), a missing token or a message
+rate exceeded for a second on end (1008, :mod:`phantomtouch.server.flood`) close it.
+Messages over the rate are dropped and counted; only the first of a flood is answered.
+The loop yields to the event loop after every frame, so that a connection whose frames
+are already buffered cannot keep HTTP requests and other connections waiting.
 
 Every message resets the watchdog; silence longer than ``watchdog_s`` releases the
 connection's contacts (``released``). Closing, in any way, releases them all.
@@ -35,8 +39,10 @@ from phantomtouch.server.errors import (
     WS_CLOSE_UNSUPPORTED_DATA,
     NotFoundError,
     Problem,
+    QuotaError,
     describe,
 )
+from phantomtouch.server.flood import FloodGuard
 from phantomtouch.server.limits import token_matches
 from phantomtouch.server.service import Service
 from phantomtouch.server.ws_messages import (
@@ -58,6 +64,10 @@ if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
 
 
+_GONE = (WebSocketDisconnect, RuntimeError, OSError)
+"""What sending or closing raises once the client has gone."""
+
+
 class SessionState(enum.Enum):
     CONNECTING = "connecting"
     OPEN = "open"
@@ -73,26 +83,6 @@ class SessionClosed(Exception):
         self.reason = reason
 
 
-class RateLimiter:
-    """Token bucket: ``rate_per_s`` messages per second with one second of burst."""
-
-    def __init__(self, rate_per_s: float) -> None:
-        self.rate_per_s = rate_per_s
-        self._tokens = rate_per_s
-        self._stamp = time.monotonic()
-        self.refused_in_a_row = 0
-
-    def allow(self, now: float) -> bool:
-        self._tokens = min(self.rate_per_s, self._tokens + (now - self._stamp) * self.rate_per_s)
-        self._stamp = now
-        if self._tokens >= 1.0:
-            self._tokens -= 1.0
-            self.refused_in_a_row = 0
-            return True
-        self.refused_in_a_row += 1
-        return False
-
-
 class Session:
     """The protocol of one connection; :meth:`run` returns when it is closed."""
 
@@ -103,8 +93,7 @@ class Session:
         settings = service.settings
         self.watchdog_s = settings.watchdog_s
         self.max_message_bytes = settings.max_ws_message_bytes
-        self.limiter = RateLimiter(settings.ws_messages_per_s)
-        self.refusals_before_close = max(10, int(settings.ws_messages_per_s))
+        self.limiter = FloodGuard(settings.ws_messages_per_s)
         self.owner = service.new_owner()
         self.state = SessionState.CONNECTING
         self.contacts: set[str] = set()
@@ -139,7 +128,7 @@ class Session:
             await self._serve()
         except SessionClosed as closed:
             code, reason = closed.code, closed.reason
-        except WebSocketDisconnect:
+        except (WebSocketDisconnect, OSError):
             pass
         finally:
             self._expect(SessionState.OPEN, SessionState.CLOSED)
@@ -150,7 +139,10 @@ class Session:
             self.engine.release_owner(self.owner)
             self.contacts.clear()
         if code is not None:
-            await self.websocket.close(code, reason)
+            try:
+                await self.websocket.close(code, reason)
+            except _GONE:
+                return
 
     async def _serve(self) -> None:
         receive = self.websocket.receive
@@ -173,19 +165,29 @@ class Session:
                     WS_CLOSE_MESSAGE_TOO_BIG,
                     f"message over the limit of {self.max_message_bytes} bytes",
                 )
-            if not self.limiter.allow(self.last_message_s):
-                await self._refuse_rate()
-                continue
-            await self._handle_text(text, received_s)
+            if self.limiter.admit(self.last_message_s):
+                await self._handle_text(text, received_s)
+            else:
+                await self._refuse_rate(self.last_message_s)
+            await asyncio.sleep(0)
 
-    async def _refuse_rate(self) -> None:
+    async def _refuse_rate(self, now_s: float) -> None:
+        self.service.metrics.ws_dropped.inc()
         limit = self.limiter.rate_per_s
-        if self.limiter.refused_in_a_row > self.refusals_before_close:
+        if self.limiter.sustained(now_s):
+            self.service.metrics.ws_flood_closes.inc()
             raise SessionClosed(
-                WS_CLOSE_POLICY_VIOLATION, f"message rate limit of {limit:g}/s exceeded repeatedly"
+                WS_CLOSE_POLICY_VIOLATION,
+                f"over the message rate limit of {limit:g}/s for "
+                f"{self.limiter.close_after_s:g} s; {self.limiter.dropped} messages dropped",
             )
-        message = f"more than {limit:g} messages per second; this message was dropped"
-        await self._send_error(Problem(429, "rate_limited", message), None)
+        if self.limiter.flood_started:
+            message = (
+                f"more than {limit:g} messages per second: messages are dropped, unanswered, "
+                f"until the rate falls; over it for {self.limiter.close_after_s:g} s closes "
+                "the connection (1008)"
+            )
+            await self._send_error(Problem(429, "rate_limited", message), None)
 
     async def _handle_text(self, text: str, received_s: float) -> None:
         try:
@@ -230,7 +232,9 @@ class Session:
         elif isinstance(message, Hello):
             await self._send(self._welcome(message))
         elif isinstance(message, Play):
-            job = await touch.schedule(self.service, message.request, owner=self.owner)
+            job = await touch.schedule(
+                self.service, message.request, client=self.owner, owner=self.owner
+            )
             await self._ok(message, job.model_dump())
         elif isinstance(message, Stop):
             await self._stop(message)
@@ -252,9 +256,11 @@ class Session:
             )
         limit = self.service.settings.max_contacts_per_connection
         if len(self.contacts) >= limit:
-            raise ProtocolError(
-                f"contact={message.contact!r}: at most {limit} contacts per connection are down "
-                "at once; send up for one first"
+            raise QuotaError(
+                f"contact={message.contact!r}: quota max_contacts_per_connection={limit} "
+                "(contacts one connection holds down at once) is used up; send up for one first",
+                field="contact",
+                value=message.contact,
             )
         if message.carrier is not None and message.carrier.kind != "sine":
             await asyncio.to_thread(self.engine.prepare_carrier, message.carrier)
@@ -375,7 +381,7 @@ class Session:
         """Send from a background task; a connection that is gone is not an error there."""
         try:
             await self._send(message)
-        except (WebSocketDisconnect, RuntimeError, OSError):
+        except _GONE:
             return
 
     async def _ok(self, message: ClientMessage, result: Any = None) -> None:

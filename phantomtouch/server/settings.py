@@ -82,7 +82,15 @@ class Settings(BaseSettings):
         description="Messages per second one WebSocket connection may send (1 s of burst).",
     )
     watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
-    max_contacts_per_connection: int = Field(default=16, ge=1, le=256)
+    max_contacts_per_connection: int = Field(
+        default=10,
+        ge=1,
+        le=256,
+        description=(
+            "Contacts one WebSocket connection may hold down at once (two hands); the "
+            "engine holds 128, so a dozen clients at their quota still leave room."
+        ),
+    )
     max_concurrent_renders: int = Field(default=2, ge=1, le=64)
     max_render_duration_s: float = Field(default=600.0, gt=0.0, le=7200.0)
     queue_capacity: int = Field(default=4096, ge=16, le=1 << 20)
@@ -110,6 +118,26 @@ class Settings(BaseSettings):
             "quietest sounding touch fades out in 5 ms to make room for it."
         ),
     )
+    max_voices_per_client: int | None = Field(
+        default=None,
+        ge=1,
+        le=4096,
+        description=(
+            "Touches one client (a WebSocket connection, or an address over HTTP) may have "
+            "scheduled or playing at once; None: three quarters of max_voices, so that "
+            "one client never holds every voice."
+        ),
+    )
+    max_voice_seconds_per_client: float = Field(
+        default=14_400.0,
+        gt=0.0,
+        le=1_000_000.0,
+        description=(
+            "Seconds of touch still to play that one client may hold, summed over its "
+            "touches: long touches count by the time they hold (default: two of the "
+            "longest, 2 h each)."
+        ),
+    )
     engine_process: bool = Field(
         default=True,
         description=(
@@ -120,6 +148,13 @@ class Settings(BaseSettings):
     engine_log_path: Path | None = Field(
         default=None, description="Where the engine logs what it played (None: no log)."
     )
+
+    @property
+    def voices_per_client(self) -> int:
+        """``max_voices_per_client``, or three quarters of ``max_voices`` (at least 1)."""
+        if self.max_voices_per_client is not None:
+            return self.max_voices_per_client
+        return max(1, (3 * self.max_voices) // 4)
 
     @field_validator("cors_origins")
     @classmethod

@@ -8,6 +8,10 @@ A row that no longer reads as a pattern (edited by hand, or stored by a version 
 accepted what this one refuses) is the library's fault, not the request's: ``list``
 leaves it out and logs it, ``get`` raises :class:`StoredPatternError` (500); the other
 rows stay usable, and ``PUT`` or ``DELETE`` of that name mends it.
+
+A store that fails while the service runs (its disk full, a page of its file damaged)
+raises :class:`~phantomtouch.server.errors.StorageError` (503 ``storage``) and keeps the
+reason in :attr:`PatternStore.problem`, which ``/health`` reports, until a write succeeds.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ import shlex
 import sqlite3
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +31,7 @@ from pydantic import ValidationError
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema import TouchPattern
-from phantomtouch.server.errors import StoredPatternError
+from phantomtouch.server.errors import StorageError, StoredPatternError
 from phantomtouch.server.models import PlanSummary
 
 logger = logging.getLogger("phantomtouch.server.store")
@@ -70,6 +76,8 @@ class PatternStore:
         self._db = connection
         self._lock = threading.Lock()
         self.path = path
+        self.problem: str | None = None
+        """Why the last failed call failed, until a write succeeds (None: healthy)."""
 
     @classmethod
     def open(cls, path: Path) -> PatternStore:
@@ -101,13 +109,27 @@ class PatternStore:
         with self._lock:
             self._db.close()
 
+    @contextmanager
+    def _using(self, *, writes: bool) -> Iterator[sqlite3.Connection]:
+        """The connection, under the lock; SQLite's failures become :class:`StorageError`."""
+        with self._lock:
+            try:
+                yield self._db
+            except sqlite3.Error as exc:
+                self.problem = _reason(exc)
+                raise StorageError(
+                    f"the pattern store {str(self.path)!r} failed: {self.problem}"
+                ) from exc
+        if writes:
+            self.problem = None
+
     def list(self) -> list[tuple[str, dict[str, Any]]]:
         """Every readable stored pattern's name and summary, sorted by name.
 
         A row whose pattern or summary no longer reads is left out and logged.
         """
-        with self._lock:
-            rows = self._db.execute(
+        with self._using(writes=False) as db:
+            rows = db.execute(
                 "SELECT name, pattern, summary FROM patterns ORDER BY name"
             ).fetchall()
         listed = []
@@ -129,10 +151,8 @@ class PatternStore:
         StoredPatternError
             The row is there but no longer reads as a pattern.
         """
-        with self._lock:
-            row = self._db.execute(
-                "SELECT pattern FROM patterns WHERE name = ?", (name,)
-            ).fetchone()
+        with self._using(writes=False) as db:
+            row = db.execute("SELECT pattern FROM patterns WHERE name = ?", (name,)).fetchone()
         if row is None:
             return None
         try:
@@ -143,24 +163,32 @@ class PatternStore:
     def put(self, name: str, pattern: TouchPattern, summary: dict[str, Any]) -> bool:
         """Store ``pattern`` under ``name``; True if the name was new."""
         text = pattern.model_dump_json(exclude_unset=True)
-        with self._lock:
-            self._db.execute("BEGIN IMMEDIATE")
+        with self._using(writes=True) as db:
+            db.execute("BEGIN IMMEDIATE")
             try:
-                existed = self._db.execute(
-                    "SELECT 1 FROM patterns WHERE name = ?", (name,)
-                ).fetchone()
-                self._db.execute(
+                existed = db.execute("SELECT 1 FROM patterns WHERE name = ?", (name,)).fetchone()
+                db.execute(
                     "INSERT OR REPLACE INTO patterns VALUES (?, ?, ?, ?)",
                     (name, text, json.dumps(summary), time.time()),
                 )
+                db.execute("COMMIT")
             except BaseException:
-                self._db.execute("ROLLBACK")
+                if db.in_transaction:
+                    db.execute("ROLLBACK")
                 raise
-            self._db.execute("COMMIT")
         return existed is None
 
     def delete(self, name: str) -> bool:
         """Remove ``name``; False if it was not stored."""
-        with self._lock:
-            cursor = self._db.execute("DELETE FROM patterns WHERE name = ?", (name,))
+        with self._using(writes=True) as db:
+            cursor = db.execute("DELETE FROM patterns WHERE name = ?", (name,))
         return cursor.rowcount > 0
+
+
+def _reason(exc: sqlite3.Error) -> str:
+    """SQLite's failure in words a reader of ``/health`` can act on."""
+    if isinstance(exc, sqlite3.OperationalError) and "full" in str(exc):
+        return f"the disk is full ({exc})"
+    if isinstance(exc, sqlite3.DatabaseError) and "malformed" in str(exc):
+        return f"the file is damaged ({exc})"
+    return str(exc)

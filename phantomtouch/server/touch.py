@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from phantomtouch.errors import ParameterError
@@ -37,7 +38,11 @@ def preset_pattern(name: str) -> TouchPattern:
 
 
 def stored_pattern(store: PatternStore, name: str, *, field: str = "stored") -> TouchPattern:
-    """The stored pattern ``name``; an unknown name is a :class:`NotFoundError` on ``field``."""
+    """The stored pattern ``name``; an unknown name is a :class:`NotFoundError`.
+
+    ``field`` is what the request called the name: ``name`` in the path of
+    ``/patterns/{name}``, ``stored`` in a touch request.
+    """
     pattern = store.get(name)
     if pattern is None:
         raise NotFoundError(
@@ -101,14 +106,24 @@ def accepted(engine: EngineFront, job: Job, plan: Plan) -> JobAccepted:
     )
 
 
+def _still_playing(engine: EngineFront) -> Callable[[str], bool]:
+    def still_playing(job_id: str) -> bool:
+        state = engine.job_state(job_id)
+        return state is not None and state.state in ("scheduled", "playing")
+
+    return still_playing
+
+
 async def schedule(
     service: Service,
     request: AnyTouch,
     *,
+    client: str,
     owner: str | None = None,
 ) -> JobAccepted:
     """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
 
+    ``client`` is whose quotas it counts against (:mod:`phantomtouch.server.quotas`).
     Reading the store, planning and scheduling (which may build a noise loop) run in a
     worker thread: the event loop never waits for them.
     """
@@ -118,7 +133,21 @@ async def schedule(
     def plan_and_schedule() -> JobAccepted:
         planned = service.plans.plan(resolve(request, service.store))
         first = start_frame(engine, request.timing())
-        job = engine.schedule(planned, start_frame=first, owner=owner, stop_count=stops)
+        now_s = engine.server_time_s()
+        hold = service.voices.reserve(
+            client,
+            now_s=now_s,
+            start_s=now_s if first is None else engine.time_at(first),
+            duration_s=planned.duration_s,
+            still_playing=_still_playing(engine),
+        )
+        try:
+            job = engine.schedule(planned, start_frame=first, owner=owner, stop_count=stops)
+        except BaseException:
+            service.voices.cancel(hold)
+            raise
+        end_s = engine.time_at(job.start_frame) + job.duration_s
+        service.voices.confirm(hold, str(job.job_id), end_s)
         return accepted(engine, job, planned)
 
     return await asyncio.to_thread(plan_and_schedule)

@@ -9,7 +9,11 @@ from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr, Validat
 
 from phantomtouch.schema import limits
 from phantomtouch.schema.pattern import Carrier, Law
-from phantomtouch.server.errors import ErrorCode, Problem, field_problems, invalid
+from phantomtouch.server.errors import (
+    ErrorCode,
+    Problem,
+    validation_problem,
+)
 from phantomtouch.server.models import AnyTouch, parse_touch_request
 
 PROTOCOL_VERSION = 1
@@ -122,13 +126,17 @@ def parse(text: str) -> ClientMessage:
     Raises
     ------
     MessageError
-        ``invalid_json`` (not JSON), ``invalid`` (not an object, or a field out of range)
-        or ``unknown_type``; with the message's ``id`` when it had a usable one.
+        ``invalid_json`` (not JSON, or nested too deeply), ``invalid`` (not an object,
+        or a field out of range) or ``unknown_type``; with the message's ``id`` when it
+        had a usable one.
     """
     try:
         data = json.loads(text)
     except ValueError as exc:
         message = f"the frame is not JSON: {exc}"
+        raise MessageError(_problem("invalid_json", "body", None, message)) from None
+    except RecursionError:
+        message = "the frame is nested too deeply to read; no message needs more than a few levels"
         raise MessageError(_problem("invalid_json", "body", None, message)) from None
     if not isinstance(data, dict):
         message = f"expected a JSON object with a 'type', got {type(data).__name__}"
@@ -147,7 +155,7 @@ def parse(text: str) -> ClientMessage:
                 request=parse_touch_request(json.dumps(request)),
             )
     except ValidationError as exc:
-        raise MessageError(invalid(field_problems(exc.errors())), message_id) from None
+        raise MessageError(validation_problem(exc), message_id) from None
     if kind is None:
         raise MessageError(_problem("invalid", "type", None, "type: field required"), message_id)
     message = f"type={kind!r} is not a client message; expected one of {', '.join(MESSAGE_TYPES)}"

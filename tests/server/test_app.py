@@ -35,7 +35,17 @@ def test_lifespan_runs_the_engine(tmp_path: Path, engine_process: bool) -> None:
 def test_openapi_documents_error_bodies(client: TestClient) -> None:
     document = client.get("/openapi.json").json()
     touch = document["paths"]["/touch"]["post"]
-    assert set(touch["responses"]) == {"202", "401", "404", "413", "415", "422", "500", "503"}
+    assert set(touch["responses"]) == {
+        "202",
+        "401",
+        "404",
+        "413",
+        "415",
+        "422",
+        "429",
+        "500",
+        "503",
+    }
     assert touch["responses"]["422"]["content"]["application/json"]["schema"] == {
         "$ref": "#/components/schemas/ErrorBody"
     }

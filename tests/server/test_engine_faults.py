@@ -20,7 +20,7 @@ import pytest
 
 from phantomtouch import DeviceProfile
 from tests.support.jack import JackServer, start_jack_or_skip
-from tests.support.live_server import LiveServer
+from tests.support.live_server import LiveServer, engine_pid
 
 LONG_TOUCH = {
     "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
@@ -47,24 +47,6 @@ def live(jack: JackServer, tmp_path: Path) -> Iterator[LiveServer]:
     server = LiveServer(tmp_path / "patterns.db", output="system", args=("--device", str(profile)))
     with server:
         yield server
-
-
-def engine_pid(server: LiveServer) -> int:
-    """The engine process: the server's child that multiprocessing spawned."""
-    assert server.process is not None
-    parent = server.process.pid
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdecimal():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-            cmdline = (entry / "cmdline").read_bytes().decode(errors="replace")
-        except OSError:
-            continue
-        ppid = int(stat.rsplit(")", 1)[1].split()[1])
-        if ppid == parent and "spawn_main" in cmdline:
-            return int(entry.name)
-    raise AssertionError("no engine process found")
 
 
 def wait_for(condition: Callable[[], bool], timeout_s: float, server: LiveServer) -> None:

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import BaseModel, Field, TypeAdapter, ValidationError
 
 from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError, ProtocolError
-from phantomtouch.server import errors
+from phantomtouch.server import create_app, errors
 from phantomtouch.server.errors import (
+    MAX_FIELDS,
     NotFoundError,
     RateLimitedError,
     TooLargeError,
@@ -17,6 +21,7 @@ from phantomtouch.server.errors import (
     describe,
     field_problems,
 )
+from tests.support.service import make_settings
 
 
 class Speed(BaseModel):
@@ -119,3 +124,40 @@ def test_unknown_route_and_method() -> None:
         assert wrong.status_code == 405
         assert wrong.headers["allow"] == "PUT"
         assert wrong.json()["error"]["code"] == "method_not_allowed"
+
+
+def test_many_problems_list_a_bounded_number_and_count_the_rest() -> None:
+    with pytest.raises(ValidationError) as info:
+        TypeAdapter(list[int]).validate_json(json.dumps(["x"] * 5000), strict=True)
+    problem = describe(info.value)
+    assert len(problem.fields) == MAX_FIELDS
+    assert [f["field"] for f in problem.fields[:2]] == ["[0]", "[1]"]
+    assert "and 4980 more problems (5000 in all" in problem.message
+    assert len(json.dumps(problem.body())) < 8 * 1024
+
+
+@pytest.mark.parametrize(
+    ("message", "field", "value"),
+    [
+        ("duration_s=7300.5: a WAV render lasts at most 600 s", "duration_s", 7300.5),
+        ("start_at_s=12 is more than 60 s after the server time", "start_at_s", 12),
+        ("preset='nope' is not a preset", "preset", "nope"),
+        ("points_cm[3]=(1.0, 2.0) lies outside", "points_cm[3]", None),
+        ("the path is empty", "body", None),
+    ],
+)
+def test_renderer_refusals_name_the_field_and_the_value(
+    message: str, field: str, value: object
+) -> None:
+    problem = describe(ParameterError(message))
+    assert problem.fields == [{"field": field, "value": value, "message": message}]
+
+
+def test_405_allow_lists_the_methods_of_every_route_on_the_path(tmp_path: Path) -> None:
+    with TestClient(create_app(make_settings(tmp_path))) as client:
+        page = client.put("/")
+        assert page.status_code == 405
+        assert page.headers["allow"] == "GET"
+        assert page.json()["error"]["code"] == "method_not_allowed"
+        patterns = client.post("/patterns/x")
+        assert patterns.headers["allow"] == "DELETE, GET, PUT"

@@ -176,7 +176,7 @@ def test_stop_under_load(live: LiveServer) -> None:
     for thread in threads:
         thread.join(budget_s + 10)
     assert answer.status_code == 200
-    assert set(statuses) <= {202, 503}
+    assert set(statuses) <= {202, 429, 503}, "played, over this client's quota, or busy"
     assert stop_s < 1.0, f"POST /stop took {stop_s:.3f} s under load"
     with httpx.Client(base_url=live.url, timeout=10) as client:
         states = {client.get(f"/jobs/{job}").json()["state"] for job in before}

@@ -26,8 +26,10 @@ def test_put_get_list_delete(client: TestClient) -> None:
     assert client.delete("/patterns/my-stroke.v1").status_code == 204
     gone = client.get("/patterns/my-stroke.v1")
     assert gone.status_code == 404
-    assert gone.json()["error"]["fields"][0]["field"] == "name"
-    assert client.delete("/patterns/my-stroke.v1").status_code == 404
+    assert gone.json()["error"]["fields"][0]["field"] == "name", "the path's name, as DELETE"
+    deleted_again = client.delete("/patterns/my-stroke.v1")
+    assert deleted_again.status_code == 404
+    assert deleted_again.json()["error"]["fields"][0]["field"] == "name"
 
 
 def test_names_from_a_safe_set(client: TestClient) -> None:

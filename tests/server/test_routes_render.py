@@ -81,7 +81,7 @@ def test_renders_beyond_the_slots_are_429(tmp_path: Path) -> None:
         assert client.post("/render", json={"preset": "vr/tap"}).status_code == 200
 
 
-def test_wav_answer_counts_its_clipped_frames_and_json_estimates_them(
+def test_wav_answer_estimates_its_clipped_frames_as_json_does(
     client: TestClient,
 ) -> None:
     loud = {**STROKE, "carrier": {"kind": "noise"}, "level_db": 150.0}
@@ -90,8 +90,11 @@ def test_wav_answer_counts_its_clipped_frames_and_json_estimates_them(
     samples, _ = soundfile.read(io.BytesIO(answer.content), dtype="float32")
     at_ceiling = np.mean((np.abs(samples) >= np.float32(1.0)).any(axis=1))
     assert at_ceiling > 0.0
-    assert float(answer.headers["X-Clipped-Fraction"]) == pytest.approx(at_ceiling, rel=1e-5)
     estimate = client.post("/render", json=loud, headers=JSON).json()["clipped_fraction"]
     assert estimate == plan(TouchPattern(**loud)).clipped_fraction > 0.0
+    # the WAV streams as it renders: its header carries the estimate made before, which
+    # the frames it holds bear out (the estimate is within 10 % over noise seeds)
+    assert float(answer.headers["X-Clipped-Fraction"]) == pytest.approx(estimate, rel=1e-5)
+    assert at_ceiling == pytest.approx(estimate, rel=0.2)
     quiet = client.post("/render", json=STROKE)
     assert float(quiet.headers["X-Clipped-Fraction"]) == 0.0

@@ -123,7 +123,7 @@ def test_full_engine_answers_503_busy(tmp_path: Path) -> None:
 
 
 def test_more_voices_than_max_voices_at_once_answer_503_busy(tmp_path: Path) -> None:
-    settings = make_settings(tmp_path, max_voices=2, voice_policy="refuse")
+    settings = make_settings(tmp_path, max_voices=2, max_voices_per_client=3, voice_policy="refuse")
     with TestClient(create_app(settings)) as client:
         answers = [client.post("/touch", json=LONG) for _ in range(3)]
         assert [a.status_code for a in answers[:2]] == [202, 202]

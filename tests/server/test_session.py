@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -188,18 +189,64 @@ def test_message_over_the_limit_closes_1009(app_client: Callable[..., TestClient
         assert wait_until(lambda: contacts(client) == [])
 
 
-def test_rate_limit_refuses_then_closes_1008(app_client: Callable[..., TestClient]) -> None:
+def test_a_flood_is_answered_once_then_closed_1008(app_client: Callable[..., TestClient]) -> None:
+    """Over the rate: the first dropped message is answered, the rest only counted; a
+    flood that goes on for a second closes the connection."""
     with app_client(ws_messages_per_s=10) as client, client.websocket_connect("/ws") as ws:
-        for _ in range(10):
-            ws.send_json({"type": "move", "contact": "nobody", "x_cm": 1, "y_cm": 1})
-            assert ws.receive_json()["code"] == "invalid"
-        ws.send_json({"type": "ping"})
+        sent = 0
+        deadline = time.monotonic() + 1.6  # 5 ms apart: the bucket admits about one in 20
+        while time.monotonic() < deadline:
+            ws.send_json({"type": "ping", "id": sent})
+            sent += 1
+            time.sleep(0.005 if sent > 30 else 0.0)  # a burst of 30, then 200 per second
+        answers: list[dict[str, Any]] = []
+        with pytest.raises(WebSocketDisconnect) as closed:
+            while True:
+                answers.append(ws.receive_json())
+        metrics = client.get("/metrics").text
+    assert closed.value.code == WS_CLOSE_POLICY_VIOLATION
+    assert "for 1 s" in closed.value.reason
+    refused = [a for a in answers if a["type"] != "pong"]
+    assert [a["code"] for a in refused] == ["rate_limited"], "only the first drop is answered"
+    assert "more than 10 messages per second" in refused[0]["message"]
+    pongs = len(answers) - 1
+    assert 10 <= pongs <= 10 + 10 * 1.6 + 1, "the burst, then what the bucket admits"
+    match = re.search(r"^phantomtouch_ws_dropped_messages_total (\S+)$", metrics, re.MULTILINE)
+    assert match is not None
+    reason = re.search(r"; (\d+) messages dropped", closed.value.reason)
+    assert reason is not None
+    assert float(match.group(1)) == int(reason.group(1)) >= 100, "a second of drops, counted"
+    assert "phantomtouch_ws_flood_closes_total 1.0" in metrics
+
+
+def test_contacts_past_the_quota_are_refused_naming_it(
+    app_client: Callable[..., TestClient],
+) -> None:
+    with (
+        app_client(max_contacts_per_connection=2) as client,
+        client.websocket_connect("/ws") as ws,
+    ):
+        for k, contact in enumerate(("a", "b")):
+            down = {"type": "down", "contact": contact, "x_cm": 1.9, "y_cm": 3 + k, "id": k}
+            assert ask(ws, down) == {"type": "ok", "id": k}
+        refused = ask(ws, {"type": "down", "contact": "c", "x_cm": 1.9, "y_cm": 9, "id": 2})
+        assert refused["code"] == "quota"
+        assert "max_contacts_per_connection=2" in refused["message"]
+        assert refused["fields"][0]["field"] == "contact"
+        assert ask(ws, {"type": "up", "contact": "a", "id": 3})["type"] == "ok"
+        assert ask(ws, {"type": "down", "contact": "c", "x_cm": 1.9, "y_cm": 9, "id": 4}) == {
+            "type": "ok",
+            "id": 4,
+        }
+
+
+def test_a_frame_nested_too_deeply_is_answered_and_the_session_kept(client: TestClient) -> None:
+    with client.websocket_connect("/ws") as ws:
+        ws.send_text("[" * 30_000)
         refused = ws.receive_json()
-        assert refused["code"] == "rate_limited"
-        assert "more than 10 messages per second" in refused["message"]
-        for _ in range(20):
-            ws.send_json({"type": "ping"})
-        assert _closed_with(ws) == WS_CLOSE_POLICY_VIOLATION
+        assert refused["code"] == "invalid_json"
+        assert "nested too deeply" in refused["message"]
+        assert ask(ws, {"type": "ping", "id": 1})["type"] == "pong"
 
 
 def test_token_required(app_client: Callable[..., TestClient]) -> None:

@@ -128,3 +128,21 @@ class LiveServer:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def engine_pid(server: LiveServer) -> int:
+    """The engine process: the server's child that multiprocessing spawned."""
+    assert server.process is not None
+    parent = server.process.pid
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdecimal():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes().decode(errors="replace")
+        except OSError:
+            continue
+        ppid = int(stat.rsplit(")", 1)[1].split()[1])
+        if ppid == parent and "spawn_main" in cmdline:
+            return int(entry.name)
+    raise AssertionError("no engine process found")

@@ -76,17 +76,21 @@ async def get_clock(engine: EngineDep) -> ClockInfo:
     )
 
 
-@router.get("/health", response_model=Health, summary="Liveness")
-async def get_health(engine: EngineDep) -> Health:
-    """`ok` while audio flows, `degraded` while the engine is being restarted; needs no
-    token, and never waits for the engine (its figures come from shared memory)."""
-    status = engine.status()
+@router.get("/health", response_model=Health, response_model_exclude_none=True, summary="Liveness")
+async def get_health(service: ServiceDep) -> Health:
+    """`ok` while audio flows and the pattern store works; `degraded` while the engine is
+    being restarted (`engine` says its state) or naming the store's problem (`storage`:
+    its disk is full or its file damaged). Needs no token, and never waits for the engine
+    (its figures come from shared memory)."""
+    status = service.engine.status()
+    problem = service.store.problem
     return Health(
-        status="ok" if status.state == "running" else "degraded",
+        status="ok" if status.state == "running" and problem is None else "degraded",
         backend=status.backend,
         engine=status.state,
         underruns=status.underruns,
         render_load_p99=status.render_load_p99,
+        storage=problem,
     )
 
 

@@ -10,7 +10,7 @@ from pydantic import TypeAdapter
 from phantomtouch.schema import TouchPattern
 from phantomtouch.server import touch
 from phantomtouch.server.bodies import strict_body
-from phantomtouch.server.deps import PatternNameParam, ServiceDep, StoreDep
+from phantomtouch.server.deps import ClientDep, PatternNameParam, ServiceDep, StoreDep
 from phantomtouch.server.errors import NotFoundError, responses
 from phantomtouch.server.models import (
     JobAccepted,
@@ -28,7 +28,9 @@ play_body, PLAY_BODY_OPENAPI = strict_body(
 )
 
 
-@router.get("", response_model=list[PatternInfo], responses=responses(401), summary="The library")
+@router.get(
+    "", response_model=list[PatternInfo], responses=responses(401, 503), summary="The library"
+)
 def list_patterns(store: StoreDep) -> list[PatternInfo]:
     """Every stored pattern with its plan summary, sorted by name."""
     return [
@@ -40,7 +42,7 @@ def list_patterns(store: StoreDep) -> list[PatternInfo]:
     "/{name}",
     response_model=TouchPattern,
     response_model_exclude_unset=True,
-    responses=responses(401, 404, 422, 500),
+    responses=responses(401, 404, 422, 500, 503),
     summary="One stored pattern",
 )
 def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
@@ -51,7 +53,7 @@ def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
 @router.put(
     "/{name}",
     response_model=PatternInfo,
-    responses=responses(401, 413, 415, 422),
+    responses=responses(401, 413, 415, 422, 503),
     summary="Store a pattern",
     openapi_extra=PATTERN_BODY_OPENAPI,
 )
@@ -67,7 +69,7 @@ def put_pattern(
 
 
 @router.delete(
-    "/{name}", status_code=204, responses=responses(401, 404, 422), summary="Remove a pattern"
+    "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary="Remove a pattern"
 )
 def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
     """Remove a stored pattern."""
@@ -84,7 +86,7 @@ def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
     "/{name}/play",
     status_code=202,
     response_model=JobAccepted,
-    responses=responses(401, 404, 413, 415, 422, 500, 503),
+    responses=responses(401, 404, 413, 415, 422, 429, 500, 503),
     summary="Play a stored pattern",
     openapi_extra=PLAY_BODY_OPENAPI,
 )
@@ -92,7 +94,8 @@ async def play_pattern(
     name: PatternNameParam,
     service: ServiceDep,
     timing: Annotated[PlayRequest, Depends(play_body)],
+    client: ClientDep,
 ) -> JobAccepted:
     """As `POST /touch` with `{"stored": name}`; optional `start_in_ms` or `start_at_s`."""
     request = NamedTouch(stored=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
-    return await touch.schedule(service, request)
+    return await touch.schedule(service, request, client=client)

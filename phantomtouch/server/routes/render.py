@@ -2,18 +2,15 @@
 
 from __future__ import annotations
 
-import tempfile
-from collections.abc import Iterator
-from typing import IO, Annotated
+from contextlib import ExitStack
+from typing import Annotated
 
 import numpy as np
-import soundfile
 from fastapi import APIRouter, Header, Response
 from fastapi.responses import StreamingResponse
+from starlette.background import BackgroundTask
 
 from phantomtouch.errors import ParameterError
-from phantomtouch.renderer import render_plan_blocks
-from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.renderer.trajectory import control_gains, positions_at
 from phantomtouch.server import touch
@@ -21,13 +18,11 @@ from phantomtouch.server.deps import ServiceDep
 from phantomtouch.server.errors import responses
 from phantomtouch.server.models import Curves, RenderPlan
 from phantomtouch.server.routes.touch import TOUCH_BODY_OPENAPI, TouchBody
+from phantomtouch.server.wav import wav_bytes, wav_stream
 
 router = APIRouter(tags=["render"])
 
 MAX_CURVE_POINTS = 500
-_WAV_BLOCK_FRAMES = 1 << 15
-_SPOOL_BYTES = 16 << 20
-_CHUNK_BYTES = 1 << 20
 WAV_MEDIA_TYPE = "audio/wav"
 
 
@@ -45,31 +40,8 @@ def curves(plan: Plan, *, points: int = MAX_CURVE_POINTS) -> Curves:
 
 
 CLIPPED_HEADER = "X-Clipped-Fraction"
-"""Response header of a WAV render: the fraction of its frames at the safety ceiling."""
-
-
-def _wav_file(plan: Plan) -> tuple[IO[bytes], float]:
-    spool = tempfile.SpooledTemporaryFile(max_size=_SPOOL_BYTES)  # noqa: SIM115 (streamed, closed by _chunks)
-    with soundfile.SoundFile(
-        spool,
-        "w",
-        samplerate=plan.sample_rate_hz,
-        channels=plan.channels,
-        subtype="FLOAT",
-        format="WAV",
-    ) as wav:
-        clipped = 0
-        for block in render_plan_blocks(plan, block_frames=_WAV_BLOCK_FRAMES):
-            wav.write(block)
-            clipped += frames_at_ceiling(block, plan.device.safety.ceiling)
-    spool.seek(0)
-    return spool, clipped / plan.frames
-
-
-def _chunks(file: IO[bytes]) -> Iterator[bytes]:
-    with file:
-        while chunk := file.read(_CHUNK_BYTES):
-            yield chunk
+"""Response header of a WAV render: the fraction of its frames the safety ceiling clips, as
+estimated before rendering (the WAV streams as it renders)."""
 
 
 @router.post(
@@ -90,7 +62,7 @@ def _chunks(file: IO[bytes]) -> Iterator[bytes]:
                 }
             },
         },
-        **responses(401, 404, 413, 415, 422, 429, 500),
+        **responses(401, 404, 413, 415, 422, 429, 500, 503),
     },
     summary="Render a touch offline",
     openapi_extra=TOUCH_BODY_OPENAPI,
@@ -102,8 +74,9 @@ def post_render(
 ) -> Response | RenderPlan:
     """Render a touch request as the engine would play it (timing fields are ignored).
 
-    WAV renders are capped at `max_render_duration_s` (default 600 s); a few run at once
-    (`max_concurrent_renders`), more are refused with 429.
+    WAV renders are capped at `max_render_duration_s` (default 600 s) and stream as they
+    are rendered; a few run at once (`max_concurrent_renders`, each until its download
+    ends or its client leaves), more are refused with 429.
     """
     pattern = touch.resolve(request, service.store)
     plan = service.plans.plan(pattern)
@@ -116,13 +89,16 @@ def post_render(
             f"duration_s={plan.duration_s:.6g}: a WAV render lasts at most {cap_s:g} s "
             "(max_render_duration_s); ask with 'Accept: application/json' for the plan alone"
         )
-    with service.render_slot():
-        wav, clipped_fraction = _wav_file(plan)
+    slot = ExitStack()
+    slot.enter_context(service.render_slot())
+    stream = wav_stream(plan, slot.close)
     return StreamingResponse(
-        _chunks(wav),
+        stream,
+        background=BackgroundTask(stream.aclose),  # runs also when the client has left
         media_type=WAV_MEDIA_TYPE,
         headers={
             "Content-Disposition": 'attachment; filename="touch.wav"',
-            CLIPPED_HEADER: f"{clipped_fraction:.6g}",
+            CLIPPED_HEADER: f"{plan.clipped_fraction:.6g}",
+            "Content-Length": str(wav_bytes(plan)),
         },
     )

@@ -9,7 +9,7 @@ from fastapi import Path as PathParam
 
 from phantomtouch.server import touch
 from phantomtouch.server.bodies import strict_body
-from phantomtouch.server.deps import EngineDep, ServiceDep
+from phantomtouch.server.deps import ClientDep, EngineDep, ServiceDep
 from phantomtouch.server.errors import NotFoundError, responses
 
 if TYPE_CHECKING:
@@ -44,17 +44,18 @@ JobIdParam = Annotated[
     "/touch",
     status_code=202,
     response_model=JobAccepted,
-    responses=responses(401, 404, 413, 415, 422, 500, 503),
+    responses=responses(401, 404, 413, 415, 422, 429, 500, 503),
     summary="Play a touch",
     openapi_extra=TOUCH_BODY_OPENAPI,
 )
-async def post_touch(request: TouchBody, service: ServiceDep) -> JobAccepted:
+async def post_touch(request: TouchBody, service: ServiceDep, client: ClientDep) -> JobAccepted:
     """Schedule a touch: a whole pattern, a preset with overrides, or a stored pattern.
 
     Without `start_in_ms` or `start_at_s` it starts as soon as possible. 404 names an
-    unknown preset or stored pattern; 503 `busy` means the engine's queue is full.
+    unknown preset or stored pattern; 503 `busy` means the engine's queue is full; 429
+    `quota` that this client holds its share of the voices (the message names the quota).
     """
-    return await touch.schedule(service, request)
+    return await touch.schedule(service, request, client=client)
 
 
 @router.post(

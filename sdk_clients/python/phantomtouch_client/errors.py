@@ -14,9 +14,12 @@
         ├── NotFound                          code "not_found": unknown job, pattern, preset
         ├── TooLarge                          code "too_large"
         ├── RateLimited                       code "rate_limited"
+        │   └── QuotaExceeded                 code "quota": this client's fair share is used
         ├── MethodNotAllowed                  code "method_not_allowed"
-        ├── Busy                              code "busy": the engine's queue is full
-        └── DeviceFailed                      code "device": the sound card failed
+        ├── Busy                              code "busy": the engine is full
+        ├── DeviceFailed                      code "device": the sound card failed, or the
+        │                                     engine is restarting
+        └── StorageFailed                     code "storage": the pattern store failed
 
 REST errors and WebSocket ``error`` replies carry the same ``code`` and map to the same
 class; ``status`` is the HTTP status, or ``None`` for a WebSocket reply. Errors of httpx and
@@ -101,6 +104,11 @@ class RateLimited(ApiError):
     """Too many requests or messages."""
 
 
+class QuotaExceeded(RateLimited):
+    """This client holds its share (contacts, voices, seconds of touch); the message names
+    the quota. Retry when one of its touches has ended or a contact is lifted."""
+
+
 class MethodNotAllowed(ApiError):
     """The route has no such method."""
 
@@ -113,6 +121,10 @@ class DeviceFailed(ApiError):
     """The service's sound card failed."""
 
 
+class StorageFailed(ApiError):
+    """The service's pattern store failed: its disk is full or its file damaged."""
+
+
 _BY_CODE: dict[str, type[ApiError]] = {
     "invalid": InvalidRequest,
     "invalid_json": MalformedMessage,
@@ -121,9 +133,11 @@ _BY_CODE: dict[str, type[ApiError]] = {
     "not_found": NotFound,
     "too_large": TooLarge,
     "rate_limited": RateLimited,
+    "quota": QuotaExceeded,
     "method_not_allowed": MethodNotAllowed,
     "busy": Busy,
     "device": DeviceFailed,
+    "storage": StorageFailed,
 }
 
 _BY_STATUS: dict[int, str] = {

@@ -114,13 +114,15 @@ class Clock(_Answer):
 
 
 class Health(_Answer):
-    """``GET /health``: ``degraded`` while the service's engine is being restarted."""
+    """``GET /health``: ``degraded`` while the service's engine is being restarted, or with
+    ``storage`` saying why the pattern store fails."""
 
     status: Literal["ok", "degraded"] = "ok"
     backend: str
     engine: str
     underruns: int
     render_load_p99: float
+    storage: str | None = None
 
 
 class DeviceInfo(_Answer):

@@ -1,0 +1,121 @@
+"""uvicorn's protocols, adjusted: JSON for unparsable requests, fair WebSocket reading.
+
+A request uvicorn cannot parse (malformed framing, a request line or a header too long
+for its parser) never reaches the app: uvicorn answers it itself, by default with a
+plain-text ``400``. :class:`JsonErrorProtocol` answers the same ``400`` with the body of
+every other refusal, ``{"error": {"code": "invalid", "message", "fields"}}``.
+
+uvicorn's WebSocket protocol parses everything one socket read brings (up to 256 KB,
+some 10,000 small frames of a flooding client) in one callback of the event loop, which
+held every other request up for a quarter of a second at a time.
+:class:`FairWebSocketProtocol` keeps what it received and parses it a slice at a time,
+when the session asks for its next message: the parsing of a connection proceeds at the
+pace its session handles messages, and the session yields after each one. When the
+session closes, the close frame ends the stream and what the client still sends is
+dropped unparsed.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING, Any
+
+from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
+
+from phantomtouch.server.errors import Problem
+
+if TYPE_CHECKING:
+    from uvicorn._types import ASGIReceiveEvent, ASGISendEvent
+
+
+def malformed_body(reason: str) -> bytes:
+    """The JSON error body of a request that could not be parsed."""
+    message = f"malformed HTTP request: {reason}"
+    field = {"field": "request", "value": None, "message": message}
+    return json.dumps(Problem(400, "invalid", message, [field]).body()).encode()
+
+
+class JsonErrorProtocol(HttpToolsProtocol):
+    """uvicorn's httptools protocol whose parse errors answer the service's error body."""
+
+    def send_400_response(self, msg: str) -> None:
+        body = malformed_body(msg.rstrip(".").lower())
+        content = [b"HTTP/1.1 400 Bad Request\r\n"]
+        for name, value in self.server_state.default_headers:
+            content.extend([name, b": ", value, b"\r\n"])
+        content.extend(
+            [
+                b"content-type: application/json\r\n",
+                b"content-length: " + str(len(body)).encode("ascii") + b"\r\n",
+                b"connection: close\r\n",
+                b"\r\n",
+                body,
+            ]
+        )
+        self.transport.write(b"".join(content))
+        self.transport.close()
+
+
+PARSE_SLICE_BYTES = 4096
+"""Most received bytes parsed at once (some 180 small frames, a few milliseconds)."""
+
+
+class FairWebSocketProtocol(WebSocketsSansIOProtocol):
+    """uvicorn's WebSocket protocol parsing received bytes a slice at a time, on demand.
+
+    Received bytes wait unparsed; :meth:`receive` parses slices until a message is ready
+    (or nothing is left). Reading from the socket stays paused while bytes wait, so
+    what waits is at most one socket read.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._unparsed = bytearray()
+        self._closed_by_the_app = False
+
+    async def send(self, message: ASGISendEvent) -> None:
+        """As uvicorn's; once the session has closed, the connection is ended at once.
+
+        uvicorn goes on parsing what arrives until the client's close reply, for up to
+        10 s: a flooding client would have every frame it had sent parsed meanwhile.
+        Here the close frame is followed by the end of the stream (the client learns at
+        once that nothing more will come), and what still arrives is dropped unparsed.
+        """
+        await super().send(message)
+        if message["type"] == "websocket.close" and self.close_sent:
+            self._closed_by_the_app = True
+            self._unparsed.clear()
+            self.stop_keepalive()
+            if self.transport.can_write_eof():
+                self.transport.write_eof()
+
+    def data_received(self, data: bytes) -> None:
+        if self._closed_by_the_app:
+            return  # the session is over: what arrives is read (no reset) and dropped
+        self._unparsed += data
+        if self.queue.empty():
+            self._parse_until_a_message()
+        if self._unparsed and not self.disconnected:
+            self.read_paused = True
+            self.transport.pause_reading()
+
+    def _parse_until_a_message(self) -> None:
+        while self._unparsed and self.queue.empty() and not self.disconnected:
+            chunk = bytes(self._unparsed[:PARSE_SLICE_BYTES])
+            del self._unparsed[:PARSE_SLICE_BYTES]
+            super().data_received(chunk)
+
+    async def receive(self) -> ASGIReceiveEvent:
+        if self.queue.empty():
+            self._parse_until_a_message()
+            self._read_more_if_all_parsed()  # what is left is part of a frame at most
+        message = await self.queue.get()
+        if self.queue.empty():
+            self._read_more_if_all_parsed()
+        return message
+
+    def _read_more_if_all_parsed(self) -> None:
+        if self.read_paused and not self._unparsed and not self.disconnected:
+            self.read_paused = False
+            self.transport.resume_reading()
