@@ -19,10 +19,10 @@ length), so a pattern voice renders ``chunk_frames`` (default 4096) frames at a 
 a ring of two chunks taken from a preallocated :class:`RingPool`, and the callback adds
 slices of it. The scheduler spreads the refills of all voices evenly over the blocks.
 The samples are the same: the block renderer gives identical samples however its output
-is cut into blocks. A voice that runs dry (one that just began, before its turn for a
-chunk) renders only the frames it is missing, so that many voices beginning in one block
-do not each render a whole chunk there. With the pool empty, or ``chunk_frames`` 0, a
-voice renders each block directly.
+is cut into blocks. A voice that runs dry (one that just began) renders a chunk at once;
+the engine bounds how many voices may begin in one block by what that costs
+(:mod:`phantomtouch.engine.front`). With the pool empty, or ``chunk_frames`` 0, a voice
+renders each block directly.
 """
 
 from __future__ import annotations
@@ -236,12 +236,12 @@ class PatternVoice(Voice):
         ahead = self._write - self._read
         return ahead if ahead <= self._ring.shape[0] - self._chunk else None
 
-    def refill(self, frames: int | None = None) -> None:
-        """Render the next chunk (or only ``frames``) into the ring."""
+    def refill(self) -> None:
+        """Render the next chunk into the ring."""
         assert self._ring is not None
         ring = self._ring
         size = ring.shape[0]
-        left = min(self._chunk if frames is None else frames, self._renderer.remaining_frames)
+        left = min(self._chunk, self._renderer.remaining_frames)
         while left > 0:  # two pieces where the ring wraps
             at = self._write % size
             piece = min(left, size - at)
@@ -280,9 +280,8 @@ class PatternVoice(Voice):
         ring = self._ring
         assert ring is not None
         count = dest.shape[0]
-        missing = count - (self._write - self._read)
-        if missing > 0:  # run dry (a voice that just began): render only what is missing
-            self.refill(missing)
+        if self._write - self._read < count:  # run dry (a voice that just began): a chunk now
+            self.refill()
         read = self._read
         spans = self._spans
         while spans[0][0] <= read:  # chunks played out (the one being read stays)
