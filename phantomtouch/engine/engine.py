@@ -23,6 +23,7 @@ from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.front import (
+    CHUNK_FRAMES,
     MAX_VOICES,
     RENDER_BUDGET,
     ContactRecord,
@@ -39,7 +40,7 @@ from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger("phantomtouch.engine")
 
-RENDER_AHEAD_FRAMES = 4096
+RENDER_AHEAD_FRAMES = CHUNK_FRAMES
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`)."""
 RENDER_AHEAD_RINGS = 64
 """Most pattern voices that render ahead at once: the engine preallocates a ring (two

@@ -75,6 +75,14 @@ STEAL_FADE_S = 0.005
 START_SHARE = 0.2
 """Share of a block's playing time that voices beginning in it may take (a voice's first
 block costs more than the next: it renders before the callback's spread refills)."""
+CHURN_SHARE = 0.15
+"""Share of the callback's time, on average, that the first chunks of beginning voices
+may take: a short touch renders almost all of its frames in its first two chunks, so a
+flood of taps costs by how fast they begin, not by how many sound at once."""
+CHURN_WINDOW_S = 0.1
+"""Over how long a burst of beginnings may exceed ``CHURN_SHARE`` before it is refused."""
+CHUNK_FRAMES = 4096
+"""Frames a pattern voice renders at a time (the engine's render-ahead chunk)."""
 MAX_START_DELAY_S = 0.02
 """How far a job that asks to start as soon as possible may be moved to a later block
 when the next ones already begin as many voices as they may; beyond it, it is refused."""
@@ -135,6 +143,8 @@ class EngineFront:
         self._voice_cost = 0.0
         self._start_cost = 0.0
         self._starts: dict[int, int] = {}  # block index: jobs that begin in it
+        self._churn = 0.0  # first-chunk work admitted and not yet paid off, in blocks
+        self._churn_block = 0.0
         self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
         self._lock = threading.RLock()
         self._jobs = JobTable()
@@ -234,6 +244,26 @@ class EngineFront:
         if self._start_cost <= 0.0:
             return 1 << 30
         return max(1, math.floor(START_SHARE / self._start_cost))
+
+    def _charge_churn(self, frames: int) -> None:
+        """Count a job's first chunks (at most two) against ``CHURN_SHARE``, or refuse it.
+
+        The account drains by ``CHURN_SHARE`` of a block per block played and may hold
+        ``CHURN_WINDOW_S`` worth of it.
+        """
+        if self._start_cost <= 0.0:
+            return
+        now_block = self.now_frames / self.block_frames
+        paid = (now_block - self._churn_block) * CHURN_SHARE
+        self._churn, self._churn_block = max(0.0, self._churn - paid), now_block
+        cost = min(2, math.ceil(frames / CHUNK_FRAMES)) * self._start_cost
+        window = CHURN_SHARE * CHURN_WINDOW_S * self.sample_rate_hz / self.block_frames
+        if self._churn + cost > max(window, cost):
+            raise EngineBusyError(
+                "touches begin faster than the engine can render their first frames "
+                f"(at most {CHURN_SHARE:.0%} of its time); retry later"
+            )
+        self._churn += cost
 
     def _place_start(self, first: int, frame: int | None) -> tuple[int, int | None]:
         """The block a job begins in, within the budget of starts per block.
@@ -346,6 +376,7 @@ class EngineFront:
                 voices=self.voice_capacity,
                 policy=chosen,
             )
+            self._charge_churn(resolved.frames)
             first, frame = self._place_start(first, frame)
             record.requested_start_frame = first
             self._send_start(job_id, resolved, owner, frame)
