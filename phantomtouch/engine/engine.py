@@ -18,14 +18,13 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from phantomtouch.engine.admission import CHUNK_FRAMES, RENDER_BUDGET
 from phantomtouch.engine.checks import check_int, check_range
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.front import (
-    CHUNK_FRAMES,
     MAX_VOICES,
-    RENDER_BUDGET,
     ContactRecord,
     EngineFront,
     check_frame_number,
@@ -120,9 +119,9 @@ class Engine(EngineFront):
             )
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
         if voice_cost is not None:
-            self._voice_cost = check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
+            self._admission.voice_cost = check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
         if start_cost is not None:
-            self._start_cost = check_range("start_cost", start_cost, 1e-6, 100.0, "")
+            self._admission.start_cost = check_range("start_cost", start_cost, 1e-6, 100.0, "")
         self._core = Core(
             device,
             sink if sink is not None else NullSink(device),
@@ -163,9 +162,9 @@ class Engine(EngineFront):
                 raise DeviceError("the engine is closed")
             if self._core.running:
                 return
-            if self._voice_cost <= 0.0 and self._core.sink.realtime:
+            if self._admission.voice_cost <= 0.0 and self._core.sink.realtime:
                 costs = measure_costs(self._device, cost_plan(self._device))
-                self._voice_cost, self._start_cost = costs
+                self._admission.voice_cost, self._admission.start_cost = costs
             self._core.start()
             self._halt.clear()
             self._housekeeper = threading.Thread(

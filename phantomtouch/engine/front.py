@@ -23,7 +23,6 @@ touch is the one the user sees) or ``steal-quietest``; a stolen job fades out ov
 from __future__ import annotations
 
 import contextlib
-import math
 import threading
 import time
 import uuid
@@ -32,6 +31,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Self
 
+from phantomtouch.engine.admission import RENDER_BUDGET, Admission
 from phantomtouch.engine.board import MAX_VELOCITY_M_S, check_contact_carrier, contact_amplitude
 from phantomtouch.engine.checks import (
     check_ahead,
@@ -68,24 +68,8 @@ MAX_QUEUE_CAPACITY = 1_000_000
 MAX_VOICES = 64
 """Default of ``max_voices``: the most pattern voices that may sound at once, whatever
 the budget allows."""
-RENDER_BUDGET = 0.5
-"""Default share of a block's playing time that pattern voices may take to render."""
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
-START_SHARE = 0.2
-"""Share of a block's playing time that voices beginning in it may take (a voice's first
-block costs more than the next: it renders before the callback's spread refills)."""
-CHURN_SHARE = 0.15
-"""Share of the callback's time, on average, that the first chunks of beginning voices
-may take: a short touch renders almost all of its frames in its first two chunks, so a
-flood of taps costs by how fast they begin, not by how many sound at once."""
-CHURN_WINDOW_S = 0.1
-"""Over how long a burst of beginnings may exceed ``CHURN_SHARE`` before it is refused."""
-CHUNK_FRAMES = 4096
-"""Frames a pattern voice renders at a time (the engine's render-ahead chunk)."""
-MAX_START_DELAY_S = 0.02
-"""How far a job that asks to start as soon as possible may be moved to a later block
-when the next ones already begin as many voices as they may; beyond it, it is refused."""
 
 
 @dataclass
@@ -137,14 +121,8 @@ class EngineFront:
         self._device = device
         self._settings = contact or ContactSettings()
         self._queue_capacity = queue_capacity
-        self._max_voices = max_voices
-        self._budget = float(render_budget)
+        self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
         self._policy = self._check_policy(voice_policy)
-        self._voice_cost = 0.0
-        self._start_cost = 0.0
-        self._starts: dict[int, int] = {}  # block index: jobs that begin in it
-        self._churn = 0.0  # first-chunk work admitted and not yet paid off, in blocks
-        self._churn_block = 0.0
         self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
         self._lock = threading.RLock()
         self._jobs = JobTable()
@@ -231,78 +209,13 @@ class EngineFront:
 
     @property
     def voice_capacity(self) -> int:
-        """Pattern voices that may sound at once: the budget over the measured cost of
-        one voice, at most ``max_voices`` and at least 1."""
-        cost = self._voice_cost
-        by_budget = self._max_voices if cost <= 0 else math.floor(self._budget / cost)
-        return max(1, min(self._max_voices, by_budget))
+        """Pattern voices that may sound at once (see :class:`Admission`)."""
+        return self._admission.voice_capacity
 
     @property
     def starts_per_block(self) -> int:
-        """Pattern voices that may begin in one block: ``START_SHARE`` over the measured
-        cost of a voice's first block (unbounded when it is not measured)."""
-        if self._start_cost <= 0.0:
-            return 1 << 30
-        return max(1, math.floor(START_SHARE / self._start_cost))
-
-    def _charge_churn(self, frames: int) -> None:
-        """Count a job's first chunks (at most two) against ``CHURN_SHARE``, or refuse it.
-
-        The account drains by ``CHURN_SHARE`` of a block per block played and may hold
-        ``CHURN_WINDOW_S`` worth of it.
-        """
-        if self._start_cost <= 0.0:
-            return
-        now_block = self.now_frames / self.block_frames
-        paid = (now_block - self._churn_block) * CHURN_SHARE
-        self._churn, self._churn_block = max(0.0, self._churn - paid), now_block
-        cost = min(2, math.ceil(frames / CHUNK_FRAMES)) * self._start_cost
-        window = CHURN_SHARE * CHURN_WINDOW_S * self.sample_rate_hz / self.block_frames
-        if self._churn + cost > max(window, cost):
-            raise EngineBusyError(
-                "touches begin faster than the engine can render their first frames "
-                f"(at most {CHURN_SHARE:.0%} of its time); retry later"
-            )
-        self._churn += cost
-
-    def _place_start(self, first: int, frame: int | None) -> tuple[int, int | None]:
-        """The block a job begins in, within the budget of starts per block.
-
-        Returns the job's first frame and the frame to send (None: as soon as possible).
-        A job for a given frame keeps it or is refused; one as soon as possible may move
-        up to ``MAX_START_DELAY_S`` later.
-        """
-        per_block = self.starts_per_block
-        if per_block >= 1 << 30:
-            return first, frame
-        size = self.block_frames
-        starts = self._starts
-        now_block = self.now_frames // size
-        for old in [b for b in starts if b < now_block]:
-            del starts[old]
-        block = first // size
-        if frame is not None:
-            if starts.get(block, 0) >= per_block:
-                raise EngineBusyError(
-                    f"{per_block} pattern voices already begin in the block of "
-                    f"start_frame={frame} (what one block can begin at once); choose "
-                    "another frame"
-                )
-            starts[block] = starts.get(block, 0) + 1
-            return first, frame
-        last = block + max(1, math.ceil(MAX_START_DELAY_S * self.sample_rate_hz / size))
-        while starts.get(block, 0) >= per_block:
-            block += 1
-            if block > last:
-                raise EngineBusyError(
-                    f"{per_block} pattern voices begin in every block of the next "
-                    f"{MAX_START_DELAY_S * 1000:g} ms (what one block can begin at once); "
-                    "retry later"
-                )
-        starts[block] = starts.get(block, 0) + 1
-        if block * size > first:
-            return block * size, block * size
-        return first, None
+        """Pattern voices that may begin in one block (see :class:`Admission`)."""
+        return self._admission.starts_per_block
 
     def schedule(
         self,
@@ -376,8 +289,9 @@ class EngineFront:
                 voices=self.voice_capacity,
                 policy=chosen,
             )
-            self._charge_churn(resolved.frames)
-            first, frame = self._place_start(first, frame)
+            now_frames = self.now_frames
+            self._admission.charge_churn(resolved.frames, now_frames)
+            first, frame = self._admission.place_start(first, frame, now_frames)
             record.requested_start_frame = first
             self._send_start(job_id, resolved, owner, frame)
             for victim in victims:
@@ -513,16 +427,8 @@ class EngineFront:
             raise ParameterError(f"law={law!r} must be one of {sorted(LAWS)}")
         checked = check_contact_carrier(self._device, carrier)
         contact_amplitude(self._device, intensity, checked)
-        x = check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
-        y = check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
-        if normal_velocity_m_s is not None:
-            check_range(
-                "normal_velocity_m_s",
-                normal_velocity_m_s,
-                -MAX_VELOCITY_M_S,
-                MAX_VELOCITY_M_S,
-                "m/s",
-            )
+        x, y = _check_position(x_cm, y_cm)
+        _check_velocity(normal_velocity_m_s)
         frame = check_frame("at_frame", at_frame)
         key = (owner, contact)
         with self._lock:
@@ -572,8 +478,7 @@ class EngineFront:
         """
         check_id("owner", owner)
         check_id("contact", contact)
-        x = check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
-        y = check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm")
+        x, y = _check_position(x_cm, y_cm)
         if intensity is not None:
             intensity = check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
         frame = check_frame("at_frame", at_frame)
@@ -607,14 +512,7 @@ class EngineFront:
         """
         check_id("owner", owner)
         check_id("contact", contact)
-        if normal_velocity_m_s is not None:
-            check_range(
-                "normal_velocity_m_s",
-                normal_velocity_m_s,
-                -MAX_VELOCITY_M_S,
-                MAX_VELOCITY_M_S,
-                "m/s",
-            )
+        _check_velocity(normal_velocity_m_s)
         frame = check_frame("at_frame", at_frame)
         with self._lock:
             record = self._contacts.pop((owner, contact), None)
@@ -675,10 +573,10 @@ class EngineFront:
             render_load_max=float(figures["render_load_max"]),
             state=str(figures["state"]),
             voice_capacity=self.voice_capacity,
-            voice_cost=self._voice_cost,
-            start_cost=self._start_cost,
+            voice_cost=self._admission.voice_cost,
+            start_cost=self._admission.start_cost,
             starts_per_block=min(self.starts_per_block, 1 << 20),
-            render_budget=self._budget,
+            render_budget=self._admission.render_budget,
             callback_errors=int(figures["callback_errors"]),
             restarts=int(figures.get("restarts", 0)),
         )
@@ -712,6 +610,20 @@ class EngineFront:
     @property
     def channels(self) -> int:
         return self._device.channels
+
+
+def _check_position(x_cm: object, y_cm: object) -> tuple[float, float]:
+    return (
+        check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm"),
+        check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm"),
+    )
+
+
+def _check_velocity(normal_velocity_m_s: object) -> None:
+    if normal_velocity_m_s is not None:
+        check_range(
+            "normal_velocity_m_s", normal_velocity_m_s, -MAX_VELOCITY_M_S, MAX_VELOCITY_M_S, "m/s"
+        )
 
 
 def check_server_time(server_time_s: object) -> float:

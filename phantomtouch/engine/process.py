@@ -40,13 +40,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from phantomtouch.engine.admission import RENDER_BUDGET
 from phantomtouch.engine.checks import check_int
 from phantomtouch.engine.child import serve
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import (
     MAX_VOICES,
-    RENDER_BUDGET,
     ContactRecord,
     EngineFront,
     check_frame_number,
@@ -193,7 +193,7 @@ class ProcessEngine(EngineFront):
         self._restarts = 0
         self._halt = threading.Event()
         self._child = self._spawn()
-        self._voice_cost, self._start_cost = self._child.costs
+        self._admission.voice_cost, self._admission.start_cost = self._child.costs
         self._watchdog = threading.Thread(
             target=self._watch, name="phantomtouch-engine-watchdog", daemon=True
         )
@@ -323,14 +323,14 @@ class ProcessEngine(EngineFront):
             self._state = state
             self._jobs.forget_all(self.now_frames)
             self._contacts.clear()
-            self._starts.clear()  # the next engine process counts frames from 0
+            self._admission.forget_starts()
         if self.on_fault is not None:
             try:
                 self.on_fault(state)
             except Exception:
                 logger.exception("on_fault failed")
         self._end(self._child, kill=True)
-        self._options["costs"] = (self._voice_cost, self._start_cost)  # measured once
+        self._options["costs"] = (self._admission.voice_cost, self._admission.start_cost)
         delay_s = RETRY_FIRST_S
         while True:
             if not self._set_state("restarting"):

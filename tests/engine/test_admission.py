@@ -7,7 +7,8 @@ import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, TouchPattern, render
 from phantomtouch.engine import CaptureSink, Engine
-from phantomtouch.engine.front import CHURN_SHARE, CHURN_WINDOW_S, STEAL_FADE_S
+from phantomtouch.engine.admission import CHURN_SHARE, CHURN_WINDOW_S
+from phantomtouch.engine.front import STEAL_FADE_S
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames

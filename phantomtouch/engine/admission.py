@@ -1,0 +1,141 @@
+"""Admission by budget: how many pattern voices may sound, and begin, at once.
+
+The engine measures what a voice costs the audio callback (a share of a block's playing
+time, :func:`~phantomtouch.engine.core.measure_costs`): a sounding voice, and a voice in
+the block it begins in. :class:`Admission` turns those into the limits the control side
+(:class:`~phantomtouch.engine.front.EngineFront`) applies: voices that may sound at once
+(``render_budget`` over the voice cost, at most ``max_voices``), voices that may begin in
+one block, and how fast short touches may begin (their first chunks are most of their
+work). Unmeasured costs (0) leave the limits at ``max_voices`` and unbounded.
+"""
+
+from __future__ import annotations
+
+import math
+
+from phantomtouch.errors import EngineBusyError
+from phantomtouch.schema.device import DeviceProfile
+
+RENDER_BUDGET = 0.5
+"""Default share of a block's playing time that pattern voices may take to render."""
+START_SHARE = 0.2
+"""Share of a block's playing time that voices beginning in it may take (a voice's first
+block costs more than the next: it renders before the callback's spread refills)."""
+CHURN_SHARE = 0.15
+"""Share of the callback's time, on average, that the first chunks of beginning voices
+may take: a short touch renders almost all of its frames in its first two chunks, so a
+flood of taps costs by how fast they begin, not by how many sound at once."""
+CHURN_WINDOW_S = 0.1
+"""Over how long a burst of beginnings may exceed ``CHURN_SHARE`` before it is refused."""
+CHUNK_FRAMES = 4096
+"""Frames a pattern voice renders at a time (the engine's render-ahead chunk)."""
+MAX_START_DELAY_S = 0.02
+"""How far a job that asks to start as soon as possible may be moved to a later block
+when the next ones already begin as many voices as they may; beyond it, it is refused."""
+
+
+class Admission:
+    """The voice, start and churn limits of one engine (the front's lock held).
+
+    Parameters
+    ----------
+    device : DeviceProfile
+    max_voices : int, >= 1
+    render_budget : float, 0 < render_budget <= 1
+
+    Attributes
+    ----------
+    voice_cost, start_cost : float
+        Measured costs, shares of a block's playing time (0: not measured).
+    """
+
+    def __init__(self, device: DeviceProfile, *, max_voices: int, render_budget: float) -> None:
+        self.sample_rate_hz = device.sample_rate_hz
+        self.block_frames = device.block_frames
+        self.max_voices = max_voices
+        self.render_budget = float(render_budget)
+        self.voice_cost = 0.0
+        self.start_cost = 0.0
+        self._starts: dict[int, int] = {}  # block index: jobs that begin in it
+        self._churn = 0.0  # first-chunk work admitted and not yet paid off, in blocks
+        self._churn_block = 0.0
+
+    def forget_starts(self) -> None:
+        """A new engine process counts frames from 0 again."""
+        self._starts.clear()
+        self._churn = self._churn_block = 0.0
+
+    @property
+    def voice_capacity(self) -> int:
+        """Pattern voices that may sound at once: the budget over the measured cost of
+        one voice, at most ``max_voices`` and at least 1."""
+        cost = self.voice_cost
+        by_budget = self.max_voices if cost <= 0 else math.floor(self.render_budget / cost)
+        return max(1, min(self.max_voices, by_budget))
+
+    @property
+    def starts_per_block(self) -> int:
+        """Pattern voices that may begin in one block: ``START_SHARE`` over the measured
+        cost of a voice's first block (unbounded when it is not measured)."""
+        if self.start_cost <= 0.0:
+            return 1 << 30
+        return max(1, math.floor(START_SHARE / self.start_cost))
+
+    def charge_churn(self, frames: int, now_frames: int) -> None:
+        """Count a job's first chunks (at most two) against ``CHURN_SHARE``, or refuse it.
+
+        The account drains by ``CHURN_SHARE`` of a block per block played and may hold
+        ``CHURN_WINDOW_S`` worth of it.
+        """
+        if self.start_cost <= 0.0:
+            return
+        now_block = now_frames / self.block_frames
+        paid = (now_block - self._churn_block) * CHURN_SHARE
+        self._churn, self._churn_block = max(0.0, self._churn - paid), now_block
+        cost = min(2, math.ceil(frames / CHUNK_FRAMES)) * self.start_cost
+        window = CHURN_SHARE * CHURN_WINDOW_S * self.sample_rate_hz / self.block_frames
+        if self._churn + cost > max(window, cost):
+            raise EngineBusyError(
+                "touches begin faster than the engine can render their first frames "
+                f"(at most {CHURN_SHARE:.0%} of its time); retry later"
+            )
+        self._churn += cost
+
+    def place_start(self, first: int, frame: int | None, now_frames: int) -> tuple[int, int | None]:
+        """The block a job begins in, within the budget of starts per block.
+
+        Returns the job's first frame and the frame to send (None: as soon as possible).
+        A job for a given frame keeps it or is refused; one as soon as possible may move
+        up to ``MAX_START_DELAY_S`` later.
+        """
+        per_block = self.starts_per_block
+        if per_block >= 1 << 30:
+            return first, frame
+        size = self.block_frames
+        starts = self._starts
+        now_block = now_frames // size
+        for old in [b for b in starts if b < now_block]:
+            del starts[old]
+        block = first // size
+        if frame is not None:
+            if starts.get(block, 0) >= per_block:
+                raise EngineBusyError(
+                    f"{per_block} pattern voices already begin in the block of "
+                    f"start_frame={frame} (what one block can begin at once); choose "
+                    "another frame"
+                )
+            starts[block] = starts.get(block, 0) + 1
+            return first, frame
+        last = block + max(1, math.ceil(MAX_START_DELAY_S * self.sample_rate_hz / size))
+        while starts.get(block, 0) >= per_block:
+            block += 1
+            if block > last:
+                raise EngineBusyError(
+                    f"{per_block} pattern voices begin in every block of the next "
+                    f"{MAX_START_DELAY_S * 1000:g} ms (what one block can begin at once); "
+                    "retry later"
+                )
+        starts[block] = starts.get(block, 0) + 1
+        if block * size > first:
+            return block * size, block * size
+        return first, None
