@@ -136,7 +136,8 @@ def test_more_voices_than_max_voices_at_once_answer_503_busy(tmp_path: Path) -> 
 
 
 def test_by_default_the_newest_touch_steals_the_oldest(tmp_path: Path) -> None:
-    with TestClient(create_app(make_settings(tmp_path, max_voices=2))) as client:
+    settings = make_settings(tmp_path, max_voices=2, max_voices_per_client=3)
+    with TestClient(create_app(settings)) as client:
         jobs = []
         for _ in range(3):
             answer = client.post("/touch", json=LONG)
