@@ -608,7 +608,11 @@ def test_async_client_retries_too() -> None:
 def test_a_busy_engine_is_retried_after_its_retry_after(tmp_path: Path) -> None:
     # One voice at most: while a long touch plays, the next is refused 503 busy with
     # Retry-After: 1; the client waits that second once, then raises.
-    env = {"PHANTOMTOUCH_MAX_VOICES": "1", "PHANTOMTOUCH_VOICE_POLICY": "refuse"}
+    env = {
+        "PHANTOMTOUCH_MAX_VOICES": "1",
+        "PHANTOMTOUCH_MAX_VOICES_PER_CLIENT": "2",
+        "PHANTOMTOUCH_VOICE_POLICY": "refuse",
+    }
     long = {"path": {"kind": "polyline", "points_cm": [[1.9, 7.2]]}, "duration_s": 30.0}
     server = LiveServer(tmp_path / "patterns.db", env=env)
     with server, Client(server.url, retries=1, max_retry_wait_s=2.0) as pt:
