@@ -182,8 +182,8 @@ def test_a_client_that_hangs_up_mid_body_is_no_server_error(live: LiveServer) ->
     for _ in range(20):
         with socket.create_connection((HOST, live.port)) as sock:
             sock.sendall(
-                b"PUT /patterns/gone HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
-                b"Content-Length: 1000\r\n\r\n{}"
+                b"PUT /patterns/gone HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                b"Content-Type: application/json\r\nContent-Length: 1000\r\n\r\n{}"
             )
     time.sleep(0.5)
     after = requests_by_status(live)
