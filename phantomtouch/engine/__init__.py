@@ -11,10 +11,12 @@
     engine.close()
 
 Modules: :mod:`~phantomtouch.engine.front` (the API and the control side: job table,
-contacts, admission by the render budget), :mod:`~phantomtouch.engine.core` (the audio
-side: sink, queue, scheduler, voices), :mod:`~phantomtouch.engine.engine` (both in one
-process) and :mod:`~phantomtouch.engine.process` with :mod:`~phantomtouch.engine.child`
-and :mod:`~phantomtouch.engine.link` (the audio side in a process of its own),
+contacts) with :mod:`~phantomtouch.engine.admission` (the render budget),
+:mod:`~phantomtouch.engine.core` (the audio side: sink, queue, scheduler, voices),
+:mod:`~phantomtouch.engine.engine` (both in one process) and
+:mod:`~phantomtouch.engine.process` with :mod:`~phantomtouch.engine.spawn`,
+:mod:`~phantomtouch.engine.child` and :mod:`~phantomtouch.engine.link` (the audio side in
+a process of its own),
 :mod:`~phantomtouch.engine.clock` (frames and server time),
 :mod:`~phantomtouch.engine.commands` (the bounded queue),
 :mod:`~phantomtouch.engine.scheduler` (the audio callback),

@@ -27,22 +27,16 @@ opens. When this process dies, the pipe closes and the child fades out and ends.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import logging
-import multiprocessing
-import os
-import select
 import threading
 import time
 import weakref
-from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from phantomtouch.engine.admission import RENDER_BUDGET
 from phantomtouch.engine.checks import check_int
-from phantomtouch.engine.child import serve
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import (
@@ -53,20 +47,17 @@ from phantomtouch.engine.front import (
     check_server_time,
 )
 from phantomtouch.engine.jobs import Policy
-from phantomtouch.engine.link import Outbox, encode, read_frames
-from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
+from phantomtouch.engine.link import encode, read_frames
 from phantomtouch.engine.soundcard import SinkSpec
+from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, EngineProcess, slim, spawn
 from phantomtouch.errors import DeviceError, EngineBusyError
 from phantomtouch.renderer.carriers import noise_key, noise_loop
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
-from phantomtouch.schema.pattern import Carrier, NoiseCarrier, PolylinePath, SineCarrier
+from phantomtouch.schema.pattern import Carrier, NoiseCarrier, SineCarrier
 
 logger = logging.getLogger("phantomtouch.engine")
 
-START_TIMEOUT_S = 60.0
-"""Longest wait for the child to import, open its sink and answer."""
-CLOSE_TIMEOUT_S = 10.0
 STALL_S = 0.5
 """A running engine process that has not called back for this long is stalled."""
 WATCH_PERIOD_S = 0.1
@@ -80,39 +71,6 @@ NOISE_LOOPS = 8
 """Noise loops the engine process keeps (as the renderer's cache does)."""
 REALTIME_PRIORITY = 1
 """SCHED_FIFO priority of the engine process's threads (above every ordinary thread)."""
-
-_BLANK_PATH = PolylinePath(points_cm=[(0.0, 0.0)])
-
-
-def slim(plan: Plan) -> Plan:
-    """The plan without what the engine process has already: device, geometry, and the
-    pattern's path (the timelines carry the resolved path)."""
-    pattern = plan.pattern.model_copy(update={"path": _BLANK_PATH})
-    return dataclasses.replace(plan, pattern=pattern, device=None, geometry=None)  # type: ignore[arg-type]
-
-
-@dataclasses.dataclass
-class _Child:
-    """One engine process and what is shared with it."""
-
-    process: Any
-    outbox: Outbox
-    reports_fd: int
-    clock: SharedClock
-    slots: MoveSlots
-    status: StatusBlock
-    mark: Any
-    costs: tuple[float, float]
-    backend: str
-    output_device: str | None
-    seq: int = 0
-    plans: OrderedDict[int, tuple[int, weakref.ref[Plan], int]] = dataclasses.field(
-        default_factory=OrderedDict
-    )  # id(plan): key, the plan (not kept alive here), bytes the engine process keeps
-    plan_bytes: int = 0
-    forget: list[int] = dataclasses.field(default_factory=list)
-    noise: OrderedDict[Any, None] = dataclasses.field(default_factory=OrderedDict)
-    reader: threading.Thread | None = None
 
 
 class ProcessEngine(EngineFront):
@@ -192,7 +150,7 @@ class ProcessEngine(EngineFront):
         self._started = False
         self._restarts = 0
         self._halt = threading.Event()
-        self._child = self._spawn()
+        self._child = self._start_child()
         self._admission.voice_cost, self._admission.start_cost = self._child.costs
         self._watchdog = threading.Thread(
             target=self._watch, name="phantomtouch-engine-watchdog", daemon=True
@@ -201,61 +159,9 @@ class ProcessEngine(EngineFront):
 
     # -- the child --------------------------------------------------------------------
 
-    def _spawn(self) -> _Child:
-        context = multiprocessing.get_context("spawn")
-        device = self._device
-        clock = SharedClock(device.sample_rate_hz)
-        slots = MoveSlots(self._settings.max_contacts)
-        status = StatusBlock(device.channels)
-        mark = context.Value("q", 0, lock=False)
-        commands_in, commands_out = context.Pipe(duplex=False)
-        reports_in, reports_out = context.Pipe(duplex=False)
-        process = context.Process(
-            target=serve,
-            args=(
-                commands_in,
-                reports_out,
-                device.model_dump_json(),
-                self._spec,
-                self._options,
-                mark,
-                self._priority,
-                {
-                    "clock": clock.raw,
-                    "slots": slots.raw,
-                    "slot_count": slots.capacity,
-                    "status": status.raw,
-                },
-            ),
-            name="phantomtouch-engine",
-            daemon=True,
-        )
-        process.start()
-        commands_in.close()
-        reports_out.close()
-        reports_fd = os.dup(reports_in.fileno())
-        reports_in.close()
-        commands_fd = os.dup(commands_out.fileno())
-        commands_out.close()
-        try:
-            ready = self._first_report(reports_fd, process)
-        except BaseException:
-            os.close(reports_fd)
-            os.close(commands_fd)
-            process.kill()
-            process.join(CLOSE_TIMEOUT_S)
-            raise
-        child = _Child(
-            process=process,
-            outbox=Outbox(commands_fd),
-            reports_fd=reports_fd,
-            clock=clock,
-            slots=slots,
-            status=status,
-            mark=mark,
-            costs=(float(ready[1][0]), float(ready[1][1])),
-            backend=str(ready[2]),
-            output_device=ready[3],
+    def _start_child(self) -> EngineProcess:
+        child = spawn(
+            self._device, self._spec, self._options, self._priority, self._settings.max_contacts
         )
         child.reader = threading.Thread(
             target=self._read_reports, args=(child,), name="phantomtouch-reports", daemon=True
@@ -263,26 +169,7 @@ class ProcessEngine(EngineFront):
         child.reader.start()
         return child
 
-    @staticmethod
-    def _first_report(fd: int, process: Any) -> Any:
-        deadline = time.monotonic() + START_TIMEOUT_S
-        frames = read_frames(fd)
-        while True:
-            readable, _, _ = select.select([fd], [], [], 0.2)
-            if readable:
-                break
-            if not process.is_alive():
-                raise DeviceError("the engine process ended while starting")
-            if time.monotonic() > deadline:
-                raise DeviceError(f"the engine process did not start within {START_TIMEOUT_S:g} s")
-        message = next(frames, None)
-        if message is None:
-            raise DeviceError("the engine process ended while starting")
-        if message[0] == "failed":
-            raise message[1]
-        return message
-
-    def _read_reports(self, child: _Child) -> None:
+    def _read_reports(self, child: EngineProcess) -> None:
         for events in read_frames(child.reports_fd):
             self._apply_events(events)
 
@@ -329,14 +216,14 @@ class ProcessEngine(EngineFront):
                 self.on_fault(state)
             except Exception:
                 logger.exception("on_fault failed")
-        self._end(self._child, kill=True)
+        self._child.end(kill=True)
         self._options["costs"] = (self._admission.voice_cost, self._admission.start_cost)
         delay_s = RETRY_FIRST_S
         while True:
             if not self._set_state("restarting"):
                 return
             try:
-                child = self._spawn()
+                child = self._start_child()
                 child.outbox.put(encode(("start_sink", 0)))
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
@@ -350,16 +237,16 @@ class ProcessEngine(EngineFront):
                     self._child = child
                     self._restarts += 1
             if closing:  # closed while this one started
-                self._end(child, kill=True)
+                child.end(kill=True)
                 return
             self._wait_running(child)
             if self._state == "running":
                 return
-            self._end(child, kill=True)
+            child.end(kill=True)
             self._halt.wait(delay_s)
             delay_s = min(RETRY_MAX_S, 2 * delay_s)
 
-    def _wait_running(self, child: _Child) -> None:
+    def _wait_running(self, child: EngineProcess) -> None:
         deadline = time.monotonic() + START_TIMEOUT_S
         while not child.status.read()["running"]:
             if not child.process.is_alive() or time.monotonic() > deadline:
@@ -375,20 +262,6 @@ class ProcessEngine(EngineFront):
                 return False
             self._state = state
             return True
-
-    def _end(self, child: _Child, *, kill: bool) -> None:
-        if kill:
-            with contextlib.suppress(OSError, ValueError):
-                child.process.kill()
-        child.process.join(CLOSE_TIMEOUT_S)
-        if child.process.is_alive():
-            child.process.kill()
-            child.process.join()
-        child.outbox.close(0.1)
-        if child.reader is not None:
-            child.reader.join(1.0)
-        with contextlib.suppress(OSError):
-            os.close(child.reports_fd)
 
     # -- life cycle -------------------------------------------------------------------
 
@@ -422,7 +295,7 @@ class ProcessEngine(EngineFront):
             child.outbox.put(encode(("close", 0)))
         child.outbox.close(CLOSE_TIMEOUT_S)
         self._watchdog.join()
-        self._end(child, kill=False)
+        child.end(kill=False)
         self._ledger.close()
 
     # -- clock ------------------------------------------------------------------------

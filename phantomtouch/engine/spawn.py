@@ -1,0 +1,172 @@
+"""Starting an engine process, and what the host shares with it.
+
+:func:`spawn` starts the child of :class:`~phantomtouch.engine.process.ProcessEngine`
+(``spawn``: a fresh interpreter running :func:`~phantomtouch.engine.child.serve`) with its
+pipes and shared memory, and waits for its first report. :class:`EngineProcess` holds
+what belongs to one such process: the process, its outbox, the shared clock, contact
+slots and figures, the stop mark, the plans and noise loops it was sent.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import multiprocessing
+import os
+import select
+import threading
+import time
+import weakref
+from collections import OrderedDict
+from typing import Any
+
+from phantomtouch.engine.child import serve
+from phantomtouch.engine.link import Outbox, read_frames
+from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
+from phantomtouch.engine.soundcard import SinkSpec
+from phantomtouch.errors import DeviceError
+from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema.device import DeviceProfile
+from phantomtouch.schema.pattern import PolylinePath
+
+START_TIMEOUT_S = 60.0
+"""Longest wait for the child to import, open its sink and answer."""
+CLOSE_TIMEOUT_S = 10.0
+
+_BLANK_PATH = PolylinePath(points_cm=[(0.0, 0.0)])
+
+
+def slim(plan: Plan) -> Plan:
+    """The plan without what the engine process has already: device, geometry, and the
+    pattern's path (the timelines carry the resolved path)."""
+    pattern = plan.pattern.model_copy(update={"path": _BLANK_PATH})
+    return dataclasses.replace(plan, pattern=pattern, device=None, geometry=None)  # type: ignore[arg-type]
+
+
+@dataclasses.dataclass
+class EngineProcess:
+    """One engine process and what is shared with it."""
+
+    process: Any
+    outbox: Outbox
+    reports_fd: int
+    clock: SharedClock
+    slots: MoveSlots
+    status: StatusBlock
+    mark: Any
+    costs: tuple[float, float]
+    backend: str
+    output_device: str | None
+    seq: int = 0
+    plans: OrderedDict[int, tuple[int, weakref.ref[Plan], int]] = dataclasses.field(
+        default_factory=OrderedDict
+    )  # id(plan): key, the plan (not kept alive here), bytes the engine process keeps
+    plan_bytes: int = 0
+    forget: list[int] = dataclasses.field(default_factory=list)
+    noise: OrderedDict[Any, None] = dataclasses.field(default_factory=OrderedDict)
+    reader: threading.Thread | None = None
+
+    def end(self, *, kill: bool) -> None:
+        """End the process (killed with ``kill``), its outbox and its reader."""
+        if kill:
+            with contextlib.suppress(OSError, ValueError):
+                self.process.kill()
+        self.process.join(CLOSE_TIMEOUT_S)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+        self.outbox.close(0.1)
+        if self.reader is not None:
+            self.reader.join(1.0)
+        with contextlib.suppress(OSError):
+            os.close(self.reports_fd)
+
+
+def spawn(
+    device: DeviceProfile,
+    spec: SinkSpec,
+    options: dict[str, Any],
+    priority: int | None,
+    slot_count: int,
+) -> EngineProcess:
+    """Start an engine process and wait for its first report (ready, or the error).
+
+    Raises
+    ------
+    DeviceError
+        It did not start within ``START_TIMEOUT_S``, or ended while starting; or the
+        error it reported (its sink could not open).
+    """
+    context = multiprocessing.get_context("spawn")
+    clock = SharedClock(device.sample_rate_hz)
+    slots = MoveSlots(slot_count)
+    status = StatusBlock(device.channels)
+    mark = context.Value("q", 0, lock=False)
+    commands_in, commands_out = context.Pipe(duplex=False)
+    reports_in, reports_out = context.Pipe(duplex=False)
+    process = context.Process(
+        target=serve,
+        args=(
+            commands_in,
+            reports_out,
+            device.model_dump_json(),
+            spec,
+            options,
+            mark,
+            priority,
+            {
+                "clock": clock.raw,
+                "slots": slots.raw,
+                "slot_count": slots.capacity,
+                "status": status.raw,
+            },
+        ),
+        name="phantomtouch-engine",
+        daemon=True,
+    )
+    process.start()
+    commands_in.close()
+    reports_out.close()
+    reports_fd = os.dup(reports_in.fileno())
+    reports_in.close()
+    commands_fd = os.dup(commands_out.fileno())
+    commands_out.close()
+    try:
+        ready = _first_report(reports_fd, process)
+    except BaseException:
+        os.close(reports_fd)
+        os.close(commands_fd)
+        process.kill()
+        process.join(CLOSE_TIMEOUT_S)
+        raise
+    return EngineProcess(
+        process=process,
+        outbox=Outbox(commands_fd),
+        reports_fd=reports_fd,
+        clock=clock,
+        slots=slots,
+        status=status,
+        mark=mark,
+        costs=(float(ready[1][0]), float(ready[1][1])),
+        backend=str(ready[2]),
+        output_device=ready[3],
+    )
+
+
+def _first_report(fd: int, process: Any) -> Any:
+    deadline = time.monotonic() + START_TIMEOUT_S
+    frames = read_frames(fd)
+    while True:
+        readable, _, _ = select.select([fd], [], [], 0.2)
+        if readable:
+            break
+        if not process.is_alive():
+            raise DeviceError("the engine process ended while starting")
+        if time.monotonic() > deadline:
+            raise DeviceError(f"the engine process did not start within {START_TIMEOUT_S:g} s")
+    message = next(frames, None)
+    if message is None:
+        raise DeviceError("the engine process ended while starting")
+    if message[0] == "failed":
+        raise message[1]
+    return message
