@@ -61,6 +61,9 @@ logger = logging.getLogger("phantomtouch.engine")
 STALL_S = 0.5
 """A running engine process that has not called back for this long is stalled."""
 WATCH_PERIOD_S = 0.1
+RESTART_TIMEOUT_S = 10.0
+"""Longest wait for a restarted engine process to open its sink (a sound card that
+has just lost a client may hang a new one for a while): then it is tried again."""
 RETRY_FIRST_S = 0.5
 RETRY_MAX_S = 5.0
 """A restart that fails (the sound card is gone) is tried again after 0.5 s, then after
@@ -159,9 +162,14 @@ class ProcessEngine(EngineFront):
 
     # -- the child --------------------------------------------------------------------
 
-    def _start_child(self) -> EngineProcess:
+    def _start_child(self, timeout_s: float = START_TIMEOUT_S) -> EngineProcess:
         child = spawn(
-            self._device, self._spec, self._options, self._priority, self._settings.max_contacts
+            self._device,
+            self._spec,
+            self._options,
+            self._priority,
+            self._settings.max_contacts,
+            timeout_s=timeout_s,
         )
         child.reader = threading.Thread(
             target=self._read_reports, args=(child,), name="phantomtouch-reports", daemon=True
@@ -223,7 +231,7 @@ class ProcessEngine(EngineFront):
             if not self._set_state("restarting"):
                 return
             try:
-                child = self._start_child()
+                child = self._start_child(RESTART_TIMEOUT_S)
                 child.outbox.put(encode(("start_sink", 0)))
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
@@ -239,15 +247,15 @@ class ProcessEngine(EngineFront):
             if closing:  # closed while this one started
                 child.end(kill=True)
                 return
-            self._wait_running(child)
+            self._wait_running(child, RESTART_TIMEOUT_S)
             if self._state == "running":
                 return
             child.end(kill=True)
             self._halt.wait(delay_s)
             delay_s = min(RETRY_MAX_S, 2 * delay_s)
 
-    def _wait_running(self, child: EngineProcess) -> None:
-        deadline = time.monotonic() + START_TIMEOUT_S
+    def _wait_running(self, child: EngineProcess, timeout_s: float = START_TIMEOUT_S) -> None:
+        deadline = time.monotonic() + timeout_s
         while not child.status.read()["running"]:
             if not child.process.is_alive() or time.monotonic() > deadline:
                 self._set_state("gone")

@@ -88,14 +88,16 @@ def spawn(
     options: dict[str, Any],
     priority: int | None,
     slot_count: int,
+    *,
+    timeout_s: float = START_TIMEOUT_S,
 ) -> EngineProcess:
     """Start an engine process and wait for its first report (ready, or the error).
 
     Raises
     ------
     DeviceError
-        It did not start within ``START_TIMEOUT_S``, or ended while starting; or the
-        error it reported (its sink could not open).
+        It did not start within ``timeout_s``, or ended while starting; or the error it
+        reported (its sink could not open).
     """
     context = multiprocessing.get_context("spawn")
     clock = SharedClock(device.sample_rate_hz)
@@ -132,7 +134,7 @@ def spawn(
     commands_fd = os.dup(commands_out.fileno())
     commands_out.close()
     try:
-        ready = _first_report(reports_fd, process)
+        ready = _first_report(reports_fd, process, timeout_s)
     except BaseException:
         os.close(reports_fd)
         os.close(commands_fd)
@@ -153,8 +155,8 @@ def spawn(
     )
 
 
-def _first_report(fd: int, process: Any) -> Any:
-    deadline = time.monotonic() + START_TIMEOUT_S
+def _first_report(fd: int, process: Any, timeout_s: float) -> Any:
+    deadline = time.monotonic() + timeout_s
     frames = read_frames(fd)
     while True:
         readable, _, _ = select.select([fd], [], [], 0.2)
@@ -163,7 +165,7 @@ def _first_report(fd: int, process: Any) -> Any:
         if not process.is_alive():
             raise DeviceError("the engine process ended while starting")
         if time.monotonic() > deadline:
-            raise DeviceError(f"the engine process did not start within {START_TIMEOUT_S:g} s")
+            raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
     message = next(frames, None)
     if message is None:
         raise DeviceError("the engine process ended while starting")
