@@ -40,6 +40,7 @@ import argparse
 import asyncio
 import json
 import os
+import re
 import shutil
 import signal
 import sys
@@ -51,7 +52,7 @@ from typing import Any
 
 import numpy as np
 import realtime_load as load
-from realtime_report import TITLES, number, table
+from realtime_report import TITLES, number, table, xruns_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
 
@@ -131,8 +132,34 @@ def highest(samples: list[dict[str, Any]], key: str) -> float | None:
     return max(values) if values else None
 
 
+def xrun_causes(log: str, period_us: float) -> dict[str, int]:
+    """JACK's xruns by cause, from what ``jackd`` printed.
+
+    The dummy driver reports ``JackTimedDriver::Process XRun = N usec`` when a cycle ends
+    after the next one should have begun, N being how long the cycle's processing took
+    (in sync mode, waiting for every client). ``late_wakeup``: N under half a period —
+    the cycle itself was short, so the driver's timer woke late (the machine's timer; it
+    happens with no client connected). ``slow_cycle``: N of half a period or more — the
+    graph, that is a client, took that long. ``client_late:NAME``: JACK named a client that
+    had not finished its cycle in time.
+    """
+    causes: dict[str, int] = {"late_wakeup": 0, "slow_cycle": 0}
+    for usec in re.findall(r"JackTimedDriver::Process XRun = (\d+) usec", log):
+        causes["late_wakeup" if int(usec) < period_us / 2 else "slow_cycle"] += 1
+    late = re.findall(r"client = (\S+) was not finished|client (\S+) finished after current", log)
+    for names in late:
+        key = f"client_late:{names[0] or names[1]}"
+        causes[key] = causes.get(key, 0) + 1
+    return causes
+
+
 async def measure(
-    port: int, xruns: JackXrunCounter, seconds: float, make_load: Load, args: argparse.Namespace
+    port: int,
+    xruns: JackXrunCounter,
+    jack: JackServer,
+    seconds: float,
+    make_load: Load,
+    args: argparse.Namespace,
 ) -> dict[str, Any]:
     """Rest, then run ``make_load`` for ``seconds`` while sampling ``/health`` and ``/metrics``."""
     await rest(port, args.rest_seconds)
@@ -140,6 +167,7 @@ async def measure(
     try:
         before = await load.metrics(connection)
         xruns_before = xruns.xruns
+        log_before = len(jack.output())
         cpu_before = load.cpu_seconds()
         started = time.monotonic()
         deadline = started + seconds
@@ -153,6 +181,7 @@ async def measure(
         await asyncio.sleep(TAIL_S)
         after = await load.metrics(connection)
         xruns_after = xruns.xruns
+        log_during = jack.output()[log_before:]
     finally:
         connection.close()
     if before is None or after is None:
@@ -169,6 +198,7 @@ async def measure(
         "busy_cores_others": max(0.0, machine_s - ours_s) / elapsed_s,
         "underruns": underruns,
         "jack_xruns": xruns_after - xruns_before,
+        "jack_xrun_causes": xrun_causes(log_during, args.period_frames / SAMPLE_RATE_HZ * 1e6),
         "render_load_p99": highest(samples, "render_load_p99"),
         "render_load_max": highest(samples, "render_load_max"),
         "voices_max": highest(samples, "active_voices"),
@@ -314,12 +344,18 @@ def parse_args() -> argparse.Namespace:
         "--hogs", type=within(int, 1, 64), default=os.cpu_count() or 2, help="CPU hog processes"
     )
     parser.add_argument("--health-hz", type=within(float, 0.5, 100), default=10.0)
+    parser.add_argument(
+        "--floor-seconds",
+        type=within(float, 1, 600),
+        help="JACK alone before the service starts, for its own xruns (default 10)",
+    )
     parser.add_argument("--json", type=Path, help="also write the results to this file")
     args = parser.parse_args()
     scale = 0.1 if args.quick else 1.0
     args.seconds = args.seconds or 60.0 * scale
     args.flood_seconds = args.flood_seconds or max(1.0, 10.0 * scale)
     args.quiet_seconds = args.quiet_seconds or max(1.0, 10.0 * scale)
+    args.floor_seconds = args.floor_seconds or max(1.0, 10.0 * scale)
     args.scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
     unknown = [s for s in args.scenarios if s not in TITLES]
     if unknown:
@@ -368,6 +404,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
     xruns = service = None
     try:
         xruns = JackXrunCounter(jack)
+        results["floor"] = floor(jack, xruns, args.floor_seconds, block_s * 1e6)
         service = Service(
             folder / "patterns.db",
             env=env,
@@ -392,7 +429,9 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
         for key in args.scenarios:
             seconds, make_load = loads[key]
             print(f"({key}) {TITLES[key]}: {seconds:g} s ...", file=sys.stderr, flush=True)
-            results["scenarios"][key] = asyncio.run(measure(port, xruns, seconds, make_load, args))
+            results["scenarios"][key] = asyncio.run(
+                measure(port, xruns, jack, seconds, make_load, args)
+            )
         results["load_avg_1min_after"] = os.getloadavg()[0]
     except Exception:
         if service is not None:
@@ -406,6 +445,19 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
             xruns.close()
         jack.stop()
     return results
+
+
+def floor(
+    jack: JackServer, xruns: JackXrunCounter, seconds: float, period_us: float
+) -> dict[str, Any]:
+    """JACK's xruns with no client of ours in its graph: what the machine gives anyway."""
+    log_before, xruns_before = len(jack.output()), xruns.xruns
+    time.sleep(seconds)
+    return {
+        "seconds": seconds,
+        "jack_xruns": xruns.xruns - xruns_before,
+        "jack_xrun_causes": xrun_causes(jack.output()[log_before:], period_us),
+    }
 
 
 def metrics_text(port: int) -> str:
@@ -449,6 +501,11 @@ def main() -> None:
         f"yardstick: numpy copy of one {args.period_frames} x {CHANNELS} block "
         f"{results['block_copy_us']:.2f} µs; render load window "
         f"{number(results['render_load_window_s'])} s, rest {args.rest_seconds:g} s\n"
+    )
+    base = results["floor"]
+    print(
+        f"floor: JACK alone for {base['seconds']:g} s: {xruns_text(base)} xruns "
+        "(timer: the dummy driver woke late; slow: a cycle, that is a client, took too long)\n"
     )
     print(table(results))
     print(

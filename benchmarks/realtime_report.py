@@ -55,17 +55,24 @@ def load_text(result: dict[str, Any]) -> str:
     return "; ".join(parts) or "—"
 
 
+def xruns_text(result: dict[str, Any]) -> str:
+    """``total (late wake-ups / slow cycles or late clients)``: ``bench_realtime.xrun_causes``."""
+    causes = result.get("jack_xrun_causes", {})
+    slow = sum(n for key, n in causes.items() if key != "late_wakeup")
+    return f"{result['jack_xruns']} ({causes.get('late_wakeup', 0)} / {slow})"
+
+
 def table(results: dict[str, Any]) -> str:
     lines = [
-        "| scenario | s | underruns | JACK xruns | render load p99 | max | voices max "
-        "| /touch answered | /health p50 / p99 ms | load | busy cores (others) |",
+        "| scenario | s | underruns | JACK xruns (timer / slow) | render load p99 | max "
+        "| voices max | /touch answered | /health p50 / p99 ms | load | busy cores (others) |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key, r in results["scenarios"].items():
         health = r["health"]
         lines.append(
             f"| ({key}) {TITLES[key]} | {r['seconds']:.0f} | {number(r['underruns'], 0)} "
-            f"| {r['jack_xruns']} | {percent(r['render_load_p99'])} "
+            f"| {xruns_text(r)} | {percent(r['render_load_p99'])} "
             f"| {percent(r['render_load_max'])} | {number(r['voices_max'], 0)} "
             f"| {touch_statuses(r)} | {number(health['p50_ms'])} / {number(health['p99_ms'])} "
             f"| {load_text(r)} | {r['busy_cores']:.1f} ({r['busy_cores_others']:.1f}) |"

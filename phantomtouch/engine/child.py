@@ -34,6 +34,7 @@ import time
 from multiprocessing.connection import Connection
 from typing import Any
 
+from phantomtouch.engine.clips import Clip
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
@@ -77,7 +78,7 @@ class _Child:
         self.status = status
         self.geometry = Geometry.for_device(core.device)
         self.handled_mark = 0
-        self.plans: dict[int, Plan] = {}
+        self.plans: dict[int, tuple[Plan, Clip | None]] = {}
         self.leave = threading.Event()
         period_s = core.device.block_frames / core.device.sample_rate_hz
         self.budget_s = INTAKE_SHARE * period_s
@@ -174,15 +175,17 @@ class _Child:
     def start(self, message: tuple[Any, ...]) -> None:
         """A job's start: its plan is kept even when the start itself is void (the host
         sends a plan once), and a job that does not start is reported cancelled."""
-        _, seq, job_id, key, plan, forget, owner, frame = message
+        _, seq, job_id, key, plan, clip, forget, owner, frame = message
         core = self.core
         for old in forget:
             self.plans.pop(old, None)
         if plan is not None:
-            self.plans[key] = dataclasses.replace(plan, device=core.device, geometry=self.geometry)
+            whole = dataclasses.replace(plan, device=core.device, geometry=self.geometry)
+            self.plans[key] = (whole, clip)
         if seq >= self.handled_mark:  # else sent before a stop_all: void
             try:
-                core.start_job(job_id, self.plans[key], owner, frame)
+                known, known_clip = self.plans[key]
+                core.start_job(job_id, known, owner, frame, known_clip)
                 return
             except Exception as exc:
                 self.failed(exc)

@@ -28,12 +28,13 @@ from typing import Any
 import numpy as np
 
 from phantomtouch.engine.board import ContactBoard
+from phantomtouch.engine.clips import Clip
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings, ContactVoice
 from phantomtouch.engine.scheduler import Scheduler
 from phantomtouch.engine.sinks import Sink
-from phantomtouch.engine.voices import DONE, PatternVoice
+from phantomtouch.engine.voices import DONE, ClipVoice, JobVoice, PatternVoice
 from phantomtouch.errors import DeviceError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
@@ -93,7 +94,7 @@ class Core:
         )
         self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
         self.running = False
-        self._jobs: dict[str, PatternVoice] = {}
+        self._jobs: dict[str, JobVoice] = {}
 
     # -- life cycle (control thread) --------------------------------------------------
 
@@ -118,11 +119,22 @@ class Core:
 
     # -- commands (checked by the caller) ---------------------------------------------
 
-    def start_job(self, job_id: str, plan: Plan, owner: str | None, frame: int | None) -> None:
-        """Play ``plan`` from ``frame`` (None: the next block)."""
-        voice = PatternVoice(
-            plan, job_id=job_id, owner=owner, release_frames=self.board.release_frames
-        )
+    def start_job(
+        self,
+        job_id: str,
+        plan: Plan,
+        owner: str | None,
+        frame: int | None,
+        clip: Clip | None = None,
+    ) -> None:
+        """Play ``plan`` from ``frame`` (None: the next block); from ``clip``, its samples
+        rendered beforehand, when given."""
+        release_frames = self.board.release_frames
+        voice: JobVoice
+        if clip is None:
+            voice = PatternVoice(plan, job_id=job_id, owner=owner, release_frames=release_frames)
+        else:
+            voice = ClipVoice(plan, clip, job_id=job_id, owner=owner, release_frames=release_frames)
         first = self.scheduler.next_block_frame() if frame is None else frame
         self.queue.push_start(voice, first, frame is None)
         self._jobs[job_id] = voice
@@ -161,7 +173,7 @@ class Core:
                 out.append(("stop_all", event[1]))
                 continue
             voice, frame = event[1], event[2]
-            if isinstance(voice, PatternVoice):
+            if isinstance(voice, JobVoice):
                 key: Any = voice.job_id
                 what = "job"
                 if kind in ("end", "cancel"):

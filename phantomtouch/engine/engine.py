@@ -20,6 +20,7 @@ from typing import Any
 
 from phantomtouch.engine.admission import CHUNK_FRAMES, RENDER_BUDGET
 from phantomtouch.engine.checks import check_int, check_range
+from phantomtouch.engine.clips import CLIP_MAX_S, Clip
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
@@ -99,6 +100,7 @@ class Engine(EngineFront):
         clock: SampleClock | None = None,
         render_budget: float = RENDER_BUDGET,
         voice_policy: Policy = "steal-oldest",
+        clip_max_s: float = CLIP_MAX_S,
         voice_cost: float | None = None,
         start_cost: float | None = None,
     ) -> None:
@@ -110,6 +112,7 @@ class Engine(EngineFront):
             log_path=log_path,
             render_budget=render_budget,
             voice_policy=voice_policy,
+            clip_max_s=clip_max_s,
         )
         if clock is not None and (
             not isinstance(clock, SampleClock) or clock.sample_rate_hz != device.sample_rate_hz
@@ -230,8 +233,10 @@ class Engine(EngineFront):
         self._collect()
         return super().job_state(job_id)
 
-    def _send_start(self, job_id: str, plan: Plan, owner: str | None, frame: int | None) -> None:
-        self._core.start_job(job_id, plan, owner, frame)
+    def _send_start(
+        self, job_id: str, plan: Plan, owner: str | None, frame: int | None, clip: Clip | None
+    ) -> None:
+        self._core.start_job(job_id, plan, owner, frame, clip)
 
     def _send_release(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
         self._core.release_job(job_id, frame, fade_frames)

@@ -37,6 +37,7 @@ from typing import Any
 
 from phantomtouch.engine.admission import RENDER_BUDGET
 from phantomtouch.engine.checks import check_int
+from phantomtouch.engine.clips import CLIP_MAX_S, Clip
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import (
@@ -122,6 +123,7 @@ class ProcessEngine(EngineFront):
         realtime_priority: int | None = REALTIME_PRIORITY,
         render_budget: float = RENDER_BUDGET,
         voice_policy: Policy = "steal-oldest",
+        clip_max_s: float = CLIP_MAX_S,
         voice_cost: float | None = None,
         start_cost: float | None = None,
         on_fault: Callable[[str], None] | None = None,
@@ -134,6 +136,7 @@ class ProcessEngine(EngineFront):
             log_path=log_path,
             render_budget=render_budget,
             voice_policy=voice_policy,
+            clip_max_s=clip_max_s,
         )
         if realtime_priority is not None:
             check_int("realtime_priority", realtime_priority, 1, 99)
@@ -346,20 +349,23 @@ class ProcessEngine(EngineFront):
         while len(sent) > NOISE_LOOPS:
             sent.popitem(last=False)
 
-    def _send_start(self, job_id: str, plan: Plan, owner: str | None, frame: int | None) -> None:
+    def _send_start(
+        self, job_id: str, plan: Plan, owner: str | None, frame: int | None, clip: Clip | None
+    ) -> None:
         child = self._child
         self._noise(plan.pattern.carrier)
         known = child.plans.pop(id(plan), None)
         if known is not None and known[1]() is plan:
             child.plans[id(plan)] = known  # the most recently used
             key, sent = known[0], None
+            clip = None  # the engine process has it with the plan
         else:
             if known is not None:  # a plan gone since, whose id this one has
                 child.forget.append(known[0])
                 child.plan_bytes -= known[2]
             key, sent = self._next_seq(), slim(plan)
         forget, child.forget = child.forget, []
-        message = ("start", self._next_seq(), job_id, key, sent, forget, owner, frame)
+        message = ("start", self._next_seq(), job_id, key, sent, clip, forget, owner, frame)
         frame_bytes = encode(message)
         if not child.outbox.put(frame_bytes):
             child.forget = forget + child.forget

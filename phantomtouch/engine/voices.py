@@ -5,8 +5,9 @@ into the mix. When the channels its gains drive span at most half the channels, 
 only those; a wider span adds all channels at once (the others add zeros, which changes
 no sample), as a contiguous add is faster than a strided one. :class:`PatternVoice` plays a
 planned pattern through the renderer's :class:`~phantomtouch.renderer.PatternRenderer`,
-so it gives exactly the samples of an offline render; the contact voice lives in
-:mod:`phantomtouch.engine.contacts`.
+so it gives exactly the samples of an offline render; :class:`ClipVoice` plays a short
+plan rendered whole beforehand (:mod:`phantomtouch.engine.clips`), the same samples with
+no rendering in the callback; the contact voice lives in :mod:`phantomtouch.engine.contacts`.
 
 A release fades a voice out linearly over ``release_frames``: the gain of frame ``f``
 at or after the release frame ``R`` is ``(R + L - 1 - f) / L`` (``L`` the release length),
@@ -32,6 +33,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from phantomtouch.engine.clips import Clip
 from phantomtouch.renderer import PatternRenderer
 from phantomtouch.renderer.plan import Plan
 
@@ -181,8 +183,8 @@ class RingPool:
         self._free.append(ring)
 
 
-class PatternVoice(Voice):
-    """A planned pattern, played from its first frame.
+class JobVoice(Voice):
+    """A planned pattern, played from its first frame (a job).
 
     Parameters
     ----------
@@ -200,12 +202,6 @@ class PatternVoice(Voice):
         self.plan = plan
         self.job_id = job_id
         self.owner = owner
-        self._renderer = PatternRenderer(plan)
-        self._ring: np.ndarray | None = None
-        self._chunk = 0
-        self._read = 0  # voice frames added to the mix
-        self._write = 0  # voice frames rendered into the ring
-        self._spans: deque[tuple[int, int, int]] = deque()  # (end frame, lo, hi) per chunk
 
     @property
     def silent_from(self) -> int:
@@ -213,6 +209,73 @@ class PatternVoice(Voice):
         if self.release_frame is not None:
             end = min(end, self.release_frame + self.release_frames - 1)
         return end
+
+    def _span(self, frames: int, block_start: int) -> tuple[int, int, int]:
+        """``(offset, first, count)``: the block's frames ``offset .. offset + count``
+        are this voice's, from absolute frame ``first`` on (``count`` <= 0: none)."""
+        offset = max(0, self.start_frame - block_start)
+        first = block_start + offset
+        return offset, first, min(frames - offset, self.silent_from - first)
+
+    def _release_gains(self, work: Workspace, first: int, count: int) -> np.ndarray | None:
+        """The fade-out's gains over frames ``first .. first + count``, or None (no fade)."""
+        release = self.release_frame
+        if release is None or release >= first + count:
+            return None
+        return release_gains(work.gain[:count], work, first, release, self.release_frames)
+
+
+class ClipVoice(JobVoice):
+    """A short plan rendered whole beforehand: the callback only adds its samples.
+
+    Parameters
+    ----------
+    plan : Plan
+    clip : Clip
+        ``plan`` rendered by :func:`phantomtouch.engine.clips.render_clip`.
+    job_id, owner, release_frames
+        As for :class:`JobVoice`.
+    """
+
+    def __init__(
+        self, plan: Plan, clip: Clip, *, job_id: str, owner: str | None, release_frames: int
+    ) -> None:
+        super().__init__(plan, job_id=job_id, owner=owner, release_frames=release_frames)
+        self._samples = clip.samples
+        self._lo, self._hi = clip.lo, clip.hi
+
+    def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
+        frames = mix.shape[0]
+        offset, first, count = self._span(frames, block_start)
+        if count > 0 and self._hi > self._lo:
+            at = first - self.start_frame
+            piece = self._samples[at : at + count]
+            dest = mix[offset : offset + count, self._lo : self._hi]
+            gains = self._release_gains(work, first, count)
+            if gains is None:
+                dest += piece
+            else:
+                dest += piece * gains[:, None]
+        return block_start + frames >= self.silent_from
+
+
+class PatternVoice(JobVoice):
+    """A planned pattern, rendered in the callback (ahead into a ring when one is free).
+
+    Parameters
+    ----------
+    plan, job_id, owner, release_frames
+        As for :class:`JobVoice`.
+    """
+
+    def __init__(self, plan: Plan, *, job_id: str, owner: str | None, release_frames: int) -> None:
+        super().__init__(plan, job_id=job_id, owner=owner, release_frames=release_frames)
+        self._renderer = PatternRenderer(plan)
+        self._ring: np.ndarray | None = None
+        self._chunk = 0
+        self._read = 0  # voice frames added to the mix
+        self._write = 0  # voice frames rendered into the ring
+        self._spans: deque[tuple[int, int, int]] = deque()  # (end frame, lo, hi) per chunk
 
     def begin(self, frame: int, pool: RingPool) -> None:
         super().begin(frame, pool)
@@ -253,16 +316,9 @@ class PatternVoice(Voice):
 
     def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
         frames = mix.shape[0]
-        silent_from = self.silent_from
-        offset = max(0, self.start_frame - block_start)
-        first = block_start + offset
-        count = min(frames - offset, silent_from - first)
+        offset, first, count = self._span(frames, block_start)
         if count > 0:
-            gains = None
-            if self.release_frame is not None and self.release_frame < first + count:
-                gains = release_gains(
-                    work.gain[:count], work, first, self.release_frame, self.release_frames
-                )
+            gains = self._release_gains(work, first, count)
             dest = mix[offset : offset + count]
             if self._ring is not None:
                 self._add_ahead(dest, gains)
@@ -274,7 +330,7 @@ class PatternVoice(Voice):
                 scratch *= gains[:, None]
                 dest += scratch
             self._read += count
-        return block_start + frames >= silent_from
+        return block_start + frames >= self.silent_from
 
     def _add_ahead(self, dest: np.ndarray, gains: np.ndarray | None) -> None:
         ring = self._ring

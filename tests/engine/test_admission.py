@@ -169,9 +169,10 @@ def test_short_touches_begin_no_faster_than_the_churn_share_pays_for() -> None:
     sink = CaptureSink(DEVICE)
     tap = hold(0.0, 0.0, seconds=0.15)  # 7200 frames: two chunks, both rendered near its start
     # a first chunk costs 0.1 of a block: a tap 0.2; the account holds CHURN_SHARE (0.15)
-    # of a block for 0.1 s of blocks, 2.8125 blocks' worth: 14 taps, then refusals
+    # of a block for 0.1 s of blocks, 2.8125 blocks' worth: 14 taps, then refusals (taps
+    # rendered in the callback: as clips they cost no first chunk, tests/engine/test_clips.py)
     window = CHURN_SHARE * CHURN_WINDOW_S * DEVICE.sample_rate_hz / BLOCK
-    with Engine(DEVICE, sink, voice_cost=1e-4, start_cost=0.1) as engine:
+    with Engine(DEVICE, sink, voice_cost=1e-4, start_cost=0.1, clip_max_s=0.0) as engine:
         accepted = 0
         with pytest.raises(EngineBusyError, match="touches begin faster"):
             while True:

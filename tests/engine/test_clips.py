@@ -1,0 +1,94 @@
+"""Short plans played as clips: the same samples as voices rendered in the callback."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phantomtouch import DeviceProfile, TouchPattern, render
+from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine.clips import ClipCache, render_clip
+from phantomtouch.renderer import plan
+
+DEVICE = DeviceProfile.default()
+BLOCK = DEVICE.block_frames
+
+
+def tap(x_cm: float = 1.5, y_cm: float = 6.0, **changes: object) -> TouchPattern:
+    fields: dict[str, object] = {
+        "path": {"kind": "polyline", "points_cm": [[x_cm, y_cm]]},
+        "duration_s": 0.15,
+        "fade_in_s": 0.01,
+        "fade_out_s": 0.03,
+        "carrier": {"kind": "combined", "seed": 5},
+    }
+    fields.update(changes)
+    return TouchPattern.model_validate(fields)
+
+
+def play(pattern: TouchPattern, *, clip_max_s: float, start_frame: int, stop_block: int | None):
+    """What the engine plays of ``pattern`` (stopped at ``stop_block``), as clips or not."""
+    sink = CaptureSink(DEVICE)
+    with Engine(DEVICE, sink, clip_max_s=clip_max_s) as engine:
+        job = engine.schedule(pattern, start_frame=start_frame)
+        if stop_block is not None:
+            sink.pull(stop_block)
+            assert engine.stop(job.job_id) is True
+        sink.pull(-(-(start_frame + job.frames) // BLOCK) + 2 - sink.frames // BLOCK)
+        state = engine.job_state(job.job_id)
+    assert state is not None
+    return sink.recording(), state
+
+
+@pytest.mark.parametrize("start_frame", [0, 1000, 5 * BLOCK - 1])
+def test_a_clip_plays_the_offline_render_from_its_frame(start_frame: int) -> None:
+    pattern = tap()
+    recording, state = play(pattern, clip_max_s=1.0, start_frame=start_frame, stop_block=None)
+    reference = render(pattern, DEVICE)
+    expected = np.zeros_like(recording)
+    expected[start_frame : start_frame + len(reference)] = reference
+    np.testing.assert_array_equal(recording, expected)
+    assert (state.state, state.start_frame) == ("finished", start_frame)
+
+
+@pytest.mark.parametrize("stop_block", [None, 20, 40])
+def test_a_clip_and_a_voice_rendered_in_the_callback_give_the_same_samples(
+    stop_block: int | None,
+) -> None:
+    pattern = tap(x_cm=0.3, y_cm=11.0, modulation={"freq_hz": 40.0, "index": 0.5})
+    as_clip, clip_state = play(pattern, clip_max_s=1.0, start_frame=333, stop_block=stop_block)
+    rendered, voice_state = play(pattern, clip_max_s=0.0, start_frame=333, stop_block=stop_block)
+    np.testing.assert_array_equal(as_clip, rendered)
+    assert np.any(as_clip)
+    assert (clip_state.state, clip_state.end_frame) == (voice_state.state, voice_state.end_frame)
+
+
+def test_a_clip_keeps_only_the_channels_its_gains_drive() -> None:
+    resolved = plan(tap(x_cm=0.0, y_cm=0.0), DEVICE)
+    clip = render_clip(resolved)
+    whole = render(tap(x_cm=0.0, y_cm=0.0), DEVICE)  # the output stage changes no zero
+    driven = np.flatnonzero(np.any(whole != 0.0, axis=0))
+    assert (clip.lo, clip.hi) == (driven[0], driven[-1] + 1)
+    assert clip.hi - clip.lo < DEVICE.channels
+    assert clip.frames == resolved.frames and not clip.samples.flags.writeable
+
+
+def test_the_cache_renders_a_plan_once_keeps_its_bound_and_skips_long_plans() -> None:
+    short = [plan(tap(intensity=0.2 + 0.1 * k), DEVICE) for k in range(4)]  # same channels
+    one = render_clip(short[0]).samples.nbytes
+    cache = ClipCache(DEVICE.sample_rate_hz, max_s=1.0, max_bytes=2 * one)
+    first = cache.get(short[0])
+    assert first is not None and cache.get(short[0]) is first
+    for resolved in short[1:]:
+        cache.get(resolved)
+    assert cache.bytes <= 2 * one
+    assert cache.get(short[0]) is not first  # dropped as least recently used, rendered again
+    assert cache.get(plan(tap(duration_s=1.5), DEVICE)) is None
+
+
+def test_clips_are_not_charged_for_first_chunks() -> None:
+    # a first chunk in the callback costs 0.1 of a block here: rendered there, 14 taps in
+    # 0.1 s fill the churn account (tests/engine/test_admission.py); as clips, 40 begin
+    with Engine(DEVICE, CaptureSink(DEVICE), voice_cost=1e-4, start_cost=0.1) as engine:
+        for k in range(40):
+            engine.schedule(tap(), start_frame=(100 + k) * BLOCK)
