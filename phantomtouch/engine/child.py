@@ -34,6 +34,8 @@ import time
 from multiprocessing.connection import Connection
 from typing import Any
 
+import numpy as np
+
 from phantomtouch.engine.clips import Clip
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
@@ -54,8 +56,6 @@ INTAKE_SHARE = 0.15
 """Share of a block's playing time the callback spends on the host's messages."""
 READ_BYTES = 1 << 18
 """Most bytes read from the host's pipe per block."""
-LOAD_EVERY_BLOCKS = 64
-"""Blocks between two computations of the render-load percentiles."""
 
 
 class _Child:
@@ -82,8 +82,7 @@ class _Child:
         self.leave = threading.Event()
         period_s = core.device.block_frames / core.device.sample_rate_hz
         self.budget_s = INTAKE_SHARE * period_s
-        self.blocks = 0
-        self.figures: dict[str, Any] = {}
+        self.figures: dict[str, Any] = core.figures()
 
     # -- the audio callback -----------------------------------------------------------
 
@@ -112,27 +111,24 @@ class _Child:
             self.writer.send(events)
         else:
             self.writer.flush()
-        self.blocks += 1
-        if self.blocks % LOAD_EVERY_BLOCKS == 1:
-            self.figures = core.figures()
-        else:
-            figures = self.figures
-            mixer = scheduler.mixer
-            figures.update(
-                now_frames=scheduler.frames,
-                active_voices=scheduler.active_voices,
-                underruns=core.sink.underruns,
-                late_commands=scheduler.late_commands,
-                muted_blocks=mixer.muted_blocks,
-                limited_blocks=mixer.limited_blocks,
-                peak=mixer.peak,
-                queue_depth=core.queue.depth,
-                levels=mixer.levels,
-                callback_errors=scheduler.callback_errors,
-            )
-        self.figures["dropped_reports"] = self.writer.dropped
-        self.figures["running"] = core.running
-        self.status.write(self.figures)
+        figures = self.figures  # the render loads are in shared memory: the host's to sum up
+        mixer = scheduler.mixer
+        figures.update(
+            now_frames=scheduler.frames,
+            active_voices=scheduler.active_voices,
+            underruns=core.sink.underruns,
+            late_commands=scheduler.late_commands,
+            muted_blocks=mixer.muted_blocks,
+            limited_blocks=mixer.limited_blocks,
+            peak=mixer.peak,
+            queue_depth=core.queue.depth,
+            levels=mixer.levels,
+            callback_errors=scheduler.callback_errors,
+            output_latency_s=core.clock.output_latency_s,
+            dropped_reports=self.writer.dropped,
+            running=core.running,
+        )
+        self.status.write(figures)
 
     def check_mark(self) -> None:
         mark = int(self.mark.value)
@@ -262,7 +258,8 @@ def serve(
     priority : int or None
         SCHED_FIFO priority for this process's threads.
     shared : dict
-        The shared memory: ``clock``, ``slots`` and ``slot_count``, ``status``.
+        The shared memory: ``clock``, ``slots`` and ``slot_count``, ``status``, ``loads``
+        (the scheduler's render loads).
     """
     # Ctrl+C reaches the whole process group: the host closes the engine (with its fade-out)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -286,6 +283,7 @@ def serve(
             rings=min(options["max_voices"], RENDER_AHEAD_RINGS),
             chunk_frames=options["render_ahead_frames"],
             clock=clock,
+            render_loads=np.frombuffer(shared["loads"], dtype=np.float64),
         )
         costs = options["costs"]
         if costs is None:

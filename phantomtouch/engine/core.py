@@ -59,6 +59,8 @@ class Core:
     chunk_frames : int, >= 0
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
     clock : SampleClock
+    render_loads : ndarray, shape (RENDER_TIMES,), float64, optional
+        Where the scheduler keeps its render loads (see :class:`Scheduler`).
 
     Raises
     ------
@@ -76,6 +78,7 @@ class Core:
         rings: int,
         chunk_frames: int,
         clock: SampleClock,
+        render_loads: np.ndarray | None = None,
     ) -> None:
         for name in ("sample_rate_hz", "block_frames", "channels"):
             if getattr(sink, name) != getattr(device, name):
@@ -90,7 +93,13 @@ class Core:
         self.queue = CommandQueue(queue_capacity)
         self.board = ContactBoard(device, settings, self.queue)
         self.scheduler = Scheduler(
-            device, self.queue, clock, rings=rings, chunk_frames=chunk_frames, clocked=sink.realtime
+            device,
+            self.queue,
+            clock,
+            rings=rings,
+            chunk_frames=chunk_frames,
+            clocked=sink.realtime,
+            render_loads=render_loads,
         )
         self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
         self.running = False

@@ -49,6 +49,7 @@ from phantomtouch.engine.front import (
 )
 from phantomtouch.engine.jobs import Policy
 from phantomtouch.engine.link import encode, read_frames
+from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, EngineProcess, slim, spawn
 from phantomtouch.errors import DeviceError, EngineBusyError
@@ -436,7 +437,10 @@ class ProcessEngine(EngineFront):
 
     def _figures(self) -> dict[str, Any]:
         figures = self._child.status.read()
+        load_p99, load_max = load_percentiles(self._child.loads)
         figures.update(
+            render_load_p99=load_p99,
+            render_load_max=load_max,
             backend=self._child.backend,
             output_device=self._child.output_device,
             state=self._state,

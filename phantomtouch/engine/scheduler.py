@@ -64,9 +64,11 @@ class Scheduler:
     last_error : BaseException or None
     events : deque
         Reports for the control side (see the module docstring).
-    render_loads : ndarray, shape (RENDER_TIMES,)
+    render_loads : ndarray, shape (RENDER_TIMES,), float64
         Wall time of each of the last calls of :meth:`render` over the playing time of
-        the frames it rendered (a ring).
+        the frames it rendered (a ring; NaN where no call was timed yet). The engine
+        process passes one in shared memory, so that the host computes its percentiles
+        (:func:`load_percentiles`) and the callback never does.
     intake : callable or None
         Called at the start of every block, before its commands apply: the engine
         process takes its messages and contact positions here.
@@ -84,6 +86,7 @@ class Scheduler:
         rings: int,
         chunk_frames: int,
         clocked: bool = True,
+        render_loads: np.ndarray | None = None,
     ) -> None:
         self.block_frames = device.block_frames
         self.queue = queue
@@ -106,7 +109,12 @@ class Scheduler:
         self._waiting: list[tuple[int, int, Voice]] = []
         self._stop_seen = 0
         self._refill_credit = 0.0
-        self.render_loads = np.zeros(RENDER_TIMES)
+        if render_loads is None:
+            render_loads = np.empty(RENDER_TIMES)
+        elif render_loads.shape != (RENDER_TIMES,) or render_loads.dtype != np.float64:
+            raise ValueError(f"render_loads must be float64 of shape ({RENDER_TIMES},)")
+        render_loads.fill(np.nan)
+        self.render_loads = render_loads
         self._timed = 0
 
     @property
@@ -132,10 +140,7 @@ class Scheduler:
     def render_load(self) -> tuple[float, float]:
         """p99 and largest render load of the last ``RENDER_TIMES`` calls (any thread;
         0 before the first call)."""
-        loads = self.render_loads[: min(self._timed, RENDER_TIMES)]
-        if loads.size == 0:
-            return 0.0, 0.0
-        return float(np.percentile(loads, 99)), float(loads.max())
+        return load_percentiles(self.render_loads)
 
     def _render_blocks(self, out: np.ndarray) -> None:
         step = self.block_frames
@@ -278,3 +283,11 @@ class Scheduler:
             self.events.append(("end", voice, frame))
         self._voices = []
         self.active_voices = 0
+
+
+def load_percentiles(loads: np.ndarray) -> tuple[float, float]:
+    """p99 and largest of a ring of render loads, NaN entries left out (0, 0 when empty)."""
+    timed = loads[~np.isnan(loads)]
+    if timed.size == 0:
+        return 0.0, 0.0
+    return float(np.percentile(timed, 99)), float(timed.max())

@@ -20,8 +20,11 @@ import weakref
 from collections import OrderedDict
 from typing import Any
 
+import numpy as np
+
 from phantomtouch.engine.child import serve
 from phantomtouch.engine.link import Outbox, read_frames
+from phantomtouch.engine.scheduler import RENDER_TIMES
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.errors import DeviceError
@@ -54,6 +57,8 @@ class EngineProcess:
     slots: MoveSlots
     status: StatusBlock
     mark: Any
+    loads: np.ndarray
+    """The audio callback's render loads (see :class:`~phantomtouch.engine.scheduler.Scheduler`)."""
     costs: tuple[float, float]
     backend: str
     output_device: str | None
@@ -104,6 +109,7 @@ def spawn(
     slots = MoveSlots(slot_count)
     status = StatusBlock(device.channels)
     mark = context.Value("q", 0, lock=False)
+    loads = context.RawArray("d", RENDER_TIMES)
     commands_in, commands_out = context.Pipe(duplex=False)
     reports_in, reports_out = context.Pipe(duplex=False)
     process = context.Process(
@@ -121,6 +127,7 @@ def spawn(
                 "slots": slots.raw,
                 "slot_count": slots.capacity,
                 "status": status.raw,
+                "loads": loads,
             },
         ),
         name="phantomtouch-engine",
@@ -149,6 +156,7 @@ def spawn(
         slots=slots,
         status=status,
         mark=mark,
+        loads=np.frombuffer(loads, dtype=np.float64),
         costs=(float(ready[1][0]), float(ready[1][1])),
         backend=str(ready[2]),
         output_device=ready[3],

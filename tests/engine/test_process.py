@@ -349,3 +349,12 @@ def test_a_plan_sent_with_a_start_that_a_stop_voids_is_kept_for_the_next_start()
             wait_for_state(engine, again.job_id, "playing")
             engine.stop_all()
         assert engine.status().callback_errors == 0
+
+
+def test_the_host_reads_the_callback_s_render_loads_from_shared_memory() -> None:
+    with ProcessEngine(DEVICE, SinkSpec("null")) as engine:
+        deadline = time.monotonic() + 5.0
+        while engine.status().render_load_max == 0.0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        status = engine.status()
+        assert 0.0 < status.render_load_p99 <= status.render_load_max
