@@ -28,7 +28,6 @@ renders each block directly.
 
 from __future__ import annotations
 
-from collections import deque
 from typing import ClassVar
 
 import numpy as np
@@ -142,15 +141,11 @@ class Voice:
         """Hand back what the voice borrowed (audio callback)."""
         self.state = DONE
 
-    @property
-    def has_ring(self) -> bool:
-        """The voice renders ahead into a ring from the pool."""
-        return False
-
-    @property
-    def ahead_frames(self) -> int | None:
-        """Frames rendered ahead when there is room for another chunk, else None."""
-        return None
+    has_ring: bool = False
+    """The voice renders ahead into a ring from the pool."""
+    ahead_frames: int | None = None
+    """After :meth:`render`: frames rendered ahead when the ring has room for another
+    chunk, else None."""
 
     def refill(self) -> None:
         """Render the next chunk ahead (only when :attr:`ahead_frames` is not None)."""
@@ -262,6 +257,9 @@ class ClipVoice(JobVoice):
 class PatternVoice(JobVoice):
     """A planned pattern, rendered in the callback (ahead into a ring when one is free).
 
+    The ring holds whole-width frames (the renderer writes zeros on the channels it does
+    not drive), so a block is one contiguous add, or two where the ring wraps.
+
     Parameters
     ----------
     plan, job_id, owner, release_frames
@@ -271,47 +269,40 @@ class PatternVoice(JobVoice):
     def __init__(self, plan: Plan, *, job_id: str, owner: str | None, release_frames: int) -> None:
         super().__init__(plan, job_id=job_id, owner=owner, release_frames=release_frames)
         self._renderer = PatternRenderer(plan)
+        self._frames = plan.frames
         self._ring: np.ndarray | None = None
+        self._size = 0
         self._chunk = 0
         self._read = 0  # voice frames added to the mix
         self._write = 0  # voice frames rendered into the ring
-        self._spans: deque[tuple[int, int, int]] = deque()  # (end frame, lo, hi) per chunk
 
     def begin(self, frame: int, pool: RingPool) -> None:
         super().begin(frame, pool)
         self._ring = pool.take()
-        self._chunk = pool.chunk_frames
+        if self._ring is not None:
+            self.has_ring = True
+            self._size = self._ring.shape[0]
+            self._chunk = pool.chunk_frames
 
     def finish(self, pool: RingPool) -> None:
         super().finish(pool)
         if self._ring is not None:
             pool.give(self._ring)
             self._ring = None
-
-    @property
-    def has_ring(self) -> bool:
-        return self._ring is not None
-
-    @property
-    def ahead_frames(self) -> int | None:
-        if self._ring is None or self._renderer.finished or self.release_frame is not None:
-            return None
-        ahead = self._write - self._read
-        return ahead if ahead <= self._ring.shape[0] - self._chunk else None
+            self.has_ring = False
+            self.ahead_frames = None
 
     def refill(self) -> None:
         """Render the next chunk into the ring."""
-        assert self._ring is not None
         ring = self._ring
-        size = ring.shape[0]
-        left = min(self._chunk, self._renderer.remaining_frames)
+        assert ring is not None
+        size = self._size
+        left = min(self._chunk, self._frames - self._write)
         while left > 0:  # two pieces where the ring wraps
             at = self._write % size
             piece = min(left, size - at)
             self._renderer.render_into(ring[at : at + piece])
-            lo, hi = self._renderer.active_span
             self._write += piece
-            self._spans.append((self._write, lo, hi))
             left -= piece
 
     def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
@@ -330,6 +321,10 @@ class PatternVoice(JobVoice):
                 scratch *= gains[:, None]
                 dest += scratch
             self._read += count
+        if self._ring is not None:
+            ahead = self._write - self._read
+            room = ahead <= self._size - self._chunk and self._write < self._frames
+            self.ahead_frames = ahead if room and self.release_frame is None else None
         return block_start + frames >= self.silent_from
 
     def _add_ahead(self, dest: np.ndarray, gains: np.ndarray | None) -> None:
@@ -338,32 +333,14 @@ class PatternVoice(JobVoice):
         count = dest.shape[0]
         if self._write - self._read < count:  # run dry (a voice that just began): a chunk now
             self.refill()
-        read = self._read
-        spans = self._spans
-        while spans[0][0] <= read:  # chunks played out (the one being read stays)
-            spans.popleft()
-        size, channels = ring.shape
-        lo, hi = channels, 0
-        for end, span_lo, span_hi in spans:  # the pieces this read reaches
-            if span_hi > span_lo:
-                lo, hi = min(lo, span_lo), max(hi, span_hi)
-            if end >= read + count:
-                break
-        if hi <= lo:
-            return  # silent here
-        at = read % size
-        first = min(count, size - at)
-        if 2 * (hi - lo) > channels:  # a contiguous add of all channels beats a strided one
-            head, tail = ring[at : at + first], ring[: count - first]
-            target = dest
-        else:
-            head, tail = ring[at : at + first, lo:hi], ring[: count - first, lo:hi]
-            target = dest[:, lo:hi]
+        size = self._size
+        at = self._read % size
+        head = min(count, size - at)
         if gains is None:
-            target[:first] += head
-            if first < count:
-                target[first:] += tail
+            dest[:head] += ring[at : at + head]
+            if head < count:
+                dest[head:] += ring[: count - head]
         else:
-            target[:first] += head * gains[:first, None]
-            if first < count:
-                target[first:] += tail * gains[first:, None]
+            dest[:head] += ring[at : at + head] * gains[:head, None]
+            if head < count:
+                dest[head:] += ring[: count - head] * gains[head:, None]
