@@ -140,3 +140,37 @@ def test_touches_sent_before_a_stop_are_stopped_and_fall_silent(live: LiveServer
             return "phantomtouch_active_voices 0.0" in metrics
 
         wait_for(silent, timeout_s=2.0, server=live)  # released within the release ramp (80 ms)
+
+
+def test_the_sound_card_vanishes_then_comes_back(tmp_path: Path) -> None:
+    card = start_jack_or_skip(sample_rate_hz=48000, period_frames=256, channels=8)
+    name = card.name
+    profile = tmp_path / "armband-256.json"
+    profile.write_text(DeviceProfile.default().model_dump_json())  # 256-frame blocks
+    server = LiveServer(tmp_path / "patterns.db", output="system", args=("--device", str(profile)))
+    try:
+        with server, httpx.Client(base_url=server.url, timeout=10) as client:
+            assert health(client)["engine"] == "running"
+            job = client.post("/touch", json=LONG_TOUCH).json()["job_id"]
+            card.stop()  # the audio server, the service's sound card, is gone mid-stream
+            wait_for(lambda: health(client)["status"] == "degraded", timeout_s=5.0, server=server)
+            assert client.get(f"/jobs/{job}").json()["state"] == "stopped"
+            refused = client.post("/touch", json=LONG_TOUCH)
+            if health(client)["status"] == "degraded":
+                assert refused.status_code == 503
+                assert refused.json()["error"]["code"] == "device"
+            assert client.post("/stop", timeout=RESPONSIVE_S).status_code == 200
+            card = JackServer(sample_rate_hz=48000, period_frames=256, channels=8)
+            card.name = name  # the same card is plugged in again
+            card.start()
+            wait_for(lambda: health(client)["engine"] == "running", timeout_s=60.0, server=server)
+            again = client.post("/touch", json={"preset": "vr/tap"})
+            assert again.status_code == 202
+            wait_for(
+                lambda: client.get(f"/jobs/{again.json()['job_id']}").json()["state"] == "finished",
+                timeout_s=10.0,
+                server=server,
+            )
+            assert health(client)["backend"] == "sounddevice"
+    finally:
+        card.stop()
