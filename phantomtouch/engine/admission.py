@@ -5,8 +5,9 @@ time, :func:`~phantomtouch.engine.core.measure_costs`): a sounding voice, and a 
 the block it begins in. :class:`Admission` turns those into the limits the control side
 (:class:`~phantomtouch.engine.front.EngineFront`) applies: voices that may sound at once
 (``render_budget`` over the voice cost, at most ``max_voices``), voices that may begin in
-one block, and how fast short touches may begin (their first chunks are most of their
-work). Unmeasured costs (0) leave the limits at ``max_voices`` and unbounded.
+one block, and how fast voices may begin (what a voice renders when it begins comes on
+top of what it costs while it sounds). Unmeasured costs (0) leave the limits at
+``max_voices`` and unbounded.
 """
 
 from __future__ import annotations
@@ -22,13 +23,12 @@ START_SHARE = 0.2
 """Share of a block's playing time that voices beginning in it may take (a voice's first
 block costs more than the next: it renders before the callback's spread refills)."""
 CHURN_SHARE = 0.15
-"""Share of the callback's time, on average, that the first chunks of beginning voices
-may take: a short touch renders almost all of its frames in its first two chunks, so a
-flood of taps costs by how fast they begin, not by how many sound at once."""
+"""Share of the callback's time, on average, that the first frames of beginning voices
+may take: a flood of touches costs by how fast they begin, not only by how many sound at
+once. (Touches short enough to play as clips render nothing in the callback and are not
+counted: :mod:`phantomtouch.engine.clips`.)"""
 CHURN_WINDOW_S = 0.1
 """Over how long a burst of beginnings may exceed ``CHURN_SHARE`` before it is refused."""
-CHUNK_FRAMES = 4096
-"""Frames a pattern voice renders at a time (the engine's render-ahead chunk)."""
 MAX_START_DELAY_S = 0.02
 """How far a job that asks to start as soon as possible may be moved to a later block
 when the next ones already begin as many voices as they may; beyond it, it is refused."""
@@ -81,8 +81,8 @@ class Admission:
             return 1 << 30
         return max(1, math.floor(START_SHARE / self.start_cost))
 
-    def charge_churn(self, frames: int, now_frames: int) -> None:
-        """Count a job's first chunks (at most two) against ``CHURN_SHARE``, or refuse it.
+    def charge_churn(self, now_frames: int) -> None:
+        """Count a job's first frames (``start_cost``) against ``CHURN_SHARE``, or refuse it.
 
         The account drains by ``CHURN_SHARE`` of a block per block played and may hold
         ``CHURN_WINDOW_S`` worth of it.
@@ -92,7 +92,7 @@ class Admission:
         now_block = now_frames / self.block_frames
         paid = (now_block - self._churn_block) * CHURN_SHARE
         self._churn, self._churn_block = max(0.0, self._churn - paid), now_block
-        cost = min(2, math.ceil(frames / CHUNK_FRAMES)) * self.start_cost
+        cost = self.start_cost
         window = CHURN_SHARE * CHURN_WINDOW_S * self.sample_rate_hz / self.block_frames
         if self._churn + cost > max(window, cost):
             raise EngineBusyError(

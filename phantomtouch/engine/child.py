@@ -287,7 +287,12 @@ def serve(
         )
         costs = options["costs"]
         if costs is None:
-            costs = measure_costs(device, cost_plan(device)) if sink.realtime else (0.0, 0.0)
+            chunk = options["render_ahead_frames"]
+            costs = (
+                measure_costs(device, cost_plan(device), chunk_frames=chunk)
+                if sink.realtime
+                else (0.0, 0.0)
+            )
     except Exception as exc:
         os.write(report_fd, encode(("failed", exc)))
         return

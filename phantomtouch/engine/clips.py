@@ -7,7 +7,7 @@ once, when the touch is scheduled, in the requesting thread: :func:`render_clip`
 the plan with the same :class:`~phantomtouch.renderer.PatternRenderer`, so a clip holds
 exactly the samples the voice would have rendered (the renderer's output does not depend
 on how it is cut into blocks), and the callback's :class:`~phantomtouch.engine.voices.ClipVoice`
-adds slices of it. Only the channels the touch drives are kept.
+adds slices of it: whole-width frames, one contiguous add a block.
 
 :class:`ClipCache` keeps the clips of the plans in use: a plan made once and played
 often (a preset from the server's plan cache) is rendered once.
@@ -33,23 +33,14 @@ CLIP_CACHE_BYTES = 32 << 20
 
 @dataclass(frozen=True)
 class Clip:
-    """A plan's whole output, on the channels it drives.
+    """A plan's whole output.
 
     Attributes
     ----------
-    samples : ndarray, shape (frames, hi - lo), float32, C-contiguous, read-only
-        Frame ``f`` of the plan on channels ``lo .. hi - 1``; other channels are 0.
-    lo : int
-        First channel kept.
+    samples : ndarray, shape (frames, channels), float32, C-contiguous, read-only
     """
 
     samples: np.ndarray
-    lo: int
-
-    @property
-    def hi(self) -> int:
-        """One past the last channel kept."""
-        return self.lo + int(self.samples.shape[1])
 
     @property
     def frames(self) -> int:
@@ -58,13 +49,10 @@ class Clip:
 
 def render_clip(plan: Plan) -> Clip:
     """Render ``plan`` whole (any length; see :data:`CLIP_MAX_S` for what is worth it)."""
-    out = np.zeros((plan.frames, plan.channels), dtype=np.float32)
-    PatternRenderer(plan).render_into(out)
-    active = np.flatnonzero(np.any(out != 0.0, axis=0))
-    lo, hi = (int(active[0]), int(active[-1]) + 1) if active.size else (0, 0)
-    samples = np.ascontiguousarray(out[:, lo:hi])
+    samples = np.empty((plan.frames, plan.channels), dtype=np.float32)
+    PatternRenderer(plan).render_into(samples)
     samples.flags.writeable = False
-    return Clip(samples=samples, lo=lo)
+    return Clip(samples=samples)
 
 
 class ClipCache:

@@ -227,7 +227,9 @@ class Core:
         }
 
 
-def measure_costs(device: DeviceProfile, plan: Plan, *, voices: int = 16) -> tuple[float, float]:
+def measure_costs(
+    device: DeviceProfile, plan: Plan, *, chunk_frames: int, voices: int = 16
+) -> tuple[float, float]:
     """What a pattern voice costs the audio callback, as fractions of a block's playing time.
 
     Returns ``(voice_cost, start_cost)``: the render load one sounding voice adds (64
@@ -247,7 +249,7 @@ def measure_costs(device: DeviceProfile, plan: Plan, *, voices: int = 16) -> tup
             settings=ContactSettings(),
             queue_capacity=2 * voices + 1,
             rings=2 * voices,
-            chunk_frames=4096,
+            chunk_frames=chunk_frames,
             clock=SampleClock(device.sample_rate_hz),
         )
         core.scheduler.clocked = False

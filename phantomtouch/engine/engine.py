@@ -18,7 +18,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from phantomtouch.engine.admission import CHUNK_FRAMES, RENDER_BUDGET
+from phantomtouch.engine.admission import RENDER_BUDGET
 from phantomtouch.engine.checks import check_int, check_range
 from phantomtouch.engine.clips import CLIP_MAX_S, Clip
 from phantomtouch.engine.clock import SampleClock
@@ -40,12 +40,13 @@ from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger("phantomtouch.engine")
 
-RENDER_AHEAD_FRAMES = CHUNK_FRAMES
-"""Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`)."""
+RENDER_AHEAD_FRAMES = 16384
+"""Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`):
+most of a refill's cost is per call, so long chunks make a sounding voice cheap."""
 RENDER_AHEAD_RINGS = 64
 """Most pattern voices that render ahead at once: the engine preallocates a ring (two
-chunks, 256 KB at 8 channels) for each of ``min(max_voices, RENDER_AHEAD_RINGS)``
-voices; voices beyond render block by block."""
+chunks, 1 MB at 8 channels; memory is taken only once a ring is used) for each of
+``min(max_voices, RENDER_AHEAD_RINGS)`` voices; voices beyond render block by block."""
 HOUSEKEEPING_PERIOD_S = 0.05
 COST_PRESET = "exp1/noise-high-v3"
 """The pattern whose voices measure what a voice costs: noise, the dearest carrier."""
@@ -166,7 +167,11 @@ class Engine(EngineFront):
             if self._core.running:
                 return
             if self._admission.voice_cost <= 0.0 and self._core.sink.realtime:
-                costs = measure_costs(self._device, cost_plan(self._device))
+                costs = measure_costs(
+                    self._device,
+                    cost_plan(self._device),
+                    chunk_frames=self._core.scheduler.pool.chunk_frames,
+                )
                 self._admission.voice_cost, self._admission.start_cost = costs
             self._core.start()
             self._halt.clear()

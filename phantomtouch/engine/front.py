@@ -301,7 +301,7 @@ class EngineFront:
             )
             if clip is None:  # a clip renders nothing in the callback
                 now_frames = self.now_frames
-                self._admission.charge_churn(resolved.frames, now_frames)
+                self._admission.charge_churn(now_frames)
                 first, frame = self._admission.place_start(first, frame, now_frames)
                 record.requested_start_frame = first
             self._send_start(job_id, resolved, owner, frame, clip)

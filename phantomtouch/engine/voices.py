@@ -24,6 +24,9 @@ is cut into blocks. A voice that runs dry (one that just began) renders a chunk 
 the engine bounds how many voices may begin in one block by what that costs
 (:mod:`phantomtouch.engine.front`). With the pool empty, or ``chunk_frames`` 0, a voice
 renders each block directly.
+
+A voice that begins renders only ``FIRST_FRAMES`` at once, and the scheduler's refills
+catch up from the next block on, so a start costs a fraction of a chunk.
 """
 
 from __future__ import annotations
@@ -37,6 +40,9 @@ from phantomtouch.renderer import PatternRenderer
 from phantomtouch.renderer.plan import Plan
 
 WAITING, PLAYING, DONE = "waiting", "playing", "done"
+FIRST_FRAMES = 2048
+"""Frames a voice with a ring renders when it runs dry (it just began): less than a
+chunk, so that beginning costs little; the scheduler's refills follow."""
 
 
 class Workspace:
@@ -205,19 +211,31 @@ class JobVoice(Voice):
             end = min(end, self.release_frame + self.release_frames - 1)
         return end
 
-    def _span(self, frames: int, block_start: int) -> tuple[int, int, int]:
-        """``(offset, first, count)``: the block's frames ``offset .. offset + count``
-        are this voice's, from absolute frame ``first`` on (``count`` <= 0: none)."""
-        offset = max(0, self.start_frame - block_start)
-        first = block_start + offset
-        return offset, first, min(frames - offset, self.silent_from - first)
-
-    def _release_gains(self, work: Workspace, first: int, count: int) -> np.ndarray | None:
-        """The fade-out's gains over frames ``first .. first + count``, or None (no fade)."""
+    def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
+        frames = mix.shape[0]
+        start = self.start_frame
         release = self.release_frame
-        if release is None or release >= first + count:
-            return None
-        return release_gains(work.gain[:count], work, first, release, self.release_frames)
+        end = self.silent_from
+        block_end = block_start + frames
+        if start <= block_start and end >= block_end and (release is None or release >= block_end):
+            self._add(mix, block_start - start, None, work)  # the whole block, no fade: most
+        else:
+            offset = max(0, start - block_start)
+            first = block_start + offset
+            count = min(frames - offset, end - first)
+            if count > 0:
+                gains = None
+                if release is not None and release < first + count:
+                    gains = release_gains(
+                        work.gain[:count], work, first, release, self.release_frames
+                    )
+                self._add(mix[offset : offset + count], first - start, gains, work)
+        return block_end >= end
+
+    def _add(self, dest: np.ndarray, at: int, gains: np.ndarray | None, work: Workspace) -> None:
+        """Add the voice's frames ``at .. at + len(dest)`` into ``dest``, times ``gains``
+        (shape (len(dest),)) when given."""
+        raise NotImplementedError
 
 
 class ClipVoice(JobVoice):
@@ -237,21 +255,13 @@ class ClipVoice(JobVoice):
     ) -> None:
         super().__init__(plan, job_id=job_id, owner=owner, release_frames=release_frames)
         self._samples = clip.samples
-        self._lo, self._hi = clip.lo, clip.hi
 
-    def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
-        frames = mix.shape[0]
-        offset, first, count = self._span(frames, block_start)
-        if count > 0 and self._hi > self._lo:
-            at = first - self.start_frame
-            piece = self._samples[at : at + count]
-            dest = mix[offset : offset + count, self._lo : self._hi]
-            gains = self._release_gains(work, first, count)
-            if gains is None:
-                dest += piece
-            else:
-                dest += piece * gains[:, None]
-        return block_start + frames >= self.silent_from
+    def _add(self, dest: np.ndarray, at: int, gains: np.ndarray | None, work: Workspace) -> None:
+        piece = self._samples[at : at + dest.shape[0]]
+        if gains is None:
+            dest += piece
+        else:
+            dest += piece * gains[:, None]
 
 
 class PatternVoice(JobVoice):
@@ -292,12 +302,12 @@ class PatternVoice(JobVoice):
             self.has_ring = False
             self.ahead_frames = None
 
-    def refill(self) -> None:
-        """Render the next chunk into the ring."""
+    def refill(self, frames: int | None = None) -> None:
+        """Render the next chunk into the ring (``frames`` of it, when given)."""
         ring = self._ring
         assert ring is not None
         size = self._size
-        left = min(self._chunk, self._frames - self._write)
+        left = min(self._chunk if frames is None else frames, self._frames - self._write)
         while left > 0:  # two pieces where the ring wraps
             at = self._write % size
             piece = min(left, size - at)
@@ -305,42 +315,34 @@ class PatternVoice(JobVoice):
             self._write += piece
             left -= piece
 
-    def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
-        frames = mix.shape[0]
-        offset, first, count = self._span(frames, block_start)
-        if count > 0:
-            gains = self._release_gains(work, first, count)
-            dest = mix[offset : offset + count]
-            if self._ring is not None:
-                self._add_ahead(dest, gains)
-            elif gains is None:
+    def _add(self, dest: np.ndarray, at: int, gains: np.ndarray | None, work: Workspace) -> None:
+        ring = self._ring
+        count = dest.shape[0]
+        if ring is None:
+            if gains is None:
                 self._renderer.render_add(dest)
             else:
                 scratch = work.scratch[:count]
                 self._renderer.render_into(scratch)
                 scratch *= gains[:, None]
                 dest += scratch
-            self._read += count
-        if self._ring is not None:
-            ahead = self._write - self._read
-            room = ahead <= self._size - self._chunk and self._write < self._frames
-            self.ahead_frames = ahead if room and self.release_frame is None else None
-        return block_start + frames >= self.silent_from
-
-    def _add_ahead(self, dest: np.ndarray, gains: np.ndarray | None) -> None:
-        ring = self._ring
-        assert ring is not None
-        count = dest.shape[0]
-        if self._write - self._read < count:  # run dry (a voice that just began): a chunk now
-            self.refill()
+            return
+        read = self._read
+        if self._write - read < count:  # run dry (a voice that just began): a few frames now
+            self.refill(max(count, FIRST_FRAMES))
         size = self._size
-        at = self._read % size
-        head = min(count, size - at)
+        start = read % size
+        head = min(count, size - start)
         if gains is None:
-            dest[:head] += ring[at : at + head]
+            dest[:head] += ring[start : start + head]
             if head < count:
                 dest[head:] += ring[: count - head]
         else:
-            dest[:head] += ring[at : at + head] * gains[:head, None]
+            dest[:head] += ring[start : start + head] * gains[:head, None]
             if head < count:
                 dest[head:] += ring[: count - head] * gains[head:, None]
+        read += count
+        self._read = read
+        ahead = self._write - read
+        room = ahead <= size - self._chunk and self._write < self._frames
+        self.ahead_frames = ahead if room and self.release_frame is None else None

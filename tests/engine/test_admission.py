@@ -165,22 +165,23 @@ def test_voices_beginning_at_once_are_spread_over_blocks_within_the_start_budget
     assert np.any(recording[first_block * BLOCK : (first_block + 1) * BLOCK])
 
 
-def test_short_touches_begin_no_faster_than_the_churn_share_pays_for() -> None:
+def test_touches_begin_no_faster_than_the_churn_share_pays_for() -> None:
     sink = CaptureSink(DEVICE)
-    tap = hold(0.0, 0.0, seconds=0.15)  # 7200 frames: two chunks, both rendered near its start
-    # a first chunk costs 0.1 of a block: a tap 0.2; the account holds CHURN_SHARE (0.15)
-    # of a block for 0.1 s of blocks, 2.8125 blocks' worth: 14 taps, then refusals (taps
-    # rendered in the callback: as clips they cost no first chunk, tests/engine/test_clips.py)
+    touch = hold(0.0, 0.0)
+    # a voice's first frames cost 0.1 of a block; the account holds CHURN_SHARE (0.15) of
+    # a block for 0.1 s of blocks, 2.8125 blocks' worth: 28 touches, then refusals (touches
+    # rendered in the callback: as clips they cost nothing there, tests/engine/test_clips.py)
     window = CHURN_SHARE * CHURN_WINDOW_S * DEVICE.sample_rate_hz / BLOCK
     with Engine(DEVICE, sink, voice_cost=1e-4, start_cost=0.1, clip_max_s=0.0) as engine:
         accepted = 0
         with pytest.raises(EngineBusyError, match="touches begin faster"):
             while True:
-                engine.schedule(tap, start_frame=(100 + accepted) * BLOCK)
+                engine.schedule(touch, start_frame=(100 + accepted) * BLOCK)
                 accepted += 1
-        assert accepted == int(window / 0.2) == 14
+        assert accepted == int(window / 0.1) == 28
         # the account drains by CHURN_SHARE of a block per block played
-        pull_to(sink, 2 * BLOCK)  # 0.3 blocks paid: one more tap (0.2) fits, not two
-        engine.schedule(tap, start_frame=200 * BLOCK)
+        pull_to(sink, 2 * BLOCK)  # 0.3 blocks paid: three more touches fit, not four
+        for k in range(3):
+            engine.schedule(touch, start_frame=(200 + k) * BLOCK)
         with pytest.raises(EngineBusyError, match="touches begin faster"):
-            engine.schedule(tap, start_frame=201 * BLOCK)
+            engine.schedule(touch, start_frame=203 * BLOCK)

@@ -63,14 +63,13 @@ def test_a_clip_and_a_voice_rendered_in_the_callback_give_the_same_samples(
     assert (clip_state.state, clip_state.end_frame) == (voice_state.state, voice_state.end_frame)
 
 
-def test_a_clip_keeps_only_the_channels_its_gains_drive() -> None:
-    resolved = plan(tap(x_cm=0.0, y_cm=0.0), DEVICE)
-    clip = render_clip(resolved)
-    whole = render(tap(x_cm=0.0, y_cm=0.0), DEVICE)  # the output stage changes no zero
-    driven = np.flatnonzero(np.any(whole != 0.0, axis=0))
-    assert (clip.lo, clip.hi) == (driven[0], driven[-1] + 1)
-    assert clip.hi - clip.lo < DEVICE.channels
-    assert clip.frames == resolved.frames and not clip.samples.flags.writeable
+def test_a_clip_holds_the_whole_render_read_only() -> None:
+    pattern = tap(x_cm=0.0, y_cm=0.0)
+    clip = render_clip(plan(pattern, DEVICE))
+    # the default device has no calibration and the tap stays under its ceiling: the
+    # offline render is the renderer's output as it is
+    np.testing.assert_array_equal(clip.samples, render(pattern, DEVICE))
+    assert clip.samples.flags.c_contiguous and not clip.samples.flags.writeable
 
 
 def test_the_cache_renders_a_plan_once_keeps_its_bound_and_skips_long_plans() -> None:
