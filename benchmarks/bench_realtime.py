@@ -52,7 +52,8 @@ from typing import Any
 
 import numpy as np
 import realtime_load as load
-from realtime_report import TITLES, number, table, xruns_text
+from realtime_floor import LatencyProbe
+from realtime_report import TITLES, floor_text, number, table, xruns_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
 
@@ -168,6 +169,7 @@ async def measure(
         before = await load.metrics(connection)
         xruns_before = xruns.xruns
         log_before = len(jack.output())
+        probe = LatencyProbe(round(args.period_frames / SAMPLE_RATE_HZ * 1e6)).start()
         cpu_before = load.cpu_seconds()
         started = time.monotonic()
         deadline = started + seconds
@@ -178,6 +180,7 @@ async def measure(
         )
         elapsed_s = time.monotonic() - started
         cpu_after = load.cpu_seconds()
+        machine = probe.stop()
         await asyncio.sleep(TAIL_S)
         after = await load.metrics(connection)
         xruns_after = xruns.xruns
@@ -199,6 +202,7 @@ async def measure(
         "underruns": underruns,
         "jack_xruns": xruns_after - xruns_before,
         "jack_xrun_causes": xrun_causes(log_during, args.period_frames / SAMPLE_RATE_HZ * 1e6),
+        "machine_floor": machine,
         "render_load_p99": highest(samples, "render_load_p99"),
         "render_load_max": highest(samples, "render_load_max"),
         "voices_max": highest(samples, "active_voices"),
@@ -371,6 +375,8 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
     wrk = shutil.which("wrk")
     if "c" in args.scenarios and wrk is None:
         raise SystemExit("bench_realtime: scenario c needs wrk (Debian package wrk)")
+    if not LatencyProbe.available():
+        raise SystemExit("bench_realtime: the machine's floor needs cyclictest (Debian rt-tests)")
     results: dict[str, Any] = {
         "cpus": os.cpu_count(),
         "load_avg_1min": os.getloadavg()[0],
@@ -452,11 +458,13 @@ def floor(
 ) -> dict[str, Any]:
     """JACK's xruns with no client of ours in its graph: what the machine gives anyway."""
     log_before, xruns_before = len(jack.output()), xruns.xruns
+    probe = LatencyProbe(round(period_us)).start()
     time.sleep(seconds)
     return {
         "seconds": seconds,
         "jack_xruns": xruns.xruns - xruns_before,
         "jack_xrun_causes": xrun_causes(jack.output()[log_before:], period_us),
+        "machine_floor": probe.stop(),
     }
 
 
@@ -505,7 +513,8 @@ def main() -> None:
     base = results["floor"]
     print(
         f"floor: JACK alone for {base['seconds']:g} s: {xruns_text(base)} xruns "
-        "(timer: the dummy driver woke late; slow: a cycle, that is a client, took too long)\n"
+        "(timer: the dummy driver woke late; slow: a cycle, that is a client, took too long); "
+        f"a do-nothing SCHED_FIFO thread: {floor_text(base)} wake-ups a period or more late\n"
     )
     print(table(results))
     print(

@@ -62,11 +62,23 @@ def xruns_text(result: dict[str, Any]) -> str:
     return f"{result['jack_xruns']} ({causes.get('late_wakeup', 0)} / {slow})"
 
 
+def floor_text(result: dict[str, Any]) -> str:
+    """``late of all (max ms)``: a do-nothing real-time thread's late wake-ups
+    (``realtime_floor.LatencyProbe``)."""
+    floor = result.get("machine_floor")
+    if floor is None:
+        return "—"
+    return (
+        f"{floor['late_wakeups']} of {floor['wakeups']} ({floor['max_latency_us'] / 1000:.1f} ms)"
+    )
+
+
 def table(results: dict[str, Any]) -> str:
     lines = [
         "| scenario | s | underruns | JACK xruns (timer / slow) | render load p99 | max "
-        "| voices max | /touch answered | /health p50 / p99 ms | load | busy cores (others) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| voices max | /touch answered | /health p50 / p99 ms | load | busy cores (others) "
+        "| RT probe late (max) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key, r in results["scenarios"].items():
         health = r["health"]
@@ -75,6 +87,7 @@ def table(results: dict[str, Any]) -> str:
             f"| {xruns_text(r)} | {percent(r['render_load_p99'])} "
             f"| {percent(r['render_load_max'])} | {number(r['voices_max'], 0)} "
             f"| {touch_statuses(r)} | {number(health['p50_ms'])} / {number(health['p99_ms'])} "
-            f"| {load_text(r)} | {r['busy_cores']:.1f} ({r['busy_cores_others']:.1f}) |"
+            f"| {load_text(r)} | {r['busy_cores']:.1f} ({r['busy_cores_others']:.1f}) "
+            f"| {floor_text(r)} |"
         )
     return "\n".join(lines)
