@@ -45,8 +45,10 @@ class Admission:
 
     Attributes
     ----------
-    voice_cost, start_cost : float
-        Measured costs, shares of a block's playing time (0: not measured).
+    voice_cost, start_cost, clip_cost : float
+        Measured costs, shares of a block's playing time (0: not measured): a sounding
+        voice that renders in the callback, a voice in the block it begins in, a sounding
+        clip (:mod:`phantomtouch.engine.clips`).
     """
 
     def __init__(self, device: DeviceProfile, *, max_voices: int, render_budget: float) -> None:
@@ -56,6 +58,7 @@ class Admission:
         self.render_budget = float(render_budget)
         self.voice_cost = 0.0
         self.start_cost = 0.0
+        self.clip_cost = 0.0
         self._starts: dict[int, int] = {}  # block index: jobs that begin in it
         self._churn = 0.0  # first-chunk work admitted and not yet paid off, in blocks
         self._churn_block = 0.0
@@ -64,6 +67,15 @@ class Admission:
         """A new engine process counts frames from 0 again."""
         self._starts.clear()
         self._churn = self._churn_block = 0.0
+
+    def set_costs(self, costs: tuple[float, float, float]) -> None:
+        """Set ``(voice_cost, start_cost, clip_cost)``, as
+        :func:`~phantomtouch.engine.core.measure_costs` gives them."""
+        self.voice_cost, self.start_cost, self.clip_cost = (float(cost) for cost in costs)
+
+    def cost(self, clip: bool) -> float:
+        """What a job costs while it sounds: a clip, or a voice rendered in the callback."""
+        return self.clip_cost if clip else self.voice_cost
 
     @property
     def voice_capacity(self) -> int:

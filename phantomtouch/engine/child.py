@@ -245,14 +245,14 @@ def serve(
         The host's messages (read end; framed by :mod:`phantomtouch.engine.link`).
     reports : Connection
         Where the engine reports (write end): first ``("ready", (voice_cost,
-        start_cost), backend, output_device)`` or ``("failed", exception)``, then lists
+        start_cost, clip_cost), backend, output_device)`` or ``("failed", exception)``, then lists
         of events.
     device_json : str
         The device profile as JSON.
     spec : SinkSpec
     options : dict
         ``queue_capacity``, ``max_voices``, ``contact``, ``render_ahead_frames``,
-        ``costs`` (``(voice_cost, start_cost)``; None: measure them), ``contact_slots``.
+        ``costs`` (``(voice_cost, start_cost, clip_cost)``; None: measure them), ``contact_slots``.
     mark : multiprocessing.Value
         Sequence number of the host's last ``stop_all``.
     priority : int or None
@@ -291,7 +291,7 @@ def serve(
             costs = (
                 measure_costs(device, cost_plan(device), chunk_frames=chunk)
                 if sink.realtime
-                else (0.0, 0.0)
+                else (0.0, 0.0, 0.0)
             )
     except Exception as exc:
         os.write(report_fd, encode(("failed", exc)))

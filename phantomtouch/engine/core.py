@@ -21,6 +21,7 @@ a process boundary as they are:
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from typing import Any
@@ -229,19 +230,20 @@ class Core:
 
 def measure_costs(
     device: DeviceProfile, plan: Plan, *, chunk_frames: int, voices: int = 16
-) -> tuple[float, float]:
+) -> tuple[float, float, float]:
     """What a pattern voice costs the audio callback, as fractions of a block's playing time.
 
-    Returns ``(voice_cost, start_cost)``: the render load one sounding voice adds (64
-    blocks with ``voices`` copies of ``plan`` against 64 without), and what one voice
-    adds to the block it begins in (``voices`` begin in one block, against an idle
-    block). Each is the median of three tries, at least 1e-4. Run before the sink starts.
+    Returns ``(voice_cost, start_cost, clip_cost)``: the render load one sounding voice
+    adds (64 blocks with ``voices`` copies of ``plan`` against 64 without), what one
+    voice adds to the block it begins in (``voices`` begin in one block, against an idle
+    block), and what one sounding clip adds (as the first, with clips). Each is the
+    median of three tries, at least 1e-4 (clips 1e-5). Run before the sink starts.
     """
     from phantomtouch.engine.sinks import NullSink
 
     block = np.zeros((device.block_frames, device.channels), dtype=np.float32)
     period_s = device.block_frames / device.sample_rate_hz
-    sounding, starting = [], []
+    sounding, starting, clips = [], [], []
     for _ in range(3):
         core = Core(
             device,
@@ -280,4 +282,22 @@ def measure_costs(
                 render(block)
             timings.append((time.perf_counter() - began) / 64)
         sounding.append((timings[1] - timings[0]) / voices / period_s)
-    return max(1e-4, float(np.median(sounding))), max(1e-4, float(np.median(starting)))
+        core.stop_all()
+        for _ in range(64):
+            render(block)
+        frames = 80 * device.block_frames  # the clip outlasts the blocks timed
+        clip = Clip(samples=np.zeros((frames, device.channels), dtype=np.float32))
+        short = dataclasses.replace(plan, frames=frames)
+        for k in range(voices):
+            core.start_job(f"clip-{k}", short, None, None, clip)
+        for _ in range(8):
+            render(block)
+        began = time.perf_counter()
+        for _ in range(64):
+            render(block)
+        clips.append(((time.perf_counter() - began) / 64 - timings[0]) / voices / period_s)
+    return (
+        max(1e-4, float(np.median(sounding))),
+        max(1e-4, float(np.median(starting))),
+        max(1e-5, float(np.median(clips))),
+    )

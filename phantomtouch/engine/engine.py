@@ -124,6 +124,7 @@ class Engine(EngineFront):
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
         if voice_cost is not None:
             self._admission.voice_cost = check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
+            self._admission.clip_cost = voice_cost  # given, not measured: the same for clips
         if start_cost is not None:
             self._admission.start_cost = check_range("start_cost", start_cost, 1e-6, 100.0, "")
         self._core = Core(
@@ -172,7 +173,7 @@ class Engine(EngineFront):
                     cost_plan(self._device),
                     chunk_frames=self._core.scheduler.pool.chunk_frames,
                 )
-                self._admission.voice_cost, self._admission.start_cost = costs
+                self._admission.set_costs(costs)
             self._core.start()
             self._halt.clear()
             self._housekeeper = threading.Thread(

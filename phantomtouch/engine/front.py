@@ -12,7 +12,7 @@ process without waiting for an answer. No call waits for the audio side.
 Admission by budget
 -------------------
 The audio side measures what a pattern voice costs to render (a fraction of a block's
-playing time, :func:`~phantomtouch.engine.core.measure_voice_cost`); the front admits
+playing time, :func:`~phantomtouch.engine.core.measure_costs`); the front admits
 jobs while ``voices x cost`` stays within ``render_budget`` of the period (and within
 ``max_voices``). Beyond it the voice policy decides, as game audio engines do:
 ``refuse`` (EngineBusyError, a 503 ``busy``), ``steal-oldest`` (the default: the newest
@@ -292,11 +292,14 @@ class EngineFront:
                 record.state, record.end_frame = "stopped", first
                 self._jobs.retire(record)
                 return self._job(record, resolved)
+            record.cost = self._admission.cost(clip is not None)
             victims = self._jobs.admit(
                 first,
                 resolved.frames,
                 jobs=self._queue_capacity,
-                voices=self.voice_capacity,
+                cost=record.cost,
+                budget=self._admission.render_budget,
+                voices=self._admission.max_voices,
                 policy=chosen,
             )
             if clip is None:  # a clip renders nothing in the callback

@@ -101,6 +101,8 @@ class JobRecord:
     frames: int
     duration_s: float
     amplitude: float = 1.0
+    cost: float = 0.0
+    """Render load while it sounds, a share of a block's playing time (0: not measured)."""
     state: JobStateName = "scheduled"
     start_frame: int | None = None
     end_frame: int | None = None
@@ -164,19 +166,29 @@ class JobTable:
         return len(self._sounding(start_frame, end_frame))
 
     def admit(
-        self, start_frame: int, frames: int, *, jobs: int, voices: int, policy: Policy
+        self,
+        start_frame: int,
+        frames: int,
+        *,
+        jobs: int,
+        cost: float,
+        budget: float,
+        voices: int,
+        policy: Policy,
     ) -> list[JobRecord]:
-        """Make room for a job of ``frames`` from ``start_frame``, or refuse it.
+        """Make room for a job of ``frames`` from ``start_frame`` costing ``cost``, or refuse.
 
-        Refused when ``jobs`` are scheduled or playing already. When it would sound
-        together with ``voices`` others, ``policy`` decides: ``refuse``, or the jobs to
-        steal (the oldest started, or the quietest, among those sounding at its start)
-        are returned; the caller fades them out.
+        Refused when ``jobs`` are scheduled or playing already. When, together with the
+        jobs sounding at the same time, it would exceed the render ``budget`` (the sum of
+        their costs, shares of a block) or ``voices`` voices, ``policy`` decides:
+        ``refuse``, or the jobs to steal (the oldest started, or the quietest, among
+        those sounding at its start, as few as make room) are returned; the caller fades
+        them out.
 
         Raises
         ------
         EngineBusyError
-            Naming the limit (``queue_capacity`` or the voice budget) and the count.
+            Naming the limit (``queue_capacity``, or the voice budget) and the count.
         """
         if len(self._live) >= jobs:
             raise EngineBusyError(
@@ -184,20 +196,29 @@ class JobTable:
                 f"at most queue_capacity={jobs}"
             )
         sounding = self._sounding(start_frame, start_frame + frames)
-        excess = len(sounding) - voices + 1
-        if excess <= 0:
+        load = cost + sum(record.cost for record in sounding)
+        count = len(sounding) + 1
+        if _fits(load, count, budget, voices):
             return []
         at_start = [r for r in sounding if r.first_frame <= start_frame and r.state != "stopped"]
-        if policy == "refuse" or len(at_start) < excess:
-            raise EngineBusyError(
-                f"{len(sounding)} pattern voices would sound at once from frame {start_frame}; "
-                f"the voice budget allows {voices} (voice policy {policy!r})"
-            )
         if policy == "steal-oldest":
             at_start.sort(key=lambda r: (r.first_frame, r.job_id))
         else:
             at_start.sort(key=lambda r: (r.amplitude, r.first_frame))
-        return at_start[:excess]
+        victims: list[JobRecord] = []
+        if policy != "refuse":
+            for record in at_start:
+                victims.append(record)
+                load -= record.cost
+                count -= 1
+                if _fits(load, count, budget, voices):
+                    return victims
+        capacity = voices if cost <= 0.0 else min(voices, int(budget / cost + 1e-9))
+        raise EngineBusyError(
+            f"{len(sounding)} pattern voices would sound at once from frame {start_frame}; "
+            f"the voice budget allows {max(1, capacity)} such voices ({budget:.0%} of a "
+            f"block's time, at most {voices}; voice policy {policy!r})"
+        )
 
     def add(self, record: JobRecord) -> None:
         self._live[record.job_id] = record
@@ -251,3 +272,8 @@ def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
     if isinstance(pattern, TouchPattern):
         return plan(pattern, device)
     raise ParameterError(f"pattern must be a TouchPattern or a Plan, got {type(pattern).__name__}")
+
+
+def _fits(load: float, count: int, budget: float, voices: int) -> bool:
+    """Within ``voices``, and within the ``budget`` (one voice alone always fits it)."""
+    return count <= voices and (count <= 1 or load <= budget * (1.0 + 1e-9))

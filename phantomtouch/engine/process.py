@@ -149,7 +149,7 @@ class ProcessEngine(EngineFront):
             "max_voices": max_voices,
             "contact": contact,
             "render_ahead_frames": render_ahead_frames,
-            "costs": None if voice_cost is None else (voice_cost, start_cost or 0.0),
+            "costs": None if voice_cost is None else (voice_cost, start_cost or 0.0, voice_cost),
             "contact_slots": self._settings.max_contacts,
         }
         self.on_fault = on_fault
@@ -158,7 +158,7 @@ class ProcessEngine(EngineFront):
         self._restarts = 0
         self._halt = threading.Event()
         self._child = self._start_child()
-        self._admission.voice_cost, self._admission.start_cost = self._child.costs
+        self._admission.set_costs(self._child.costs)
         self._watchdog = threading.Thread(
             target=self._watch, name="phantomtouch-engine-watchdog", daemon=True
         )
@@ -229,7 +229,8 @@ class ProcessEngine(EngineFront):
             except Exception:
                 logger.exception("on_fault failed")
         self._child.end(kill=True)
-        self._options["costs"] = (self._admission.voice_cost, self._admission.start_cost)
+        admission = self._admission
+        self._options["costs"] = (admission.voice_cost, admission.start_cost, admission.clip_cost)
         delay_s = RETRY_FIRST_S
         while True:
             if not self._set_state("restarting"):

@@ -59,7 +59,7 @@ class EngineProcess:
     mark: Any
     loads: np.ndarray
     """The audio callback's render loads (see :class:`~phantomtouch.engine.scheduler.Scheduler`)."""
-    costs: tuple[float, float]
+    costs: tuple[float, float, float]
     backend: str
     output_device: str | None
     seq: int = 0
@@ -157,7 +157,7 @@ def spawn(
         status=status,
         mark=mark,
         loads=np.frombuffer(loads, dtype=np.float64),
-        costs=(float(ready[1][0]), float(ready[1][1])),
+        costs=(float(ready[1][0]), float(ready[1][1]), float(ready[1][2])),
         backend=str(ready[2]),
         output_device=ready[3],
     )

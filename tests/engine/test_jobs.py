@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from phantomtouch import DeviceProfile, ParameterError, TouchPattern
+from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, TouchPattern
 from phantomtouch.engine.jobs import JobRecord, JobTable, resolve_plan
 from phantomtouch.renderer import plan
 
@@ -50,3 +50,37 @@ def test_resolve_plan_refuses_plans_of_other_devices_and_other_types() -> None:
         resolve_plan(plan(pattern, DeviceProfile(block_frames=128)), device)
     with pytest.raises(ParameterError, match="got dict"):
         resolve_plan({"path": {}}, device)  # type: ignore[arg-type]
+
+
+def costing(job_id: str, cost: float, first_frame: int) -> JobRecord:
+    job = JobRecord(
+        plan=None,
+        job_id=job_id,
+        owner=None,
+        requested_start_frame=first_frame,
+        frames=1000,
+        duration_s=1.0,
+        cost=cost,
+    )
+    job.state = "playing"
+    return job
+
+
+def test_admission_sums_what_the_sounding_jobs_cost_against_the_budget() -> None:
+    table = JobTable()
+    # two voices rendered in the callback (1/8 of a block each) and five clips (1/20)
+    for k, cost in enumerate([0.125, 0.125, 0.05, 0.05, 0.05, 0.05, 0.05]):
+        table.add(costing(f"j{k}", cost, first_frame=k))
+    limits = {"jobs": 100, "budget": 0.5, "voices": 64}
+    assert table.admit(10, 100, cost=0.0, policy="refuse", **limits) == []  # 0.5: fits
+    with pytest.raises(EngineBusyError, match="the voice budget allows 10 such voices"):
+        table.admit(10, 100, cost=0.05, policy="refuse", **limits)
+    # the oldest is stolen, and no more than makes room: it alone frees 1/8
+    victims = table.admit(10, 100, cost=0.1, policy="steal-oldest", **limits)
+    assert [v.job_id for v in victims] == ["j0"]
+    # a voice costing the whole budget needs every other one gone
+    victims = table.admit(10, 100, cost=0.5, policy="steal-oldest", **limits)
+    assert len(victims) == 7
+    # the voice count bounds too, whatever the costs
+    with pytest.raises(EngineBusyError, match="at most 7"):
+        table.admit(10, 100, cost=0.0, policy="refuse", jobs=100, budget=0.5, voices=7)
