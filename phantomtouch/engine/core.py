@@ -234,7 +234,8 @@ def measure_costs(
     """What a pattern voice costs the audio callback, as fractions of a block's playing time.
 
     Returns ``(voice_cost, start_cost, clip_cost)``: the render load one sounding voice
-    adds (64 blocks with ``voices`` copies of ``plan`` against 64 without), what one
+    adds (``voices`` copies of ``plan`` against none, over at least 64 blocks and two
+    chunks' worth, once every voice has refilled its ring), what one
     voice adds to the block it begins in (``voices`` begin in one block, against an idle
     block), and what one sounding clip adds (as the first, with clips). Each is the
     median of three tries, at least 1e-4 (clips 1e-5). Run before the sink starts.
@@ -243,6 +244,10 @@ def measure_costs(
 
     block = np.zeros((device.block_frames, device.channels), dtype=np.float32)
     period_s = device.block_frames / device.sample_rate_hz
+    # steady state: every voice has refilled after its first frames, and the blocks timed
+    # hold each voice's refills at the rate they come
+    warm = max(1, chunk_frames) // device.block_frames + 8
+    timed = max(64, 2 * chunk_frames // device.block_frames)
     sounding, starting, clips = [], [], []
     for _ in range(3):
         core = Core(
@@ -271,16 +276,16 @@ def measure_costs(
             if count:
                 for k in range(count):
                     core.start_job(f"cost-{k}", plan, None, None)
-                for _ in range(8):
+                for _ in range(warm):
                     render(block)
             else:
                 core.stop_all()
                 for _ in range(64):
                     render(block)
             began = time.perf_counter()
-            for _ in range(64):
+            for _ in range(timed):
                 render(block)
-            timings.append((time.perf_counter() - began) / 64)
+            timings.append((time.perf_counter() - began) / timed)
         sounding.append((timings[1] - timings[0]) / voices / period_s)
         core.stop_all()
         for _ in range(64):
