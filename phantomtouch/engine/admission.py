@@ -25,8 +25,8 @@ block costs more than the next: it renders before the callback's spread refills)
 CHURN_SHARE = 0.15
 """Share of the callback's time, on average, that the first frames of beginning voices
 may take: a flood of touches costs by how fast they begin, not only by how many sound at
-once. (Touches short enough to play as clips render nothing in the callback and are not
-counted: :mod:`phantomtouch.engine.clips`.)"""
+once. (Touches short enough to be rendered whole beforehand render nothing in the
+callback and are not counted: :mod:`phantomtouch.engine.prerender`.)"""
 CHURN_WINDOW_S = 0.1
 """Over how long a burst of beginnings may exceed ``CHURN_SHARE`` before it is refused."""
 MAX_START_DELAY_S = 0.02
@@ -45,10 +45,10 @@ class Admission:
 
     Attributes
     ----------
-    voice_cost, start_cost, clip_cost : float
+    voice_cost, start_cost, prerendered_cost : float
         Measured costs, shares of a block's playing time (0: not measured): a sounding
         voice that renders in the callback, a voice in the block it begins in, a sounding
-        clip (:mod:`phantomtouch.engine.clips`).
+        prerendered voice (:mod:`phantomtouch.engine.prerender`).
     """
 
     def __init__(self, device: DeviceProfile, *, max_voices: int, render_budget: float) -> None:
@@ -58,7 +58,7 @@ class Admission:
         self.render_budget = float(render_budget)
         self.voice_cost = 0.0
         self.start_cost = 0.0
-        self.clip_cost = 0.0
+        self.prerendered_cost = 0.0
         self._starts: dict[int, int] = {}  # block index: jobs that begin in it
         self._churn = 0.0  # first-chunk work admitted and not yet paid off, in blocks
         self._churn_block = 0.0
@@ -69,13 +69,14 @@ class Admission:
         self._churn = self._churn_block = 0.0
 
     def set_costs(self, costs: tuple[float, float, float]) -> None:
-        """Set ``(voice_cost, start_cost, clip_cost)``, as
+        """Set ``(voice_cost, start_cost, prerendered_cost)``, as
         :func:`~phantomtouch.engine.core.measure_costs` gives them."""
-        self.voice_cost, self.start_cost, self.clip_cost = (float(cost) for cost in costs)
+        voice, start, prerendered = (float(cost) for cost in costs)
+        self.voice_cost, self.start_cost, self.prerendered_cost = voice, start, prerendered
 
-    def cost(self, clip: bool) -> float:
-        """What a job costs while it sounds: a clip, or a voice rendered in the callback."""
-        return self.clip_cost if clip else self.voice_cost
+    def cost(self, prerendered: bool) -> float:
+        """What a job costs while it sounds: prerendered, or rendered in the callback."""
+        return self.prerendered_cost if prerendered else self.voice_cost
 
     @property
     def voice_capacity(self) -> int:

@@ -36,12 +36,12 @@ from typing import Any
 
 import numpy as np
 
-from phantomtouch.engine.clips import Clip
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
 from phantomtouch.engine.link import FrameReader, NonBlockingWriter, encode, widen
+from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.sinks import CaptureSink
 from phantomtouch.engine.soundcard import SinkSpec
@@ -78,7 +78,7 @@ class _Child:
         self.status = status
         self.geometry = Geometry.for_device(core.device)
         self.handled_mark = 0
-        self.plans: dict[int, tuple[Plan, Clip | None]] = {}
+        self.plans: dict[int, tuple[Plan, Prerendered | None]] = {}
         self.leave = threading.Event()
         period_s = core.device.block_frames / core.device.sample_rate_hz
         self.budget_s = INTAKE_SHARE * period_s
@@ -171,17 +171,17 @@ class _Child:
     def start(self, message: tuple[Any, ...]) -> None:
         """A job's start: its plan is kept even when the start itself is void (the host
         sends a plan once), and a job that does not start is reported cancelled."""
-        _, seq, job_id, key, plan, clip, forget, owner, frame = message
+        _, seq, job_id, key, plan, prerendered, forget, owner, frame = message
         core = self.core
         for old in forget:
             self.plans.pop(old, None)
         if plan is not None:
             whole = dataclasses.replace(plan, device=core.device, geometry=self.geometry)
-            self.plans[key] = (whole, clip)
+            self.plans[key] = (whole, prerendered)
         if seq >= self.handled_mark:  # else sent before a stop_all: void
             try:
-                known, known_clip = self.plans[key]
-                core.start_job(job_id, known, owner, frame, known_clip)
+                known, known_prerendered = self.plans[key]
+                core.start_job(job_id, known, owner, frame, known_prerendered)
                 return
             except Exception as exc:
                 self.failed(exc)
@@ -245,14 +245,15 @@ def serve(
         The host's messages (read end; framed by :mod:`phantomtouch.engine.link`).
     reports : Connection
         Where the engine reports (write end): first ``("ready", (voice_cost,
-        start_cost, clip_cost), backend, output_device)`` or ``("failed", exception)``, then lists
-        of events.
+        start_cost, prerendered_cost), backend, output_device)`` or ``("failed",
+        exception)``, then lists of events.
     device_json : str
         The device profile as JSON.
     spec : SinkSpec
     options : dict
         ``queue_capacity``, ``max_voices``, ``contact``, ``render_ahead_frames``,
-        ``costs`` (``(voice_cost, start_cost, clip_cost)``; None: measure them), ``contact_slots``.
+        ``costs`` (``(voice_cost, start_cost, prerendered_cost)``; None: measure them),
+        ``contact_slots``.
     mark : multiprocessing.Value
         Sequence number of the host's last ``stop_all``.
     priority : int or None

@@ -29,13 +29,13 @@ from typing import Any
 import numpy as np
 
 from phantomtouch.engine.board import ContactBoard
-from phantomtouch.engine.clips import Clip
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings, ContactVoice
+from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.scheduler import Scheduler
 from phantomtouch.engine.sinks import Sink
-from phantomtouch.engine.voices import DONE, ClipVoice, JobVoice, PatternVoice
+from phantomtouch.engine.voices import DONE, JobVoice, PatternVoice, PrerenderedVoice
 from phantomtouch.errors import DeviceError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
@@ -135,16 +135,18 @@ class Core:
         plan: Plan,
         owner: str | None,
         frame: int | None,
-        clip: Clip | None = None,
+        prerendered: Prerendered | None = None,
     ) -> None:
-        """Play ``plan`` from ``frame`` (None: the next block); from ``clip``, its samples
+        """Play ``plan`` from ``frame`` (None: the next block); from ``prerendered``, its samples
         rendered beforehand, when given."""
         release_frames = self.board.release_frames
         voice: JobVoice
-        if clip is None:
+        if prerendered is None:
             voice = PatternVoice(plan, job_id=job_id, owner=owner, release_frames=release_frames)
         else:
-            voice = ClipVoice(plan, clip, job_id=job_id, owner=owner, release_frames=release_frames)
+            voice = PrerenderedVoice(
+                plan, prerendered, job_id=job_id, owner=owner, release_frames=release_frames
+            )
         first = self.scheduler.next_block_frame() if frame is None else frame
         self.queue.push_start(voice, first, frame is None)
         self._jobs[job_id] = voice
@@ -233,12 +235,13 @@ def measure_costs(
 ) -> tuple[float, float, float]:
     """What a pattern voice costs the audio callback, as fractions of a block's playing time.
 
-    Returns ``(voice_cost, start_cost, clip_cost)``: the render load one sounding voice
-    adds (``voices`` copies of ``plan`` against none, over at least 64 blocks and two
+    Returns ``(voice_cost, start_cost, prerendered_cost)``: the render load one sounding
+    voice adds (``voices`` copies of ``plan`` against none, over at least 64 blocks and two
     chunks' worth, once every voice has refilled its ring), what one
     voice adds to the block it begins in (``voices`` begin in one block, against an idle
-    block), and what one sounding clip adds (as the first, with clips). Each is the
-    median of three tries, at least 1e-4 (clips 1e-5). Run before the sink starts.
+    block), and what one sounding prerendered voice adds (as the first). Each is the
+    median of three tries, at least 1e-4 (prerendered voices 1e-5). Run before the sink
+    starts.
     """
     from phantomtouch.engine.sinks import NullSink
 
@@ -248,7 +251,7 @@ def measure_costs(
     # hold each voice's refills at the rate they come
     warm = max(1, chunk_frames) // device.block_frames + 8
     timed = max(64, 2 * chunk_frames // device.block_frames)
-    sounding, starting, clips = [], [], []
+    sounding, starting, prerendered_voices = [], [], []
     for _ in range(3):
         core = Core(
             device,
@@ -290,19 +293,21 @@ def measure_costs(
         core.stop_all()
         for _ in range(64):
             render(block)
-        frames = 80 * device.block_frames  # the clip outlasts the blocks timed
-        clip = Clip(samples=np.zeros((frames, device.channels), dtype=np.float32))
+        frames = 80 * device.block_frames  # the prerendered outlasts the blocks timed
+        prerendered = Prerendered(samples=np.zeros((frames, device.channels), dtype=np.float32))
         short = dataclasses.replace(plan, frames=frames)
         for k in range(voices):
-            core.start_job(f"clip-{k}", short, None, None, clip)
+            core.start_job(f"prerendered-{k}", short, None, None, prerendered)
         for _ in range(8):
             render(block)
         began = time.perf_counter()
         for _ in range(64):
             render(block)
-        clips.append(((time.perf_counter() - began) / 64 - timings[0]) / voices / period_s)
+        prerendered_voices.append(
+            ((time.perf_counter() - began) / 64 - timings[0]) / voices / period_s
+        )
     return (
         max(1e-4, float(np.median(sounding))),
         max(1e-4, float(np.median(starting))),
-        max(1e-5, float(np.median(clips))),
+        max(1e-5, float(np.median(prerendered_voices))),
     )

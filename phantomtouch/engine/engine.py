@@ -20,7 +20,6 @@ from typing import Any
 
 from phantomtouch.engine.admission import RENDER_BUDGET
 from phantomtouch.engine.checks import check_int, check_range
-from phantomtouch.engine.clips import CLIP_MAX_S, Clip
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
@@ -32,6 +31,7 @@ from phantomtouch.engine.front import (
     check_server_time,
 )
 from phantomtouch.engine.jobs import JobState, Policy
+from phantomtouch.engine.prerender import PRERENDER_MAX_S, Prerendered
 from phantomtouch.engine.sinks import NullSink, Sink
 from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.renderer.plan import Plan, plan
@@ -101,7 +101,7 @@ class Engine(EngineFront):
         clock: SampleClock | None = None,
         render_budget: float = RENDER_BUDGET,
         voice_policy: Policy = "steal-oldest",
-        clip_max_s: float = CLIP_MAX_S,
+        prerender_max_s: float = PRERENDER_MAX_S,
         voice_cost: float | None = None,
         start_cost: float | None = None,
     ) -> None:
@@ -113,7 +113,7 @@ class Engine(EngineFront):
             log_path=log_path,
             render_budget=render_budget,
             voice_policy=voice_policy,
-            clip_max_s=clip_max_s,
+            prerender_max_s=prerender_max_s,
         )
         if clock is not None and (
             not isinstance(clock, SampleClock) or clock.sample_rate_hz != device.sample_rate_hz
@@ -124,7 +124,7 @@ class Engine(EngineFront):
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
         if voice_cost is not None:
             self._admission.voice_cost = check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
-            self._admission.clip_cost = voice_cost  # given, not measured: the same for clips
+            self._admission.prerendered_cost = voice_cost  # given, not measured
         if start_cost is not None:
             self._admission.start_cost = check_range("start_cost", start_cost, 1e-6, 100.0, "")
         self._core = Core(
@@ -240,9 +240,14 @@ class Engine(EngineFront):
         return super().job_state(job_id)
 
     def _send_start(
-        self, job_id: str, plan: Plan, owner: str | None, frame: int | None, clip: Clip | None
+        self,
+        job_id: str,
+        plan: Plan,
+        owner: str | None,
+        frame: int | None,
+        prerendered: Prerendered | None,
     ) -> None:
-        self._core.start_job(job_id, plan, owner, frame, clip)
+        self._core.start_job(job_id, plan, owner, frame, prerendered)
 
     def _send_release(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
         self._core.release_job(job_id, frame, fade_frames)

@@ -41,7 +41,6 @@ from phantomtouch.engine.checks import (
     check_range,
     check_seconds,
 )
-from phantomtouch.engine.clips import CLIP_MAX_S, Clip, ClipCache
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.events import Ledger
 from phantomtouch.engine.jobs import (
@@ -54,6 +53,7 @@ from phantomtouch.engine.jobs import (
     resolve_plan,
 )
 from phantomtouch.engine.log import StimulusLog
+from phantomtouch.engine.prerender import PRERENDER_MAX_S, PrerenderCache, Prerendered
 from phantomtouch.engine.status import EngineStatus
 from phantomtouch.errors import EngineBusyError, ParameterError, ProtocolError
 from phantomtouch.renderer.carriers import make_source
@@ -99,9 +99,10 @@ class EngineFront:
         Share of a block's playing time pattern voices may take (``RENDER_BUDGET``).
     voice_policy : {"refuse", "steal-oldest", "steal-quietest"}
         What a job beyond the budget does (see the module docstring).
-    clip_max_s : float, 0 <= clip_max_s <= 10
-        Plans at most this long are rendered whole when scheduled and played as clips
-        (:mod:`phantomtouch.engine.clips`); 0: every plan renders in the callback.
+    prerender_max_s : float, 0 <= prerender_max_s <= 10
+        Plans at most this long are rendered whole when scheduled, so that the callback
+        only adds their samples (:mod:`phantomtouch.engine.prerender`); 0: every plan
+        renders in the callback.
     """
 
     def __init__(
@@ -114,14 +115,14 @@ class EngineFront:
         log_path: str | Path | None = None,
         render_budget: float = RENDER_BUDGET,
         voice_policy: Policy = "steal-oldest",
-        clip_max_s: float = CLIP_MAX_S,
+        prerender_max_s: float = PRERENDER_MAX_S,
     ) -> None:
         if not isinstance(device, DeviceProfile):
             raise ParameterError(f"device={device!r} must be a DeviceProfile")
         check_int("queue_capacity", queue_capacity, 1, MAX_QUEUE_CAPACITY)
         check_int("max_voices", max_voices, 1, MAX_QUEUE_CAPACITY)
         check_range("render_budget", render_budget, 1e-3, 1.0, "(share of a block)")
-        check_range("clip_max_s", clip_max_s, 0.0, 10.0, "s")
+        check_range("prerender_max_s", prerender_max_s, 0.0, 10.0, "s")
         if contact is not None and not isinstance(contact, ContactSettings):
             raise ParameterError(f"contact={contact!r} must be ContactSettings or None")
         self._device = device
@@ -130,7 +131,7 @@ class EngineFront:
         self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
         self._policy = self._check_policy(voice_policy)
         self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
-        self._clips = ClipCache(device.sample_rate_hz, max_s=clip_max_s)
+        self._prerendered = PrerenderCache(device.sample_rate_hz, max_s=prerender_max_s)
         self._lock = threading.RLock()
         self._jobs = JobTable()
         self._contacts: dict[tuple[str, str], ContactRecord] = {}
@@ -174,7 +175,12 @@ class EngineFront:
         raise NotImplementedError
 
     def _send_start(
-        self, job_id: str, plan: Plan, owner: str | None, frame: int | None, clip: Clip | None
+        self,
+        job_id: str,
+        plan: Plan,
+        owner: str | None,
+        frame: int | None,
+        prerendered: Prerendered | None,
     ) -> None:
         raise NotImplementedError
 
@@ -275,7 +281,7 @@ class EngineFront:
         if frame is not None:
             check_ahead(frame, self.now_frames, self.sample_rate_hz, MAX_SCHEDULE_AHEAD_S)
         job_id = uuid.uuid4().hex
-        clip = self._clips.get(resolved)
+        prerendered = self._prerendered.get(resolved)
         with self._lock:
             self._check_ready()
             first = self._next_block_frame() if frame is None else frame
@@ -292,7 +298,7 @@ class EngineFront:
                 record.state, record.end_frame = "stopped", first
                 self._jobs.retire(record)
                 return self._job(record, resolved)
-            record.cost = self._admission.cost(clip is not None)
+            record.cost = self._admission.cost(prerendered is not None)
             victims = self._jobs.admit(
                 first,
                 resolved.frames,
@@ -302,12 +308,12 @@ class EngineFront:
                 voices=self._admission.max_voices,
                 policy=chosen,
             )
-            if clip is None:  # a clip renders nothing in the callback
+            if prerendered is None:  # nothing to render in the callback
                 now_frames = self.now_frames
                 self._admission.charge_churn(now_frames)
                 first, frame = self._admission.place_start(first, frame, now_frames)
                 record.requested_start_frame = first
-            self._send_start(job_id, resolved, owner, frame, clip)
+            self._send_start(job_id, resolved, owner, frame, prerendered)
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
                 victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames

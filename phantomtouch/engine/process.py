@@ -37,7 +37,6 @@ from typing import Any
 
 from phantomtouch.engine.admission import RENDER_BUDGET
 from phantomtouch.engine.checks import check_int
-from phantomtouch.engine.clips import CLIP_MAX_S, Clip
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import (
@@ -49,6 +48,7 @@ from phantomtouch.engine.front import (
 )
 from phantomtouch.engine.jobs import Policy
 from phantomtouch.engine.link import encode, read_frames
+from phantomtouch.engine.prerender import PRERENDER_MAX_S, Prerendered
 from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, EngineProcess, slim, spawn
@@ -124,7 +124,7 @@ class ProcessEngine(EngineFront):
         realtime_priority: int | None = REALTIME_PRIORITY,
         render_budget: float = RENDER_BUDGET,
         voice_policy: Policy = "steal-oldest",
-        clip_max_s: float = CLIP_MAX_S,
+        prerender_max_s: float = PRERENDER_MAX_S,
         voice_cost: float | None = None,
         start_cost: float | None = None,
         on_fault: Callable[[str], None] | None = None,
@@ -137,7 +137,7 @@ class ProcessEngine(EngineFront):
             log_path=log_path,
             render_budget=render_budget,
             voice_policy=voice_policy,
-            clip_max_s=clip_max_s,
+            prerender_max_s=prerender_max_s,
         )
         if realtime_priority is not None:
             check_int("realtime_priority", realtime_priority, 1, 99)
@@ -230,7 +230,11 @@ class ProcessEngine(EngineFront):
                 logger.exception("on_fault failed")
         self._child.end(kill=True)
         admission = self._admission
-        self._options["costs"] = (admission.voice_cost, admission.start_cost, admission.clip_cost)
+        self._options["costs"] = (
+            admission.voice_cost,
+            admission.start_cost,
+            admission.prerendered_cost,
+        )
         delay_s = RETRY_FIRST_S
         while True:
             if not self._set_state("restarting"):
@@ -352,7 +356,12 @@ class ProcessEngine(EngineFront):
             sent.popitem(last=False)
 
     def _send_start(
-        self, job_id: str, plan: Plan, owner: str | None, frame: int | None, clip: Clip | None
+        self,
+        job_id: str,
+        plan: Plan,
+        owner: str | None,
+        frame: int | None,
+        prerendered: Prerendered | None,
     ) -> None:
         child = self._child
         self._noise(plan.pattern.carrier)
@@ -360,14 +369,14 @@ class ProcessEngine(EngineFront):
         if known is not None and known[1]() is plan:
             child.plans[id(plan)] = known  # the most recently used
             key, sent = known[0], None
-            clip = None  # the engine process has it with the plan
+            prerendered = None  # the engine process has it with the plan
         else:
             if known is not None:  # a plan gone since, whose id this one has
                 child.forget.append(known[0])
                 child.plan_bytes -= known[2]
             key, sent = self._next_seq(), slim(plan)
         forget, child.forget = child.forget, []
-        message = ("start", self._next_seq(), job_id, key, sent, clip, forget, owner, frame)
+        message = ("start", self._next_seq(), job_id, key, sent, prerendered, forget, owner, frame)
         frame_bytes = encode(message)
         if not child.outbox.put(frame_bytes):
             child.forget = forget + child.forget

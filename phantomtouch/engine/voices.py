@@ -5,9 +5,10 @@ into the mix. When the channels its gains drive span at most half the channels, 
 only those; a wider span adds all channels at once (the others add zeros, which changes
 no sample), as a contiguous add is faster than a strided one. :class:`PatternVoice` plays a
 planned pattern through the renderer's :class:`~phantomtouch.renderer.PatternRenderer`,
-so it gives exactly the samples of an offline render; :class:`ClipVoice` plays a short
-plan rendered whole beforehand (:mod:`phantomtouch.engine.clips`), the same samples with
-no rendering in the callback; the contact voice lives in :mod:`phantomtouch.engine.contacts`.
+so it gives exactly the samples of an offline render; :class:`PrerenderedVoice` plays a
+short plan rendered whole beforehand (:mod:`phantomtouch.engine.prerender`), the same
+samples with no rendering in the callback; the contact voice lives in
+:mod:`phantomtouch.engine.contacts`.
 
 A release fades a voice out linearly over ``release_frames``: the gain of frame ``f``
 at or after the release frame ``R`` is ``(R + L - 1 - f) / L`` (``L`` the release length),
@@ -35,7 +36,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from phantomtouch.engine.clips import Clip
+from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.renderer import PatternRenderer
 from phantomtouch.renderer.plan import Plan
 
@@ -238,23 +239,29 @@ class JobVoice(Voice):
         raise NotImplementedError
 
 
-class ClipVoice(JobVoice):
+class PrerenderedVoice(JobVoice):
     """A short plan rendered whole beforehand: the callback only adds its samples.
 
     Parameters
     ----------
     plan : Plan
-    clip : Clip
-        ``plan`` rendered by :func:`phantomtouch.engine.clips.render_clip`.
+    prerendered : Prerendered
+        ``plan`` rendered by :func:`phantomtouch.engine.prerender.prerender`.
     job_id, owner, release_frames
         As for :class:`JobVoice`.
     """
 
     def __init__(
-        self, plan: Plan, clip: Clip, *, job_id: str, owner: str | None, release_frames: int
+        self,
+        plan: Plan,
+        prerendered: Prerendered,
+        *,
+        job_id: str,
+        owner: str | None,
+        release_frames: int,
     ) -> None:
         super().__init__(plan, job_id=job_id, owner=owner, release_frames=release_frames)
-        self._samples = clip.samples
+        self._samples = prerendered.samples
 
     def _add(self, dest: np.ndarray, at: int, gains: np.ndarray | None, work: Workspace) -> None:
         piece = self._samples[at : at + dest.shape[0]]

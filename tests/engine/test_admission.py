@@ -170,9 +170,9 @@ def test_touches_begin_no_faster_than_the_churn_share_pays_for() -> None:
     touch = hold(0.0, 0.0)
     # a voice's first frames cost 0.1 of a block; the account holds CHURN_SHARE (0.15) of
     # a block for 0.1 s of blocks, 2.8125 blocks' worth: 28 touches, then refusals (touches
-    # rendered in the callback: as clips they cost nothing there, tests/engine/test_clips.py)
+    # rendered in the callback: prerendered they cost nothing there, tests/engine/test_prerender.py)
     window = CHURN_SHARE * CHURN_WINDOW_S * DEVICE.sample_rate_hz / BLOCK
-    with Engine(DEVICE, sink, voice_cost=1e-4, start_cost=0.1, clip_max_s=0.0) as engine:
+    with Engine(DEVICE, sink, voice_cost=1e-4, start_cost=0.1, prerender_max_s=0.0) as engine:
         accepted = 0
         with pytest.raises(EngineBusyError, match="touches begin faster"):
             while True:

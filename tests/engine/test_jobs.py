@@ -68,7 +68,7 @@ def costing(job_id: str, cost: float, first_frame: int) -> JobRecord:
 
 def test_admission_sums_what_the_sounding_jobs_cost_against_the_budget() -> None:
     table = JobTable()
-    # two voices rendered in the callback (1/8 of a block each) and five clips (1/20)
+    # two voices rendered in the callback (1/8 of a block each) and five prerendered (1/20)
     for k, cost in enumerate([0.125, 0.125, 0.05, 0.05, 0.05, 0.05, 0.05]):
         table.add(costing(f"j{k}", cost, first_frame=k))
     limits = {"jobs": 100, "budget": 0.5, "voices": 64}

@@ -1,4 +1,4 @@
-"""Short plans played as clips: the same samples as voices rendered in the callback."""
+"""Short plans played prerendered: the same samples as voices rendered in the callback."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
 from phantomtouch.engine import CaptureSink, Engine
-from phantomtouch.engine.clips import ClipCache, render_clip
+from phantomtouch.engine.prerender import PrerenderCache, prerender
 from phantomtouch.renderer import plan
 
 DEVICE = DeviceProfile.default()
@@ -26,10 +26,12 @@ def tap(x_cm: float = 1.5, y_cm: float = 6.0, **changes: object) -> TouchPattern
     return TouchPattern.model_validate(fields)
 
 
-def play(pattern: TouchPattern, *, clip_max_s: float, start_frame: int, stop_block: int | None):
-    """What the engine plays of ``pattern`` (stopped at ``stop_block``), as clips or not."""
+def play(
+    pattern: TouchPattern, *, prerender_max_s: float, start_frame: int, stop_block: int | None
+):
+    """What the engine plays of ``pattern`` (stopped at ``stop_block``), prerendered or not."""
     sink = CaptureSink(DEVICE)
-    with Engine(DEVICE, sink, clip_max_s=clip_max_s) as engine:
+    with Engine(DEVICE, sink, prerender_max_s=prerender_max_s) as engine:
         job = engine.schedule(pattern, start_frame=start_frame)
         if stop_block is not None:
             sink.pull(stop_block)
@@ -41,9 +43,9 @@ def play(pattern: TouchPattern, *, clip_max_s: float, start_frame: int, stop_blo
 
 
 @pytest.mark.parametrize("start_frame", [0, 1000, 5 * BLOCK - 1])
-def test_a_clip_plays_the_offline_render_from_its_frame(start_frame: int) -> None:
+def test_a_prerendered_touch_plays_the_offline_render_from_its_frame(start_frame: int) -> None:
     pattern = tap()
-    recording, state = play(pattern, clip_max_s=1.0, start_frame=start_frame, stop_block=None)
+    recording, state = play(pattern, prerender_max_s=1.0, start_frame=start_frame, stop_block=None)
     reference = render(pattern, DEVICE)
     expected = np.zeros_like(recording)
     expected[start_frame : start_frame + len(reference)] = reference
@@ -52,30 +54,37 @@ def test_a_clip_plays_the_offline_render_from_its_frame(start_frame: int) -> Non
 
 
 @pytest.mark.parametrize("stop_block", [None, 20, 40])
-def test_a_clip_and_a_voice_rendered_in_the_callback_give_the_same_samples(
+def test_prerendered_and_rendered_in_the_callback_give_the_same_samples(
     stop_block: int | None,
 ) -> None:
     pattern = tap(x_cm=0.3, y_cm=11.0, modulation={"freq_hz": 40.0, "index": 0.5})
-    as_clip, clip_state = play(pattern, clip_max_s=1.0, start_frame=333, stop_block=stop_block)
-    rendered, voice_state = play(pattern, clip_max_s=0.0, start_frame=333, stop_block=stop_block)
-    np.testing.assert_array_equal(as_clip, rendered)
-    assert np.any(as_clip)
-    assert (clip_state.state, clip_state.end_frame) == (voice_state.state, voice_state.end_frame)
+    prerendered, prerendered_state = play(
+        pattern, prerender_max_s=1.0, start_frame=333, stop_block=stop_block
+    )
+    rendered, voice_state = play(
+        pattern, prerender_max_s=0.0, start_frame=333, stop_block=stop_block
+    )
+    np.testing.assert_array_equal(prerendered, rendered)
+    assert np.any(prerendered)
+    assert (prerendered_state.state, prerendered_state.end_frame) == (
+        voice_state.state,
+        voice_state.end_frame,
+    )
 
 
-def test_a_clip_holds_the_whole_render_read_only() -> None:
+def test_a_prerendered_plan_holds_the_whole_render_read_only() -> None:
     pattern = tap(x_cm=0.0, y_cm=0.0)
-    clip = render_clip(plan(pattern, DEVICE))
+    prerendered = prerender(plan(pattern, DEVICE))
     # the default device has no calibration and the tap stays under its ceiling: the
     # offline render is the renderer's output as it is
-    np.testing.assert_array_equal(clip.samples, render(pattern, DEVICE))
-    assert clip.samples.flags.c_contiguous and not clip.samples.flags.writeable
+    np.testing.assert_array_equal(prerendered.samples, render(pattern, DEVICE))
+    assert prerendered.samples.flags.c_contiguous and not prerendered.samples.flags.writeable
 
 
 def test_the_cache_renders_a_plan_once_keeps_its_bound_and_skips_long_plans() -> None:
     short = [plan(tap(intensity=0.2 + 0.1 * k), DEVICE) for k in range(4)]  # same channels
-    one = render_clip(short[0]).samples.nbytes
-    cache = ClipCache(DEVICE.sample_rate_hz, max_s=1.0, max_bytes=2 * one)
+    one = prerender(short[0]).samples.nbytes
+    cache = PrerenderCache(DEVICE.sample_rate_hz, max_s=1.0, max_bytes=2 * one)
     first = cache.get(short[0])
     assert first is not None and cache.get(short[0]) is first
     for resolved in short[1:]:
@@ -85,9 +94,9 @@ def test_the_cache_renders_a_plan_once_keeps_its_bound_and_skips_long_plans() ->
     assert cache.get(plan(tap(duration_s=1.5), DEVICE)) is None
 
 
-def test_clips_are_not_charged_for_first_chunks() -> None:
+def test_prerendered_touches_are_not_charged_for_first_frames() -> None:
     # a first chunk in the callback costs 0.1 of a block here: rendered there, 14 taps in
-    # 0.1 s fill the churn account (tests/engine/test_admission.py); as clips, 40 begin
+    # 0.1 s fill the churn account (tests/engine/test_admission.py); prerendered, 40 begin
     with Engine(DEVICE, CaptureSink(DEVICE), voice_cost=1e-4, start_cost=0.1) as engine:
         for k in range(40):
             engine.schedule(tap(), start_frame=(100 + k) * BLOCK)
