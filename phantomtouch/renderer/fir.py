@@ -131,6 +131,25 @@ class PartitionedFir:
         self._fill = 0
         self._past = np.zeros((self.channels, size), dtype=np.float32)
         self._output = np.empty((self.channels, size, 1), dtype=np.float32)
+        # Views, made once: the callback pays for no slicing it can avoid.
+        self._column = self._current[:, :, None]
+        self._tail_input = self._current[:, size - tail :, None]
+        self._tail_rows = (self._past[:, :tail], self._tail_output[:, :, 0])
+        self._terms = self._products.view(np.float32).reshape(parts, -1)
+        self._sum_flat = self._sum.reshape(-1)
+        self._steps = [self._step(slot) for slot in range(parts)]
+
+    def _step(self, slot: int) -> tuple[np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        """For a new spectrum at ``slot``: where it goes, and the delay line oldest first
+        (X_{j-K} .. X_{j-1} against H_K .. H_1) as two contiguous runs of the ring."""
+        oldest = slot + 1
+        older = self._parts - oldest
+        segments, line, products = self._segments, self._line, self._products
+        return (
+            line[slot].view(np.float32),
+            (segments[:older], line[oldest:], products[:older]),
+            (segments[older:], line[:oldest], products[older:]),
+        )
 
     def process(self, block: np.ndarray) -> None:
         """Filter ``block`` in place, shape (frames, channels), float32.
@@ -146,7 +165,7 @@ class PartitionedFir:
             n = min(frames - start, size - lo)
             hi = lo + n
             current[:, lo:hi] = block[start : start + n].T
-            np.matmul(self._present, current[:, :, None], out=self._output)
+            np.matmul(self._present, self._column, out=self._output)
             # The past holds no -0.0, so a present of -0.0 or +0.0 (the sign of zero
             # products with frames past ``hi``) gives +0.0 either way.
             np.add(self._output[:, lo:hi, 0], self._past[:, lo:hi], out=block[start : start + n].T)
@@ -157,20 +176,16 @@ class PartitionedFir:
 
     def _advance(self) -> None:
         """Partition ``j - 1`` is complete: compute the past of partition ``j``."""
-        slot = self._slot
-        line = self._line
-        np.matmul(self._current, self._forward, out=line[slot].view(np.float32))
-        # Oldest first: X_{j-K} .. X_{j-1} meet H_K .. H_1.
-        oldest = slot + 1
-        older = self._parts - oldest
-        np.multiply(self._segments[:older], line[oldest:], out=self._products[:older])
-        np.multiply(self._segments[older:], line[:oldest], out=self._products[older:])
-        terms = self._products.view(np.float32).reshape(self._parts, -1)
-        np.matmul(self._ones, terms, out=self._sum.reshape(-1))
+        spectrum, older, newer = self._steps[self._slot]
+        np.matmul(self._current, self._forward, out=spectrum)
+        np.multiply(older[0], older[1], out=older[2])
+        np.multiply(newer[0], newer[1], out=newer[2])
+        np.matmul(self._ones, self._terms, out=self._sum_flat)
         np.matmul(self._sum, self._inverse, out=self._past)
-        np.matmul(self._tail, self._current[:, -self._tail_frames :, None], out=self._tail_output)
-        self._past[:, : self._tail_frames] += self._tail_output[:, :, 0]
+        np.matmul(self._tail, self._tail_input, out=self._tail_output)
+        rows, tail = self._tail_rows
+        np.add(rows, tail, out=rows)
         self._past += 0.0  # -0.0 to +0.0
-        self._slot = oldest % self._parts
+        self._slot = (self._slot + 1) % self._parts
         self._current[:] = 0.0
         self._fill = 0
