@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import functools
 import json
-import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Self
 
@@ -221,6 +220,8 @@ class DeviceProfile(_Frozen):
         DeviceError
             The file cannot be read or parsed, or its layout is degenerate.
         """
+        import tomllib  # here: most callers never read a profile file
+
         path = Path(path)
         try:
             text = path.read_text(encoding="utf-8")
