@@ -6,7 +6,15 @@ The stable Python interface::
 
     device = DeviceProfile.default()           # the paper's 4 x 2 armband
     samples = render(preset("exp2/curved"))    # (frames, 8) float32
+
+The names load on first use: ``import phantomtouch`` costs only the error types, the
+schema names load pydantic, the renderer's also numpy (``benchmarks/bench_import.py``).
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from phantomtouch.errors import (
     DeviceError,
@@ -15,10 +23,32 @@ from phantomtouch.errors import (
     PhantomTouchError,
     ProtocolError,
 )
-from phantomtouch.renderer import Plan, gains_at, plan, preset, preset_names, render, render_blocks
-from phantomtouch.schema import DeviceProfile, TouchPattern
+
+if TYPE_CHECKING:
+    from phantomtouch.renderer import (
+        Plan,
+        gains_at,
+        plan,
+        preset,
+        preset_names,
+        render,
+        render_blocks,
+    )
+    from phantomtouch.schema import DeviceProfile, TouchPattern
 
 __version__ = "0.1.0"
+
+_LAZY = {
+    "DeviceProfile": "phantomtouch.schema",
+    "Plan": "phantomtouch.renderer",
+    "TouchPattern": "phantomtouch.schema",
+    "gains_at": "phantomtouch.renderer",
+    "plan": "phantomtouch.renderer",
+    "preset": "phantomtouch.renderer",
+    "preset_names": "phantomtouch.renderer",
+    "render": "phantomtouch.renderer",
+    "render_blocks": "phantomtouch.renderer",
+}
 
 __all__ = [
     "DeviceError",
@@ -37,3 +67,17 @@ __all__ = [
     "render",
     "render_blocks",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Import the module that defines ``name`` on first access (PEP 562)."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'phantomtouch' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -13,24 +13,74 @@ things are asked for too often for that:
   it, and the audio callback reads every slot that changed at the start of each block.
   Latest wins, as in the engine's own mailbox; nothing is queued or pickled.
 
-Both use a sequence lock: the writer makes the sequence number odd, writes, and makes it
-even again; a reader that sees an odd number, or a different one after reading, reads
-again (the clock) or leaves the slot for the next block (moves). Each value has a single
-writer thread. This relies on one thread's stores becoming visible to other processes in
-the order they were made, as on x86-64.
+On x86 both use a sequence lock: the writer makes the sequence number odd, writes, and
+makes it even again; a reader that sees an odd number, or a different one after reading,
+reads again (the clock) or leaves the slot for the next block (moves). Each value has a
+single writer thread. This relies on one thread's stores becoming visible to other
+processes in the order they were made, which x86 guarantees and ARM64 (Apple silicon,
+Raspberry Pi, Jetson) does not: there a store of the sequence number may be seen before
+the values it guards. Elsewhere, or with ``PHANTOMTOUCH_SHARED_LOCKS=1``, a
+multiprocessing lock guards each buffer instead, and the audio callback never waits for
+it: it only tries to take it, and when the host holds it, the callback keeps what it had
+(moves wait for the next block; a clock anchor is dropped, and the next block publishes
+a newer one). The host, which may wait, takes it for the few stores or loads it makes.
 """
 
 from __future__ import annotations
 
 import math
 import multiprocessing
+import os
+import platform
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 _CLOCK_FIELDS = 4  # seq, anchor frame, anchor time s, output latency s
 _SLOT_FIELDS = 6  # seq, generation, x_cm, y_cm, intensity (NaN: unchanged), frame (NaN: next)
+
+LOCKS_VARIABLE = "PHANTOMTOUCH_SHARED_LOCKS"
+"""Set to ``1``, the shared clock and move slots use locks on x86 too."""
+
+_IN_ORDER_STORES = frozenset({"x86_64", "amd64", "i386", "i686", "x86"})
+"""``platform.machine()`` of processors whose stores reach other cores in program order."""
+
+
+def sequence_locks_are_safe(machine: str | None = None) -> bool:
+    """Whether ``machine`` (default: this one's ``platform.machine()``) keeps store order."""
+    return (platform.machine() if machine is None else machine).lower() in _IN_ORDER_STORES
+
+
+def _locked(locked: bool | None) -> bool:
+    if locked is not None:
+        return locked
+    return os.environ.get(LOCKS_VARIABLE) == "1" or not sequence_locks_are_safe()
+
+
+@dataclass(frozen=True)
+class SharedBuffer:
+    """Float64 values in shared memory and, where sequence locks are unsafe, their lock.
+
+    Passed to the engine process as it starts (both halves are inherited, not copied).
+
+    Attributes
+    ----------
+    values : multiprocessing RawArray of float64
+    lock : multiprocessing Lock, or None
+        None: the values are guarded by a sequence lock.
+    """
+
+    values: Any
+    lock: Any
+
+    @classmethod
+    def allocate(cls, count: int, locked: bool | None = None) -> SharedBuffer:
+        """``count`` zeros, with a lock if ``locked`` (None: off x86 or when the
+        environment asks for it)."""
+        context = multiprocessing.get_context("spawn")
+        return cls(context.RawArray("d", count), context.Lock() if _locked(locked) else None)
 
 
 def _raw(count: int) -> Any:
@@ -43,18 +93,51 @@ class SharedClock:
     Parameters
     ----------
     sample_rate_hz : int, > 0
-    raw : multiprocessing RawArray of float64, or None
+    raw : SharedBuffer, or None
         The shared memory (as passed to the child); None: allocate it.
+    locked : bool or None
+        When allocating: guard it with a lock (True) or a sequence lock (False); None:
+        a lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
+
+    Attributes
+    ----------
+    dropped_anchors : int
+        Anchors not published because the host held the lock (locked buffers only).
     """
 
-    def __init__(self, sample_rate_hz: int, raw: Any = None) -> None:
+    def __init__(
+        self, sample_rate_hz: int, raw: SharedBuffer | None = None, *, locked: bool | None = None
+    ) -> None:
         self.sample_rate_hz = int(sample_rate_hz)
-        self.raw = raw if raw is not None else _raw(_CLOCK_FIELDS)
-        self._values = np.frombuffer(self.raw, dtype=np.float64)
+        self.raw = raw if raw is not None else SharedBuffer.allocate(_CLOCK_FIELDS, locked)
+        self._values = np.frombuffer(self.raw.values, dtype=np.float64)
+        self._lock = self.raw.lock
+        self.dropped_anchors = 0
+
+    @property
+    def locked(self) -> bool:
+        """A lock guards the anchor, not a sequence lock."""
+        return self._lock is not None
 
     def publish(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
         """Write a new anchor (one writer thread at a time: the engine's); a ``publish``
-        for :class:`~phantomtouch.engine.clock.SampleClock`."""
+        for :class:`~phantomtouch.engine.clock.SampleClock`.
+
+        Never waits: with a lock the host holds, the anchor is dropped (and counted); the
+        engine clock publishes again at the next block.
+        """
+        lock = self._lock
+        if lock is None:
+            self._store(anchor_frame, anchor_s, output_latency_s)
+        elif lock.acquire(False):
+            try:
+                self._store(anchor_frame, anchor_s, output_latency_s)
+            finally:
+                lock.release()
+        else:
+            self.dropped_anchors += 1
+
+    def _store(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
         values = self._values
         values[0] += 1.0
         values[1] = anchor_frame
@@ -65,6 +148,10 @@ class SharedClock:
     def anchor(self) -> tuple[int, float, float]:
         """``(anchor_frame, anchor_s, output_latency_s)``, consistent."""
         values = self._values
+        if self._lock is not None:
+            with self._lock:
+                frame, anchor_s, latency_s = float(values[1]), float(values[2]), float(values[3])
+            return int(frame), anchor_s, latency_s
         while True:
             seq = values[0]
             frame, anchor_s, latency_s = float(values[1]), float(values[2]), float(values[3])
@@ -96,20 +183,34 @@ class MoveSlots:
     ----------
     capacity : int, >= 1
         Slots (the engine's ``contact.max_contacts``).
-    raw : multiprocessing RawArray of float64, or None
+    raw : SharedBuffer, or None
         The shared memory (as passed to the child); None: allocate it.
+    locked : bool or None
+        As for :class:`SharedClock`.
     """
 
-    def __init__(self, capacity: int, raw: Any = None) -> None:
+    def __init__(
+        self, capacity: int, raw: SharedBuffer | None = None, *, locked: bool | None = None
+    ) -> None:
         self.capacity = int(capacity)
-        self.raw = raw if raw is not None else _raw(self.capacity * _SLOT_FIELDS)
-        self._rows = np.frombuffer(self.raw, dtype=np.float64).reshape(self.capacity, _SLOT_FIELDS)
+        self.raw = (
+            raw if raw is not None else SharedBuffer.allocate(self.capacity * _SLOT_FIELDS, locked)
+        )
+        self._rows = np.frombuffer(self.raw.values, dtype=np.float64).reshape(
+            self.capacity, _SLOT_FIELDS
+        )
+        self._lock = self.raw.lock
         # the host's side
         self._free = list(range(self.capacity - 1, -1, -1))
         self._generation = 0
         # the engine process's side
         self._seen = np.zeros(self.capacity)
         self._bound: list[tuple[str, str, float] | None] = [None] * self.capacity
+
+    @property
+    def locked(self) -> bool:
+        """A lock guards the slots, not sequence locks."""
+        return self._lock is not None
 
     # -- the host ---------------------------------------------------------------------
 
@@ -138,7 +239,22 @@ class MoveSlots:
         intensity: float | None,
         frame: int | None,
     ) -> None:
-        """Post a position (one writer thread at a time)."""
+        """Post a position (one writer thread at a time; with a lock, waits for it)."""
+        if self._lock is None:
+            self._store(slot, generation, x_cm, y_cm, intensity, frame)
+            return
+        with self._lock:
+            self._store(slot, generation, x_cm, y_cm, intensity, frame)
+
+    def _store(
+        self,
+        slot: int,
+        generation: int,
+        x_cm: float,
+        y_cm: float,
+        intensity: float | None,
+        frame: int | None,
+    ) -> None:
         row = self._rows[slot]
         row[0] += 1.0
         row[1] = generation
@@ -169,9 +285,18 @@ class MoveSlots:
         """Hand every new position to ``post(owner, contact, x, y, intensity, frame)``.
 
         Audio callback: a vectorised look at the sequence numbers, then a copy of each
-        changed row; a row caught mid-write waits for the next block.
+        changed row; a row caught mid-write waits for the next block. With a lock: a copy
+        of every row if the lock is free at once, else nothing until the next block.
         """
         rows = self._rows
+        lock = self._lock
+        if lock is not None:
+            if not lock.acquire(False):
+                return
+            try:
+                rows = rows.copy()
+            finally:
+                lock.release()
         seqs = rows[:, 0].copy()
         changed = np.flatnonzero(seqs != self._seen)
         for slot in changed.tolist():

@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import difflib
 import functools
 from collections.abc import Callable
 from typing import Any
@@ -148,6 +147,8 @@ def preset(name: str) -> TouchPattern:
     try:
         return _PRESETS[name]()
     except KeyError:
+        import difflib  # only for a name that is wrong
+
         close = difflib.get_close_matches(name, _PRESETS, n=3)
         hint = f"; did you mean {', '.join(close)}?" if close else "; see `phantomtouch presets`"
         raise ParameterError(f"preset={name!r} is not a known preset{hint}") from None

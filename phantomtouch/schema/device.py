@@ -9,16 +9,18 @@ actuators 5-8 the column at x = 3.8 cm; actuators 1 and 5 face the hand (y = 0 c
 
 from __future__ import annotations
 
+import functools
 import json
-import tomllib
 from pathlib import Path
-from typing import Annotated, Self
+from typing import TYPE_CHECKING, Annotated, Self
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema import limits
+
+if TYPE_CHECKING:
+    import numpy as np
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Coordinate = Annotated[float, Field(ge=-limits.MAX_COORD_CM, le=limits.MAX_COORD_CM)]
@@ -206,8 +208,8 @@ class DeviceProfile(_Frozen):
 
     @classmethod
     def default(cls) -> DeviceProfile:
-        """The paper's 4 x 2 armband at 48 kHz."""
-        return _DEFAULT
+        """The paper's 4 x 2 armband at 48 kHz (one shared instance)."""
+        return _default_profile()
 
     @classmethod
     def load(cls, path: str | Path) -> DeviceProfile:
@@ -218,6 +220,8 @@ class DeviceProfile(_Frozen):
         DeviceError
             The file cannot be read or parsed, or its layout is degenerate.
         """
+        import tomllib  # here: most callers never read a profile file
+
         path = Path(path)
         try:
             text = path.read_text(encoding="utf-8")
@@ -242,6 +246,8 @@ class DeviceProfile(_Frozen):
 
     def positions_cm(self) -> np.ndarray:
         """Actuator positions, shape (actuators, 2), columns x_cm and y_cm, float64."""
+        import numpy as np  # here, so the schema alone does not load numpy
+
         return np.array([(a.x_cm, a.y_cm) for a in self.actuators], dtype=np.float64)
 
     @model_validator(mode="before")
@@ -253,6 +259,8 @@ class DeviceProfile(_Frozen):
 
     @model_validator(mode="after")
     def _check_layout(self) -> Self:
+        import numpy as np
+
         positions = self.positions_cm()
         n = len(positions)
         channels = [a.channel for a in self.actuators]
@@ -305,4 +313,7 @@ class DeviceProfile(_Frozen):
         return self
 
 
-_DEFAULT = DeviceProfile()
+@functools.cache
+def _default_profile() -> DeviceProfile:
+    """Built on first use: validating a layout loads numpy, the schema alone does not."""
+    return DeviceProfile()

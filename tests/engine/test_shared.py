@@ -1,21 +1,41 @@
-"""Shared memory between the host and the engine process: the clock and move slots."""
+"""Shared memory between the host and the engine process: the clock and move slots.
+
+Every behaviour is tested with both guards: the sequence locks x86 uses and the locks
+used elsewhere (forced here with ``locked=True`` or ``PHANTOMTOUCH_SHARED_LOCKS=1``).
+"""
 
 from __future__ import annotations
 
 import math
+import multiprocessing
 import sys
 import threading
+from typing import Any
 
 import pytest
 
+from phantomtouch.engine import shared as shared_module
 from phantomtouch.engine.clock import SampleClock
-from phantomtouch.engine.shared import MoveSlots, SharedClock
+from phantomtouch.engine.shared import (
+    LOCKS_VARIABLE,
+    MoveSlots,
+    SharedBuffer,
+    SharedClock,
+    sequence_locks_are_safe,
+)
 
 RATE = 48000
 
 
-def test_the_shared_clock_maps_frames_and_times_as_the_engine_clock_does() -> None:
-    shared = SharedClock(RATE)
+@pytest.fixture(params=[False, True], ids=["sequence-lock", "lock"])
+def locked(request: pytest.FixtureRequest) -> bool:
+    value: bool = request.param
+    return value
+
+
+def test_the_shared_clock_maps_frames_and_times_as_the_engine_clock_does(locked: bool) -> None:
+    shared = SharedClock(RATE, locked=locked)
+    assert shared.locked is locked
     clock = SampleClock(RATE, now_s=50.0, publish=shared.publish)
     clock.output_latency_s = 0.007
     for k in range(1, 400):  # jittered callbacks move the anchor
@@ -28,11 +48,11 @@ def test_the_shared_clock_maps_frames_and_times_as_the_engine_clock_does() -> No
     assert shared.anchor() == (7, 99.0, 0.007)
 
 
-def test_readers_never_see_half_a_write() -> None:
+def test_readers_never_see_half_a_write(locked: bool) -> None:
     interval_s = sys.getswitchinterval()
     sys.setswitchinterval(1e-6)  # switch threads as often as possible
-    shared = SharedClock(RATE)
-    slots = MoveSlots(1)
+    shared = SharedClock(RATE, locked=locked)
+    slots = MoveSlots(1, locked=locked)
     slot, generation = slots.allocate() or (0, 0)
     slots.bind(slot, generation, "c", "1")
     done = threading.Event()
@@ -64,8 +84,8 @@ def posted(slots: MoveSlots) -> list[tuple[object, ...]]:
     return got
 
 
-def test_only_the_newest_position_of_a_bound_slot_is_posted_once() -> None:
-    slots = MoveSlots(4)
+def test_only_the_newest_position_of_a_bound_slot_is_posted_once(locked: bool) -> None:
+    slots = MoveSlots(4, locked=locked)
     taken = slots.allocate()
     assert taken is not None
     slot, generation = taken
@@ -78,8 +98,8 @@ def test_only_the_newest_position_of_a_bound_slot_is_posted_once() -> None:
     assert posted(slots) == []  # applied once
 
 
-def test_a_slot_that_changes_hands_never_posts_what_it_held_before() -> None:
-    slots = MoveSlots(1)
+def test_a_slot_that_changes_hands_never_posts_what_it_held_before(locked: bool) -> None:
+    slots = MoveSlots(1, locked=locked)
     slot, old = slots.allocate() or (0, 0)
     slots.bind(slot, old, "a", "1")
     slots.write(slot, old, 1.0, 1.0, None, None)
@@ -96,7 +116,7 @@ def test_a_slot_that_changes_hands_never_posts_what_it_held_before() -> None:
 
 
 def test_a_row_caught_mid_write_waits_for_the_next_block() -> None:
-    slots = MoveSlots(2)
+    slots = MoveSlots(2, locked=False)
     slot, generation = slots.allocate() or (0, 0)
     slots.bind(slot, generation, "c", "1")
     row = slots._rows[slot]
@@ -106,6 +126,108 @@ def test_a_row_caught_mid_write_waits_for_the_next_block() -> None:
     row[1] = generation
     row[0] += 1.0
     assert posted(slots) == [("c", "1", 1.0, 2.0, None, None)]
+
+
+def test_with_a_lock_the_callback_skips_a_block_while_the_host_writes() -> None:
+    slots = MoveSlots(2, locked=True)
+    slot, generation = slots.allocate() or (0, 0)
+    slots.bind(slot, generation, "c", "1")
+    slots.write(slot, generation, 1.0, 2.0, None, None)
+    lock = slots.raw.lock
+    assert lock.acquire(False)  # the host is in the middle of a write
+    try:
+        assert posted(slots) == []  # did not wait: nothing this block
+    finally:
+        lock.release()
+    assert posted(slots) == [("c", "1", 1.0, 2.0, None, None)]
+
+
+def test_with_a_lock_the_engine_drops_an_anchor_while_the_host_reads() -> None:
+    shared = SharedClock(RATE, locked=True)
+    shared.publish(10, 5.0, 0.01)
+    lock = shared.raw.lock
+    assert lock.acquire(False)  # the host is reading
+    try:
+        shared.publish(20, 6.0, 0.01)  # returns at once
+    finally:
+        lock.release()
+    assert shared.dropped_anchors == 1
+    assert shared.anchor() == (10, 5.0, 0.01)  # the last good anchor
+    shared.publish(30, 7.0, 0.02)  # the next block
+    assert shared.anchor() == (30, 7.0, 0.02)
+
+
+@pytest.mark.parametrize(
+    ("machine", "safe"),
+    [
+        ("x86_64", True),
+        ("AMD64", True),
+        ("i686", True),
+        ("aarch64", False),
+        ("arm64", False),
+        ("armv7l", False),
+        ("riscv64", False),
+        ("ppc64le", False),
+    ],
+)
+def test_sequence_locks_only_where_stores_stay_in_order(machine: str, safe: bool) -> None:
+    assert sequence_locks_are_safe(machine) is safe
+
+
+def test_the_platform_and_the_environment_choose_the_guard(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.delenv(LOCKS_VARIABLE, raising=False)
+    monkeypatch.setattr(shared_module.platform, "machine", lambda: "x86_64")
+    assert not SharedClock(RATE).locked and not MoveSlots(1).locked
+    monkeypatch.setattr(shared_module.platform, "machine", lambda: "aarch64")
+    assert SharedClock(RATE).locked and MoveSlots(1).locked
+    monkeypatch.setattr(shared_module.platform, "machine", lambda: "x86_64")
+    monkeypatch.setenv(LOCKS_VARIABLE, "1")
+    assert SharedClock(RATE).locked and MoveSlots(1).locked
+    # the engine process takes the guard the host chose, whatever its own environment
+    assert SharedClock(RATE, SharedBuffer.allocate(4, locked=False)).locked is False
+
+
+def engine_side(clock_raw: SharedBuffer, slots_raw: SharedBuffer, count: int, ready: Any) -> None:
+    """Another process, as the engine: publish anchors and (standing in for the host)
+    write moves, as fast as it can."""
+    clock = SharedClock(RATE, clock_raw)
+    slots = MoveSlots(1, slots_raw)
+    ready.set()
+    for k in range(1, count + 1):
+        clock.publish(k, k * 0.5, k * 0.25)
+        slots.write(0, 1, float(k), 2.0 * k, None, None)
+
+
+def test_another_process_is_never_seen_half_written(locked: bool) -> None:
+    clock = SharedClock(RATE, locked=locked)
+    slots = MoveSlots(1, locked=locked)
+    slots.bind(0, 1, "c", "1")
+    count = 100_000
+    context = multiprocessing.get_context("spawn")
+    ready = context.Event()
+    process: Any = context.Process(target=engine_side, args=(clock.raw, slots.raw, count, ready))
+    process.start()
+    moves: list[tuple[float, float]] = []
+    anchors: set[int] = set()
+    try:
+        assert ready.wait(timeout=60)
+        while process.is_alive():
+            frame, anchor_s, latency_s = clock.anchor()
+            assert (anchor_s, latency_s) == (frame * 0.5, frame * 0.25)
+            anchors.add(frame)
+            slots.drain(lambda owner, contact, x, y, intensity, at: moves.append((x, y)))
+    finally:
+        process.join(timeout=60)
+    assert process.exitcode == 0
+    slots.drain(lambda owner, contact, x, y, intensity, at: moves.append((x, y)))
+    # read while the other process wrote, never a mix of two writes
+    assert len(anchors) > 1 and len(moves) > 1
+    assert all(y == 2.0 * x for x, y in moves)
+    assert moves[-1] == (float(count), 2.0 * count)  # the newest position arrives
+    # with a lock, the engine may have dropped its last anchors while this process read
+    assert clock.anchor()[0] == count if not locked else 0 < clock.anchor()[0] <= count
 
 
 def test_slots_run_out_and_come_back() -> None:
