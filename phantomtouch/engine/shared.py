@@ -325,8 +325,6 @@ STATUS_FIELDS = (
     "output_latency_s",
     "queue_depth",
     "running",
-    "render_load_p99",
-    "render_load_max",
     "callback_errors",
     "dropped_reports",
 )
