@@ -148,12 +148,24 @@ def test_a_ninth_client_gets_a_contact_while_eight_hold_theirs(live: LiveServer)
     asyncio.run(scenario())
 
 
+def post_touch(client: httpx.Client, body: dict[str, Any]) -> httpx.Response:
+    """``POST /touch``, again after a moment while the engine answers 503 ``busy``: a
+    burst of voices beginning may be more than a loaded machine's engine takes at once,
+    which is not what the quotas tested here are about."""
+    for _ in range(50):
+        answer = client.post("/touch", json=body)
+        if answer.status_code != 503 or answer.json()["error"]["code"] != "busy":
+            return answer
+        time.sleep(0.05)
+    return answer
+
+
 def test_long_touches_of_one_client_leave_voices_for_others(live: LiveServer) -> None:
     hours = {**LONG, "duration_s": 7200.0}
     with httpx.Client(base_url=live.url, timeout=10) as client:
         statuses = []
         for _ in range(64):
-            answer = client.post("/touch", json=hours)
+            answer = post_touch(client, hours)
             statuses.append(answer.status_code)
             if answer.status_code != 202:
                 break
@@ -171,7 +183,7 @@ def test_long_touches_of_one_client_leave_voices_for_others(live: LiveServer) ->
 
         assert asyncio.run(other_client())["type"] == "ok"
         assert client.post("/stop").status_code == 200
-        answers = [client.post("/touch", json=LONG) for _ in range(49)]
+        answers = [post_touch(client, LONG) for _ in range(49)]
         assert [a.status_code for a in answers] == [202] * 48 + [429], "stopped touches free it"
         assert "max_voices_per_client=48" in answers[-1].json()["error"]["message"]
         assert client.post("/stop").status_code == 200
