@@ -67,9 +67,17 @@ def _lifespan(settings: Settings, metrics: Metrics) -> Any:
         app.state.service = service
         logger.info("phantomtouch: %s; patterns in %s", describe_output(engine), store.path)
         metrics.watch_engine(lambda: engine.status().to_dict())
+        osc = None
         try:
+            if settings.osc_listen is not None:
+                from phantomtouch.osc.service_link import start_osc
+
+                osc = start_osc(service)
+                logger.info("phantomtouch: OSC on udp://%s:%d", *osc.address)
             yield
         finally:
+            if osc is not None:
+                await asyncio.to_thread(osc.close)
             metrics.watch_engine(None)
             engine.close()
             store.close()
