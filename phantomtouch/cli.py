@@ -2,6 +2,7 @@
 
 ``phantomtouch serve``    the touch service: REST and WebSocket API on 127.0.0.1:8000
 ``phantomtouch osc``      the same with OSC input (VRChat contact receivers) on UDP 9001
+``phantomtouch import``   a haptic clip (.haptic, .ahap) into the clip library
 ``phantomtouch render``   one pattern (JSON file or preset) to an 8-channel WAV (+ plot)
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder
@@ -29,6 +30,7 @@ from pydantic import ValidationError
 from tqdm import tqdm
 
 from phantomtouch import __version__
+from phantomtouch.clips.command import add_import_command
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
 from phantomtouch.osc.command import add_osc_command
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
@@ -454,6 +456,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--osc-map", help="OSC map file (TOML), with --osc")
     serve.set_defaults(func=_cmd_serve)
     add_osc_command(sub, _serve_arguments, _cmd_serve)
+    add_import_command(sub)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")

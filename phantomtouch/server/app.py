@@ -32,7 +32,7 @@ from phantomtouch.server.origin import (
     OriginPolicy,
     Refusals,
 )
-from phantomtouch.server.routes import docs, info, patterns, render, touch, web, ws
+from phantomtouch.server.routes import clips, docs, info, patterns, render, touch, web, ws
 from phantomtouch.server.service import Service
 from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
@@ -129,7 +129,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     errors.install(app)
-    for module in (touch, patterns, render, info, ws, web, docs):
+    for module in (touch, patterns, clips, render, info, ws, web, docs):
         app.include_router(module.router)
     app.mount(docs.ASSETS_PATH, StaticFiles(directory=docs.ASSETS_DIR), name="docs-assets")
     if web.STATIC_DIR.is_dir():
