@@ -33,8 +33,13 @@ from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError
 from phantomtouch.osc import messages
 from phantomtouch.osc.counters import OscCounters
 from phantomtouch.osc.mapping import ReceiverMap
-from phantomtouch.osc.receivers import Change, ContactTracker, touches
+from phantomtouch.osc.receivers import Change, ContactTracker, ReceiverLayout
 from phantomtouch.server.flood import FloodGuard
+
+try:
+    from pythonosc.osc_packet import OscPacket, ParseError
+except ImportError as exc:  # pragma: no cover - the osc extra is missing
+    raise ImportError("OSC input needs python-osc: pip install 'phantomtouch[osc]'") from exc
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
@@ -101,10 +106,11 @@ class OscBridge:
         self._stop = stop or engine.stop_all
         self._flood = FloodGuard(rate_per_s)
         self._index = {r.address: i for i, r in enumerate(receiver_map.receiver)}
-        self._positions_cm = np.array(
-            [(r.x_cm, r.y_cm) for r in receiver_map.receiver], dtype=np.float64
+        self._layout = ReceiverLayout(
+            np.array([(r.x_cm, r.y_cm) for r in receiver_map.receiver]),
+            receiver_map.cluster_gap_cm,
         )
-        self._proximity = np.zeros(len(receiver_map.receiver), dtype=np.float64)
+        self._proximity = [0.0] * len(receiver_map.receiver)
         self._tracker = ContactTracker(receiver_map.smoothing_s)
         self._contacts: set[str] = set()
         self._last_s = time.monotonic()
@@ -165,8 +171,6 @@ class OscBridge:
             self._watchdog(time.monotonic())
 
     def _datagram(self, data: bytes, now_s: float) -> None:
-        from pythonosc.osc_packet import OscPacket, ParseError
-
         try:
             packet = OscPacket(data)
         except ParseError as exc:
@@ -209,7 +213,7 @@ class OscBridge:
     def _forget(self) -> None:
         self._tracker.forget()
         self._contacts.clear()
-        self._proximity[:] = 0.0
+        self._proximity = [0.0] * len(self._proximity)
 
     # -- messages -------------------------------------------------------------------------
 
@@ -234,12 +238,8 @@ class OscBridge:
             )
 
     def _receivers(self, now_s: float) -> None:
-        found = touches(
-            self._positions_cm,
-            self._proximity,
-            threshold=self.map.threshold,
-            gap_cm=self.map.cluster_gap_cm,
-            max_intensity=self.map.max_intensity,
+        found = self._layout.touches(
+            self._proximity, threshold=self.map.threshold, max_intensity=self.map.max_intensity
         )
         refused: PhantomTouchError | None = None
         for change in self._tracker.update(found, now_s):

@@ -38,51 +38,61 @@ class Touch:
     """Summed proximity of its receivers (which of several touches are kept)."""
 
 
-def touches(
-    positions_cm: np.ndarray,
-    proximity: np.ndarray,
-    *,
-    threshold: float,
-    gap_cm: float,
-    max_intensity: float,
-) -> list[Touch]:
-    """The touches the receivers report, the strongest first, at most :data:`MAX_CONTACTS`.
+class ReceiverLayout:
+    """Where the receivers are and which are neighbours (closer than ``gap_cm``).
+
+    The neighbours are found once; each instant then costs a walk over the active
+    receivers only (a few microseconds for an avatar's dozen).
 
     Parameters
     ----------
-    positions_cm : ndarray, shape (n, 2), float64
+    positions_cm : ndarray, shape (n, 2)
         Receiver positions (x_cm, y_cm).
-    proximity : ndarray, shape (n,), each in [0, 1]
-    threshold : float, 0 <= threshold < 1
     gap_cm : float, > 0
-    max_intensity : float, 0 < max_intensity <= 1
     """
-    active = np.flatnonzero((proximity >= threshold) & (proximity > 0.0))
-    if active.size == 0:
-        return []
-    parent = list(range(active.size))
 
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
+    def __init__(self, positions_cm: np.ndarray, gap_cm: float) -> None:
+        points = np.asarray(positions_cm, dtype=np.float64)
+        self.positions_cm = [(float(x), float(y)) for x, y in points]
+        distance = np.hypot(*(points[:, None, :] - points[None, :, :]).transpose(2, 0, 1))
+        close = distance < gap_cm
+        self.neighbours = [
+            [int(j) for j in np.flatnonzero(row) if j != i] for i, row in enumerate(close)
+        ]
 
-    points = positions_cm[active]
-    distance = np.hypot(*(points[:, None, :] - points[None, :, :]).transpose(2, 0, 1))
-    for i, j in zip(*np.nonzero(np.triu(distance < gap_cm, k=1)), strict=True):
-        parent[root(int(i))] = root(int(j))
-    groups: dict[int, list[int]] = {}
-    for i in range(active.size):
-        groups.setdefault(root(i), []).append(int(active[i]))
-    found = []
-    for members in groups.values():
-        p = proximity[members]
-        weight = float(p.sum())
-        x, y = (p @ positions_cm[members]) / weight
-        found.append(Touch(float(x), float(y), max_intensity * min(1.0, weight), weight))
-    found.sort(key=lambda t: -t.weight)
-    return found[:MAX_CONTACTS]
+    def touches(
+        self, proximity: list[float], *, threshold: float, max_intensity: float
+    ) -> list[Touch]:
+        """The touches the receivers report, the strongest first, at most
+        :data:`MAX_CONTACTS`.
+
+        Parameters
+        ----------
+        proximity : list of float, one per receiver, each in [0, 1]
+        threshold : float, 0 <= threshold < 1
+        max_intensity : float, 0 < max_intensity <= 1
+        """
+        active = {i for i, p in enumerate(proximity) if p > 0.0 and p >= threshold}
+        found = []
+        while active:
+            cluster = [active.pop()]
+            for i in cluster:  # grows while it is walked: a breadth-first search
+                for j in self.neighbours[i]:
+                    if j in active:
+                        active.remove(j)
+                        cluster.append(j)
+            weight = x_sum = y_sum = 0.0
+            for i in cluster:
+                p = proximity[i]
+                x, y = self.positions_cm[i]
+                weight += p
+                x_sum += p * x
+                y_sum += p * y
+            found.append(
+                Touch(x_sum / weight, y_sum / weight, max_intensity * min(1.0, weight), weight)
+            )
+        found.sort(key=lambda t: -t.weight)
+        return found[:MAX_CONTACTS]
 
 
 @dataclass

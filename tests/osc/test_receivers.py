@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from phantomtouch.osc.receivers import ContactTracker, Touch, touches
+from phantomtouch.osc.receivers import ContactTracker, ReceiverLayout, Touch
 
 ROW_CM = 4.8
 LINE = np.array([(1.9, ROW_CM * i) for i in range(4)])
@@ -20,7 +20,8 @@ def linear(y_cm: float, radius_cm: float = ROW_CM) -> np.ndarray:
 
 
 def found(p: np.ndarray, gap_cm: float = 6.2) -> list[Touch]:
-    return touches(LINE, p, threshold=0.01, gap_cm=gap_cm, max_intensity=0.6)
+    layout = ReceiverLayout(LINE, gap_cm)
+    return layout.touches(list(p), threshold=0.01, max_intensity=0.6)
 
 
 @pytest.mark.parametrize("y_cm", [0.0, 1.0, 2.4, 4.8, 7.0, 11.9, 14.4])
