@@ -3,7 +3,9 @@
 ``/phantomtouch/touch NAME`` is a touch request as ``POST /touch`` makes it: a name with a
 ``/`` is a preset (``exp2/curved``), any other a stored pattern, scheduled by
 :func:`phantomtouch.server.touch.schedule` on the event loop under the quotas of the
-client ``osc``. ``/phantomtouch/stop`` is :meth:`Service.stop_everything`. The bridge's
+client ``osc``; the bridge's thread waits for it (planning takes a millisecond or so, a new
+noise band about 60 ms the first time), at most ``PLAY_TIMEOUT_S``.
+``/phantomtouch/stop`` is :meth:`Service.stop_everything`. The bridge's
 counts appear in ``/metrics`` as ``phantomtouch_osc_messages_total{outcome}``.
 """
 
