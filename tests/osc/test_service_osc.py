@@ -121,7 +121,6 @@ def test_bad_osc_is_dropped_and_counted_and_never_vibrates(service) -> None:
         for _ in range(50):
             osc.send_message("/avatar/parameters/PT_Arm_7", 0.0)
         time.sleep(0.001 * (burst % 2))
-    elapsed_s = time.monotonic() - started_s
 
     def settled() -> dict[str, float] | None:
         before = osc_counts(client)
@@ -130,10 +129,14 @@ def test_bad_osc_is_dropped_and_counted_and_never_vibrates(service) -> None:
         return after if after == before else None
 
     counts = wait_for(settled)
+    # The bucket refills while the bridge works through the burst, which may take longer
+    # than the sending did: the time until the counts settled bounds it.
+    elapsed_s = time.monotonic() - started_s
     arrived = counts["accepted"] + counts["flood"]
     assert arrived > 900  # UDP: the kernel may drop a few before the bridge sees them
     assert counts["accepted"] <= 200 + 200 * elapsed_s + 1
     assert counts["flood"] >= arrived - 200 - 200 * elapsed_s - 1
+    assert counts["flood"] >= 500
     # The service is still up and nothing vibrates.
     assert client.get("/health").status_code == 200
     assert status(client)["active_contacts"] == []
