@@ -1,6 +1,8 @@
 """The ``phantomtouch`` command line.
 
 ``phantomtouch serve``    the touch service: REST and WebSocket API on 127.0.0.1:8000
+``phantomtouch osc``      the same with OSC input (VRChat contact receivers) on UDP 9001
+``phantomtouch import``   a haptic clip (.haptic, .ahap) into the clip library
 ``phantomtouch render``   one pattern (JSON file or preset) to an 8-channel WAV (+ plot)
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder
@@ -28,7 +30,9 @@ from pydantic import ValidationError
 from tqdm import tqdm
 
 from phantomtouch import __version__
+from phantomtouch.clips.command import add_import_command
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
+from phantomtouch.osc.command import add_osc_command
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
@@ -241,7 +245,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         "output_device": args.output,
         "db_path": args.db,
         "token": args.token,
+        "osc_listen": args.osc,
+        "osc_map": args.osc_map,
     }
+    if args.osc is not None:
+        _require("osc", "pythonosc")
     try:
         settings = Settings(**{k: v for k, v in options.items() if v is not None})
     except ValidationError as exc:
@@ -252,6 +260,13 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         print(f"phantomtouch serve: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     check_port_free(settings.host, settings.port)
+    if settings.osc_address is not None:
+        from phantomtouch.osc.bridge import open_socket
+        from phantomtouch.osc.mapping import ReceiverMap
+
+        if settings.osc_map is not None:
+            ReceiverMap.load(settings.osc_map)
+        open_socket(*settings.osc_address).close()
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
     serve(settings)
     return 0
@@ -419,21 +434,29 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _serve_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--host", help="address to bind (default 127.0.0.1; others need --token)")
+    parser.add_argument("--port", type=int, help="TCP port (default 8000)")
+    parser.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
+    parser.add_argument(
+        "--output", help="sound-card output name or index, or 'null' (default: first that fits)"
+    )
+    parser.add_argument("--db", help="pattern library, SQLite file")
+    parser.add_argument("--token", help="bearer token every request must carry")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"phantomtouch {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     serve = sub.add_parser("serve", help="run the touch service (REST and WebSocket)")
-    serve.add_argument("--host", help="address to bind (default 127.0.0.1; others need --token)")
-    serve.add_argument("--port", type=int, help="TCP port (default 8000)")
-    serve.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
-    serve.add_argument(
-        "--output", help="sound-card output name or index, or 'null' (default: first that fits)"
-    )
-    serve.add_argument("--db", help="pattern library, SQLite file")
-    serve.add_argument("--token", help="bearer token every request must carry")
+    _serve_arguments(serve)
+    serve.add_argument("--osc", help="also receive OSC on this UDP HOST:PORT (loopback)")
+    serve.add_argument("--osc-map", help="OSC map file (TOML), with --osc")
     serve.set_defaults(func=_cmd_serve)
+    add_osc_command(sub, _serve_arguments, _cmd_serve)
+    add_import_command(sub)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")

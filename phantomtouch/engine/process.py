@@ -55,8 +55,9 @@ from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, EnginePr
 from phantomtouch.errors import DeviceError, EngineBusyError
 from phantomtouch.renderer.carriers import noise_key, noise_loop
 from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema.clip import ClipCarrier
 from phantomtouch.schema.device import DeviceProfile
-from phantomtouch.schema.pattern import Carrier, NoiseCarrier, SineCarrier
+from phantomtouch.schema.pattern import NoiseCarrier, PatternCarrier, SineCarrier
 
 logger = logging.getLogger("phantomtouch.engine")
 
@@ -340,9 +341,9 @@ class ProcessEngine(EngineFront):
 
     # -- the audio side, over the pipe ------------------------------------------------
 
-    def _noise(self, carrier: Carrier | None) -> None:
+    def _noise(self, carrier: PatternCarrier | None) -> None:
         """Send the noise loop a carrier needs, unless the child has it."""
-        if carrier is None or isinstance(carrier, SineCarrier):
+        if carrier is None or isinstance(carrier, SineCarrier | ClipCarrier):
             return
         assert isinstance(carrier, NoiseCarrier) or hasattr(carrier, "low_hz")
         key = noise_key(carrier.low_hz, carrier.high_hz, carrier.seed, self.sample_rate_hz)

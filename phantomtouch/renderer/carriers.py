@@ -24,7 +24,8 @@ from typing import Protocol
 
 import numpy as np
 
-from phantomtouch.schema.pattern import Carrier, CombinedCarrier, NoiseCarrier, SineCarrier
+from phantomtouch.schema.clip import ClipCarrier
+from phantomtouch.schema.pattern import CombinedCarrier, NoiseCarrier, PatternCarrier, SineCarrier
 
 NOISE_ORDER = 8
 """Butterworth order of each band edge (48 dB per octave)."""
@@ -159,8 +160,13 @@ class CombinedSource:
         return mixed
 
 
-def make_source(carrier: Carrier, sample_rate_hz: int) -> CarrierSource:
-    """The source for a carrier specification."""
+def make_source(carrier: PatternCarrier, sample_rate_hz: int) -> CarrierSource:
+    """The source for a carrier specification (a clip's ``data`` must be filled in)."""
+    if isinstance(carrier, ClipCarrier):
+        from phantomtouch.renderer.clip import ClipSource
+
+        assert carrier.data is not None  # the plan refuses a clip without it
+        return ClipSource(carrier.data, sample_rate_hz, loop=carrier.loop)
     if isinstance(carrier, SineCarrier):
         return SineSource(carrier.freq_hz, sample_rate_hz)
     noise = NoiseSource(carrier.low_hz, carrier.high_hz, carrier.seed, sample_rate_hz)

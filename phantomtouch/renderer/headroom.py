@@ -24,7 +24,8 @@ from phantomtouch.renderer.carriers import NOISE_PERIOD_FRAMES, noise_loop
 from phantomtouch.renderer.output import OutputStage
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.renderer.trajectory import control_gains
-from phantomtouch.schema.pattern import Carrier, CombinedCarrier, NoiseCarrier, SineCarrier
+from phantomtouch.schema.clip import ClipCarrier
+from phantomtouch.schema.pattern import CombinedCarrier, NoiseCarrier, PatternCarrier, SineCarrier
 
 _MAX_POINTS = 4096
 """Most control times the estimate evaluates the gains at."""
@@ -35,7 +36,7 @@ _PHASES = 64
 
 
 @lru_cache(maxsize=8)
-def _sorted_magnitudes(carrier: Carrier, sample_rate_hz: int) -> np.ndarray:
+def _sorted_magnitudes(carrier: PatternCarrier, sample_rate_hz: int) -> np.ndarray:
     """|carrier| over one noise period (every ``_NOISE_STEP``-th frame), ascending."""
     assert isinstance(carrier, NoiseCarrier | CombinedCarrier)
     loop = noise_loop(float(carrier.low_hz), float(carrier.high_hz), carrier.seed, sample_rate_hz)
@@ -49,9 +50,13 @@ def _sorted_magnitudes(carrier: Carrier, sample_rate_hz: int) -> np.ndarray:
     return magnitudes
 
 
-def _exceedance(carrier: Carrier, sample_rate_hz: int, threshold: np.ndarray) -> np.ndarray:
-    """P(|carrier| > threshold) elementwise; 0 where the threshold is inf."""
-    if isinstance(carrier, SineCarrier):
+def _exceedance(carrier: PatternCarrier, sample_rate_hz: int, threshold: np.ndarray) -> np.ndarray:
+    """P(|carrier| > threshold) elementwise; 0 where the threshold is inf.
+
+    A clip is a sine under an envelope of at most 1: the full sine's figure bounds it
+    (its transients, a few ms each, aside).
+    """
+    if isinstance(carrier, SineCarrier | ClipCarrier):
         return 1.0 - (2.0 / np.pi) * np.arcsin(np.minimum(threshold, 1.0))
     magnitudes = _sorted_magnitudes(carrier, sample_rate_hz)
     above = len(magnitudes) - np.searchsorted(magnitudes, threshold, side="right")

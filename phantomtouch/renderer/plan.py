@@ -20,8 +20,9 @@ from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.levels import amplitude_for_level, pattern_level_db
 from phantomtouch.renderer.paths import ResolvedPath, resolve_path
 from phantomtouch.schema import limits
+from phantomtouch.schema.clip import ClipCarrier
 from phantomtouch.schema.device import DeviceProfile
-from phantomtouch.schema.pattern import Carrier, NoiseCarrier, SineCarrier, TouchPattern
+from phantomtouch.schema.pattern import NoiseCarrier, PatternCarrier, SineCarrier, TouchPattern
 
 _NOISE_MAX_EDGE = 0.45
 """Highest noise band edge as a fraction of the sample rate."""
@@ -119,7 +120,7 @@ class Plan:
         }
 
 
-def check_carrier_frequencies(carrier: Carrier, sample_rate_hz: int) -> None:
+def check_carrier_frequencies(carrier: PatternCarrier, sample_rate_hz: int) -> None:
     """Refuse a carrier the sample rate cannot play (patterns and live contacts alike).
 
     Raises
@@ -129,6 +130,9 @@ def check_carrier_frequencies(carrier: Carrier, sample_rate_hz: int) -> None:
         or a noise band narrower than ``limits.MIN_NOISE_LOOP_BINS`` steps of the loop.
     """
     nyquist = sample_rate_hz / 2.0
+    if isinstance(carrier, ClipCarrier):
+        check_clip(carrier)
+        return
     if not isinstance(carrier, NoiseCarrier) and carrier.freq_hz >= nyquist:
         raise ParameterError(
             f"carrier.freq_hz={carrier.freq_hz!r} must be below the Nyquist frequency "
@@ -205,6 +209,16 @@ def _timelines(
         None if path.intensity is None else path.intensity[::-1],
     )
     return forward, backward
+
+
+def check_clip(carrier: ClipCarrier) -> None:
+    """Refuse a clip carrier whose clip is not filled in. (Its band ends at
+    ``CLIP_HIGH_HZ``, far below the Nyquist frequency of the lowest sample rate.)"""
+    if carrier.data is None:
+        raise ParameterError(
+            f"carrier.clip={carrier.clip!r}: the clip is not in carrier.data; the service "
+            "fills it in from its library (PUT /clips/{name}, phantomtouch import)"
+        )
 
 
 def plan(pattern: TouchPattern, device: DeviceProfile | None = None) -> Plan:

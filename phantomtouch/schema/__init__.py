@@ -1,5 +1,6 @@
 """The one contract: pydantic models for patterns, device profiles and messages."""
 
+from phantomtouch.schema.clip import ClipCarrier, HapticClip
 from phantomtouch.schema.device import Actuator, Calibration, DeviceProfile, SafetyLimits
 from phantomtouch.schema.pattern import (
     AmplitudeModulation,
@@ -23,8 +24,10 @@ __all__ = [
     "ArcPath",
     "Calibration",
     "Carrier",
+    "ClipCarrier",
     "CombinedCarrier",
     "DeviceProfile",
+    "HapticClip",
     "Keyframe",
     "KeyframePath",
     "NoiseCarrier",

@@ -13,6 +13,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_valida
 from pydantic.config import JsonValue
 
 from phantomtouch.schema import limits
+from phantomtouch.schema.clip import ClipCarrier
 
 Coordinate = Annotated[
     float, Field(ge=-limits.MAX_COORD_CM, le=limits.MAX_COORD_CM, allow_inf_nan=False)
@@ -152,6 +153,11 @@ class CombinedCarrier(_Band):
 
 
 Carrier = Annotated[SineCarrier | NoiseCarrier | CombinedCarrier, Field(discriminator="kind")]
+"""A carrier a live contact can play: a steady signal."""
+PatternCarrier = Annotated[
+    SineCarrier | NoiseCarrier | CombinedCarrier | ClipCarrier, Field(discriminator="kind")
+]
+"""A pattern's carrier: a steady signal, or a haptic clip with its own envelope."""
 
 
 def given(name: str, schema: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -256,7 +262,7 @@ class TouchPattern(_Model):
         default=1, ge=1, le=limits.MAX_REPEAT, description="Strokes, each with its own fades."
     )
     alternate: bool = Field(default=False, description="Every second stroke runs backwards.")
-    carrier: Carrier = Field(default_factory=SineCarrier)
+    carrier: PatternCarrier = Field(default_factory=SineCarrier)
     intensity: RelativeIntensity | IntensityPreset = Field(
         default="low",
         description=(

@@ -32,7 +32,7 @@ from phantomtouch.server.origin import (
     OriginPolicy,
     Refusals,
 )
-from phantomtouch.server.routes import docs, info, patterns, render, touch, web, ws
+from phantomtouch.server.routes import clips, docs, info, patterns, render, touch, web, ws
 from phantomtouch.server.service import Service
 from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
@@ -67,9 +67,17 @@ def _lifespan(settings: Settings, metrics: Metrics) -> Any:
         app.state.service = service
         logger.info("phantomtouch: %s; patterns in %s", describe_output(engine), store.path)
         metrics.watch_engine(lambda: engine.status().to_dict())
+        osc = None
         try:
+            if settings.osc_listen is not None:
+                from phantomtouch.osc.service_link import start_osc
+
+                osc = start_osc(service)
+                logger.info("phantomtouch: OSC on udp://%s:%d", *osc.address)
             yield
         finally:
+            if osc is not None:
+                await asyncio.to_thread(osc.close)
             metrics.watch_engine(None)
             engine.close()
             store.close()
@@ -121,7 +129,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     errors.install(app)
-    for module in (touch, patterns, render, info, ws, web, docs):
+    for module in (touch, patterns, clips, render, info, ws, web, docs):
         app.include_router(module.router)
     app.mount(docs.ASSETS_PATH, StaticFiles(directory=docs.ASSETS_DIR), name="docs-assets")
     if web.STATIC_DIR.is_dir():

@@ -360,6 +360,16 @@ class PatternInfo(BaseModel):
     summary: PlanSummary
 
 
+class ClipInfo(BaseModel):
+    """A clip of the library: its name and size."""
+
+    name: str
+    duration_s: float
+    amplitude_points: int
+    frequency_points: int
+    transients: int
+
+
 class PresetInfo(BaseModel):
     name: str
     summary: PlanSummary

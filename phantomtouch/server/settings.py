@@ -148,6 +148,20 @@ class Settings(BaseSettings):
     engine_log_path: Path | None = Field(
         default=None, description="Where the engine logs what it played (None: no log)."
     )
+    osc_listen: str | None = Field(
+        default=None,
+        description=(
+            "Listen for OSC over UDP at HOST:PORT, a loopback address (VRChat sends to "
+            "127.0.0.1:9001); None: no OSC input."
+        ),
+    )
+    osc_map: Path | None = Field(
+        default=None,
+        description="OSC map file (TOML): avatar receivers on the forearm; None: one per actuator.",
+    )
+    osc_messages_per_s: float = Field(
+        default=20_000.0, gt=0.0, le=1_000_000.0, description="OSC messages admitted per second."
+    )
 
     @property
     def voices_per_client(self) -> int:
@@ -174,6 +188,29 @@ class Settings(BaseSettings):
                     "or port, e.g. 'armband.local', '192.168.1.20' or '[fe80::1]'"
                 )
         return [host.lower().rstrip(".") for host in hosts]
+
+    @field_validator("osc_listen")
+    @classmethod
+    def _osc_listen(cls, listen: str | None) -> str | None:
+        if listen is None:
+            return None
+        host, _, port = listen.rpartition(":")
+        if not host or not port.isdecimal() or not 1 <= int(port) <= 65535:
+            raise ValueError("must be HOST:PORT, e.g. 127.0.0.1:9001")
+        if not is_loopback(host):
+            raise ValueError(
+                "OSC carries no token, so it listens on a loopback address only "
+                "(127.0.0.1), where only programs of this machine reach it"
+            )
+        return listen
+
+    @property
+    def osc_address(self) -> tuple[str, int] | None:
+        """``osc_listen`` as (host, port), brackets of an IPv6 host removed."""
+        if self.osc_listen is None:
+            return None
+        host, _, port = self.osc_listen.rpartition(":")
+        return host.strip("[]"), int(port)
 
     @field_validator("output_device")
     @classmethod

@@ -1,4 +1,4 @@
-"""The pattern library: named ``TouchPattern`` s in one SQLite file.
+"""The pattern library: named ``TouchPattern`` s and haptic clips in one SQLite file.
 
 WAL journal and ``synchronous=FULL``: a committed ``PUT`` survives the process being
 killed (and a power cut). One connection shared by the worker threads, guarded by a lock;
@@ -16,6 +16,7 @@ reason in :attr:`PatternStore.problem`, which ``/health`` reports, until a write
 
 from __future__ import annotations
 
+import builtins
 import json
 import logging
 import shlex
@@ -30,7 +31,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from phantomtouch.errors import DeviceError
-from phantomtouch.schema import TouchPattern
+from phantomtouch.schema import HapticClip, TouchPattern
 from phantomtouch.server.errors import StorageError, StoredPatternError
 from phantomtouch.server.models import PlanSummary
 
@@ -41,6 +42,13 @@ CREATE TABLE IF NOT EXISTS patterns (
     name TEXT PRIMARY KEY,
     pattern TEXT NOT NULL,
     summary TEXT NOT NULL,
+    updated_unix_s REAL NOT NULL
+)
+"""
+_CLIP_SCHEMA = """
+CREATE TABLE IF NOT EXISTS clips (
+    name TEXT PRIMARY KEY,
+    clip TEXT NOT NULL,
     updated_unix_s REAL NOT NULL
 )
 """
@@ -97,6 +105,7 @@ class PatternStore:
             db.execute("PRAGMA synchronous=FULL")
             db.execute("PRAGMA busy_timeout=5000")
             db.execute(_SCHEMA)
+            db.execute(_CLIP_SCHEMA)
         except sqlite3.DatabaseError as exc:
             if isinstance(exc, sqlite3.OperationalError):
                 raise DeviceError(f"cannot open the pattern store {str(path)!r}: {exc}") from exc
@@ -182,6 +191,54 @@ class PatternStore:
         """Remove ``name``; False if it was not stored."""
         with self._using(writes=True) as db:
             cursor = db.execute("DELETE FROM patterns WHERE name = ?", (name,))
+        return cursor.rowcount > 0
+
+    # -- haptic clips (a pattern's ``{"kind": "clip", "clip": name}`` carrier) -------------
+
+    def list_clips(self) -> builtins.list[tuple[str, HapticClip]]:
+        """Every readable clip, sorted by name (a row that no longer reads is logged)."""
+        with self._using(writes=False) as db:
+            rows = db.execute("SELECT name, clip FROM clips ORDER BY name").fetchall()
+        listed = []
+        for name, text in rows:
+            try:
+                listed.append((name, HapticClip.model_validate_json(text)))
+            except ValidationError as exc:
+                logger.warning("%s; left out of GET /clips", unreadable(name, exc))
+        return listed
+
+    def get_clip(self, name: str) -> HapticClip | None:
+        """The clip stored as ``name``, or None (StoredPatternError: it no longer reads)."""
+        with self._using(writes=False) as db:
+            row = db.execute("SELECT clip FROM clips WHERE name = ?", (name,)).fetchone()
+        if row is None:
+            return None
+        try:
+            return HapticClip.model_validate_json(row[0])
+        except ValidationError as exc:
+            raise StoredPatternError(unreadable(name, exc), field="clip", value=name) from exc
+
+    def put_clip(self, name: str, clip: HapticClip) -> bool:
+        """Store ``clip`` under ``name``; True if the name was new."""
+        with self._using(writes=True) as db:
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                existed = db.execute("SELECT 1 FROM clips WHERE name = ?", (name,)).fetchone()
+                db.execute(
+                    "INSERT OR REPLACE INTO clips VALUES (?, ?, ?)",
+                    (name, clip.model_dump_json(), time.time()),
+                )
+                db.execute("COMMIT")
+            except BaseException:
+                if db.in_transaction:
+                    db.execute("ROLLBACK")
+                raise
+        return existed is None
+
+    def delete_clip(self, name: str) -> bool:
+        """Remove the clip ``name``; False if it was not stored."""
+        with self._using(writes=True) as db:
+            cursor = db.execute("DELETE FROM clips WHERE name = ?", (name,))
         return cursor.rowcount > 0
 
 

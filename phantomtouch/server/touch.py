@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer import plan, preset
 from phantomtouch.renderer.plan import Plan
-from phantomtouch.schema import DeviceProfile, TouchPattern
+from phantomtouch.schema import ClipCarrier, DeviceProfile, TouchPattern
 from phantomtouch.server.errors import NotFoundError
 from phantomtouch.server.models import (
     MAX_START_AHEAD_S,
@@ -54,12 +54,32 @@ def stored_pattern(store: PatternStore, name: str, *, field: str = "stored") -> 
 
 
 def resolve(request: AnyTouch, store: PatternStore) -> TouchPattern:
-    """The pattern a touch request asks for."""
+    """The pattern a touch request asks for, its clip (if any) filled in."""
     if isinstance(request, PresetTouch):
-        return request.apply(preset_pattern(request.preset))
+        return with_clip(request.apply(preset_pattern(request.preset)), store)
     if isinstance(request, NamedTouch):
-        return stored_pattern(store, request.stored)
-    return request.pattern()
+        return with_clip(stored_pattern(store, request.stored), store)
+    return with_clip(request.pattern(), store)
+
+
+def with_clip(pattern: TouchPattern, store: PatternStore) -> TouchPattern:
+    """``pattern`` with its clip carrier's ``data`` read from the library.
+
+    A pattern without a clip, or whose clip is given inline, is returned as it is; a clip
+    that is not in the library is a :class:`NotFoundError` naming ``carrier.clip``.
+    """
+    carrier = pattern.carrier
+    if not isinstance(carrier, ClipCarrier) or carrier.data is not None:
+        return pattern
+    clip = store.get_clip(carrier.clip)
+    if clip is None:
+        raise NotFoundError(
+            f"carrier.clip={carrier.clip!r} is not in the clip library (GET /clips; "
+            "PUT /clips/{name} or phantomtouch import adds one)",
+            field="carrier.clip",
+            value=carrier.clip,
+        )
+    return pattern.model_copy(update={"carrier": carrier.model_copy(update={"data": clip})})
 
 
 def plan_for(pattern: TouchPattern, device: DeviceProfile) -> Plan:

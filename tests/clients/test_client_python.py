@@ -30,6 +30,7 @@ from phantomtouch_client import (
     AsyncSession,
     Busy,
     Client,
+    ClipSummary,
     Clock,
     DeviceInfo,
     Health,
@@ -133,6 +134,28 @@ def test_patterns_put_list_get_play_delete(client: Client) -> None:
     client.delete_pattern(name)
     with pytest.raises(NotFound):
         client.get_pattern(name)
+
+
+def test_clips_put_list_get_play_delete(client: Client) -> None:
+    clip = {
+        "duration_s": 0.5,
+        "amplitude": [{"t_s": 0.0, "value": 0.2}, {"t_s": 0.5, "value": 1.0}],
+        "transients": [{"t_s": 0.1, "amplitude": 0.8, "frequency": 0.5}],
+    }
+    summary = client.put_clip("client-test.clip", clip)
+    assert (summary.duration_s, summary.amplitude_points, summary.transients) == (0.5, 2, 1)
+    assert "client-test.clip" in {c.name for c in client.clips()}
+    assert client.get_clip("client-test.clip").transients[0].amplitude == 0.8
+    stroke = TouchPattern.model_validate(
+        {
+            **STROKE.model_dump(exclude_unset=True),
+            "carrier": {"kind": "clip", "clip": "client-test.clip"},
+        }
+    )
+    assert isinstance(client.touch(stroke), Job)
+    client.delete_clip("client-test.clip")
+    with pytest.raises(NotFound):
+        client.touch(stroke)
 
 
 def test_stop_and_metrics(client: Client) -> None:
@@ -411,6 +434,7 @@ ANSWERS: dict[str, type[BaseModel]] = {
     "StopAnswer": StopAnswer,
     "PatternInfo": Summary,
     "PresetInfo": Summary,
+    "ClipInfo": ClipSummary,
     "PlanSummary": PlanSummary,
     "RenderPlan": RenderPlan,
     "Curves": RenderCurves,
@@ -430,7 +454,13 @@ def test_answer_models_have_the_fields_of_the_openapi_document(server: LiveServe
 
 
 def test_the_client_calls_every_route_of_the_openapi_document(server: LiveServer) -> None:
-    arguments = {"body": {"preset": "vr/tap"}, "job_id": "J", "name": "N", "pattern": STROKE}
+    arguments = {
+        "body": {"preset": "vr/tap"},
+        "job_id": "J",
+        "name": "N",
+        "pattern": STROKE,
+        "clip": {"duration_s": 1.0, "amplitude": [{"t_s": 0.0, "value": 1.0}]},
+    }
     calls = []
     for _, build in inspect.getmembers(_calls, inspect.isfunction):
         if str(build.__annotations__.get("return", "")).startswith("Call["):

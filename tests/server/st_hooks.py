@@ -36,6 +36,7 @@ DOCUMENTED_RULES: dict[str, str] = {
     # Comparisons between fields and sums over them, which a JSON Schema cannot make.
     "a noise band's high_hz at least 5 % above its low_hz": r"at least 5 % above low_hz",
     "keyframe times that strictly increase": r"times strictly increase",
+    "clip breakpoint and transient times that never decrease": r"times never decrease",
     "at most 1000 cm/s given the path's length and duration_s or keyframe times": (
         r"at most 1000 cm/s"
     ),

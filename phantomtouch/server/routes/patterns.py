@@ -63,7 +63,7 @@ def put_pattern(
     service: ServiceDep,
 ) -> PatternInfo:
     """Store (or replace) a pattern; it is planned first, so only playable patterns are kept."""
-    summary = touch.plan_summary(service.plans.plan(pattern))
+    summary = touch.plan_summary(service.plans.plan(touch.with_clip(pattern, service.store)))
     service.store.put(name, pattern, summary)
     return PatternInfo(name=name, summary=PlanSummary(**summary))
 

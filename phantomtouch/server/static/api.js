@@ -59,6 +59,7 @@ export const api = {
   presets: () => json("GET", "/presets"),
   patterns: () => json("GET", "/patterns"),
   pattern: (name) => json("GET", `/patterns/${encodeURIComponent(name)}`),
+  clips: () => json("GET", "/clips"),
   savePattern: (name, pattern) =>
     json("PUT", `/patterns/${encodeURIComponent(name)}`, { json: pattern }),
   deletePattern: (name) => json("DELETE", `/patterns/${encodeURIComponent(name)}`),

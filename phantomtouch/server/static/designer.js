@@ -38,6 +38,7 @@ export class Designer {
     this.animation = 0;
     this.form = {
       source: $("source"), speed: $("speed"), carrier: $("carrier"), freq: $("carrier-freq"),
+      clip: $("carrier-clip"),
       modulation: $("modulation"), modIndex: $("mod-index"), modFreq: $("mod-freq"),
       intensity: $("intensity"), relative: $("relative"), law: $("law"),
     };
@@ -136,6 +137,7 @@ export class Designer {
       out.duration_s = null;
     }
     if (f.carrier.value === "noise") out.carrier = { kind: "noise" };
+    else if (f.carrier.value === "clip") out.carrier = { kind: "clip", clip: f.clip.value };
     else if (f.carrier.value) out.carrier = { kind: f.carrier.value, freq_hz: Number(f.freq.value) };
     if (f.modulation.value === "none") out.modulation = null;
     else if (f.modulation.value) {
@@ -200,6 +202,7 @@ export class Designer {
     }
     f.speed.placeholder = source.kind === DRAWN ? `${DRAWN_DEFAULTS.speed_cm_s} (default)` : inherit;
     f.freq.disabled = !(f.carrier.value === "sine" || f.carrier.value === "combined");
+    f.clip.disabled = f.carrier.value !== "clip";
     f.modIndex.disabled = !(f.modulation.value === "stroke" || f.modulation.value === "freq");
     f.modFreq.disabled = f.modulation.value !== "freq";
     f.relative.disabled = f.intensity.value !== "relative";
@@ -382,18 +385,38 @@ export class Designer {
   // --- the library -------------------------------------------------------------------
 
   async loadLibrary() {
+    let clips;
     try {
-      this.saved = await api.patterns();
+      [this.saved, clips] = await Promise.all([api.patterns(), api.clips()]);
     } catch (exc) {
       this.ui.showError(exc.message);
       return;
     }
+    this.fillClips(clips);
     this.stored.clear();
     const list = $("library");
     list.replaceChildren();
     for (const entry of this.saved) list.appendChild(this.libraryItem(entry));
     $("library-empty").hidden = this.saved.length > 0;
     if (this.presets.length) this.fillSources();
+  }
+
+  // The clips a designed stroke can take as its carrier (the choice is kept if it is still
+  // there).
+  fillClips(clips) {
+    const select = this.form.clip;
+    const chosen = select.value;
+    select.replaceChildren();
+    for (const clip of clips) {
+      const option = document.createElement("option");
+      option.value = clip.name;
+      option.textContent = `${clip.name} (${formatNumber(clip.duration_s)} s)`;
+      select.appendChild(option);
+    }
+    if (clips.some((clip) => clip.name === chosen)) select.value = chosen;
+    const clipOption = this.form.carrier.querySelector("option[value=clip]");
+    clipOption.disabled = clips.length === 0;
+    clipOption.textContent = clips.length ? "Haptic clip" : "Haptic clip (none imported)";
   }
 
   libraryItem(entry) {

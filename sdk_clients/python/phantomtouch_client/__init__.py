@@ -41,6 +41,7 @@ from phantomtouch_client.errors import (
     Unauthorized,
 )
 from phantomtouch_client.models import (
+    ClipSummary,
     Clock,
     ContactState,
     DeviceInfo,
@@ -57,7 +58,7 @@ from phantomtouch_client.models import (
     Welcome,
     touch_request,
 )
-from phantomtouch_client.pattern import TouchPattern
+from phantomtouch_client.pattern import HapticClip, TouchPattern
 from phantomtouch_client.rest import AsyncClient, Client, ws_url
 from phantomtouch_client.session import AsyncSession
 from phantomtouch_client.sync_session import Session, SyncContact
@@ -72,12 +73,14 @@ __all__ = [
     "Busy",
     "Client",
     "ClientError",
+    "ClipSummary",
     "Clock",
     "ConnectionLost",
     "Contact",
     "ContactState",
     "DeviceFailed",
     "DeviceInfo",
+    "HapticClip",
     "Health",
     "InvalidRequest",
     "Job",

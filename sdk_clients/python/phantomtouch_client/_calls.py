@@ -17,6 +17,7 @@ from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from phantomtouch_client.errors import TransportError, error_from_response
 from phantomtouch_client.models import (
+    ClipSummary,
     Clock,
     DeviceInfo,
     Health,
@@ -29,7 +30,7 @@ from phantomtouch_client.models import (
     pattern_json,
     timing,
 )
-from phantomtouch_client.pattern import TouchPattern
+from phantomtouch_client.pattern import HapticClip, TouchPattern
 
 T = TypeVar("T")
 M = TypeVar("M", bound=BaseModel)
@@ -85,6 +86,16 @@ _SUMMARIES = TypeAdapter(list[Summary])
 def _summaries(response: httpx.Response) -> list[Summary]:
     try:
         return _SUMMARIES.validate_python(_decode(response))
+    except ValidationError as exc:
+        raise TransportError(f"{response.request.url.path}: unexpected answer: {exc}") from exc
+
+
+_CLIP_SUMMARIES = TypeAdapter(list[ClipSummary])
+
+
+def _clip_summaries(response: httpx.Response) -> list[ClipSummary]:
+    try:
+        return _CLIP_SUMMARIES.validate_python(_decode(response))
     except ValidationError as exc:
         raise TransportError(f"{response.request.url.path}: unexpected answer: {exc}") from exc
 
@@ -150,6 +161,23 @@ def play_pattern(
 ) -> Call[Job]:
     body = timing(start_in_ms=start_in_ms, start_at_s=start_at_s) or None
     return Call("POST", f"/patterns/{_segment(name)}/play", _model(Job), body)
+
+
+def clips() -> Call[list[ClipSummary]]:
+    return Call("GET", "/clips", _clip_summaries)
+
+
+def get_clip(name: str) -> Call[HapticClip]:
+    return Call("GET", f"/clips/{_segment(name)}", _model(HapticClip))
+
+
+def put_clip(name: str, clip: HapticClip | Mapping[str, Any]) -> Call[ClipSummary]:
+    body = HapticClip.model_validate(clip).model_dump(mode="json", exclude_unset=True)
+    return Call("PUT", f"/clips/{_segment(name)}", _model(ClipSummary), body)
+
+
+def delete_clip(name: str) -> Call[None]:
+    return Call("DELETE", f"/clips/{_segment(name)}", _nothing)
 
 
 def device() -> Call[DeviceInfo]:

@@ -90,6 +90,16 @@ class Summary(_Answer):
     summary: PlanSummary
 
 
+class ClipSummary(_Answer):
+    """One stored haptic clip: its name, length and size."""
+
+    name: str
+    duration_s: float
+    amplitude_points: int
+    frequency_points: int
+    transients: int
+
+
 class RenderCurves(_Answer):
     """At most 500 points of a rendered touch; ``gains`` include the envelope."""
 

@@ -159,6 +159,81 @@ class CombinedCarrier(_Band):
 
 
 Carrier = Annotated[SineCarrier | NoiseCarrier | CombinedCarrier, Field(discriminator="kind")]
+"""A carrier a live contact can play: a steady signal."""
+
+_MAX_CLIP_S = 600.0
+_MAX_CLIP_POINTS = 100_000
+_CLIP_NAME_REGEX = (
+    r"^(?:[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}"
+    r"|\.[A-Za-z0-9_-][A-Za-z0-9._-]{0,62}"
+    r"|\.\.[A-Za-z0-9._-]{1,62})$"
+)
+_Unit = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+_ClipTime = Annotated[float, Field(ge=0.0, le=_MAX_CLIP_S, allow_inf_nan=False)]
+
+
+class _ClipPart(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class Breakpoint(_ClipPart):
+    """An envelope's value at ``t_s``; between breakpoints it is a straight line."""
+
+    t_s: _ClipTime
+    value: _Unit
+
+
+class Transient(_ClipPart):
+    """A short click at ``t_s``: three cycles at ``frequency`` under a Hann window."""
+
+    t_s: _ClipTime
+    amplitude: _Unit
+    frequency: _Unit = Field(description="0-1, mapped onto the actuator's band like the envelope.")
+
+
+def _ordered(points: list[Breakpoint] | list[Transient], field: str) -> None:
+    for i in range(1, len(points)):
+        if points[i].t_s < points[i - 1].t_s:
+            raise ValueError(
+                f"{field}[{i}].t_s={points[i].t_s!r} must not be before "
+                f"{field}[{i - 1}].t_s={points[i - 1].t_s!r} (times never decrease)"
+            )
+
+
+class HapticClip(_ClipPart):
+    """An amplitude envelope, a frequency envelope and transients, all 0-1 (a ``.haptic``
+    or ``.ahap`` file imported with ``phantomtouch import``)."""
+
+    duration_s: float = Field(gt=0.0, le=_MAX_CLIP_S, allow_inf_nan=False)
+    amplitude: list[Breakpoint] = Field(min_length=1, max_length=_MAX_CLIP_POINTS)
+    frequency: list[Breakpoint] = Field(
+        default_factory=lambda: [Breakpoint(t_s=0.0, value=0.5)],
+        min_length=1,
+        max_length=_MAX_CLIP_POINTS,
+    )
+    transients: list[Transient] = Field(default_factory=list, max_length=_MAX_CLIP_POINTS)
+
+    @model_validator(mode="after")
+    def _times(self) -> Self:
+        _ordered(self.amplitude, "amplitude")
+        _ordered(self.frequency, "frequency")
+        _ordered(self.transients, "transients")
+        return self
+
+
+class ClipCarrier(_Model):
+    """A haptic clip of the service's library as the carrier (``GET /clips``)."""
+
+    kind: Literal["clip"] = "clip"
+    clip: str = Field(min_length=1, max_length=64, pattern=_CLIP_NAME_REGEX)
+    loop: bool = Field(default=False)
+    data: HapticClip | None = Field(default=None)
+
+
+PatternCarrier = Annotated[
+    SineCarrier | NoiseCarrier | CombinedCarrier | ClipCarrier, Field(discriminator="kind")
+]
+"""A pattern's carrier: a steady signal, or a haptic clip with its own envelope."""
 
 
 def given(name: str, schema: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -263,7 +338,7 @@ class TouchPattern(_Model):
         default=1, ge=1, le=_MAX_REPEAT, description="Strokes, each with its own fades."
     )
     alternate: bool = Field(default=False, description="Every second stroke runs backwards.")
-    carrier: Carrier = Field(default_factory=SineCarrier)
+    carrier: PatternCarrier = Field(default_factory=SineCarrier)
     intensity: RelativeIntensity | IntensityPreset = Field(
         default="low",
         description=(

@@ -19,6 +19,7 @@ import httpx
 from phantomtouch_client import _calls
 from phantomtouch_client.errors import ParameterError, ReplyTimeout, TransportError
 from phantomtouch_client.models import (
+    ClipSummary,
     Clock,
     DeviceInfo,
     Health,
@@ -31,7 +32,7 @@ from phantomtouch_client.models import (
     Summary,
     touch_request,
 )
-from phantomtouch_client.pattern import TouchPattern
+from phantomtouch_client.pattern import HapticClip, TouchPattern
 
 if TYPE_CHECKING:
     from phantomtouch_client.session import AsyncSession
@@ -263,6 +264,23 @@ class Client(_Base):
         """``POST /patterns/{name}/play``."""
         return self._run(_calls.play_pattern(name, start_in_ms=start_in_ms, start_at_s=start_at_s))
 
+    def clips(self) -> list[ClipSummary]:
+        """``GET /clips``: the stored haptic clips."""
+        return self._run(_calls.clips())
+
+    def get_clip(self, name: str) -> HapticClip:
+        """``GET /clips/{name}``."""
+        return self._run(_calls.get_clip(name))
+
+    def put_clip(self, name: str, clip: HapticClip | Mapping[str, Any]) -> ClipSummary:
+        """``PUT /clips/{name}``: store (or replace) a clip; a pattern plays it with
+        ``carrier={"kind": "clip", "clip": name}``."""
+        return self._run(_calls.put_clip(name, clip))
+
+    def delete_clip(self, name: str) -> None:
+        """``DELETE /clips/{name}``."""
+        self._run(_calls.delete_clip(name))
+
     def device(self) -> DeviceInfo:
         """``GET /device``."""
         return self._run(_calls.device())
@@ -427,6 +445,22 @@ class AsyncClient(_Base):
         return await self._run(
             _calls.play_pattern(name, start_in_ms=start_in_ms, start_at_s=start_at_s)
         )
+
+    async def clips(self) -> list[ClipSummary]:
+        """``GET /clips``: the stored haptic clips."""
+        return await self._run(_calls.clips())
+
+    async def get_clip(self, name: str) -> HapticClip:
+        """``GET /clips/{name}``."""
+        return await self._run(_calls.get_clip(name))
+
+    async def put_clip(self, name: str, clip: HapticClip | Mapping[str, Any]) -> ClipSummary:
+        """``PUT /clips/{name}``: store (or replace) a clip."""
+        return await self._run(_calls.put_clip(name, clip))
+
+    async def delete_clip(self, name: str) -> None:
+        """``DELETE /clips/{name}``."""
+        await self._run(_calls.delete_clip(name))
 
     async def device(self) -> DeviceInfo:
         """``GET /device``."""

@@ -1,0 +1,73 @@
+"""``phantomtouch import FILE``: a ``.haptic`` or ``.ahap`` file into the clip library.
+
+``phantomtouch import heartbeat.ahap [--name NAME] [--db PATH] [-o clip.json]`` reads the
+file, converts it (:func:`~phantomtouch.clips.load.load_clip`) and stores the clip in the
+library the service reads (``--db``, default the service's), under the file's stem unless
+``--name`` says otherwise; ``-o`` writes the clip's JSON (the body of ``PUT /clips/{name}``)
+instead. A pattern then plays it with ``"carrier": {"kind": "clip", "clip": NAME}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+from phantomtouch.errors import ParameterError
+
+_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}")
+
+
+def clip_name(path: Path) -> str:
+    """A library name from a file's stem: other characters become '-', at most 64."""
+    name = re.sub(r"[^A-Za-z0-9._-]", "-", path.stem).lstrip(".")[:64]
+    if not _NAME.fullmatch(name):
+        raise ParameterError(f"{path.name}: no clip name in its file name; give --name")
+    return name
+
+
+def _run(args: argparse.Namespace) -> int:
+    from phantomtouch.clips.load import load_clip
+
+    path = Path(args.file)
+    clip = load_clip(path)
+    summary = (
+        f"{clip.duration_s:.3g} s, {len(clip.amplitude)} amplitude and "
+        f"{len(clip.frequency)} frequency points, {len(clip.transients)} transients"
+    )
+    if args.output is not None:
+        Path(args.output).write_text(clip.model_dump_json(indent=1) + "\n", encoding="utf-8")
+        print(f"{path.name}: {summary}; written to {args.output}")
+        return 0
+    from phantomtouch.server.settings import default_db_path
+    from phantomtouch.server.store import PatternStore
+
+    name = args.name or clip_name(path)
+    if not _NAME.fullmatch(name) or name in (".", ".."):
+        raise ParameterError(f"--name={name!r} must be 1-64 letters, digits, '.', '_' or '-'")
+    db_path = Path(args.db) if args.db else default_db_path()
+    store = PatternStore.open(db_path)
+    try:
+        new = store.put_clip(name, clip)
+    finally:
+        store.close()
+    verb = "imported" if new else "replaced"
+    print(
+        f"{verb} clip {name!r} from {path.name}: {summary}, in {db_path}; a pattern plays it "
+        f'with "carrier": {{"kind": "clip", "clip": "{name}"}}'
+    )
+    return 0
+
+
+def add_import_command(sub: argparse._SubParsersAction) -> None:
+    """Register ``phantomtouch import``."""
+    command = sub.add_parser(
+        "import", help="import a haptic clip (.haptic, .ahap) into the clip library"
+    )
+    command.add_argument("file", help="a Meta Haptics Studio .haptic or Apple .ahap file")
+    command.add_argument("--name", help="the clip's name in the library (default: file stem)")
+    command.add_argument("--db", help="the library, SQLite file (default: the service's)")
+    command.add_argument(
+        "-o", "--output", help="write the clip as JSON here instead of into the library"
+    )
+    command.set_defaults(func=_run)

@@ -1,0 +1,80 @@
+"""Read a ``.haptic`` or ``.ahap`` file (or its text) into a clip; refusals name the field."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import ValidationError
+
+from phantomtouch.errors import ParameterError
+from phantomtouch.schema.clip import HapticClip
+from phantomtouch.schema.validation import describe_validation_error
+
+ClipFormat = Literal["haptic", "ahap"]
+MAX_FILE_BYTES = 16 << 20
+"""Largest clip file read, bytes."""
+
+
+def detect_format(document: Any, suffix: str = "") -> ClipFormat:
+    """``haptic`` or ``ahap``, from the file's suffix, else from its top-level keys."""
+    suffix = suffix.lower().lstrip(".")
+    if suffix in ("haptic", "ahap"):
+        return suffix  # type: ignore[return-value]
+    if isinstance(document, dict):
+        if "Pattern" in document:
+            return "ahap"
+        if "signals" in document:
+            return "haptic"
+    raise ParameterError(
+        "not a haptic clip: a .haptic file has 'signals', an .ahap file 'Pattern' at its top "
+        f"level; got {sorted(document) if isinstance(document, dict) else type(document).__name__}"
+    )
+
+
+def parse_clip(text: str | bytes, *, suffix: str = "", source: str = "clip") -> HapticClip:
+    """The clip a ``.haptic`` or ``.ahap`` document describes.
+
+    Parameters
+    ----------
+    text : str or bytes
+        The file's JSON.
+    suffix : str
+        The file's suffix (``.haptic``, ``.ahap``); other or none: told by the content.
+    source : str
+        What to call the file in messages.
+
+    Raises
+    ------
+    ParameterError
+        Not JSON, not either format, or a field outside its range; the message names the
+        field by its path in the file (``signals.continuous.envelopes.amplitude[2].time``).
+    """
+    from phantomtouch.clips.ahap import AhapFile, clip_of_ahap
+    from phantomtouch.clips.haptic_file import HapticFile, clip_of_haptic
+
+    try:
+        document = json.loads(text)
+    except ValueError as exc:
+        raise ParameterError(f"{source}: not JSON ({exc})") from exc
+    kind = detect_format(document, suffix)
+    try:
+        if kind == "haptic":
+            return clip_of_haptic(HapticFile.model_validate(document))
+        return clip_of_ahap(AhapFile.model_validate(document))
+    except ValidationError as exc:
+        raise ParameterError(f"{source} (.{kind}): {describe_validation_error(exc)}") from exc
+
+
+def load_clip(path: str | Path) -> HapticClip:
+    """Read a clip file (see :func:`parse_clip`); unreadable files are ParameterError too."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ParameterError(f"{path}: {size} bytes; a clip file may have {MAX_FILE_BYTES}")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ParameterError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from exc
+    return parse_clip(data, suffix=path.suffix, source=path.name)

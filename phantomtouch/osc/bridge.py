@@ -1,0 +1,318 @@
+"""The OSC bridge: a UDP socket, its receive thread, and what each message does.
+
+One thread receives datagrams, parses them with python-osc's packet parser and handles
+each message at once, in arrival order: receiver proximities become live contacts
+(:mod:`~phantomtouch.osc.receivers`), ``/phantomtouch/...`` messages touch, move, lift,
+play and stop (:mod:`~phantomtouch.osc.messages`). It calls the engine's control side
+(:class:`~phantomtouch.engine.EngineFront`), which never waits for the audio: a move
+reaches the audio at the next block. Bundles are taken apart and their messages applied
+on arrival; their time tags are ignored (python-osc's own dispatcher would sleep until a
+future time tag, which lets one datagram stall the bridge, and drops unparsable
+datagrams without counting them, hence the loop here).
+
+Safety: every message is checked and a bad one dropped and counted
+(:class:`~phantomtouch.osc.counters.OscCounters`); a token bucket bounds the message
+rate; silence for ``watchdog_s`` (no accepted message) releases every contact of the
+bridge, and so does closing it. A contact that the engine let go of meanwhile (``POST
+/stop``, an engine restart) touches down again on its next message.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import socket
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError
+from phantomtouch.osc import messages
+from phantomtouch.osc.counters import OscCounters
+from phantomtouch.osc.mapping import ReceiverMap
+from phantomtouch.osc.receivers import Change, ContactTracker, ReceiverLayout
+from phantomtouch.server.flood import FloodGuard
+
+try:
+    from pythonosc.osc_packet import OscPacket, ParseError
+except ImportError as exc:  # pragma: no cover - the osc extra is missing
+    raise ImportError("OSC input needs python-osc: pip install 'phantomtouch[osc]'") from exc
+
+if TYPE_CHECKING:
+    from phantomtouch.engine import EngineFront
+
+logger = logging.getLogger("phantomtouch.osc")
+
+OWNER = "osc"
+"""The engine owner of every contact the bridge holds."""
+RATE_PER_S = 20_000.0
+"""Default of the message rate limit: 8 receivers at 90 Hz are 720 messages/s."""
+MAX_CONTACTS = 10
+"""Generic contacts (``/phantomtouch/contact/{id}``) the bridge holds at once."""
+_POLL_S = 0.05
+"""The receive timeout: how often the watchdog looks when nothing arrives."""
+_MAX_DATAGRAM = 65_536
+_RECEIVE_BUFFER_BYTES = 1 << 20
+"""Room for bursts (every parameter of an avatar at once) while the thread is busy."""
+_LATENCIES = 1 << 20
+
+
+class OscBridge:
+    """Receives OSC on ``host:port`` and drives ``engine``.
+
+    Parameters
+    ----------
+    engine : EngineFront
+    receiver_map : ReceiverMap
+        The receivers and how they become contacts.
+    host, port : str, int
+        Where to listen (UDP); port 0 picks a free one (see :attr:`address`).
+    play : callable or None
+        ``play(name)`` plays a preset or stored pattern; it may raise
+        :class:`~phantomtouch.errors.PhantomTouchError`. None: presets only, planned and
+        scheduled here.
+    stop : callable or None
+        What ``/phantomtouch/stop`` does besides dropping the bridge's contacts; None:
+        ``engine.stop_all()``.
+    rate_per_s : float, > 0
+        Messages per second admitted (one second of burst); more are dropped (``flood``).
+    record_latency : bool
+        Keep each datagram's receipt-to-engine time in :attr:`latencies_s` (benchmarks).
+    """
+
+    def __init__(
+        self,
+        engine: EngineFront,
+        receiver_map: ReceiverMap,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 9001,
+        play: Callable[[str], None] | None = None,
+        stop: Callable[[], None] | None = None,
+        rate_per_s: float = RATE_PER_S,
+        record_latency: bool = False,
+    ) -> None:
+        self.engine = engine
+        self.map = receiver_map
+        self.counters = OscCounters()
+        self.watchdog_releases = 0
+        self.latencies_s: collections.deque[float] | None = (
+            collections.deque(maxlen=_LATENCIES) if record_latency else None
+        )
+        self._play = play or self._play_preset
+        self._stop = stop or engine.stop_all
+        self._flood = FloodGuard(rate_per_s)
+        self._index = {r.address: i for i, r in enumerate(receiver_map.receiver)}
+        self._layout = ReceiverLayout(
+            np.array([(r.x_cm, r.y_cm) for r in receiver_map.receiver]),
+            receiver_map.cluster_gap_cm,
+        )
+        self._proximity = [0.0] * len(receiver_map.receiver)
+        self._tracker = ContactTracker(receiver_map.smoothing_s)
+        self._contacts: set[str] = set()
+        self._last_s = time.monotonic()
+        self._logged: set[str] = set()
+        self._closing = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._socket = open_socket(host, port)
+        self._socket.settimeout(_POLL_S)
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """The (host, port) the bridge listens on."""
+        host, port = self._socket.getsockname()[:2]
+        return str(host), int(port)
+
+    @property
+    def contacts(self) -> list[str]:
+        """Engine contact ids the bridge holds down now."""
+        return sorted([*self._tracker.live, *self._contacts])
+
+    def start(self) -> None:
+        """Start the receive thread."""
+        self.engine.prepare_carrier(self.map.carrier)
+        self._thread = threading.Thread(target=self._run, name="phantomtouch-osc", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop receiving and release every contact of the bridge."""
+        self._closing.set()
+        if self._thread is not None:
+            self._thread.join()
+        self._socket.close()
+        self._release_all()
+
+    def __enter__(self) -> OscBridge:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- the receive loop ---------------------------------------------------------------
+
+    def _run(self) -> None:
+        receive = self._socket.recvfrom
+        while not self._closing.is_set():
+            try:
+                data, _ = receive(_MAX_DATAGRAM)
+            except TimeoutError:
+                self._watchdog(time.monotonic())
+                continue
+            except OSError:
+                return
+            received_s = time.perf_counter()
+            self._datagram(data, time.monotonic())
+            if self.latencies_s is not None:
+                self.latencies_s.append(time.perf_counter() - received_s)
+            self._watchdog(time.monotonic())
+
+    def _datagram(self, data: bytes, now_s: float) -> None:
+        try:
+            packet = OscPacket(data)
+        except ParseError as exc:
+            self._drop("malformed", f"a datagram of {len(data)} bytes is not OSC ({exc})")
+            return
+        for timed in packet.messages:
+            message = timed.message
+            if not self._flood.admit(now_s):
+                self._drop("flood", f"over the rate limit of {self._flood.rate_per_s:g}/s")
+                continue
+            try:
+                self._handle(message.address, tuple(message.params), now_s)
+            except messages.BadMessage as exc:
+                self._drop(exc.reason, str(exc))
+            except PhantomTouchError as exc:
+                self._drop("refused", str(exc))
+            except Exception:  # the loop (and its watchdog) must outlive any message
+                logger.exception("osc: %s failed", message.address)
+                self.counters.count("refused")
+            else:
+                self.counters.count("accepted")
+                self._last_s = now_s
+
+    def _drop(self, reason: str, message: str) -> None:
+        self.counters.count(reason)
+        if reason not in self._logged:
+            self._logged.add(reason)
+            logger.warning("osc: dropped (%s): %s; later ones are only counted", reason, message)
+
+    def _watchdog(self, now_s: float) -> None:
+        if now_s - self._last_s < self.map.watchdog_s or not self.contacts:
+            return
+        self.watchdog_releases += 1
+        self._release_all()
+
+    def _release_all(self) -> None:
+        self._forget()
+        self.engine.release_owner(OWNER)
+
+    def _forget(self) -> None:
+        self._tracker.forget()
+        self._contacts.clear()
+        self._proximity = [0.0] * len(self._proximity)
+
+    # -- messages -------------------------------------------------------------------------
+
+    def _handle(self, address: str, args: tuple[Any, ...], now_s: float) -> None:
+        index = self._index.get(address)
+        if index is not None:
+            self._proximity[index] = messages.proximity(address, args)
+            self._receivers(now_s)
+        elif address.startswith(messages.CONTACT_PREFIX):
+            self._contact(address, args)
+        elif address == messages.TOUCH:
+            self._play(messages.touch_name(address, args))
+        elif address == messages.STOP:
+            messages.no_arguments(address, args)
+            self._forget()
+            self._stop()
+        else:
+            raise messages.BadMessage(
+                "unknown_address",
+                f"address={address!r} is neither a receiver of the map nor "
+                "/phantomtouch/touch, /phantomtouch/contact/{id} or /phantomtouch/stop",
+            )
+
+    def _receivers(self, now_s: float) -> None:
+        found = self._layout.touches(
+            self._proximity, threshold=self.map.threshold, max_intensity=self.map.max_intensity
+        )
+        refused: PhantomTouchError | None = None
+        for change in self._tracker.update(found, now_s):
+            try:
+                self._apply(change)
+            except PhantomTouchError as exc:
+                self._tracker.live.pop(change.contact, None)  # tried again on the next value
+                refused = exc
+        if refused is not None:
+            raise refused
+
+    def _apply(self, change: Change) -> None:
+        if change.kind == "up":
+            self.engine.contact_up(OWNER, change.contact)
+        elif change.kind == "down":
+            self._down(change.contact, change.x_cm, change.y_cm, change.intensity)
+        else:
+            self._move(change.contact, change.x_cm, change.y_cm, change.intensity)
+
+    def _down(self, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
+        self.engine.contact_down(
+            OWNER, contact, x_cm, y_cm, intensity=intensity, carrier=self.map.carrier
+        )
+
+    def _move(self, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
+        try:
+            self.engine.contact_move(OWNER, contact, x_cm, y_cm, intensity=intensity)
+        except ProtocolError:  # the engine let go of it (a stop, a restart): down again
+            self._down(contact, x_cm, y_cm, intensity)
+
+    def _contact(self, address: str, args: tuple[Any, ...]) -> None:
+        contact = "contact-" + messages.contact_id(address)
+        x_cm, y_cm, intensity = messages.contact(address, args)
+        if intensity == 0.0:
+            if contact in self._contacts:
+                self._contacts.discard(contact)
+                self.engine.contact_up(OWNER, contact)
+            return
+        if contact in self._contacts:
+            self._move(contact, x_cm, y_cm, intensity)
+            return
+        if len(self._contacts) >= MAX_CONTACTS:
+            raise messages.BadMessage(
+                "refused",
+                f"{address}: {MAX_CONTACTS} contacts are down (the bridge's most); "
+                "lift one with intensity 0 first",
+            )
+        self._down(contact, x_cm, y_cm, intensity)
+        self._contacts.add(contact)
+
+    def _play_preset(self, name: str) -> None:
+        from phantomtouch.renderer import plan, preset
+
+        self.engine.schedule(plan(preset(name), self.engine.device))
+
+
+def open_socket(host: str, port: int) -> socket.socket:
+    """A UDP socket bound to ``(host, port)``.
+
+    Raises
+    ------
+    DeviceError
+        The address cannot be listened on (in use, or not of this machine).
+    """
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RECEIVE_BUFFER_BYTES)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise DeviceError(
+            f"osc listen={host}:{port}: cannot listen ({exc.strerror}); is another OSC "
+            "program using that port? Choose another with --listen"
+        ) from exc
+    return sock

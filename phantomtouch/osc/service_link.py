@@ -1,0 +1,100 @@
+"""The OSC bridge inside the service: the same engine, library and stop as the WebSocket.
+
+``/phantomtouch/touch NAME`` is a touch request as ``POST /touch`` makes it: a name with a
+``/`` is a preset (``exp2/curved``), any other a stored pattern, scheduled by
+:func:`phantomtouch.server.touch.schedule` on the event loop under the quotas of the
+client ``osc``; the bridge's thread waits for it (planning takes a millisecond or so, a new
+noise band about 60 ms the first time), at most ``PLAY_TIMEOUT_S``.
+``/phantomtouch/stop`` is :meth:`Service.stop_everything`. The bridge's
+counts appear in ``/metrics`` as ``phantomtouch_osc_messages_total{outcome}``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Iterator
+
+from prometheus_client.core import CounterMetricFamily
+from prometheus_client.registry import Collector
+from pydantic import ValidationError
+
+from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.osc.bridge import OWNER, OscBridge
+from phantomtouch.osc.mapping import ReceiverMap, default_map
+from phantomtouch.schema import describe_validation_error
+from phantomtouch.server import touch
+from phantomtouch.server.models import NamedTouch, PresetTouch
+from phantomtouch.server.service import Service
+
+PLAY_TIMEOUT_S = 5.0
+"""How long the bridge waits for a touch to be planned and scheduled."""
+
+
+class _Counts(Collector):
+    def __init__(self, bridge: OscBridge) -> None:
+        self.bridge = bridge
+
+    def collect(self) -> Iterator[CounterMetricFamily]:
+        family = CounterMetricFamily(
+            "phantomtouch_osc_messages",
+            "OSC messages received, by outcome: accepted or why they were dropped.",
+            labels=["outcome"],
+        )
+        for outcome, count in self.bridge.counters.snapshot().items():
+            family.add_metric([outcome], count)
+        yield family
+        yield CounterMetricFamily(
+            "phantomtouch_osc_watchdog_releases",
+            "Times silence on OSC released the bridge's contacts.",
+            value=self.bridge.watchdog_releases,
+        )
+
+
+def start_osc(service: Service) -> OscBridge:
+    """Open the bridge the settings ask for and start it (``osc_listen`` is set).
+
+    Raises
+    ------
+    ParameterError
+        The map file is unreadable or invalid.
+    DeviceError
+        The address cannot be listened on.
+    """
+    settings = service.settings
+    address = settings.osc_address
+    assert address is not None and service.loop is not None
+    loop = service.loop
+    receiver_map = (
+        ReceiverMap.load(settings.osc_map)
+        if settings.osc_map is not None
+        else default_map(service.device)
+    )
+
+    def play(name: str) -> None:
+        try:
+            request = PresetTouch(preset=name) if "/" in name else NamedTouch(stored=name)
+        except ValidationError as exc:
+            raise ParameterError(f"/phantomtouch/touch: {describe_validation_error(exc)}") from exc
+        scheduled = touch.schedule(service, request, client=OWNER, owner=OWNER)
+        try:
+            asyncio.run_coroutine_threadsafe(scheduled, loop).result(PLAY_TIMEOUT_S)
+        except TimeoutError as exc:
+            raise DeviceError(
+                f"/phantomtouch/touch {name!r}: not scheduled within {PLAY_TIMEOUT_S:g} s"
+            ) from exc
+
+    def stop() -> None:
+        loop.call_soon_threadsafe(service.stop_everything)
+
+    bridge = OscBridge(
+        service.engine,
+        receiver_map,
+        host=address[0],
+        port=address[1],
+        play=play,
+        stop=stop,
+        rate_per_s=settings.osc_messages_per_s,
+    )
+    service.metrics.registry.register(_Counts(bridge))
+    bridge.start()
+    return bridge

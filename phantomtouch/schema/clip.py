@@ -1,0 +1,117 @@
+"""Haptic clips: what a touch feels like over time, played as a pattern's carrier.
+
+A clip is an amplitude envelope and a frequency envelope, each a list of breakpoints
+joined by straight lines, and transients (short clicks) at given times. Values are 0-1
+as in the formats clips come from (Meta Haptics Studio's ``.haptic``, Apple's ``.ahap``,
+see :mod:`phantomtouch.clips`); the renderer maps frequency 0-1 onto the actuator's band
+(docs/algorithms.md, sec. 11). A pattern plays a clip with the carrier
+``{"kind": "clip", "clip": "name"}``: the clip decides what the touch feels like, the
+pattern's path where it is felt.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal, Self
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+MAX_CLIP_S = 600.0
+"""Longest clip, s."""
+MAX_CLIP_POINTS = 100_000
+"""Most breakpoints of one envelope, and most transients."""
+CLIP_NAME_REGEX = (
+    r"^(?:[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}"
+    r"|\.[A-Za-z0-9_-][A-Za-z0-9._-]{0,62}"
+    r"|\.\.[A-Za-z0-9._-]{1,62})$"
+)
+"""Clip names follow the pattern library's rule: 1-64 letters, digits, '.', '_', '-', not
+'.' or '..'."""
+
+ClipName = Annotated[
+    str,
+    Field(
+        min_length=1,
+        max_length=64,
+        pattern=CLIP_NAME_REGEX,
+        description="A clip in the library (GET /clips); 1-64 letters, digits, '.', '_', '-'.",
+    ),
+]
+Unit = Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)]
+ClipTime = Annotated[float, Field(ge=0.0, le=MAX_CLIP_S, allow_inf_nan=False)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class Breakpoint(_Model):
+    """The envelope's value at ``t_s``; between breakpoints it is a straight line."""
+
+    t_s: ClipTime
+    value: Unit
+
+
+class Transient(_Model):
+    """A short click at ``t_s``: three cycles at ``frequency`` under a Hann window."""
+
+    t_s: ClipTime
+    amplitude: Unit
+    frequency: Unit = Field(description="0-1, mapped onto the actuator's band like the envelope.")
+
+
+def _ordered(points: list[Breakpoint] | list[Transient], field: str) -> None:
+    for i in range(1, len(points)):
+        if points[i].t_s < points[i - 1].t_s:
+            raise ValueError(
+                f"{field}[{i}].t_s={points[i].t_s!r} must not be before "
+                f"{field}[{i - 1}].t_s={points[i - 1].t_s!r} (times never decrease)"
+            )
+
+
+class HapticClip(_Model):
+    """An amplitude envelope, a frequency envelope and transients, all 0-1.
+
+    Equal times in an envelope make a step. Before the first breakpoint an envelope holds
+    its first value, after the last its last value, until ``duration_s``.
+    """
+
+    duration_s: float = Field(gt=0.0, le=MAX_CLIP_S, allow_inf_nan=False)
+    amplitude: list[Breakpoint] = Field(min_length=1, max_length=MAX_CLIP_POINTS)
+    frequency: list[Breakpoint] = Field(
+        default_factory=lambda: [Breakpoint(t_s=0.0, value=0.5)],
+        min_length=1,
+        max_length=MAX_CLIP_POINTS,
+    )
+    transients: list[Transient] = Field(default_factory=list, max_length=MAX_CLIP_POINTS)
+
+    @model_validator(mode="after")
+    def _times(self) -> Self:
+        _ordered(self.amplitude, "amplitude")
+        _ordered(self.frequency, "frequency")
+        _ordered(self.transients, "transients")
+        return self
+
+
+def _kind_required(schema: dict[str, Any]) -> None:
+    """``kind`` is required on the wire, as for the other carriers, its default aside."""
+    schema["required"] = ["kind", *schema.get("required", [])]
+
+
+class ClipCarrier(_Model):
+    """A haptic clip from the library as the carrier (it brings its own envelope).
+
+    The service fills in ``data`` from the library when the pattern is played or
+    rendered; a pattern may also carry the clip itself in ``data``.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", json_schema_extra=_kind_required)
+
+    kind: Literal["clip"] = "clip"
+    clip: ClipName
+    loop: bool = Field(
+        default=False,
+        description="Repeat the clip while the pattern lasts (else once, then silence).",
+    )
+    data: HapticClip | None = Field(
+        default=None, description="The clip itself; omitted, the library's clip of that name."
+    )

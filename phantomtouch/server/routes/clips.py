@@ -1,0 +1,93 @@
+"""The clip library: ``GET /clips``, ``GET|PUT|DELETE /clips/{name}``.
+
+A clip (amplitude and frequency envelopes, transients; ``phantomtouch import`` makes one
+from a ``.haptic`` or ``.ahap`` file) is played as a pattern's carrier,
+``{"kind": "clip", "clip": name}``.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Path, Response
+from pydantic import TypeAdapter
+
+from phantomtouch.schema import HapticClip
+from phantomtouch.schema.clip import CLIP_NAME_REGEX
+from phantomtouch.server.bodies import strict_body
+from phantomtouch.server.deps import StoreDep
+from phantomtouch.server.errors import NotFoundError, responses
+from phantomtouch.server.models import ClipInfo
+
+router = APIRouter(prefix="/clips", tags=["patterns"])
+
+clip_body, CLIP_BODY_OPENAPI = strict_body(TypeAdapter(HapticClip))
+ClipNameParam = Annotated[
+    str,
+    Path(
+        min_length=1,
+        max_length=64,
+        pattern=CLIP_NAME_REGEX,
+        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters; not '.' or '..'.",
+        examples=["heartbeat"],
+    ),
+]
+
+
+def clip_info(name: str, clip: HapticClip) -> ClipInfo:
+    return ClipInfo(
+        name=name,
+        duration_s=clip.duration_s,
+        amplitude_points=len(clip.amplitude),
+        frequency_points=len(clip.frequency),
+        transients=len(clip.transients),
+    )
+
+
+@router.get("", response_model=list[ClipInfo], responses=responses(401, 503), summary="Clips")
+def list_clips(store: StoreDep) -> list[ClipInfo]:
+    """Every stored clip with its duration and size, sorted by name."""
+    return [clip_info(name, clip) for name, clip in store.list_clips()]
+
+
+@router.get(
+    "/{name}",
+    response_model=HapticClip,
+    responses=responses(401, 404, 422, 500, 503),
+    summary="One stored clip",
+)
+def get_clip(name: ClipNameParam, store: StoreDep) -> HapticClip:
+    """The clip as it was stored."""
+    clip = store.get_clip(name)
+    if clip is None:
+        raise NotFoundError(
+            f"name={name!r} is not in the clip library (GET /clips)", field="name", value=name
+        )
+    return clip
+
+
+@router.put(
+    "/{name}",
+    response_model=ClipInfo,
+    responses=responses(401, 413, 415, 422, 503),
+    summary="Store a clip",
+    openapi_extra=CLIP_BODY_OPENAPI,
+)
+def put_clip(
+    name: ClipNameParam, clip: Annotated[HapticClip, Depends(clip_body)], store: StoreDep
+) -> ClipInfo:
+    """Store (or replace) a clip; patterns that name it play the new one from now on."""
+    store.put_clip(name, clip)
+    return clip_info(name, clip)
+
+
+@router.delete(
+    "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary="Remove a clip"
+)
+def delete_clip(name: ClipNameParam, store: StoreDep) -> Response:
+    """Remove a stored clip (patterns that name it answer 404 until it is back)."""
+    if not store.delete_clip(name):
+        raise NotFoundError(
+            f"name={name!r} is not in the clip library (GET /clips)", field="name", value=name
+        )
+    return Response(status_code=204)
