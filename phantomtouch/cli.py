@@ -7,6 +7,7 @@
 ``phantomtouch devices``  list the sound card outputs (``*``: enough outputs for the armband)
 ``phantomtouch bench accuracy``  phantom position and level error against CPU time
 ``phantomtouch calibrate``  measure each actuator, write a corrected device profile
+``phantomtouch gateway``  a REST and WebSocket gateway of a fleet of armbands (NATS)
 
 Errors print one line: bad input (a field, its value and the allowed range; a wrong
 argument) exits 2, a failure while running (a file, the sound card, a missing extra)
@@ -29,6 +30,7 @@ from tqdm import tqdm
 
 from phantomtouch import __version__
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
+from phantomtouch.fleet import cli as fleet_cli
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
@@ -252,8 +254,9 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         print(f"phantomtouch serve: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     check_port_free(settings.host, settings.port)
+    attach = fleet_cli.attachment(args)
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
-    serve(settings)
+    serve(settings, attach=attach)
     return 0
 
 
@@ -434,6 +437,8 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--db", help="pattern library, SQLite file")
     serve.add_argument("--token", help="bearer token every request must carry")
     serve.set_defaults(func=_cmd_serve)
+    fleet_cli.add_serve_options(serve)
+    fleet_cli.register(sub)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")
