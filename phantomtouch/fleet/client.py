@@ -2,7 +2,9 @@
 
 Each call addresses armbands by id through :mod:`phantomtouch.fleet.subjects` and turns
 NATS's own failures into the service's refusals: an armband whose node is gone is
-:class:`~phantomtouch.fleet.errors.ArmbandUnavailableError` (503), never an answer of 202.
+:class:`~phantomtouch.fleet.errors.NoNodeError` (nobody listens) or
+:class:`~phantomtouch.fleet.errors.ArmbandUnavailableError` (no answer in time), never an
+answer of 202.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import time
 from typing import Any
 
 from phantomtouch.fleet import subjects
-from phantomtouch.fleet.errors import ArmbandUnavailableError
+from phantomtouch.fleet.errors import ArmbandUnavailableError, NoNodeError
 from phantomtouch.fleet.records import ClockAnswer, FleetAnswer
 
 STOP_COLLECT_S = 0.5
@@ -34,7 +36,7 @@ class FleetClient:
         try:
             msg = await self.nc.request(subject, payload, timeout=self.timeout_s)
         except nats.errors.NoRespondersError:
-            raise ArmbandUnavailableError(armband, "no node answers its subjects") from None
+            raise NoNodeError(armband) from None
         except nats.errors.TimeoutError:
             raise ArmbandUnavailableError(
                 armband, f"no answer within {self.timeout_s:g} s"

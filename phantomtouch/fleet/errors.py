@@ -7,6 +7,7 @@ other refusal, to their status and code::
     ├── NotFoundError
     │   └── ArmbandNotFoundError     404 not_found  (not in the registry: offline or unknown)
     ├── ArmbandUnavailableError      503 device     (registered, but no answer in time)
+    │   └── NoNodeError              503 device     (no node listens on its subjects)
     └── ForbiddenArmbandError        403 forbidden  (outside the gateway token's scope)
 """
 
@@ -37,6 +38,13 @@ class ArmbandUnavailableError(ServiceError):
         super().__init__(
             f"armband={armband!r} did not answer: {reason}", field="armband", value=armband
         )
+
+
+class NoNodeError(ArmbandUnavailableError):
+    """Nobody listens on the armband's subjects (NATS answered "no responders" at once)."""
+
+    def __init__(self, armband: str) -> None:
+        super().__init__(armband, "no node answers its subjects")
 
 
 class ForbiddenArmbandError(ServiceError):

@@ -32,19 +32,19 @@ from starlette.datastructures import Headers
 from starlette.requests import HTTPConnection
 
 from phantomtouch import __version__
-from phantomtouch.errors import ParameterError
+from phantomtouch.errors import ParameterError, PhantomTouchError
 from phantomtouch.fleet import subjects
 from phantomtouch.fleet.auth import Grant, Grants
 from phantomtouch.fleet.client import FleetClient
 from phantomtouch.fleet.connection import connect
-from phantomtouch.fleet.errors import ArmbandNotFoundError
+from phantomtouch.fleet.errors import ArmbandNotFoundError, NoNodeError
 from phantomtouch.fleet.gateway_settings import GatewaySettings
 from phantomtouch.fleet.records import ArmbandRecord, FleetAnswer, StopScope
 from phantomtouch.fleet.registry import Registry, open_bucket
 from phantomtouch.fleet.settings import FleetSettings
 from phantomtouch.server import errors
 from phantomtouch.server.bodies import strict_body
-from phantomtouch.server.errors import ServiceError, UnauthorizedError
+from phantomtouch.server.errors import UnauthorizedError
 from phantomtouch.server.limits import BodyLimitMiddleware
 from phantomtouch.server.metrics import CONTENT_TYPE, Metrics, MetricsMiddleware
 from phantomtouch.server.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
@@ -77,17 +77,24 @@ class Gateway:
     async def touch(
         self, armband: str, touch: dict[str, Any], start_at_unix_s: float | None, client: str
     ) -> FleetAnswer:
-        await self.online(armband)
+        """Send a touch to the armband's node; its answer, or a refusal naming the armband.
+
+        The node's answer decides, not the registry: a node that answers is online even
+        while NATS fails over and its heartbeats lapse. Only when nobody listens does the
+        registry tell an armband that is gone (404) from one that is registered (503).
+        """
         try:
             return await self.client.touch(
                 armband, touch, start_at_unix_s=start_at_unix_s, client=client
             )
-        except ServiceError:
+        except NoNodeError:
             self.registry.forget(armband)
+            await self.online(armband)
             raise
 
     async def stop(self, scope: StopScope, grant: Grant) -> dict[str, Any]:
         """Stop the armbands of ``scope`` that ``grant`` may address; who answered."""
+        scope.check()
         if scope.scope == "armband":
             assert scope.armband is not None
             grant.check(scope.armband)
@@ -234,7 +241,6 @@ async def post_touch(request: Request, gateway: GatewayDep, grant: GrantDep) -> 
     for armband in armbands:
         subjects.check_name("armbands", armband)
         grant.check(armband)
-        await gateway.online(armband)
     start_at_unix_s = pop_start_at_unix_s(body)
     if start_at_unix_s is None:
         start_at_unix_s = time.time() + gateway.fleet.sync_lead_s
@@ -247,7 +253,7 @@ async def post_touch(request: Request, gateway: GatewayDep, grant: GrantDep) -> 
     refusal: tuple[str, FleetAnswer] | None = None
     for armband, outcome in zip(armbands, outcomes, strict=True):
         if isinstance(outcome, BaseException):
-            if not isinstance(outcome, ServiceError):
+            if not isinstance(outcome, PhantomTouchError):
                 raise outcome
             problem = errors.describe(outcome)
             outcome = FleetAnswer(status=problem.status_code, body=problem.body())
@@ -304,7 +310,7 @@ def create_gateway(settings: GatewaySettings, fleet: FleetSettings) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         nc = await connect(fleet, f"gateway-{gateway_id}")
         try:
-            kv = await open_bucket(nc.jetstream(), fleet)
+            kv = await open_bucket(nc.jetstream(timeout=fleet.request_timeout_s), fleet)
             app.state.gateway = Gateway(
                 id=gateway_id,
                 settings=settings,

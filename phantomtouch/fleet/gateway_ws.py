@@ -27,6 +27,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
 from phantomtouch.fleet.auth import Grant
+from phantomtouch.fleet.errors import NoNodeError
 from phantomtouch.fleet.gateway import pop_start_at_unix_s, request_token
 from phantomtouch.fleet.records import StopScope
 from phantomtouch.fleet.subjects import check_name
@@ -173,8 +174,11 @@ class GatewaySession:
                     f"contact={contact!r} is already down on armband {target!r}: expected move "
                     "or up, got down"
                 )
-            await self.gateway.online(target)
-            answer = await client.contact_down(target, {**data, "owner": self.owner})
+            try:
+                answer = await client.contact_down(target, {**data, "owner": self.owner})
+            except NoNodeError:
+                await self.gateway.online(target)
+                raise
             if answer.status == 200:
                 self.held.setdefault(target, set()).add(contact)
             await self._answer(answer.status, None, message_id, answer.body)
@@ -200,8 +204,11 @@ class GatewaySession:
         assert self.grant is not None
         if job_id is not None:
             target = self._need(armband, "stop of a job_id")
-            await self.gateway.online(target)
-            answer = await self.gateway.client.stop_job(target, job_id)
+            try:
+                answer = await self.gateway.client.stop_job(target, job_id)
+            except NoNodeError:
+                await self.gateway.online(target)
+                raise
             await self._answer(answer.status, answer.body, message_id)
             return
         scope = StopScope() if armband is None else StopScope(scope="armband", armband=armband)

@@ -97,7 +97,9 @@ class ArmbandNode:
     async def start(self) -> None:
         """Connect, register, and answer the armband's subjects."""
         self._nc = await connect(self.settings, f"armband-{self.armband}")
-        self._kv = await open_bucket(self._nc.jetstream(), self.settings)
+        self._kv = await open_bucket(
+            self._nc.jetstream(timeout=self.settings.request_timeout_s), self.settings
+        )
         handlers: dict[str, Callable[[Any], Any]] = {
             subjects.touch(self.armband): self._on_touch,
             subjects.contact(self.armband): self._on_contact,

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field
 
+from phantomtouch.errors import ParameterError
 from phantomtouch.fleet.subjects import NAME_REGEX
 
 ArmbandId = Annotated[str, Field(pattern=NAME_REGEX, description="An armband id.")]
@@ -83,15 +84,16 @@ class StopScope(_Record):
     site: SiteName | None = None
     armband: ArmbandId | None = None
 
-    @model_validator(mode="after")
-    def _target(self) -> Self:
+    def check(self) -> Self:
+        """Refuse (:class:`ParameterError`, naming the field) a target the scope lacks or
+        does not take: ``site`` goes with ``site``, ``armband`` with ``armband``."""
         needed = {"all": None, "site": "site", "armband": "armband"}[self.scope]
         for name in ("site", "armband"):
-            given = getattr(self, name) is not None
-            if given and name != needed:
-                raise ValueError(f"{name}: not allowed with scope={self.scope!r}")
-            if not given and name == needed:
-                raise ValueError(f"{name}: required with scope={self.scope!r}")
+            value = getattr(self, name)
+            if value is not None and name != needed:
+                raise ParameterError(f"{name}={value!r}: not allowed with scope={self.scope!r}")
+            if value is None and name == needed:
+                raise ParameterError(f"{name}=null: required with scope={self.scope!r}")
         return self
 
 

@@ -14,6 +14,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from phantomtouch.errors import DeviceError
+from phantomtouch.fleet.errors import ArmbandUnavailableError
 from phantomtouch.fleet.records import ArmbandRecord
 from phantomtouch.fleet.settings import FleetSettings
 from phantomtouch.fleet.subjects import REGISTRY_BUCKET
@@ -25,7 +27,8 @@ REPLICAS = 3
 
 
 async def open_bucket(js: Any, settings: FleetSettings) -> Any:
-    """The registry bucket, created (replicated on three servers if it can) if missing."""
+    """The registry bucket, created if missing: replicated on three servers if it can be,
+    and readable from any replica (direct get), so reads go on while a server is down."""
     import nats.js.errors
 
     try:
@@ -34,12 +37,12 @@ async def open_bucket(js: Any, settings: FleetSettings) -> Any:
         pass
     try:
         return await js.create_key_value(
-            bucket=REGISTRY_BUCKET, ttl=settings.ttl_s, history=1, replicas=REPLICAS
+            bucket=REGISTRY_BUCKET, ttl=settings.ttl_s, history=1, replicas=REPLICAS, direct=True
         )
     except nats.js.errors.APIError as exc:
         logger.info("fleet: registry on one server only (%s replicas refused: %s)", REPLICAS, exc)
         return await js.create_key_value(
-            bucket=REGISTRY_BUCKET, ttl=settings.ttl_s, history=1, replicas=1
+            bucket=REGISTRY_BUCKET, ttl=settings.ttl_s, history=1, replicas=1, direct=True
         )
 
 
@@ -60,7 +63,8 @@ class Registry:
     An armband that is not found is looked up again on every call, so a node that just
     joined is found at once; one found stays cached for at most ``cache_s``, after which
     its key is read again (a node that died is refused by NATS in the meantime: nobody
-    answers its subjects).
+    answers its subjects). While the registry cannot be read (NATS is failing over), the
+    last record read stands in: the addressed node's own answer decides.
     """
 
     def __init__(self, kv: Any, *, cache_s: float) -> None:
@@ -70,6 +74,7 @@ class Registry:
 
     async def lookup(self, armband: str) -> ArmbandRecord | None:
         """The armband's record, or None when it is not online."""
+        import nats.errors
         import nats.js.errors
 
         cached = self._cache.get(armband)
@@ -81,6 +86,12 @@ class Registry:
         except (nats.js.errors.KeyNotFoundError, nats.js.errors.KeyDeletedError):
             self._cache.pop(armband, None)
             return None
+        except (nats.errors.Error, TimeoutError) as exc:
+            if cached is None:
+                raise ArmbandUnavailableError(
+                    armband, f"the registry cannot be read now ({type(exc).__name__})"
+                ) from None
+            return cached[1]
         record = read_record(entry.value)
         if record is None:
             self._cache.pop(armband, None)
@@ -89,13 +100,24 @@ class Registry:
         return record
 
     async def online(self) -> list[ArmbandRecord]:
-        """Every armband online, by id."""
+        """Every armband online, by id.
+
+        Raises
+        ------
+        DeviceError
+            The registry cannot be read now (503 ``device``).
+        """
+        import nats.errors
         import nats.js.errors
 
         try:
             keys = await self.kv.keys()
         except nats.js.errors.NoKeysError:
             return []
+        except (nats.errors.Error, TimeoutError) as exc:
+            raise DeviceError(
+                f"fleet: the registry cannot be read now ({type(exc).__name__}); retry"
+            ) from None
         records = [await self.lookup(key) for key in sorted(keys)]
         return [record for record in records if record is not None]
 

@@ -50,6 +50,7 @@ class NatsCluster:
         self.cluster_ports = [free_port() for _ in range(size)]
         self.monitor_ports = [free_port() for _ in range(size)]
         self.processes: list[subprocess.Popen[bytes] | None] = [None] * size
+        folder.mkdir(parents=True, exist_ok=True)
 
     @property
     def urls(self) -> list[str]:
