@@ -12,8 +12,10 @@ armbands at the same instant. The node measures its clock against the NATS serve
 time stamps (``clock_offset_s`` in its record), so the error is seen, not assumed.
 
 Every message is counted (``phantomtouch_fleet_messages{subject, outcome}`` on the
-node's ``/metrics``); a malformed or oversized one is refused with the validation of
-REST (answered where someone waits for an answer, dropped where nobody does).
+node's ``/metrics``: a touch ``accepted`` or the error code it was refused with, a contact
+message by its type or the reason it was dropped); a malformed or oversized one is refused
+with the validation of REST (answered where someone waits for an answer, dropped where
+nobody does).
 """
 
 from __future__ import annotations
@@ -289,7 +291,7 @@ class ArmbandNode:
 
     async def _on_contact(self, msg: Any) -> None:
         try:
-            self.contacts.handle(msg.data)
+            kind = self.contacts.handle(msg.data)
         except (PhantomTouchError, ValidationError) as exc:
             self.messages.labels("contact", drop_reason(exc)).inc()
             if msg.reply:
@@ -298,7 +300,7 @@ class ArmbandNode:
                     msg, FleetAnswer(status=problem.status_code, body=problem.body())
                 )
             return
-        self.messages.labels("contact", "applied").inc()
+        self.messages.labels("contact", kind).inc()
         if msg.reply:
             await self._respond(msg, FleetAnswer(status=200, body={"armband": self.armband}))
 

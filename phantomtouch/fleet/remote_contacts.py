@@ -50,8 +50,8 @@ class RemoteContacts:
         self.max_bytes = max_bytes
         self.owners: dict[str, _Owner] = {}
 
-    def handle(self, data: bytes, *, now_s: float | None = None) -> None:
-        """Apply one message.
+    def handle(self, data: bytes, *, now_s: float | None = None) -> str:
+        """Apply one message; returns its type.
 
         Raises
         ------
@@ -76,11 +76,11 @@ class RemoteContacts:
         owner = self.owners.get(owner_id)
         if kind == "release":
             self.release(owner_id)
-            return
+            return kind
         if kind == "ping":
             if owner is not None:
                 owner.last_seen_s = now_s
-            return
+            return kind
         engine_owner = OWNER_PREFIX + owner_id
         if kind == "down":
             down = Down.model_validate_json(json.dumps(message), strict=True)
@@ -108,6 +108,7 @@ class RemoteContacts:
             raise ProtocolError(
                 f"type={kind!r} is not a contact message; expected down, move, up, ping, release"
             )
+        return str(kind)
 
     def _down(self, engine_owner: str, owner: _Owner, down: Down) -> None:
         if down.contact in owner.contacts:
