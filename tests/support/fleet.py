@@ -38,13 +38,20 @@ each node (three engine processes more would only load the machine's two cores).
 class ArmbandNode(LiveServer):
     """``phantomtouch serve --fleet ... --armband ID --site SITE`` with a stimulus log."""
 
-    def __init__(self, folder: Path, cluster: NatsCluster, armband: str, site: str) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        cluster: NatsCluster,
+        armband: str,
+        site: str,
+        env: dict[str, str] | None = None,
+    ) -> None:
         self.armband = armband
         self.site = site
         self.stimulus_log = folder / f"{armband}.jsonl"
         super().__init__(
             folder / f"{armband}.db",
-            env={**NODE_ENV, "PHANTOMTOUCH_ENGINE_LOG_PATH": str(self.stimulus_log)},
+            env={**NODE_ENV, "PHANTOMTOUCH_ENGINE_LOG_PATH": str(self.stimulus_log), **(env or {})},
             args=("--fleet", cluster.servers, "--armband", armband, "--site", site),
         )
 

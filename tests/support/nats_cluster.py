@@ -42,10 +42,14 @@ def require_nats_server() -> str:
 class NatsCluster:
     """``size`` clustered ``nats-server`` processes with JetStream, in ``folder``."""
 
-    def __init__(self, folder: Path, *, size: int = 3) -> None:
+    def __init__(
+        self, folder: Path, *, size: int = 3, user: str | None = None, password: str | None = None
+    ) -> None:
         self.binary = require_nats_server()
         self.folder = folder
         self.size = size
+        self.user = user
+        self.password = password
         self.client_ports = [free_port() for _ in range(size)]
         self.cluster_ports = [free_port() for _ in range(size)]
         self.monitor_ports = [free_port() for _ in range(size)]
@@ -68,8 +72,7 @@ class NatsCluster:
         store = self.folder / f"n{index}"
         store.mkdir(parents=True, exist_ok=True)
         config = self.folder / f"n{index}.conf"
-        config.write_text(
-            f"""
+        text = f"""
 server_name: n{index}
 listen: {HOST}:{self.client_ports[index]}
 http: {HOST}:{self.monitor_ports[index]}
@@ -78,13 +81,18 @@ jetstream {{
   max_memory_store: 64MB
   max_file_store: 256MB
 }}
+"""
+        if self.size > 1:
+            text += f"""
 cluster {{
   name: phantomtouch-test
   listen: {HOST}:{self.cluster_ports[index]}
   routes: [{routes}]
 }}
 """
-        )
+        if self.user is not None:
+            text += f'authorization {{ user: "{self.user}", password: "{self.password}" }}\n'
+        config.write_text(text)
         return config
 
     def _launch(self, index: int) -> None:
