@@ -65,7 +65,9 @@ def test_an_unknown_armband_is_refused_by_name(fleet: Fleet) -> None:
 
 
 def test_one_touch_starts_on_three_armbands_at_the_same_instant(fleet: Fleet) -> None:
-    start_at_unix_s = time.time() + 0.3
+    # 1 s ahead: time enough for the request to reach each node on a loaded machine (one
+    # that arrives after its start time plays at once, late, as the job log would say).
+    start_at_unix_s = time.time() + 1.0
     answer = httpx.post(
         f"{fleet.gateways[0].url}/touch",
         json={**STROKE, "armbands": ["a1", "a2", "a3"], "start_at_unix_s": start_at_unix_s},
@@ -77,15 +79,19 @@ def test_one_touch_starts_on_three_armbands_at_the_same_instant(fleet: Fleet) ->
         armband: fleet.nodes[armband].wait_played(job["job_id"])["unix_time_s"]
         for armband, job in jobs.items()
     }
+    late = [a for a, job in jobs.items() if fleet.nodes[a].wait_played(job["job_id"])["late"]]
+    assert late == [], "the request reached these nodes after its start time"
     spread_s = max(onsets.values()) - min(onsets.values())
     print(f"onset spread across 3 armbands: {spread_s * 1e3:.3f} ms; onsets {onsets}")
-    # Each engine places the start on its own sample clock; the null output ticks in
-    # 256-frame blocks (5.3 ms at 48 kHz) and maps frames to time once a block, so the
-    # onsets may differ by up to one block, never more.
-    block_s = 256 / 48000
-    assert spread_s <= block_s
+    # Each engine places the start on its own sample clock, which the null output (no
+    # hardware clock) ticks from a thread that wakes once per 256-frame block (5.3 ms);
+    # each engine maps its frames to time from those wake-ups, which on a loaded machine
+    # jitter by milliseconds. Four blocks bound that; a touch not synchronised would start
+    # when its request arrives, a second before the instant asked for.
+    tolerance_s = 4 * 256 / 48000
+    assert spread_s <= tolerance_s
     for onset_s in onsets.values():
-        assert abs(onset_s - start_at_unix_s) <= block_s
+        assert abs(onset_s - start_at_unix_s) <= tolerance_s
 
 
 def test_a_start_in_the_past_is_refused_naming_start_at_unix_s(fleet: Fleet) -> None:
@@ -112,6 +118,8 @@ def _states(fleet: Fleet, jobs: dict[str, str]) -> dict[str, str]:
         armband: httpx.get(f"{fleet.nodes[armband].url}/jobs/{job}").json()["state"]
         for armband, job in jobs.items()
     }
+    late = [a for a, job in jobs.items() if fleet.nodes[a].wait_played(job["job_id"])["late"]]
+    assert late == [], "the request reached these nodes after its start time"
 
 
 @pytest.mark.parametrize(
@@ -140,3 +148,17 @@ def test_a_stop_scope_is_validated(fleet: Fleet) -> None:
     answer = httpx.post(f"{fleet.gateways[0].url}/stop", json={"scope": "site"})
     assert answer.status_code == 422
     assert answer.json()["error"]["fields"][0]["field"] == "site"
+
+
+def test_the_python_client_addresses_a_named_armband(fleet: Fleet) -> None:
+    from phantomtouch_client import Client, NotFound
+
+    with Client(fleet.gateways[1].url) as client:
+        assert sorted(r["armband"] for r in client.armbands()) == ["a1", "a2", "a3"]
+        start_at_unix_s = time.time() + 1.0
+        job = client.touch(preset="vr/tap", armband="a1", start_at_unix_s=start_at_unix_s)
+        played = fleet.nodes["a1"].wait_played(str(job.job_id))
+        assert played["frame"] == job.start_frame
+        assert abs(played["unix_time_s"] - start_at_unix_s) <= 4 * 256 / 48000
+        with pytest.raises(NotFound, match="armband='a9'"):
+            client.touch(preset="vr/tap", armband="a9")
