@@ -248,13 +248,13 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         settings = Settings(**{k: v for k, v in options.items() if v is not None})
     except ValidationError as exc:
         raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
+    attach = fleet_cli.attachment(args)
     try:
         check_library(settings)
     except DeviceError as exc:
         print(f"phantomtouch serve: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     check_port_free(settings.host, settings.port)
-    attach = fleet_cli.attachment(args)
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
     serve(settings, attach=attach)
     return 0
