@@ -20,10 +20,9 @@ from phantomtouch.cli import EXIT_USAGE, main
     ],
 )
 def test_a_bad_fleet_flag_is_a_usage_error(
-    argv: list[str], message: str, tmp_path: object, capsys: pytest.CaptureFixture[str]
+    argv: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert (
-        main([*argv, "--port", "1"] if argv[0] == "gateway" else [*argv, "--output", "null"])
-        == EXIT_USAGE
-    )
+    extra = ["--db", str(tmp_path / "patterns.db"), "--output", "null"]
+    assert main(argv if argv[0] == "gateway" else [*argv, *extra]) == EXIT_USAGE
     assert message in capsys.readouterr().err
+    assert not (tmp_path / "patterns.db").exists()  # refused before anything opened
