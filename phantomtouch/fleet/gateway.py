@@ -16,7 +16,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import math
 import secrets
 import time
 from collections.abc import AsyncIterator
@@ -28,7 +27,6 @@ from fastapi import APIRouter, Depends, FastAPI, Request, WebSocket
 from fastapi import Path as PathParam
 from fastapi.responses import JSONResponse, Response
 from pydantic import TypeAdapter
-from starlette.datastructures import Headers
 from starlette.requests import HTTPConnection
 
 from phantomtouch import __version__
@@ -39,8 +37,10 @@ from phantomtouch.fleet.client import FleetClient
 from phantomtouch.fleet.connection import connect
 from phantomtouch.fleet.errors import ArmbandNotFoundError, NoNodeError
 from phantomtouch.fleet.gateway_settings import GatewaySettings
+from phantomtouch.fleet.gateway_ws import GatewaySession
 from phantomtouch.fleet.records import ArmbandRecord, FleetAnswer, StopScope
 from phantomtouch.fleet.registry import Registry, open_bucket
+from phantomtouch.fleet.requests import pop_start_at_unix_s, request_token
 from phantomtouch.fleet.settings import FleetSettings
 from phantomtouch.server import errors
 from phantomtouch.server.bodies import strict_body
@@ -130,17 +130,6 @@ def _gateway(connection: HTTPConnection) -> Gateway:
     return gateway
 
 
-def request_token(connection: HTTPConnection) -> str | None:
-    """The token a request carries: ``Authorization: Bearer``, or ``?token=`` (WebSocket)."""
-    header = Headers(scope=connection.scope).get("authorization", "")
-    scheme, _, given = header.partition(" ")
-    if scheme.lower() == "bearer" and given.strip():
-        return given.strip()
-    if connection.scope["type"] == "websocket":
-        return connection.query_params.get("token")
-    return None
-
-
 async def get_gateway(connection: HTTPConnection) -> Gateway:
     return _gateway(connection)
 
@@ -176,18 +165,6 @@ async def json_object(request: Request) -> dict[str, Any]:
     if not isinstance(body, dict):
         raise ParameterError(f"body: expected a JSON object, got {type(body).__name__}")
     return body
-
-
-def pop_start_at_unix_s(body: dict[str, Any]) -> float | None:
-    """Take ``start_at_unix_s`` out of a touch body (checked: a finite number ≥ 0)."""
-    value = body.pop("start_at_unix_s", None)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ParameterError(f"start_at_unix_s={value!r}: must be a number, seconds since 1970")
-    if value < 0:
-        raise ParameterError(f"start_at_unix_s={value!r}: must be at least 0")
-    return float(value)
 
 
 def answered(answer: FleetAnswer) -> JSONResponse:
@@ -296,8 +273,6 @@ async def get_metrics(gateway: GatewayDep, grant: GrantDep) -> Response:
 
 @router.websocket("/ws")
 async def websocket_endpoint(websocket: WebSocket) -> None:
-    from phantomtouch.fleet.gateway_ws import GatewaySession
-
     await GatewaySession(websocket, _gateway(websocket)).run()
 
 

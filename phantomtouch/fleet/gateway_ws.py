@@ -28,8 +28,8 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from phantomtouch.errors import PhantomTouchError, ProtocolError
 from phantomtouch.fleet.auth import Grant
 from phantomtouch.fleet.errors import NoNodeError
-from phantomtouch.fleet.gateway import pop_start_at_unix_s, request_token
 from phantomtouch.fleet.records import StopScope
+from phantomtouch.fleet.requests import pop_start_at_unix_s, request_token
 from phantomtouch.fleet.subjects import check_name
 from phantomtouch.server.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,

@@ -13,10 +13,16 @@ import httpx
 import pytest
 
 from tests.fleet.conftest import SITES, Fleet
+from tests.support.fleet import wait_until
 from tests.support.service import LONG, STROKE
 
 
 def test_the_registry_lists_every_armband_with_its_device(fleet: Fleet) -> None:
+    def measured() -> bool:
+        listing = httpx.get(f"{fleet.gateways[0].url}/armbands", timeout=5.0).json()
+        return all(r["clock_offset_s"] is not None for r in listing)
+
+    wait_until(measured, 3.0, "each node read back a heartbeat's time stamp")
     for gateway in fleet.gateways:
         listing = httpx.get(f"{gateway.url}/armbands", timeout=5.0).json()
         assert {r["armband"]: r["site"] for r in listing} == SITES
@@ -26,9 +32,9 @@ def test_the_registry_lists_every_armband_with_its_device(fleet: Fleet) -> None:
             assert record["device"]["actuators"] == local["actuators"]
             assert record["status"] == "ok"
             # Node and NATS servers share this machine's clock: the offset each node
-            # measured is a publish's one-way latency on loopback, far below 50 ms.
-            assert record["clock_offset_s"] is not None
-            assert abs(record["clock_offset_s"]) < 0.05
+            # measured is the time from its clock reading to the server's stamp, the
+            # publish's latency: milliseconds, up to a few hundred on a loaded machine.
+            assert 0.0 <= -record["clock_offset_s"] < 0.5
 
 
 def test_a_touch_plays_on_the_addressed_armband_only(fleet: Fleet) -> None:
