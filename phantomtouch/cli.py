@@ -9,6 +9,7 @@
 ``phantomtouch devices``  list the sound card outputs (``*``: enough outputs for the armband)
 ``phantomtouch bench accuracy``  phantom position and level error against CPU time
 ``phantomtouch calibrate``  measure each actuator, write a corrected device profile
+``phantomtouch gateway``  a REST and WebSocket gateway of a fleet of armbands (NATS)
 
 Errors print one line: bad input (a field, its value and the allowed range; a wrong
 argument) exits 2, a failure while running (a file, the sound card, a missing extra)
@@ -32,6 +33,7 @@ from tqdm import tqdm
 from phantomtouch import __version__
 from phantomtouch.clips.command import add_import_command
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
+from phantomtouch.fleet import cli as fleet_cli
 from phantomtouch.osc.command import add_osc_command
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
@@ -254,6 +256,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         settings = Settings(**{k: v for k, v in options.items() if v is not None})
     except ValidationError as exc:
         raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
+    attach = fleet_cli.attachment(args)
     try:
         check_library(settings)
     except DeviceError as exc:
@@ -268,7 +271,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             ReceiverMap.load(settings.osc_map)
         open_socket(*settings.osc_address).close()
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
-    serve(settings)
+    serve(settings, attach=attach)
     return 0
 
 
@@ -443,6 +446,7 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--db", help="pattern library, SQLite file")
     parser.add_argument("--token", help="bearer token every request must carry")
+    fleet_cli.add_serve_options(parser)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -457,6 +461,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve.set_defaults(func=_cmd_serve)
     add_osc_command(sub, _serve_arguments, _cmd_serve)
     add_import_command(sub)
+    fleet_cli.register(sub)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from collections.abc import AsyncIterator, Callable
+from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI
@@ -39,6 +39,10 @@ from phantomtouch.server.store import PatternStore
 
 logger = logging.getLogger("phantomtouch.server")
 
+Attachment = Callable[[Service], AbstractAsyncContextManager[None]]
+"""Something the lifespan enters once the service runs and leaves before it stops (an
+armband node joining a fleet: ``phantomtouch.fleet.node.attach``)."""
+
 DESCRIPTION = """Touch on the forearm for VR scenes and touch research.
 
 Errors are `{"error": {"code", "message", "fields": [{field, value, message}]}}`; the
@@ -46,7 +50,7 @@ wire protocol, the WebSocket `/ws` included, is described in `docs/protocol.md`.
 """
 
 
-def _lifespan(settings: Settings, metrics: Metrics) -> Any:
+def _lifespan(settings: Settings, metrics: Metrics, attach: Attachment | None) -> Any:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         device = (
@@ -74,7 +78,11 @@ def _lifespan(settings: Settings, metrics: Metrics) -> Any:
 
                 osc = start_osc(service)
                 logger.info("phantomtouch: OSC on udp://%s:%d", *osc.address)
-            yield
+            if attach is None:
+                yield
+            else:
+                async with attach(service):
+                    yield
         finally:
             if osc is not None:
                 await asyncio.to_thread(osc.close)
@@ -108,15 +116,16 @@ def _openapi(app: FastAPI, settings: Settings) -> Any:
     return schema
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the app; the engine and the store open when it starts (lifespan)."""
+def create_app(settings: Settings | None = None, *, attach: Attachment | None = None) -> FastAPI:
+    """Build the app; the engine and the store open when it starts (lifespan), then
+    ``attach`` (if given) is entered with the running service."""
     settings = settings or Settings()
     metrics = Metrics()
     app = FastAPI(
         title="phantomtouch",
         version=__version__,
         description=DESCRIPTION,
-        lifespan=_lifespan(settings, metrics),
+        lifespan=_lifespan(settings, metrics, attach),
         separate_input_output_schemas=False,
         docs_url=None,
         redoc_url=None,

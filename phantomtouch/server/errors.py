@@ -55,6 +55,7 @@ ErrorCode = Literal[
     "invalid",
     "unauthorized",
     "forbidden_origin",
+    "forbidden",
     "unknown_host",
     "unsupported_media_type",
     "stored_pattern",

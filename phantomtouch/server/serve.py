@@ -7,7 +7,7 @@ import socket
 from typing import Any
 
 from phantomtouch.errors import PhantomTouchError
-from phantomtouch.server.app import create_app
+from phantomtouch.server.app import Attachment, create_app
 from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
 
@@ -64,8 +64,11 @@ def check_port_free(host: str, port: int) -> None:
             ) from exc
 
 
-def serve(settings: Settings) -> None:
+def serve(settings: Settings, *, attach: Attachment | None = None) -> None:
     """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly).
+
+    ``attach`` joins the running service to something more (a fleet); see
+    :func:`~phantomtouch.server.app.create_app`.
 
     Requests uvicorn cannot parse are answered with the service's JSON error body, and
     WebSocket frames are parsed at the pace their session handles them
@@ -76,7 +79,7 @@ def serve(settings: Settings) -> None:
     from phantomtouch.server.wire import FairWebSocketProtocol, JsonErrorProtocol
 
     uvicorn.run(
-        create_app(settings),
+        create_app(settings, attach=attach),
         http=JsonErrorProtocol,
         ws=FairWebSocketProtocol,
         host=settings.host,

@@ -116,8 +116,21 @@ def _segment(value: JobId) -> str:
     return quote(str(value), safe="")
 
 
-def touch(body: dict[str, Any]) -> Call[Job]:
-    return Call("POST", "/touch", _model(Job), body)
+def touch(body: dict[str, Any], armband: str | None = None) -> Call[Job]:
+    if armband is None:
+        return Call("POST", "/touch", _model(Job), body)
+    return Call("POST", f"/armbands/{_segment(armband)}/touch", _model(Job), body)
+
+
+def _records(response: httpx.Response) -> list[dict[str, Any]]:
+    data = _decode(response)
+    if not isinstance(data, list):
+        raise TransportError(f"{response.request.url.path}: expected a list of armbands")
+    return data
+
+
+def armbands() -> Call[list[dict[str, Any]]]:
+    return Call("GET", "/armbands", _records)
 
 
 def render_wav(body: dict[str, Any]) -> Call[bytes]:

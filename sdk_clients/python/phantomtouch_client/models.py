@@ -281,6 +281,20 @@ def touch_request(
     return body
 
 
+def fleet_touch_request(body: dict[str, Any], start_at_unix_s: float | None) -> dict[str, Any]:
+    """A touch request for a fleet gateway: ``start_at_unix_s`` (wall clock, s) added.
+
+    It may not go with ``start_in_ms`` or ``start_at_s`` (those are one armband's clock).
+    """
+    if start_at_unix_s is None:
+        return body
+    if "start_in_ms" in body or "start_at_s" in body:
+        raise ParameterError(
+            f"start_at_unix_s={start_at_unix_s!r}: give it or start_in_ms / start_at_s, not both"
+        )
+    return {**body, "start_at_unix_s": start_at_unix_s}
+
+
 def timing(*, start_in_ms: float | None = None, start_at_s: float | None = None) -> dict[str, Any]:
     """The optional timing fields of a request."""
     if start_in_ms is not None and start_at_s is not None:

@@ -30,6 +30,7 @@ from phantomtouch_client.models import (
     RenderPlan,
     StopAnswer,
     Summary,
+    fleet_touch_request,
     touch_request,
 )
 from phantomtouch_client.pattern import HapticClip, TouchPattern
@@ -194,17 +195,28 @@ class Client(_Base):
         overrides: Mapping[str, Any] | None = None,
         start_in_ms: float | None = None,
         start_at_s: float | None = None,
+        armband: str | None = None,
+        start_at_unix_s: float | None = None,
     ) -> Job:
-        """``POST /touch``: schedule a touch; see :func:`~phantomtouch_client.touch_request`."""
-        body = touch_request(
-            pattern,
-            preset=preset,
-            stored=stored,
-            overrides=overrides,
-            start_in_ms=start_in_ms,
-            start_at_s=start_at_s,
+        """``POST /touch``: schedule a touch; see :func:`~phantomtouch_client.touch_request`.
+
+        Through a fleet gateway, ``armband`` addresses one armband
+        (``POST /armbands/{armband}/touch``) and ``start_at_unix_s`` starts it at that
+        wall-clock time (the same instant on every armband sent it); the answer then also
+        carries ``armband``, ``site`` and ``start_at_unix_s``.
+        """
+        body = fleet_touch_request(
+            touch_request(
+                pattern,
+                preset=preset,
+                stored=stored,
+                overrides=overrides,
+                start_in_ms=start_in_ms,
+                start_at_s=start_at_s,
+            ),
+            start_at_unix_s,
         )
-        return self._run(_calls.touch(body))
+        return self._run(_calls.touch(body, armband))
 
     def render(
         self,
@@ -241,6 +253,10 @@ class Client(_Base):
     def stop(self) -> StopAnswer:
         """``POST /stop``: every job and contact of every client off at once."""
         return self._run(_calls.stop())
+
+    def armbands(self) -> list[dict[str, Any]]:
+        """``GET /armbands`` of a fleet gateway: the armbands online, with their devices."""
+        return self._run(_calls.armbands())
 
     def patterns(self) -> list[Summary]:
         """``GET /patterns``: the stored patterns."""
@@ -374,17 +390,28 @@ class AsyncClient(_Base):
         overrides: Mapping[str, Any] | None = None,
         start_in_ms: float | None = None,
         start_at_s: float | None = None,
+        armband: str | None = None,
+        start_at_unix_s: float | None = None,
     ) -> Job:
-        """``POST /touch``: schedule a touch; see :func:`~phantomtouch_client.touch_request`."""
-        body = touch_request(
-            pattern,
-            preset=preset,
-            stored=stored,
-            overrides=overrides,
-            start_in_ms=start_in_ms,
-            start_at_s=start_at_s,
+        """``POST /touch``: schedule a touch; see :func:`~phantomtouch_client.touch_request`.
+
+        Through a fleet gateway, ``armband`` addresses one armband
+        (``POST /armbands/{armband}/touch``) and ``start_at_unix_s`` starts it at that
+        wall-clock time (the same instant on every armband sent it); the answer then also
+        carries ``armband``, ``site`` and ``start_at_unix_s``.
+        """
+        body = fleet_touch_request(
+            touch_request(
+                pattern,
+                preset=preset,
+                stored=stored,
+                overrides=overrides,
+                start_in_ms=start_in_ms,
+                start_at_s=start_at_s,
+            ),
+            start_at_unix_s,
         )
-        return await self._run(_calls.touch(body))
+        return await self._run(_calls.touch(body, armband))
 
     async def render(
         self,
@@ -417,6 +444,10 @@ class AsyncClient(_Base):
     async def cancel_job(self, job_id: JobId) -> JobStatus:
         """``DELETE /jobs/{id}``: stop that job with its release ramp."""
         return await self._run(_calls.cancel_job(job_id))
+
+    async def armbands(self) -> list[dict[str, Any]]:
+        """``GET /armbands`` of a fleet gateway: the armbands online, with their devices."""
+        return await self._run(_calls.armbands())
 
     async def stop(self) -> StopAnswer:
         """``POST /stop``: every job and contact of every client off at once."""

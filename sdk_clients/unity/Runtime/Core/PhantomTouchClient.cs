@@ -97,6 +97,9 @@ namespace PhantomTouch
         /// <summary>POST /touch: schedules a touch; answers the job (job_id, start_at_s, duration_s ...).</summary>
         public Task<JsonObject> TouchAsync(TouchRequest request) { return ObjectAsync("POST", "/touch", request.Body); }
 
+        /// <summary>POST /armbands/{armband}/touch of a fleet gateway (docs/fleet.md): the touch on one named armband.</summary>
+        public Task<JsonObject> ArmbandTouchAsync(string armband, TouchRequest request) { return ObjectAsync("POST", "/armbands/" + Segment(armband) + "/touch", request.Body); }
+
         /// <summary>POST /render: the touch as a WAV file (float32, one channel per actuator).</summary>
         public Task<byte[]> RenderWavAsync(TouchRequest request) { return BytesAsync("POST", "/render", request.Body, "audio/wav"); }
 

@@ -1,0 +1,123 @@
+"""The fleet's part of the command line.
+
+``phantomtouch serve --fleet nats://HOST:4222 --armband ID [--site NAME]`` joins the
+service to a fleet as an armband node; ``phantomtouch gateway --fleet nats://...`` runs a
+gateway. NATS credentials come from the environment (docs/fleet.md), never from a flag.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from contextlib import AbstractAsyncContextManager
+from typing import TYPE_CHECKING, Any
+
+from phantomtouch.errors import ParameterError, PhantomTouchError
+
+if TYPE_CHECKING:
+    from phantomtouch.fleet.settings import FleetSettings
+    from phantomtouch.server.service import Service
+
+
+def add_serve_options(serve: argparse.ArgumentParser) -> None:
+    """``--fleet``, ``--armband`` and ``--site`` of ``phantomtouch serve``."""
+    serve.add_argument(
+        "--fleet", help="join a fleet: NATS server URL(s), comma-separated (nats://HOST:4222)"
+    )
+    serve.add_argument("--armband", help="this armband's id in the fleet (with --fleet)")
+    serve.add_argument("--site", help="this armband's site in the fleet (default: 'default')")
+
+
+def _fleet_settings(args: argparse.Namespace, **more: Any) -> FleetSettings:
+    from pydantic import ValidationError
+
+    from phantomtouch.fleet.settings import FleetSettings
+    from phantomtouch.schema import describe_validation_error
+
+    options = {"servers": args.fleet, **more}
+    try:
+        return FleetSettings(**{k: v for k, v in options.items() if v is not None})
+    except ValidationError as exc:
+        raise ParameterError(f"invalid fleet settings: {describe_validation_error(exc)}") from exc
+
+
+def _require_nats() -> None:
+    import importlib.util
+
+    if importlib.util.find_spec("nats") is None:
+        raise PhantomTouchError(
+            "nats is not installed: this needs the fleet extra, pip install 'phantomtouch[fleet]'"
+        )
+
+
+def attachment(
+    args: argparse.Namespace,
+) -> Callable[[Service], AbstractAsyncContextManager[None]] | None:
+    """What ``serve`` attaches to the service: the armband node, or None without ``--fleet``."""
+    if args.fleet is None:
+        if args.armband is not None or args.site is not None:
+            raise ParameterError("--armband and --site need --fleet nats://HOST:4222")
+        return None
+    if args.armband is None:
+        raise ParameterError("--fleet needs --armband ID: the id this armband has in the fleet")
+    _require_nats()
+    from phantomtouch.fleet.node import attach
+
+    settings = _fleet_settings(args, armband=args.armband, site=args.site)
+    print(
+        f"phantomtouch serve: armband {settings.armband!r} of site {settings.site!r} on the "
+        f"fleet at {', '.join(settings.servers)}"
+    )
+    return attach(settings)
+
+
+def _cmd_gateway(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    from phantomtouch.schema import describe_validation_error
+
+    _require_nats()
+    from phantomtouch.fleet.gateway import create_gateway
+    from phantomtouch.fleet.gateway_settings import GatewaySettings
+    from phantomtouch.server.serve import check_port_free, log_config
+
+    options = {"host": args.host, "port": args.port, "token": args.token}
+    try:
+        settings = GatewaySettings(**{k: v for k, v in options.items() if v is not None})
+    except ValidationError as exc:
+        raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
+    fleet = _fleet_settings(args)
+    check_port_free(settings.host, settings.port)
+    print(
+        f"phantomtouch gateway: http://{settings.host}:{settings.port} for the fleet at "
+        f"{', '.join(fleet.servers)}",
+        file=sys.stdout,
+        flush=True,
+    )
+    import uvicorn
+
+    uvicorn.run(
+        create_gateway(settings, fleet),
+        host=settings.host,
+        port=settings.port,
+        ws_max_size=settings.max_ws_message_bytes,
+        log_config=log_config(),
+        access_log=False,
+        server_header=False,
+    )
+    return 0
+
+
+def register(sub: Any) -> None:
+    """Add ``phantomtouch gateway`` to the subcommands ``sub``."""
+    gateway = sub.add_parser("gateway", help="run a REST and WebSocket gateway of a fleet")
+    gateway.add_argument(
+        "--fleet", required=True, help="NATS server URL(s), comma-separated (nats://HOST:4222)"
+    )
+    gateway.add_argument("--host", help="address to bind (default 127.0.0.1; others need tokens)")
+    gateway.add_argument("--port", type=int, help="TCP port (default 8100)")
+    gateway.add_argument(
+        "--token", help="a token of every armband (also PHANTOMTOUCH_GATEWAY_TOKEN)"
+    )
+    gateway.set_defaults(func=_cmd_gateway)

@@ -1,0 +1,61 @@
+"""Refusals of the fleet, below :class:`~phantomtouch.server.errors.ServiceError`.
+
+Both name the armband; :func:`phantomtouch.server.errors.describe` maps them, as every
+other refusal, to their status and code::
+
+    ServiceError
+    ├── NotFoundError
+    │   └── ArmbandNotFoundError     404 not_found  (not in the registry: offline or unknown)
+    ├── ArmbandUnavailableError      503 device     (registered, but no answer in time)
+    │   └── NoNodeError              503 device     (no node listens on its subjects)
+    └── ForbiddenArmbandError        403 forbidden  (outside the gateway token's scope)
+"""
+
+from __future__ import annotations
+
+from phantomtouch.server.errors import ErrorCode, NotFoundError, ServiceError
+
+
+class ArmbandNotFoundError(NotFoundError):
+    """An armband id that is not in the registry (never started, or its TTL ran out)."""
+
+    def __init__(self, armband: str) -> None:
+        super().__init__(
+            f"armband={armband!r} is not online: it is not in the fleet's registry "
+            "(GET /armbands lists the armbands online)",
+            field="armband",
+            value=armband,
+        )
+
+
+class ArmbandUnavailableError(ServiceError):
+    """A registered armband whose node did not answer (it died, or NATS lost it)."""
+
+    status_code = 503
+    code: ErrorCode = "device"
+
+    def __init__(self, armband: str, reason: str) -> None:
+        super().__init__(
+            f"armband={armband!r} did not answer: {reason}", field="armband", value=armband
+        )
+
+
+class NoNodeError(ArmbandUnavailableError):
+    """Nobody listens on the armband's subjects (NATS answered "no responders" at once)."""
+
+    def __init__(self, armband: str) -> None:
+        super().__init__(armband, "no node answers its subjects")
+
+
+class ForbiddenArmbandError(ServiceError):
+    """A gateway token whose scope does not include the armband it addresses."""
+
+    status_code = 403
+    code: ErrorCode = "forbidden"
+
+    def __init__(self, armband: str, player: str) -> None:
+        super().__init__(
+            f"armband={armband!r} is not one of player {player!r}'s armbands (the token's scope)",
+            field="armband",
+            value=armband,
+        )

@@ -1,0 +1,96 @@
+"""Live contacts through a gateway: latest position wins, and nothing outlives its client."""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+from websockets.sync.client import ClientConnection, connect
+
+from tests.fleet.conftest import Fleet
+from tests.support.fleet import WATCHDOG_S, Gateway, wait_until
+
+
+def _ask(ws: ClientConnection, message: dict[str, Any]) -> dict[str, Any]:
+    ws.send(json.dumps(message))
+    answer: dict[str, Any] = json.loads(ws.recv(timeout=5.0))
+    return answer
+
+
+def _remote_contacts(fleet: Fleet, armband: str) -> list[dict[str, Any]]:
+    """The contacts the armband's engine holds, read from its own WebSocket ``state``."""
+    with connect(fleet.nodes[armband].ws_url) as local:
+        local.send(json.dumps({"type": "subscribe", "rate_hz": 50}))
+        while True:
+            message = json.loads(local.recv(timeout=5.0))
+            if message["type"] == "state":
+                return [c for c in message["contacts"] if not c["own"]]
+
+
+def test_moves_reach_the_addressed_armband_and_the_latest_wins(fleet: Fleet) -> None:
+    with connect(fleet.gateways[0].ws_url) as ws:
+        welcome = _ask(ws, {"type": "hello", "id": 1})
+        assert set(welcome["armbands"]) == set(fleet.nodes)
+        down = {"type": "down", "armband": "a3", "contact": "hand", "x_cm": 1.9, "y_cm": 12.0}
+        assert _ask(ws, {**down, "id": 2})["type"] == "ok"
+        for step in range(60):
+            y_cm = 12.0 - step * (9.6 / 59)
+            ws.send(
+                json.dumps(
+                    {"type": "move", "armband": "a3", "contact": "hand", "x_cm": 1.9, "y_cm": y_cm}
+                )
+            )
+        assert _ask(ws, {"type": "ping", "id": 3})["type"] == "pong"
+        time.sleep(0.2)
+        held = _remote_contacts(fleet, "a3")
+        assert [c["contact"] for c in held] == ["hand"]
+        # The last move (y = 2.4 cm) is where the contact is: nothing queued behind it.
+        assert abs(held[0]["y_cm"] - 2.4) < 1e-6
+        assert _remote_contacts(fleet, "a1") == []
+        answer = _ask(
+            ws, {"type": "move", "armband": "a1", "contact": "hand", "x_cm": 1, "y_cm": 1, "id": 4}
+        )
+        assert answer["type"] == "error"
+        assert "not down on armband 'a1'" in answer["message"]
+    wait_until(lambda: _remote_contacts(fleet, "a3") == [], 3.0, "contact released on close")
+
+
+def test_a_contact_without_an_armband_is_refused_by_name(fleet: Fleet) -> None:
+    with connect(fleet.gateways[1].ws_url) as ws:
+        answer = _ask(ws, {"type": "down", "contact": "c", "x_cm": 1.0, "y_cm": 1.0, "id": 9})
+        assert answer["type"] == "error"
+        assert answer["message"].startswith("armband: field required")
+        answer = _ask(
+            ws,
+            {"type": "down", "armband": "gone", "contact": "c", "x_cm": 1.0, "y_cm": 1.0, "id": 10},
+        )
+        assert answer["code"] == "not_found"
+        assert "'gone'" in answer["message"]
+
+
+def test_a_vanished_gateway_releases_its_contacts_on_every_armband(fleet: Fleet) -> None:
+    gateway = Gateway(fleet.folder, fleet.cluster).start()
+    try:
+        ws = connect(gateway.ws_url, legacy=True)
+        for armband in ("a1", "a2"):
+            down = {"type": "down", "armband": armband, "contact": "c", "x_cm": 1.9, "y_cm": 7.2}
+            assert _ask(ws, {**down, "id": armband})["type"] == "ok"
+        assert len(_remote_contacts(fleet, "a1")) == len(_remote_contacts(fleet, "a2")) == 1
+        gateway.kill()
+        killed_s = time.monotonic()
+        for armband in ("a1", "a2"):
+            wait_until(
+                lambda a=armband: _remote_contacts(fleet, a) == [], 5.0, f"{armband} released"
+            )
+        elapsed_s = time.monotonic() - killed_s
+        # The node's fleet watchdog lets go after watchdog_s of silence, checked every quarter.
+        assert elapsed_s < WATCHDOG_S * 1.25 + 2.0
+        node = fleet.nodes["a1"]
+        released = node.metric(
+            "phantomtouch_fleet_messages_total", 'outcome="watchdog_release",subject="contact"'
+        )
+        assert released >= 1
+        ws.close()
+    finally:
+        gateway.kill()

@@ -1,0 +1,144 @@
+"""A whole fleet on one machine for tests: NATS cluster, armband nodes and gateways.
+
+Armband nodes are real ``phantomtouch serve --fleet`` processes on the null output; each
+keeps the engine's stimulus log (what it played, from which frame, at which time) in the
+test's folder, which is how a test sees what reached which armband. Gateways are real
+``phantomtouch gateway`` processes. Everything listens on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+from tests.support.live_server import HOST, LiveServer, free_port
+from tests.support.nats_cluster import NatsCluster
+
+HEARTBEAT_S = 0.25
+TTL_S = 1.5
+WATCHDOG_S = 0.5
+NODE_ENV = {
+    "PHANTOMTOUCH_ENGINE_PROCESS": "false",
+    "PHANTOMTOUCH_FLEET_HEARTBEAT_S": str(HEARTBEAT_S),
+    "PHANTOMTOUCH_FLEET_TTL_S": str(TTL_S),
+    "PHANTOMTOUCH_WATCHDOG_S": str(WATCHDOG_S),
+}
+"""Short heartbeats, TTL and watchdog keep the tests short; the engine runs in a thread of
+each node (three engine processes more would only load the machine's two cores)."""
+
+
+class ArmbandNode(LiveServer):
+    """``phantomtouch serve --fleet ... --armband ID --site SITE`` with a stimulus log."""
+
+    def __init__(
+        self,
+        folder: Path,
+        cluster: NatsCluster,
+        armband: str,
+        site: str,
+        env: dict[str, str] | None = None,
+    ) -> None:
+        self.armband = armband
+        self.site = site
+        self.stimulus_log = folder / f"{armband}.jsonl"
+        super().__init__(
+            folder / f"{armband}.db",
+            env={**NODE_ENV, "PHANTOMTOUCH_ENGINE_LOG_PATH": str(self.stimulus_log), **(env or {})},
+            args=("--fleet", cluster.servers, "--armband", armband, "--site", site),
+        )
+
+    def played(self) -> list[dict[str, Any]]:
+        """The ``start`` records of jobs in the stimulus log so far."""
+        if not self.stimulus_log.exists():
+            return []
+        records = [json.loads(line) for line in self.stimulus_log.read_text().splitlines()]
+        return [r for r in records if r["event"] == "start" and r["kind"] == "job"]
+
+    def wait_played(self, job_id: str, timeout_s: float = 5.0) -> dict[str, Any]:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            for record in self.played():
+                if record["job_id"] == job_id:
+                    return record
+            time.sleep(0.05)
+        raise AssertionError(f"job {job_id} never started on armband {self.armband}")
+
+    def metric(self, name: str, labels: str = "") -> float:
+        """One sample of the node's ``/metrics`` (0 when absent)."""
+        text = httpx.get(f"{self.url}/metrics", timeout=5.0).text
+        prefix = f"{name}{{{labels}}}" if labels else name
+        for line in text.splitlines():
+            if line.startswith(prefix + " "):
+                return float(line.split()[-1])
+        return 0.0
+
+
+class Gateway:
+    """``phantomtouch gateway --fleet ...`` on a free port."""
+
+    def __init__(self, folder: Path, cluster: NatsCluster, env: dict[str, str] | None = None):
+        self.port = free_port()
+        self.cluster = cluster
+        self.log_path = folder / f"gateway-{self.port}.log"
+        self.env = env or {}
+        self.process: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://{HOST}:{self.port}"
+
+    @property
+    def ws_url(self) -> str:
+        return f"ws://{HOST}:{self.port}/ws"
+
+    def start(self) -> Gateway:
+        command = [sys.executable, "-m", "phantomtouch", "gateway", "--fleet"]
+        command += [self.cluster.servers, "--port", str(self.port)]
+        with self.log_path.open("ab") as log:
+            self.process = subprocess.Popen(
+                command, env={**os.environ, **self.env}, stdout=log, stderr=subprocess.STDOUT
+            )
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                raise RuntimeError(f"gateway exited:\n{self.log()}")
+            try:
+                if httpx.get(f"{self.url}/health", timeout=1.0).status_code == 200:
+                    return self
+            except httpx.TransportError:
+                pass
+            time.sleep(0.05)
+        raise RuntimeError(f"gateway not healthy:\n{self.log()}")
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")[-3000:]
+
+    def kill(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+
+    def stop(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+            try:
+                self.process.wait(10)
+            except subprocess.TimeoutExpired:
+                self.kill()
+
+
+def wait_until(predicate: Any, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"not within {timeout_s} s: {what}")
