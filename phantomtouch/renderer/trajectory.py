@@ -73,30 +73,41 @@ def _unit_clamp(values: np.ndarray) -> np.ndarray:
     return np.minimum(values, 1.0, out=values)
 
 
-def _modulation(plan: Plan, times_s: np.ndarray, tau_s: np.ndarray) -> np.ndarray | None:
+def _modulation(
+    plan: Plan, times_s: np.ndarray, tau_s: np.ndarray, dtype: type = np.float64
+) -> np.ndarray | None:
     mod = plan.pattern.modulation
     if mod is None or mod.index <= 0:
         return None
     cycles = tau_s / plan.stroke_s if mod.freq_hz == "stroke" else times_s * float(mod.freq_hz)
     cycles -= np.floor(cycles)  # the phase wrapped in float64 keeps its precision for hours
     m = mod.index
-    return np.asarray((1.0 - m / 2.0) - (m / 2.0) * np.cos(2.0 * np.pi * cycles))
+    phase: np.ndarray = cycles.astype(dtype, copy=False)
+    phase *= dtype(2.0 * np.pi)
+    factor = np.cos(phase, out=phase)
+    factor *= dtype(-m / 2.0)
+    factor += dtype(1.0 - m / 2.0)
+    return factor
 
 
-def modulation_at(plan: Plan, times_s: np.ndarray) -> np.ndarray | None:
+def modulation_at(
+    plan: Plan, times_s: np.ndarray, *, dtype: type = np.float64
+) -> np.ndarray | None:
     """Amplitude modulation factor of eq. 2 at absolute pattern times.
 
     ``(1 - m/2) - (m/2) cos(2 pi f_m t)``, with ``f_m t`` replaced by the stroke-local
-    time over the stroke's length for ``freq_hz="stroke"``.
+    time over the stroke's length for ``freq_hz="stroke"``. The phase is wrapped to one
+    cycle in float64 whatever ``dtype``, so float32 (what the block renderer asks for:
+    its cosine costs a twentieth) loses no precision over hours.
 
     Returns
     -------
-    ndarray, shape (n,), float64, each in [0, 1], or None
+    ndarray, shape (n,), ``dtype``, each in [0, 1], or None
         None when the pattern has no modulation (a factor of 1 throughout).
     """
     times_s = np.asarray(times_s, dtype=np.float64)
     _, tau = _stroke_time(plan, times_s)
-    return _modulation(plan, times_s, tau)
+    return _modulation(plan, times_s, tau, dtype)
 
 
 def _envelope(

@@ -184,9 +184,9 @@ class PatternRenderer:
     def _modulation(self, first: int, frames: int) -> np.ndarray:
         """Eq. 2's factor at frames ``first ..``, shape (frames,), float32."""
         times_s = np.arange(first, first + frames, dtype=np.float64) * self._frame_s
-        factor = modulation_at(self.plan, times_s)
+        factor = modulation_at(self.plan, times_s, dtype=np.float32)
         assert factor is not None  # only called for a modulated pattern
-        return factor.astype(np.float32)
+        return factor
 
     def render(self, frames: int) -> np.ndarray:
         """The next ``frames`` frames as a new array, shape (frames, channels), float32."""
