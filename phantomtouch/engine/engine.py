@@ -40,12 +40,12 @@ from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger("phantomtouch.engine")
 
-RENDER_AHEAD_FRAMES = 16384
+RENDER_AHEAD_FRAMES = 8192
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`):
 most of a refill's cost is per call, so long chunks make a sounding voice cheap."""
 RENDER_AHEAD_RINGS = 64
 """Most pattern voices that render ahead at once: the engine preallocates a ring (two
-chunks, 1 MB at 8 channels; memory is taken only once a ring is used) for each of
+chunks, 512 KB at 8 channels; memory is taken only once a ring is used) for each of
 ``min(max_voices, RENDER_AHEAD_RINGS)`` voices; voices beyond render block by block."""
 HOUSEKEEPING_PERIOD_S = 0.05
 COST_PRESET = "exp1/noise-high-v3"
