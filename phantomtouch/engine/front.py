@@ -12,11 +12,12 @@ process without waiting for an answer. No call waits for the audio side.
 Admission by budget
 -------------------
 The audio side measures what a pattern voice costs to render (a fraction of a block's
-playing time, :func:`~phantomtouch.engine.core.measure_costs`); the front admits
-jobs while ``voices x cost`` stays within ``render_budget`` of the period (and within
-``max_voices``). Beyond it the voice policy decides, as game audio engines do:
-``refuse`` (EngineBusyError, a 503 ``busy``), ``steal-oldest`` (the default: the newest
-touch is the one the user sees) or ``steal-quietest``; a stolen job fades out over
+playing time, :func:`~phantomtouch.engine.core.measure_costs`; a prerendered one costs
+a fraction of that); the front admits a job while the costs of the jobs sounding with it
+sum to at most ``render_budget`` of the period (and they number at most ``max_voices``).
+Beyond it the voice policy decides, as game audio engines do: ``refuse``
+(EngineBusyError, a 503 ``busy``), ``steal-oldest`` (the default: the newest touch is
+the one the user sees) or ``steal-quietest``; a stolen job fades out over
 ``STEAL_FADE_S``, which never clicks.
 """
 

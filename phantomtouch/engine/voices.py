@@ -1,14 +1,13 @@
 """Voices: what the audio callback renders, one block at a time.
 
 A voice knows when it starts and when it is released, and adds its samples for one block
-into the mix. When the channels its gains drive span at most half the channels, it touches
-only those; a wider span adds all channels at once (the others add zeros, which changes
-no sample), as a contiguous add is faster than a strided one. :class:`PatternVoice` plays a
-planned pattern through the renderer's :class:`~phantomtouch.renderer.PatternRenderer`,
-so it gives exactly the samples of an offline render; :class:`PrerenderedVoice` plays a
-short plan rendered whole beforehand (:mod:`phantomtouch.engine.prerender`), the same
-samples with no rendering in the callback; the contact voice lives in
-:mod:`phantomtouch.engine.contacts`.
+into the mix. :class:`PatternVoice` plays a planned pattern through the renderer's
+:class:`~phantomtouch.renderer.PatternRenderer`, so it gives exactly the samples of an
+offline render; :class:`PrerenderedVoice` plays a short plan rendered whole beforehand
+(:mod:`phantomtouch.engine.prerender`), the same samples with no rendering in the
+callback; the contact voice lives in :mod:`phantomtouch.engine.contacts`. Both job
+voices add whole-width frames, one contiguous add a block (the channels a voice does not
+drive add zeros, which changes no sample).
 
 A release fades a voice out linearly over ``release_frames``: the gain of frame ``f``
 at or after the release frame ``R`` is ``(R + L - 1 - f) / L`` (``L`` the release length),
@@ -16,18 +15,17 @@ so the voice is silent from frame ``R + L - 1`` on and never clicks.
 
 Render-ahead
 ------------
-The block renderer's cost is almost all per call (about 0.1 ms whatever the block
-length), so a pattern voice renders ``chunk_frames`` (default 4096) frames at a time into
-a ring of two chunks taken from a preallocated :class:`RingPool`, and the callback adds
-slices of it. The scheduler spreads the refills of all voices evenly over the blocks.
-The samples are the same: the block renderer gives identical samples however its output
-is cut into blocks. A voice that runs dry (one that just began) renders a chunk at once;
-the engine bounds how many voices may begin in one block by what that costs
-(:mod:`phantomtouch.engine.front`). With the pool empty, or ``chunk_frames`` 0, a voice
-renders each block directly.
-
-A voice that begins renders only ``FIRST_FRAMES`` at once, and the scheduler's refills
-catch up from the next block on, so a start costs a fraction of a chunk.
+The block renderer's cost is mostly per call (about 0.1 ms whatever the block length),
+so a pattern voice renders ``chunk_frames`` frames at a time into a ring of two chunks
+taken from a preallocated :class:`RingPool`, and the callback adds slices of it. The
+scheduler spreads the refills of all voices evenly over the blocks. The samples are the
+same: the block renderer gives identical samples however its output is cut into blocks.
+A voice that runs dry (one that just began) renders ``FIRST_FRAMES`` at once, and the
+scheduler's refills catch up from the next block on, so a start costs a fraction of a
+chunk; the engine bounds how many voices may begin in one block by what that costs
+(:mod:`phantomtouch.engine.admission`). With the pool empty, or ``chunk_frames`` 0, a
+voice renders each block directly (touching only the channels its gains drive when they
+span at most half of them).
 """
 
 from __future__ import annotations
@@ -42,8 +40,8 @@ from phantomtouch.renderer.plan import Plan
 
 WAITING, PLAYING, DONE = "waiting", "playing", "done"
 FIRST_FRAMES = 2048
-"""Frames a voice with a ring renders when it runs dry (it just began): less than a
-chunk, so that beginning costs little; the scheduler's refills follow."""
+"""Frames a voice with a ring renders when it runs dry (it just began), at most a chunk:
+less than a chunk, so that beginning costs little; the scheduler's refills follow."""
 
 
 class Workspace:
@@ -336,7 +334,7 @@ class PatternVoice(JobVoice):
             return
         read = self._read
         if self._write - read < count:  # run dry (a voice that just began): a few frames now
-            self.refill(max(count, FIRST_FRAMES))
+            self.refill(max(count, min(FIRST_FRAMES, self._chunk)))
         size = self._size
         start = read % size
         head = min(count, size - start)

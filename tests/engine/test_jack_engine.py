@@ -13,10 +13,12 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 import numpy as np
+import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, gains_at, render
 from phantomtouch.engine import Engine, SoundDeviceSink
 from phantomtouch.engine.engine import MAX_VOICES
+from phantomtouch.engine.prerender import PRERENDER_MAX_S
 from phantomtouch.renderer.carriers import SineSource
 from phantomtouch.renderer.levels import amplitude_for_level
 from phantomtouch.schema import NoiseCarrier, SafetyLimits
@@ -76,15 +78,23 @@ def over_jack(
     *,
     max_voices: int = MAX_VOICES,
     voice_cost: float | None = None,
+    prerender_max_s: float = PRERENDER_MAX_S,
 ) -> Iterator[Session]:
     """An engine on JACK's "system" device, recorded; MARKER plays at frame 0.
 
     ``voice_cost`` given: no costs are measured, and voices may begin in any number.
+    ``prerender_max_s`` 0: every pattern renders in the audio callback.
     """
     sink = SoundDeviceSink(device, "system")
     recorder = JackRecorder(server, channels=8, max_frames=int(seconds * RATE))
     assert len(recorder.connect_from("PortAudio")) == 8
-    engine = Engine(device, sink, max_voices=max_voices, voice_cost=voice_cost)
+    engine = Engine(
+        device,
+        sink,
+        max_voices=max_voices,
+        voice_cost=voice_cost,
+        prerender_max_s=prerender_max_s,
+    )
     session = Session(engine, recorder)
     try:
         engine.schedule(MARKER, start_frame=0)
@@ -95,12 +105,15 @@ def over_jack(
         session.recording = recorder.close()
 
 
+@pytest.mark.parametrize(
+    "prerender_max_s", [PRERENDER_MAX_S, 0.0], ids=["prerendered", "rendered-in-the-callback"]
+)
 def test_scheduled_patterns_arrive_bit_exact_at_their_requested_frames(
-    jack_server: JackServer,
+    jack_server: JackServer, prerender_max_s: float
 ) -> None:
     sine = stroke()
     noise = stroke(carrier={"kind": "noise", "seed": 7}, intensity="high")
-    with over_jack(jack_server) as session:
+    with over_jack(jack_server, prerender_max_s=prerender_max_s) as session:
         engine = session.engine
         aligned_at = (engine.now_frames // BLOCK + 40) * BLOCK
         aligned = engine.schedule(noise, start_frame=aligned_at)

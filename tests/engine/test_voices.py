@@ -31,7 +31,13 @@ def pattern(k: int) -> TouchPattern:
 
 def play(render_ahead_frames: int, voices: int) -> np.ndarray:
     sink = CaptureSink(DEVICE)
-    with Engine(DEVICE, sink, render_ahead_frames=render_ahead_frames, max_voices=voices) as engine:
+    with Engine(
+        DEVICE,
+        sink,
+        render_ahead_frames=render_ahead_frames,
+        max_voices=voices,
+        prerender_max_s=0.0,  # these short strokes render in the callback, not beforehand
+    ) as engine:
         jobs = [engine.schedule(pattern(k), start_frame=97 * k) for k in range(voices)]
         for job in jobs[::5]:
             sink.pull(1)
@@ -47,9 +53,9 @@ def test_rendering_ahead_gives_the_same_samples_as_rendering_each_block(voices: 
 
 def test_a_voice_rendered_ahead_equals_the_offline_render_whatever_the_chunk() -> None:
     reference = render(pattern(3), DEVICE)
-    for chunk in (BLOCK, 1000, 4096):
+    for chunk in (BLOCK, 1000, 4096, 8192):
         sink = CaptureSink(DEVICE)
-        with Engine(DEVICE, sink, render_ahead_frames=chunk) as engine:
+        with Engine(DEVICE, sink, render_ahead_frames=chunk, prerender_max_s=0.0) as engine:
             engine.schedule(pattern(3), start_frame=5)
             recording = sink.pull(len(reference) // BLOCK + 1)
         np.testing.assert_array_equal(recording[5 : 5 + len(reference)], reference)
