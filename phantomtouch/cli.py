@@ -442,7 +442,9 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, help="TCP port (default 8000)")
     parser.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
     parser.add_argument(
-        "--output", help="sound-card output name or index, or 'null' (default: first that fits)"
+        "--output",
+        help="sound-card output name or index, 'null', or 'capture:FILE.wav' (records what plays; "
+        "written at exit) (default: first that fits)",
     )
     parser.add_argument("--db", help="pattern library, SQLite file")
     parser.add_argument("--token", help="bearer token every request must carry")

@@ -43,7 +43,6 @@ from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
 from phantomtouch.engine.link import FrameReader, NonBlockingWriter, encode, widen
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
-from phantomtouch.engine.sinks import CaptureSink
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.renderer.carriers import adopt_noise_loop
 from phantomtouch.renderer.geometry import Geometry
@@ -192,11 +191,8 @@ class _Child:
         scheduler.callback_errors += 1
         scheduler.last_error = exc
 
-    def close(self, spec: SinkSpec) -> None:
-        self.core.close(fade=True)
-        sink = self.core.sink
-        if isinstance(sink, CaptureSink) and spec.wav_path is not None:
-            sink.write_wav(spec.wav_path)
+    def close(self) -> None:
+        self.core.close(fade=True)  # a capture sink writes its WAV as it closes
 
 
 def raise_priority(priority: int | None) -> None:
@@ -312,4 +308,4 @@ def serve(
     sys.setswitchinterval(0.001)
     core.start()
     child.leave.wait()
-    child.close(spec)
+    child.close()

@@ -174,15 +174,23 @@ class CaptureSink:
         real-time pace, like :class:`NullSink`.
     max_frames : int or None
         Stop recording (but keep pulling) after this many frames; None: no limit.
+    wav_path : str, Path or None
+        Write the recording to this float32 WAV when the sink closes.
     """
 
     backend = "capture"
 
     def __init__(
-        self, device: DeviceProfile, *, realtime: bool = False, max_frames: int | None = None
+        self,
+        device: DeviceProfile,
+        *,
+        realtime: bool = False,
+        max_frames: int | None = None,
+        wav_path: str | Path | None = None,
     ) -> None:
         if max_frames is not None and (isinstance(max_frames, bool) or max_frames < 0):
             raise ParameterError(f"max_frames={max_frames!r} must be None or >= 0")
+        self.wav_path = None if wav_path is None else Path(wav_path)
         self.sample_rate_hz = device.sample_rate_hz
         self.block_frames = device.block_frames
         self.channels = device.channels
@@ -222,7 +230,10 @@ class CaptureSink:
         self._render = None
 
     def close(self) -> None:
+        """Stop; with ``wav_path``, write the recording there."""
         self.stop()
+        if self.wav_path is not None:
+            self.write_wav(self.wav_path)
 
     def pull(self, blocks: int = 1) -> np.ndarray:
         """Render ``blocks`` blocks now and record them (not with ``realtime``).

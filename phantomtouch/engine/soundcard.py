@@ -332,7 +332,7 @@ class SinkSpec:
         if self.backend == "null":
             return NullSink(device)
         if self.backend == "capture":
-            return CaptureSink(device, realtime=True)
+            return CaptureSink(device, realtime=True, wav_path=self.wav_path)
         if self.backend == "sounddevice":
             return SoundDeviceSink(
                 device, self.output, channel_map=self.channel_map, latency=self.latency

@@ -31,11 +31,21 @@ def open_engine(
     """Start the engine on the sound card the settings name, or the null output.
 
     Without ``output_device`` the first sound-card output with enough channels is used,
-    else the null output; ``output_device="null"`` forces the null output. With
+    else the null output; ``output_device="null"`` forces the null output, and
+    ``"capture:FILE.wav"`` records what plays (in real time, as the null output) and
+    writes it to that WAV when the engine closes. With
     ``engine_process`` (the default) the engine runs in a child process, and
     ``on_fault(state)`` is called when that process died or stalled and is restarted.
     """
-    from phantomtouch.engine import Engine, NullSink, ProcessEngine, SinkSpec, open_default_sink
+    from phantomtouch.engine import (
+        CaptureSink,
+        Engine,
+        NullSink,
+        ProcessEngine,
+        Sink,
+        SinkSpec,
+        open_default_sink,
+    )
 
     engine: EngineFront
     output = _output(settings)
@@ -46,11 +56,23 @@ def open_engine(
         "render_budget": settings.render_budget,
         "voice_policy": settings.voice_policy,
     }
+    capture = settings.capture_path
     if settings.engine_process:
-        spec = SinkSpec("null") if output == NULL_OUTPUT else SinkSpec("default", output=output)
+        if capture is not None:
+            spec = SinkSpec("capture", wav_path=str(capture))
+        elif output == NULL_OUTPUT:
+            spec = SinkSpec("null")
+        else:
+            spec = SinkSpec("default", output=output)
         engine = ProcessEngine(device, spec, on_fault=on_fault, **common)  # type: ignore[arg-type]
     else:
-        sink = NullSink(device) if output == NULL_OUTPUT else open_default_sink(device, output)
+        sink: Sink
+        if capture is not None:
+            sink = CaptureSink(device, realtime=True, wav_path=capture)
+        elif output == NULL_OUTPUT:
+            sink = NullSink(device)
+        else:
+            sink = open_default_sink(device, output)
         engine = Engine(device, sink, **common)  # type: ignore[arg-type]
     engine.start()
     return engine

@@ -14,6 +14,9 @@ from typing import Literal, Self
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+CAPTURE_PREFIX = "capture:"
+"""An ``output_device`` that records what plays to a WAV (``capture:FILE.wav``)."""
+
 _LOOPBACK_NAMES = {"localhost", "ip6-localhost", "ip6-loopback"}
 _HOST_NAME = re.compile(r"\*|\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_-]+(\.[A-Za-z0-9_-]+)*\.?")
 
@@ -50,7 +53,8 @@ class Settings(BaseSettings):
         default=None,
         description=(
             "Sound-card output (name or index) for the engine; None: the first output with "
-            "enough channels, else the null output. 'null' forces the null output."
+            "enough channels, else the null output. 'null' forces the null output; "
+            "'capture:FILE.wav' records what plays and writes it to that WAV at exit."
         ),
     )
     db_path: Path = Field(default_factory=default_db_path, description="SQLite pattern store.")
@@ -215,7 +219,23 @@ class Settings(BaseSettings):
     @field_validator("output_device")
     @classmethod
     def _output(cls, output: str | None) -> str | None:
-        return output.strip() or None if output is not None else None
+        output = output.strip() or None if output is not None else None
+        if output is not None and output.startswith(CAPTURE_PREFIX):
+            path = Path(output.removeprefix(CAPTURE_PREFIX))
+            if path.suffix.lower() != ".wav" or not path.parent.is_dir():
+                raise ValueError(
+                    f"output_device={output!r}: a capture output is 'capture:FILE.wav' in a "
+                    "folder that exists"
+                )
+        return output
+
+    @property
+    def capture_path(self) -> Path | None:
+        """The WAV a ``capture:`` output writes, else None."""
+        output = self.output_device
+        if output is None or not output.startswith(CAPTURE_PREFIX):
+            return None
+        return Path(output.removeprefix(CAPTURE_PREFIX))
 
     @model_validator(mode="after")
     def _public_bind_needs_token(self) -> Self:

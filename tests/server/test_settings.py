@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+import soundfile
 from pydantic import ValidationError
 
 from phantomtouch.server.settings import Settings, default_db_path, is_loopback
@@ -66,3 +69,37 @@ def test_default_db_path_follows_xdg(monkeypatch: pytest.MonkeyPatch, tmp_path: 
 def test_allowed_hosts_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("PHANTOMTOUCH_ALLOWED_HOSTS", '["Armband.Local.", "[fe80::1]", "10.0.0.7"]')
     assert Settings().allowed_hosts == ["armband.local", "[fe80::1]", "10.0.0.7"]
+
+
+def test_a_capture_output_names_a_wav_in_a_folder_that_exists(tmp_path: Path) -> None:
+    wav = tmp_path / "played.wav"
+    settings = Settings(db_path=tmp_path / "p.db", output_device=f"capture:{wav}")
+    assert settings.capture_path == wav
+    assert Settings(db_path=tmp_path / "p.db", output_device="null").capture_path is None
+    for bad in (f"capture:{tmp_path / 'played.flac'}", f"capture:{tmp_path / 'no' / 'x.wav'}"):
+        with pytest.raises(ValidationError, match="output_device=.*'capture:FILE.wav'"):
+            Settings(db_path=tmp_path / "p.db", output_device=bad)
+
+
+def test_a_capture_output_writes_what_played_when_the_service_stops(tmp_path: Path) -> None:
+    from fastapi.testclient import TestClient
+
+    from phantomtouch import DeviceProfile, preset, render
+    from phantomtouch.server import create_app
+
+    wav = tmp_path / "played.wav"
+    settings = Settings(
+        db_path=tmp_path / "p.db",
+        output_device=f"capture:{wav}",
+        engine_process=False,
+        allowed_hosts=["testserver"],
+    )
+    with TestClient(create_app(settings)) as client:
+        job = client.post("/touch", json={"preset": "vr/tap"}).json()
+        while client.get(f"/jobs/{job['job_id']}").json()["state"] != "finished":
+            time.sleep(0.02)
+    recording, _ = soundfile.read(wav, dtype="float32")
+    reference = render(preset("vr/tap"), DeviceProfile.default())
+    at = job["start_frame"]
+    np.testing.assert_array_equal(recording[at : at + len(reference)], reference)
+    assert not np.any(recording[:at])

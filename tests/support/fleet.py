@@ -45,6 +45,7 @@ class ArmbandNode(LiveServer):
         armband: str,
         site: str,
         env: dict[str, str] | None = None,
+        output: str = "null",
     ) -> None:
         self.armband = armband
         self.site = site
@@ -53,6 +54,7 @@ class ArmbandNode(LiveServer):
             folder / f"{armband}.db",
             env={**NODE_ENV, "PHANTOMTOUCH_ENGINE_LOG_PATH": str(self.stimulus_log), **(env or {})},
             args=("--fleet", cluster.servers, "--armband", armband, "--site", site),
+            output=output,
         )
 
     def played(self) -> list[dict[str, Any]]:

@@ -1,0 +1,109 @@
+"""What the armbands played, as recorded: each node's output captured to a WAV.
+
+Three armband nodes on ``capture:`` outputs (the engine records every block it plays and
+writes the WAV when the node stops) and a gateway: a touch addressed to one armband is
+in that armband's recording only, sample for sample the offline render, from the frame
+its engine logged; one touch to all three starts in each recording at the frame its
+engine logged, and those frames fall at the same wall-clock instant.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+import soundfile
+
+from phantomtouch import DeviceProfile, TouchPattern, render
+from tests.support.fleet import ArmbandNode, Gateway
+from tests.support.nats_cluster import NatsCluster
+
+SITES = {"a1": "lab-a", "a2": "lab-a", "a3": "lab-b"}
+TAP: dict[str, Any] = {
+    "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
+    "speed_cm_s": 40.0,
+    "fade_in_s": 0.05,
+    "fade_out_s": 0.05,
+}
+"""A 0.34 s stroke down the middle of the armband."""
+
+
+@dataclass
+class CapturedFleet:
+    nodes: dict[str, ArmbandNode]
+    gateway: Gateway
+    folder: Path
+
+    def recording(self, armband: str) -> np.ndarray:
+        samples, rate = soundfile.read(self.folder / f"{armband}.wav", dtype="float32")
+        assert rate == DeviceProfile.default().sample_rate_hz
+        return np.asarray(samples)
+
+
+@pytest.fixture
+def captured(tmp_path: Path) -> Iterator[CapturedFleet]:
+    cluster = NatsCluster(tmp_path / "nats").start()
+    nodes: dict[str, ArmbandNode] = {}
+    gateway: Gateway | None = None
+    try:
+        for armband, site in SITES.items():
+            output = f"capture:{tmp_path / f'{armband}.wav'}"
+            nodes[armband] = ArmbandNode(tmp_path, cluster, armband, site, output=output)
+            nodes[armband].start()
+        gateway = Gateway(tmp_path, cluster).start()
+        yield CapturedFleet(nodes, gateway, tmp_path)
+    finally:
+        if gateway is not None:
+            gateway.stop()
+        for node in nodes.values():
+            node.stop()
+        cluster.stop()
+
+
+def test_the_recordings_hold_each_touch_on_its_armbands_only_in_step(
+    captured: CapturedFleet,
+) -> None:
+    gateway, nodes = captured.gateway, captured.nodes
+    single = httpx.post(f"{gateway.url}/armbands/a2/touch", json=TAP, timeout=5.0)
+    assert single.status_code == 202, single.text
+    single_start = nodes["a2"].wait_played(single.json()["job_id"])
+    duration_s = single.json()["duration_s"]
+    start_at_unix_s = time.time() + duration_s + 0.7  # after the single touch has ended
+    together = httpx.post(
+        f"{gateway.url}/touch",
+        json={**TAP, "armbands": sorted(SITES), "start_at_unix_s": start_at_unix_s},
+        timeout=5.0,
+    )
+    assert together.status_code == 202, together.text
+    starts = {
+        armband: nodes[armband].wait_played(job["job_id"])
+        for armband, job in together.json()["jobs"].items()
+    }
+    assert not any(start["late"] for start in starts.values())
+    time.sleep(max(0.0, start_at_unix_s + duration_s + 0.3 - time.time()))  # they end
+    for node in nodes.values():
+        node.stop()  # a graceful shutdown: the WAV is written as the engine closes
+
+    reference = render(TouchPattern.model_validate(TAP), DeviceProfile.default())
+    for armband in SITES:
+        recording = captured.recording(armband)
+        expected = np.zeros_like(recording)
+        placed = [starts[armband]["frame"]]
+        if armband == "a2":
+            placed.append(single_start["frame"])
+        for frame in placed:
+            assert frame + len(reference) <= len(recording)
+            expected[frame : frame + len(reference)] = reference
+        # sample for sample: each touch from the frame its engine logged, silence elsewhere
+        np.testing.assert_array_equal(recording, expected)
+    onsets_s = [start["unix_time_s"] for start in starts.values()]
+    # each engine maps its frames to the wall clock from its own output's pace (the capture
+    # output ticks from a thread once per 256-frame block, 5.3 ms, that a loaded machine
+    # delays): four blocks bound it; a touch not synchronised would be a second off
+    assert max(onsets_s) - min(onsets_s) <= 4 * 256 / 48000
