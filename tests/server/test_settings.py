@@ -77,7 +77,7 @@ def test_a_capture_output_names_a_wav_in_a_folder_that_exists(tmp_path: Path) ->
     assert settings.capture_path == wav
     assert Settings(db_path=tmp_path / "p.db", output_device="null").capture_path is None
     for bad in (f"capture:{tmp_path / 'played.flac'}", f"capture:{tmp_path / 'no' / 'x.wav'}"):
-        with pytest.raises(ValidationError, match="output_device=.*'capture:FILE.wav'"):
+        with pytest.raises(ValidationError, match=r"output_device=.*'capture:FILE\.wav'"):
             Settings(db_path=tmp_path / "p.db", output_device=bad)
 
 
