@@ -28,6 +28,7 @@ from phantomtouch.engine.commands import CommandQueue, StartCommand
 from phantomtouch.engine.contacts import ContactGains
 from phantomtouch.engine.mixer import Mixer
 from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
+from phantomtouch.errors import ParameterError
 from phantomtouch.schema.device import DeviceProfile
 
 RENDER_TIMES = 4096
@@ -112,7 +113,7 @@ class Scheduler:
         if render_loads is None:
             render_loads = np.empty(RENDER_TIMES)
         elif render_loads.shape != (RENDER_TIMES,) or render_loads.dtype != np.float64:
-            raise ValueError(f"render_loads must be float64 of shape ({RENDER_TIMES},)")
+            raise ParameterError(f"render_loads must be float64 of shape ({RENDER_TIMES},)")
         render_loads.fill(np.nan)
         self.render_loads = render_loads
         self._timed = 0
