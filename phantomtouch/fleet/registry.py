@@ -57,6 +57,14 @@ def read_record(value: bytes | None) -> ArmbandRecord | None:
         return None
 
 
+LISTING_PASSES = 2
+"""Passes over the bucket's keys when listing the armbands online. One pass can miss a
+key: the bucket keeps one revision per key, and a heartbeat that replaces a record while
+the listing reads the bucket removes the revision the listing was about to see (and may
+show another key twice). Two passes, merged, miss a key only if it is replaced during
+both."""
+
+
 class Registry:
     """Reads the registry for a gateway, caching each armband found for ``cache_s``.
 
@@ -110,14 +118,16 @@ class Registry:
         import nats.errors
         import nats.js.errors
 
-        try:
-            keys = await self.kv.keys()
-        except nats.js.errors.NoKeysError:
-            return []
-        except (nats.errors.Error, TimeoutError) as exc:
-            raise DeviceError(
-                f"fleet: the registry cannot be read now ({type(exc).__name__}); retry"
-            ) from None
+        keys: set[str] = set()
+        for _ in range(LISTING_PASSES):
+            try:
+                keys.update(await self.kv.keys())
+            except nats.js.errors.NoKeysError:
+                continue
+            except (nats.errors.Error, TimeoutError) as exc:
+                raise DeviceError(
+                    f"fleet: the registry cannot be read now ({type(exc).__name__}); retry"
+                ) from None
         records = [await self.lookup(key) for key in sorted(keys)]
         return [record for record in records if record is not None]
 

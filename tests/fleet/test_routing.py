@@ -37,6 +37,17 @@ def test_the_registry_lists_every_armband_with_its_device(fleet: Fleet) -> None:
             assert 0.0 <= -record["clock_offset_s"] < 0.5
 
 
+def test_every_listing_names_each_armband_once_while_heartbeats_replace_records(
+    fleet: Fleet,
+) -> None:
+    # the nodes rewrite their records every 0.25 s here: a listing that reads the bucket
+    # while one is replaced must still see every armband, and each once
+    for _ in range(60):
+        listing = httpx.get(f"{fleet.gateways[1].url}/armbands", timeout=5.0).json()
+        assert sorted(r["armband"] for r in listing) == sorted(SITES)
+        time.sleep(0.01)
+
+
 def test_a_touch_plays_on_the_addressed_armband_only(fleet: Fleet) -> None:
     for gateway, target in ((fleet.gateways[0], "a2"), (fleet.gateways[1], "a3")):
         before = {a: len(node.played()) for a, node in fleet.nodes.items()}
