@@ -26,7 +26,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import ValidationError
 
@@ -36,6 +36,8 @@ from phantomtouch.server.errors import StorageError, StoredPatternError
 from phantomtouch.server.models import PlanSummary
 
 logger = logging.getLogger("phantomtouch.server.store")
+Table = Literal["patterns", "clips"]
+"""The tables whose rows are written and deleted by name (never a value from a request)."""
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS patterns (
@@ -172,14 +174,21 @@ class PatternStore:
     def put(self, name: str, pattern: TouchPattern, summary: dict[str, Any]) -> bool:
         """Store ``pattern`` under ``name``; True if the name was new."""
         text = pattern.model_dump_json(exclude_unset=True)
+        return self._replace("patterns", name, (text, json.dumps(summary), time.time()))
+
+    def delete(self, name: str) -> bool:
+        """Remove ``name``; False if it was not stored."""
+        return self._delete("patterns", name)
+
+    def _replace(self, table: Table, name: str, values: tuple[Any, ...]) -> bool:
+        """Write the row ``(name, *values)`` of ``table`` in one transaction; True if the
+        name was new."""
+        slots = ", ".join("?" * (1 + len(values)))
         with self._using(writes=True) as db:
             db.execute("BEGIN IMMEDIATE")
             try:
-                existed = db.execute("SELECT 1 FROM patterns WHERE name = ?", (name,)).fetchone()
-                db.execute(
-                    "INSERT OR REPLACE INTO patterns VALUES (?, ?, ?, ?)",
-                    (name, text, json.dumps(summary), time.time()),
-                )
+                existed = db.execute(f"SELECT 1 FROM {table} WHERE name = ?", (name,)).fetchone()
+                db.execute(f"INSERT OR REPLACE INTO {table} VALUES ({slots})", (name, *values))
                 db.execute("COMMIT")
             except BaseException:
                 if db.in_transaction:
@@ -187,10 +196,9 @@ class PatternStore:
                 raise
         return existed is None
 
-    def delete(self, name: str) -> bool:
-        """Remove ``name``; False if it was not stored."""
+    def _delete(self, table: Table, name: str) -> bool:
         with self._using(writes=True) as db:
-            cursor = db.execute("DELETE FROM patterns WHERE name = ?", (name,))
+            cursor = db.execute(f"DELETE FROM {table} WHERE name = ?", (name,))
         return cursor.rowcount > 0
 
     # -- haptic clips (a pattern's ``{"kind": "clip", "clip": name}`` carrier) -------------
@@ -220,26 +228,11 @@ class PatternStore:
 
     def put_clip(self, name: str, clip: HapticClip) -> bool:
         """Store ``clip`` under ``name``; True if the name was new."""
-        with self._using(writes=True) as db:
-            db.execute("BEGIN IMMEDIATE")
-            try:
-                existed = db.execute("SELECT 1 FROM clips WHERE name = ?", (name,)).fetchone()
-                db.execute(
-                    "INSERT OR REPLACE INTO clips VALUES (?, ?, ?)",
-                    (name, clip.model_dump_json(), time.time()),
-                )
-                db.execute("COMMIT")
-            except BaseException:
-                if db.in_transaction:
-                    db.execute("ROLLBACK")
-                raise
-        return existed is None
+        return self._replace("clips", name, (clip.model_dump_json(), time.time()))
 
     def delete_clip(self, name: str) -> bool:
         """Remove the clip ``name``; False if it was not stored."""
-        with self._using(writes=True) as db:
-            cursor = db.execute("DELETE FROM clips WHERE name = ?", (name,))
-        return cursor.rowcount > 0
+        return self._delete("clips", name)
 
 
 def _reason(exc: sqlite3.Error) -> str:
