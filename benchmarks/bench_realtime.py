@@ -41,7 +41,6 @@ import argparse
 import asyncio
 import json
 import os
-import re
 import shutil
 import signal
 import sys
@@ -53,7 +52,7 @@ from typing import Any
 
 import numpy as np
 import realtime_load as load
-from realtime_floor import LatencyProbe
+from realtime_floor import LatencyProbe, floor, xrun_causes
 from realtime_report import TITLES, floor_text, number, table, xruns_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
@@ -132,27 +131,6 @@ def counter_delta(before: dict[str, int], after: dict[str, int]) -> dict[str, in
 def highest(samples: list[dict[str, Any]], key: str) -> float | None:
     values = [s[key] for s in samples if s[key] is not None]
     return max(values) if values else None
-
-
-def xrun_causes(log: str, period_us: float) -> dict[str, int]:
-    """JACK's xruns by cause, from what ``jackd`` printed.
-
-    The dummy driver reports ``JackTimedDriver::Process XRun = N usec`` when a cycle ends
-    after the next one should have begun, N being how long the cycle's processing took
-    (in sync mode, waiting for every client). ``late_wakeup``: N under half a period —
-    the cycle itself was short, so the driver's timer woke late (the machine's timer; it
-    happens with no client connected). ``slow_cycle``: N of half a period or more — the
-    graph, that is a client, took that long. ``client_late:NAME``: JACK named a client that
-    had not finished its cycle in time.
-    """
-    causes: dict[str, int] = {"late_wakeup": 0, "slow_cycle": 0}
-    for usec in re.findall(r"JackTimedDriver::Process XRun = (\d+) usec", log):
-        causes["late_wakeup" if int(usec) < period_us / 2 else "slow_cycle"] += 1
-    late = re.findall(r"client = (\S+) was not finished|client (\S+) finished after current", log)
-    for names in late:
-        key = f"client_late:{names[0] or names[1]}"
-        causes[key] = causes.get(key, 0) + 1
-    return causes
 
 
 async def measure(
@@ -457,21 +435,6 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
             xruns.close()
         jack.stop()
     return results
-
-
-def floor(
-    jack: JackServer, xruns: JackXrunCounter, seconds: float, period_us: float
-) -> dict[str, Any]:
-    """JACK's xruns with no client of ours in its graph: what the machine gives anyway."""
-    log_before, xruns_before = len(jack.output()), xruns.xruns
-    probe = LatencyProbe(round(period_us)).start()
-    time.sleep(seconds)
-    return {
-        "seconds": seconds,
-        "jack_xruns": xruns.xruns - xruns_before,
-        "jack_xrun_causes": xrun_causes(jack.output()[log_before:], period_us),
-        "machine_floor": probe.stop(),
-    }
 
 
 def metrics_text(port: int) -> str:

@@ -5,7 +5,8 @@
 woke. It does no audio work, so its late wake-ups are what the machine — the kernel, a
 hypervisor, the other programs — imposes on any real-time thread, whatever the engine
 does: a thread woken more than one period late has missed its period, and so would any
-audio callback scheduled then.
+audio callback scheduled then. :func:`xrun_causes` tells JACK's own xruns apart from what
+``jackd`` printed, and :func:`floor` measures both with JACK alone.
 """
 
 from __future__ import annotations
@@ -15,7 +16,11 @@ import re
 import shutil
 import signal
 import subprocess
-from typing import Any
+import time
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from tests.support.jack import JackServer, JackXrunCounter
 
 
 class LatencyProbe:
@@ -73,4 +78,40 @@ def parse(output: str) -> dict[str, Any]:
         "wakeups": sum(numbers(output, "Total")),
         "late_wakeups": sum(numbers(output, "Histogram Overflows")),
         "max_latency_us": max(numbers(output, "Max Latencies")),
+    }
+
+
+def xrun_causes(log: str, period_us: float) -> dict[str, int]:
+    """JACK's xruns by cause, from what ``jackd`` printed.
+
+    The dummy driver reports ``JackTimedDriver::Process XRun = N usec`` when a cycle ends
+    after the next one should have begun, N being how long the cycle's processing took
+    (in sync mode, waiting for every client). ``late_wakeup``: N under half a period —
+    the cycle itself was short, so the driver's timer woke late (the machine's timer; it
+    happens with no client connected). ``slow_cycle``: N of half a period or more — the
+    graph, that is a client, took that long. ``client_late:NAME``: JACK named a client that
+    had not finished its cycle in time.
+    """
+    causes: dict[str, int] = {"late_wakeup": 0, "slow_cycle": 0}
+    for usec in re.findall(r"JackTimedDriver::Process XRun = (\d+) usec", log):
+        causes["late_wakeup" if int(usec) < period_us / 2 else "slow_cycle"] += 1
+    late = re.findall(r"client = (\S+) was not finished|client (\S+) finished after current", log)
+    for names in late:
+        key = f"client_late:{names[0] or names[1]}"
+        causes[key] = causes.get(key, 0) + 1
+    return causes
+
+
+def floor(
+    jack: JackServer, xruns: JackXrunCounter, seconds: float, period_us: float
+) -> dict[str, Any]:
+    """JACK's xruns with no client of ours in its graph: what the machine gives anyway."""
+    log_before, xruns_before = len(jack.output()), xruns.xruns
+    probe = LatencyProbe(round(period_us)).start()
+    time.sleep(seconds)
+    return {
+        "seconds": seconds,
+        "jack_xruns": xruns.xruns - xruns_before,
+        "jack_xrun_causes": xrun_causes(jack.output()[log_before:], period_us),
+        "machine_floor": probe.stop(),
     }
