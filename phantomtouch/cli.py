@@ -19,7 +19,6 @@ exits 1.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import shutil
 import sys
@@ -33,14 +32,12 @@ from tqdm import tqdm
 from phantomtouch import __version__
 from phantomtouch.clips.command import add_import_command
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
-from phantomtouch.fleet import cli as fleet_cli
-from phantomtouch.osc.command import add_osc_command
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error, limits
+from phantomtouch.serve_command import EXIT_FAILURE, add_serve_commands
 
-EXIT_FAILURE = 1
 """The command could not do its work (``serve``: the pattern library cannot be opened)."""
 EXIT_USAGE = 2
 _BLOCK_FRAMES = 1 << 15
@@ -209,72 +206,6 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
     return 0
 
 
-def _importable(module: str) -> bool:
-    try:
-        return importlib.util.find_spec(module) is not None
-    except ImportError:
-        return False
-
-
-def _require(extra: str, *modules: str) -> None:
-    """Refuse to go on without an extra's modules, naming the extra to install."""
-    missing = [m for m in modules if not _importable(m)]
-    if missing:
-        raise PhantomTouchError(
-            f"{missing[0]} is not installed: this needs the {extra} extra, "
-            f"pip install 'phantomtouch[{extra}]'"
-        )
-
-
-def _cmd_serve(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError
-
-    _require("server", "fastapi", "uvicorn", "pydantic_settings")
-    from phantomtouch.server import Settings
-    from phantomtouch.server.serve import check_library, check_port_free, serve
-
-    if args.output != "null" and not _importable("sounddevice"):
-        print(
-            "phantomtouch serve: sounddevice is not installed (pip install "
-            "'phantomtouch[audio]'): playing to the null output, no sound card",
-            file=sys.stderr,
-        )
-
-    options = {
-        "host": args.host,
-        "port": args.port,
-        "device_profile": args.device,
-        "output_device": args.output,
-        "db_path": args.db,
-        "token": args.token,
-        "osc_listen": args.osc,
-        "osc_map": args.osc_map,
-    }
-    if args.osc is not None:
-        _require("osc", "pythonosc")
-    try:
-        settings = Settings(**{k: v for k, v in options.items() if v is not None})
-    except ValidationError as exc:
-        raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
-    attach = fleet_cli.attachment(args)
-    try:
-        check_library(settings)
-    except DeviceError as exc:
-        print(f"phantomtouch serve: {exc}", file=sys.stderr)
-        return EXIT_FAILURE
-    check_port_free(settings.host, settings.port)
-    if settings.osc_address is not None:
-        from phantomtouch.osc.bridge import open_socket
-        from phantomtouch.osc.mapping import ReceiverMap
-
-        if settings.osc_map is not None:
-            ReceiverMap.load(settings.osc_map)
-        open_socket(*settings.osc_address).close()
-    print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
-    serve(settings, attach=attach)
-    return 0
-
-
 def _cmd_devices(args: argparse.Namespace) -> int:
     from phantomtouch.engine import list_output_devices
 
@@ -437,33 +368,13 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _serve_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--host", help="address to bind (default 127.0.0.1; others need --token)")
-    parser.add_argument("--port", type=int, help="TCP port (default 8000)")
-    parser.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
-    parser.add_argument(
-        "--output",
-        help="sound-card output name or index, 'null', or 'capture:FILE.wav' (records what plays; "
-        "written at exit) (default: first that fits)",
-    )
-    parser.add_argument("--db", help="pattern library, SQLite file")
-    parser.add_argument("--token", help="bearer token every request must carry")
-    fleet_cli.add_serve_options(parser)
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"phantomtouch {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    serve = sub.add_parser("serve", help="run the touch service (REST and WebSocket)")
-    _serve_arguments(serve)
-    serve.add_argument("--osc", help="also receive OSC on this UDP HOST:PORT (loopback)")
-    serve.add_argument("--osc-map", help="OSC map file (TOML), with --osc")
-    serve.set_defaults(func=_cmd_serve)
-    add_osc_command(sub, _serve_arguments, _cmd_serve)
+    add_serve_commands(sub)
     add_import_command(sub)
-    fleet_cli.register(sub)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")

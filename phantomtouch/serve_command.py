@@ -1,0 +1,107 @@
+"""``phantomtouch serve``, ``phantomtouch osc`` and ``phantomtouch gateway``: the service
+commands, their flags and the checks made before anything opens."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+
+from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
+from phantomtouch.fleet import cli as fleet_cli
+from phantomtouch.osc.command import add_osc_command
+from phantomtouch.schema import describe_validation_error
+
+EXIT_FAILURE = 1
+"""A runtime failure (2 is a usage error)."""
+
+
+def _importable(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ImportError:
+        return False
+
+
+def _require(extra: str, *modules: str) -> None:
+    """Refuse to go on without an extra's modules, naming the extra to install."""
+    missing = [m for m in modules if not _importable(m)]
+    if missing:
+        raise PhantomTouchError(
+            f"{missing[0]} is not installed: this needs the {extra} extra, "
+            f"pip install 'phantomtouch[{extra}]'"
+        )
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    _require("server", "fastapi", "uvicorn", "pydantic_settings")
+    from phantomtouch.server import Settings
+    from phantomtouch.server.serve import check_library, check_port_free, serve
+
+    if args.output != "null" and not _importable("sounddevice"):
+        print(
+            "phantomtouch serve: sounddevice is not installed (pip install "
+            "'phantomtouch[audio]'): playing to the null output, no sound card",
+            file=sys.stderr,
+        )
+
+    options = {
+        "host": args.host,
+        "port": args.port,
+        "device_profile": args.device,
+        "output_device": args.output,
+        "db_path": args.db,
+        "token": args.token,
+        "osc_listen": args.osc,
+        "osc_map": args.osc_map,
+    }
+    if args.osc is not None:
+        _require("osc", "pythonosc")
+    try:
+        settings = Settings(**{k: v for k, v in options.items() if v is not None})
+    except ValidationError as exc:
+        raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
+    attach = fleet_cli.attachment(args)
+    try:
+        check_library(settings)
+    except DeviceError as exc:
+        print(f"phantomtouch serve: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    check_port_free(settings.host, settings.port)
+    if settings.osc_address is not None:
+        from phantomtouch.osc.bridge import open_socket
+        from phantomtouch.osc.mapping import ReceiverMap
+
+        if settings.osc_map is not None:
+            ReceiverMap.load(settings.osc_map)
+        open_socket(*settings.osc_address).close()
+    print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
+    serve(settings, attach=attach)
+    return 0
+
+
+def _serve_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--host", help="address to bind (default 127.0.0.1; others need --token)")
+    parser.add_argument("--port", type=int, help="TCP port (default 8000)")
+    parser.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
+    parser.add_argument(
+        "--output",
+        help="sound-card output name or index, 'null', or 'capture:FILE.wav' (records what plays; "
+        "written at exit) (default: first that fits)",
+    )
+    parser.add_argument("--db", help="pattern library, SQLite file")
+    parser.add_argument("--token", help="bearer token every request must carry")
+    fleet_cli.add_serve_options(parser)
+
+
+def add_serve_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register ``serve``, ``osc`` and the fleet's ``gateway``."""
+    serve = sub.add_parser("serve", help="run the touch service (REST and WebSocket)")
+    _serve_arguments(serve)
+    serve.add_argument("--osc", help="also receive OSC on this UDP HOST:PORT (loopback)")
+    serve.add_argument("--osc-map", help="OSC map file (TOML), with --osc")
+    serve.set_defaults(func=_cmd_serve)
+    add_osc_command(sub, _serve_arguments, _cmd_serve)
+    fleet_cli.register(sub)
