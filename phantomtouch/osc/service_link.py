@@ -107,14 +107,8 @@ def start_osc(service: Service) -> OscBridge:
 @asynccontextmanager
 async def attach(service: Service) -> AsyncIterator[None]:
     """What ``create_app(attach=...)`` enters once the service runs: the OSC bridge the
-    settings ask for (``osc_listen`` is set), started, and closed before the service stops.
-
-    Raises
-    ------
-    ParameterError
-        The map file is unreadable or invalid.
-    DeviceError
-        The address cannot be listened on.
+    settings ask for (``osc_listen`` is set), started, and closed before the service stops;
+    it refuses to start as :func:`start_osc` does.
     """
     bridge = start_osc(service)
     logger.info("phantomtouch: OSC on udp://%s:%d", *bridge.address)
