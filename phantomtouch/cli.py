@@ -30,8 +30,8 @@ from pydantic import ValidationError
 from tqdm import tqdm
 
 from phantomtouch import __version__
-from phantomtouch.clips.command import add_import_command
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
+from phantomtouch.import_command import add_import_command
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan

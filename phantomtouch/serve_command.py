@@ -6,11 +6,16 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import sys
+from typing import TYPE_CHECKING
 
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
 from phantomtouch.fleet import cli as fleet_cli
 from phantomtouch.osc.command import add_osc_command
 from phantomtouch.schema import describe_validation_error
+
+if TYPE_CHECKING:
+    from phantomtouch.service.running import Attachment
+    from phantomtouch.service.settings import Settings
 
 EXIT_FAILURE = 1
 """A runtime failure (2 is a usage error)."""
@@ -37,8 +42,9 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
     _require("server", "fastapi", "uvicorn", "pydantic_settings")
-    from phantomtouch.server import Settings
-    from phantomtouch.server.serve import check_library, check_port_free, serve
+    from phantomtouch.server.serve import check_library, serve
+    from phantomtouch.service.listen import check_port_free
+    from phantomtouch.service.settings import Settings
 
     if args.output != "null" and not _importable("sounddevice"):
         print(
@@ -63,7 +69,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         settings = Settings(**{k: v for k, v in options.items() if v is not None})
     except ValidationError as exc:
         raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
-    attach = fleet_cli.attachment(args)
+    fleet = fleet_cli.attachment(args)
     try:
         check_library(settings)
     except DeviceError as exc:
@@ -78,8 +84,21 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             ReceiverMap.load(settings.osc_map)
         open_socket(*settings.osc_address).close()
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
-    serve(settings, attach=attach)
+    serve(settings, attach=_attachments(settings, fleet))
     return 0
+
+
+def _attachments(settings: Settings, fleet: Attachment | None) -> list[Attachment]:
+    """What the running service is joined to, in the order it is entered: the OSC bridge
+    (``osc_listen`` set), then the armband node (``--fleet``)."""
+    attachments: list[Attachment] = []
+    if settings.osc_address is not None:
+        from phantomtouch.osc.service_link import attach
+
+        attachments.append(attach)
+    if fleet is not None:
+        attachments.append(fleet)
+    return attachments
 
 
 def _serve_arguments(parser: argparse.ArgumentParser) -> None:

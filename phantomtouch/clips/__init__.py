@@ -3,9 +3,10 @@
 Each format becomes a :class:`~phantomtouch.schema.HapticClip` (amplitude and frequency
 envelopes, transients), played as a pattern's carrier. Modules:
 :mod:`~phantomtouch.clips.haptic_file` (``.haptic``), :mod:`~phantomtouch.clips.ahap`
-(``.ahap``), :mod:`~phantomtouch.clips.load` (a file of either, by its suffix or content)
-and :mod:`~phantomtouch.clips.command` (``phantomtouch import``). Only the schema is
-imported here.
+(``.ahap``) and :mod:`~phantomtouch.clips.load` (a file of either, by its suffix or
+content): a file in, a clip out. Only the schema (and the exception root) is imported here;
+storing a clip is the library's (:mod:`phantomtouch.service.store`), and ``phantomtouch
+import`` is :mod:`phantomtouch.import_command`.
 """
 
 from phantomtouch.clips.load import load_clip, parse_clip

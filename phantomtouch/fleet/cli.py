@@ -17,7 +17,7 @@ from phantomtouch.errors import ParameterError, PhantomTouchError
 
 if TYPE_CHECKING:
     from phantomtouch.fleet.settings import FleetSettings
-    from phantomtouch.server.service import Service
+    from phantomtouch.service.running import Service
 
 
 def add_serve_options(serve: argparse.ArgumentParser) -> None:
@@ -80,7 +80,7 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
     _require_nats()
     from phantomtouch.fleet.gateway import create_gateway
     from phantomtouch.fleet.gateway_settings import GatewaySettings
-    from phantomtouch.server.serve import check_port_free, log_config
+    from phantomtouch.service.listen import check_port_free, log_config
 
     options = {"host": args.host, "port": args.port, "token": args.token}
     try:

@@ -1,6 +1,6 @@
-"""Refusals of the fleet, below :class:`~phantomtouch.server.errors.ServiceError`.
+"""Refusals of the fleet, below :class:`~phantomtouch.service.errors.ServiceError`.
 
-Both name the armband; :func:`phantomtouch.server.errors.describe` maps them, as every
+Both name the armband; :func:`phantomtouch.service.errors.describe` maps them, as every
 other refusal, to their status and code::
 
     ServiceError
@@ -13,7 +13,7 @@ other refusal, to their status and code::
 
 from __future__ import annotations
 
-from phantomtouch.server.errors import ErrorCode, NotFoundError, ServiceError
+from phantomtouch.service.errors import ErrorCode, NotFoundError, ServiceError
 
 
 class ArmbandNotFoundError(NotFoundError):

@@ -42,12 +42,12 @@ from phantomtouch.fleet.records import ArmbandRecord, FleetAnswer, StopScope
 from phantomtouch.fleet.registry import Registry, open_bucket
 from phantomtouch.fleet.requests import pop_start_at_unix_s, request_token
 from phantomtouch.fleet.settings import FleetSettings
-from phantomtouch.server import errors
-from phantomtouch.server.bodies import strict_body
-from phantomtouch.server.errors import UnauthorizedError
-from phantomtouch.server.limits import BodyLimitMiddleware
-from phantomtouch.server.metrics import CONTENT_TYPE, Metrics, MetricsMiddleware
-from phantomtouch.server.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
+from phantomtouch.service import errors
+from phantomtouch.service.bodies import strict_body
+from phantomtouch.service.errors import UnauthorizedError
+from phantomtouch.service.limits import BodyLimitMiddleware
+from phantomtouch.service.metrics import CONTENT_TYPE, Metrics, MetricsMiddleware
+from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
 
 logger = logging.getLogger("phantomtouch.fleet")
 

@@ -8,7 +8,7 @@ from pydantic import Field, SecretStr, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from phantomtouch.fleet.auth import Grants, GrantSpec
-from phantomtouch.server.settings import is_loopback
+from phantomtouch.service.settings import is_loopback
 
 
 class GatewaySettings(BaseSettings):

@@ -31,15 +31,15 @@ from phantomtouch.fleet.errors import NoNodeError
 from phantomtouch.fleet.records import StopScope
 from phantomtouch.fleet.requests import pop_start_at_unix_s, request_token
 from phantomtouch.fleet.subjects import check_name
-from phantomtouch.server.errors import (
+from phantomtouch.service.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
     WS_CLOSE_UNSUPPORTED_DATA,
     Problem,
     describe,
 )
-from phantomtouch.server.flood import FloodGuard
-from phantomtouch.server.ws_messages import PROTOCOL_VERSION, MessageError, parse
+from phantomtouch.service.flood import FloodGuard
+from phantomtouch.service.ws_messages import PROTOCOL_VERSION, MessageError, parse
 
 if TYPE_CHECKING:
     from phantomtouch.fleet.gateway import Gateway

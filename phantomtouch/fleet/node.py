@@ -2,7 +2,7 @@
 
 The node answers the subjects of its armband (:mod:`phantomtouch.fleet.subjects`) by
 calling the same service code the REST routes and the WebSocket session call: a touch
-is :func:`phantomtouch.server.touch.schedule` and answers the status and body
+is :func:`phantomtouch.service.scheduling.schedule` and answers the status and body
 ``POST /touch`` would; a stop is :meth:`Service.stop_everything`. Every heartbeat it
 rewrites its registry record. The local REST and WebSocket API keep working beside it.
 
@@ -47,18 +47,18 @@ from phantomtouch.fleet.records import (
 from phantomtouch.fleet.registry import open_bucket
 from phantomtouch.fleet.remote_contacts import RemoteContacts, drop_reason
 from phantomtouch.fleet.settings import FleetSettings
-from phantomtouch.server import touch
-from phantomtouch.server.engine_access import describe_output
-from phantomtouch.server.errors import (
+from phantomtouch.service import scheduling
+from phantomtouch.service.engine_access import describe_output
+from phantomtouch.service.errors import (
     NotFoundError,
     RateLimitedError,
     TooLargeError,
     describe,
 )
-from phantomtouch.server.models import MAX_START_AHEAD_S, AnyTouch, parse_touch_request
+from phantomtouch.service.models import MAX_START_AHEAD_S, AnyTouch, parse_touch_request
 
 if TYPE_CHECKING:
-    from phantomtouch.server.service import Service
+    from phantomtouch.service.running import Service
 
 logger = logging.getLogger("phantomtouch.fleet")
 
@@ -249,7 +249,7 @@ class ArmbandNode:
             request = parse_touch_request(json.dumps(envelope.touch))
             if envelope.start_at_unix_s is not None:
                 request = self._at_unix(request, envelope.start_at_unix_s)
-            accepted = await touch.schedule(
+            accepted = await scheduling.schedule(
                 self.service, request, client=f"fleet:{envelope.client}"
             )
         except (PhantomTouchError, ValidationError) as exc:
@@ -276,7 +276,7 @@ class ArmbandNode:
                 "not both"
             )
         now_unix_s = time.time()
-        late_s = touch.LATE_START_TOLERANCE_S
+        late_s = scheduling.LATE_START_TOLERANCE_S
         if not now_unix_s - late_s <= start_at_unix_s <= now_unix_s + MAX_START_AHEAD_S:
             raise ParameterError(
                 f"start_at_unix_s={start_at_unix_s!r} must lie between {late_s:g} s before and "

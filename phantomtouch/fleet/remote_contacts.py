@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 from pydantic import ValidationError
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
-from phantomtouch.server.errors import QuotaError, TooLargeError
-from phantomtouch.server.ws_messages import Down, Move, Up
+from phantomtouch.service.errors import QuotaError, TooLargeError
+from phantomtouch.service.ws_messages import Down, Move, Up
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront

@@ -34,7 +34,7 @@ from phantomtouch.osc import messages
 from phantomtouch.osc.counters import OscCounters
 from phantomtouch.osc.mapping import ReceiverMap
 from phantomtouch.osc.receivers import Change, ContactTracker, ReceiverLayout
-from phantomtouch.server.flood import FloodGuard
+from phantomtouch.service.flood import FloodGuard
 
 try:
     from pythonosc.osc_packet import OscPacket, ParseError

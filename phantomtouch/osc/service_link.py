@@ -2,7 +2,7 @@
 
 ``/phantomtouch/touch NAME`` is a touch request as ``POST /touch`` makes it: a name with a
 ``/`` is a preset (``exp2/curved``), any other a stored pattern, scheduled by
-:func:`phantomtouch.server.touch.schedule` on the event loop under the quotas of the
+:func:`phantomtouch.service.scheduling.schedule` on the event loop under the quotas of the
 client ``osc``; the bridge's thread waits for it (planning takes a millisecond or so, a new
 noise band about 60 ms the first time), at most ``PLAY_TIMEOUT_S``.
 ``/phantomtouch/stop`` is :meth:`Service.stop_everything`. The bridge's
@@ -12,7 +12,9 @@ counts appear in ``/metrics`` as ``phantomtouch_osc_messages_total{outcome}``.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Iterator
+import logging
+from collections.abc import AsyncIterator, Iterator
+from contextlib import asynccontextmanager
 
 from prometheus_client.core import CounterMetricFamily
 from prometheus_client.registry import Collector
@@ -22,9 +24,11 @@ from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.osc.bridge import OWNER, OscBridge
 from phantomtouch.osc.mapping import ReceiverMap, default_map
 from phantomtouch.schema import describe_validation_error
-from phantomtouch.server import touch
-from phantomtouch.server.models import NamedTouch, PresetTouch
-from phantomtouch.server.service import Service
+from phantomtouch.service import scheduling
+from phantomtouch.service.models import NamedTouch, PresetTouch
+from phantomtouch.service.running import Service
+
+logger = logging.getLogger("phantomtouch.osc")
 
 PLAY_TIMEOUT_S = 5.0
 """How long the bridge waits for a touch to be planned and scheduled."""
@@ -75,7 +79,7 @@ def start_osc(service: Service) -> OscBridge:
             request = PresetTouch(preset=name) if "/" in name else NamedTouch(stored=name)
         except ValidationError as exc:
             raise ParameterError(f"/phantomtouch/touch: {describe_validation_error(exc)}") from exc
-        scheduled = touch.schedule(service, request, client=OWNER, owner=OWNER)
+        scheduled = scheduling.schedule(service, request, client=OWNER, owner=OWNER)
         try:
             asyncio.run_coroutine_threadsafe(scheduled, loop).result(PLAY_TIMEOUT_S)
         except TimeoutError as exc:
@@ -98,3 +102,17 @@ def start_osc(service: Service) -> OscBridge:
     service.metrics.registry.register(_Counts(bridge))
     bridge.start()
     return bridge
+
+
+@asynccontextmanager
+async def attach(service: Service) -> AsyncIterator[None]:
+    """What ``create_app(attach=...)`` enters once the service runs: the OSC bridge the
+    settings ask for (``osc_listen`` is set), started, and closed before the service stops;
+    it refuses to start as :func:`start_osc` does.
+    """
+    bridge = start_osc(service)
+    logger.info("phantomtouch: OSC on udp://%s:%d", *bridge.address)
+    try:
+        yield
+    finally:
+        await asyncio.to_thread(bridge.close)

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import AsyncIterator, Callable
-from contextlib import AbstractAsyncContextManager, asynccontextmanager
+from collections.abc import AsyncIterator, Sequence
+from contextlib import AsyncExitStack, asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI
@@ -20,28 +20,24 @@ from fastapi.staticfiles import StaticFiles
 
 from phantomtouch import __version__
 from phantomtouch.schema import DeviceProfile
-from phantomtouch.server import errors
-from phantomtouch.server.bodies import merge_components
-from phantomtouch.server.engine_access import describe_output, open_engine
-from phantomtouch.server.limits import BodyLimitMiddleware, TokenMiddleware
-from phantomtouch.server.metrics import Metrics, MetricsMiddleware
-from phantomtouch.server.origin import (
+from phantomtouch.server.routes import clips, docs, info, patterns, render, touch, web, ws
+from phantomtouch.service import errors
+from phantomtouch.service.bodies import merge_components
+from phantomtouch.service.engine_access import describe_output, open_engine
+from phantomtouch.service.limits import BodyLimitMiddleware, TokenMiddleware
+from phantomtouch.service.metrics import Metrics, MetricsMiddleware
+from phantomtouch.service.origin import (
     ContentTypeMiddleware,
     HostOriginMiddleware,
     HostPolicy,
     OriginPolicy,
     Refusals,
 )
-from phantomtouch.server.routes import clips, docs, info, patterns, render, touch, web, ws
-from phantomtouch.server.service import Service
-from phantomtouch.server.settings import Settings
-from phantomtouch.server.store import PatternStore
+from phantomtouch.service.running import Attachment, Service
+from phantomtouch.service.settings import Settings
+from phantomtouch.service.store import PatternStore
 
 logger = logging.getLogger("phantomtouch.server")
-
-Attachment = Callable[[Service], AbstractAsyncContextManager[None]]
-"""Something the lifespan enters once the service runs and leaves before it stops (an
-armband node joining a fleet: ``phantomtouch.fleet.node.attach``)."""
 
 DESCRIPTION = """Touch on the forearm for VR scenes and touch research.
 
@@ -50,7 +46,7 @@ wire protocol, the WebSocket `/ws` included, is described in `docs/protocol.md`.
 """
 
 
-def _lifespan(settings: Settings, metrics: Metrics, attach: Attachment | None) -> Any:
+def _lifespan(settings: Settings, metrics: Metrics, attach: Sequence[Attachment]) -> Any:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         device = (
@@ -71,21 +67,12 @@ def _lifespan(settings: Settings, metrics: Metrics, attach: Attachment | None) -
         app.state.service = service
         logger.info("phantomtouch: %s; patterns in %s", describe_output(engine), store.path)
         metrics.watch_engine(lambda: engine.status().to_dict())
-        osc = None
         try:
-            if settings.osc_listen is not None:
-                from phantomtouch.osc.service_link import start_osc
-
-                osc = start_osc(service)
-                logger.info("phantomtouch: OSC on udp://%s:%d", *osc.address)
-            if attach is None:
+            async with AsyncExitStack() as attached:
+                for attachment in attach:
+                    await attached.enter_async_context(attachment(service))
                 yield
-            else:
-                async with attach(service):
-                    yield
         finally:
-            if osc is not None:
-                await asyncio.to_thread(osc.close)
             metrics.watch_engine(None)
             engine.close()
             store.close()
@@ -116,9 +103,12 @@ def _openapi(app: FastAPI, settings: Settings) -> Any:
     return schema
 
 
-def create_app(settings: Settings | None = None, *, attach: Attachment | None = None) -> FastAPI:
-    """Build the app; the engine and the store open when it starts (lifespan), then
-    ``attach`` (if given) is entered with the running service."""
+def create_app(settings: Settings | None = None, *, attach: Sequence[Attachment] = ()) -> FastAPI:
+    """Build the app; the engine and the store open when it starts (lifespan), then each
+    of ``attach`` is entered with the running service, in order (the OSC bridge,
+    :func:`phantomtouch.osc.service_link.attach`; an armband node joining a fleet,
+    :func:`phantomtouch.fleet.node.attach`), and left in the reverse order before the
+    engine and the store close."""
     settings = settings or Settings()
     metrics = Metrics()
     app = FastAPI(

@@ -7,9 +7,9 @@ from typing import TYPE_CHECKING, Annotated, Any
 from fastapi import Depends, Path
 from starlette.requests import HTTPConnection
 
-from phantomtouch.server.models import PATTERN_NAME_REGEX
-from phantomtouch.server.service import Service
-from phantomtouch.server.store import PatternStore
+from phantomtouch.service.models import PATTERN_NAME_REGEX
+from phantomtouch.service.running import Service
+from phantomtouch.service.store import PatternStore
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront

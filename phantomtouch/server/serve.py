@@ -2,27 +2,13 @@
 
 from __future__ import annotations
 
-import copy
-import socket
-from typing import Any
+from collections.abc import Sequence
 
-from phantomtouch.errors import PhantomTouchError
-from phantomtouch.server.app import Attachment, create_app
-from phantomtouch.server.settings import Settings
-from phantomtouch.server.store import PatternStore
-
-
-def log_config() -> dict[str, Any]:
-    """uvicorn's logging, plus the ``phantomtouch`` logger (start-up lines, errors)."""
-    from uvicorn.config import LOGGING_CONFIG
-
-    config = copy.deepcopy(LOGGING_CONFIG)
-    config["loggers"]["phantomtouch"] = {
-        "handlers": ["default"],
-        "level": "INFO",
-        "propagate": False,
-    }
-    return config
+from phantomtouch.server.app import create_app
+from phantomtouch.service.listen import log_config
+from phantomtouch.service.running import Attachment
+from phantomtouch.service.settings import Settings
+from phantomtouch.service.store import PatternStore
 
 
 def check_library(settings: Settings) -> None:
@@ -31,43 +17,16 @@ def check_library(settings: Settings) -> None:
     Raises
     ------
     DeviceError
-        The library cannot be opened (:class:`~phantomtouch.server.store.DamagedStoreError`
+        The library cannot be opened (:class:`~phantomtouch.service.store.DamagedStoreError`
         if the file is damaged); ``serve`` then stops with that one line.
     """
     PatternStore.open(settings.db_path).close()
 
 
-def check_port_free(host: str, port: int) -> None:
-    """Refuse, before anything starts, a port that cannot be listened on.
-
-    Binds and releases the address the way uvicorn will (``SO_REUSEADDR``), so a port held
-    by another server is reported in one line rather than after the start-up banner.
-
-    Raises
-    ------
-    PhantomTouchError
-        The address is in use, or not an address of this machine.
-    """
-    try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
-    except socket.gaierror as exc:
-        raise PhantomTouchError(f"host={host!r}: not an address to listen on ({exc})") from exc
-    family, kind, proto, _, address = infos[0]
-    with socket.socket(family, kind, proto) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind(address)
-        except OSError as exc:
-            raise PhantomTouchError(
-                f"port={port} on {host}: cannot listen ({exc.strerror}); is another server "
-                "running there? Choose another with --port"
-            ) from exc
-
-
-def serve(settings: Settings, *, attach: Attachment | None = None) -> None:
+def serve(settings: Settings, *, attach: Sequence[Attachment] = ()) -> None:
     """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly).
 
-    ``attach`` joins the running service to something more (a fleet); see
+    ``attach`` joins the running service to more (the OSC bridge, a fleet); see
     :func:`~phantomtouch.server.app.create_app`.
 
     Requests uvicorn cannot parse are answered with the service's JSON error body, and

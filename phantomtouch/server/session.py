@@ -11,7 +11,7 @@ contact has its own two states, up and down; a step that its state does not allo
 answered with ``error`` ("expected X, got Y") and the session goes on. Malformed frames
 are answered with ``error`` too, frames nested too deeply to read included. Only a
 binary frame (1003), a frame over the size limit (1009), a missing token or a message
-rate exceeded for a second on end (1008, :mod:`phantomtouch.server.flood`) close it.
+rate exceeded for a second on end (1008, :mod:`phantomtouch.service.flood`) close it.
 Messages over the rate are dropped and counted; only the first of a flood is answered.
 The loop yields to the event loop after every frame, so that a connection whose frames
 are already buffered cannot keep HTTP requests and other connections waiting.
@@ -32,8 +32,8 @@ from pydantic import ValidationError
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
-from phantomtouch.server import touch
-from phantomtouch.server.errors import (
+from phantomtouch.service import scheduling
+from phantomtouch.service.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
     WS_CLOSE_UNSUPPORTED_DATA,
@@ -42,10 +42,10 @@ from phantomtouch.server.errors import (
     QuotaError,
     describe,
 )
-from phantomtouch.server.flood import FloodGuard
-from phantomtouch.server.limits import token_matches
-from phantomtouch.server.service import Service
-from phantomtouch.server.ws_messages import (
+from phantomtouch.service.flood import FloodGuard
+from phantomtouch.service.limits import token_matches
+from phantomtouch.service.running import Service
+from phantomtouch.service.ws_messages import (
     PROTOCOL_VERSION,
     ClientMessage,
     Down,
@@ -232,7 +232,7 @@ class Session:
         elif isinstance(message, Hello):
             await self._send(self._welcome(message))
         elif isinstance(message, Play):
-            job = await touch.schedule(
+            job = await scheduling.schedule(
                 self.service, message.request, client=self.owner, owner=self.owner
             )
             await self._ok(message, job.model_dump())

@@ -14,7 +14,7 @@ from phantomtouch.cli import main
 from phantomtouch.clips import load_clip, parse_clip
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema import HapticClip
-from phantomtouch.server.store import PatternStore
+from phantomtouch.service.store import PatternStore
 
 SAMPLES = Path(__file__).parent / "samples"
 

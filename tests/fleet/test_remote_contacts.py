@@ -13,7 +13,7 @@ from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.errors import ProtocolError
 from phantomtouch.fleet.remote_contacts import RemoteContacts
 from phantomtouch.schema import DeviceProfile
-from phantomtouch.server.errors import QuotaError, TooLargeError
+from phantomtouch.service.errors import QuotaError, TooLargeError
 
 DEVICE = DeviceProfile.default()
 WATCHDOG_S = 0.5

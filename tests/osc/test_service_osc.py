@@ -14,6 +14,7 @@ import pytest
 from fastapi.testclient import TestClient
 from pythonosc.udp_client import SimpleUDPClient
 
+from phantomtouch.osc import service_link
 from phantomtouch.server import create_app
 from tests.support.service import LONG, make_settings
 
@@ -37,7 +38,7 @@ def wait_for(condition: Callable[[], Any], timeout_s: float = 3.0) -> Any:
 def service(tmp_path: Path) -> Iterator[tuple[TestClient, SimpleUDPClient, int]]:
     port = free_udp_port()
     settings = make_settings(tmp_path, osc_listen=f"127.0.0.1:{port}", osc_messages_per_s=200.0)
-    with TestClient(create_app(settings)) as client:
+    with TestClient(create_app(settings, attach=[service_link.attach])) as client:
         yield client, SimpleUDPClient("127.0.0.1", port), port
 
 

@@ -16,7 +16,8 @@ from fastapi.testclient import TestClient
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from phantomtouch.server import Settings, create_app
+from phantomtouch.server import create_app
+from phantomtouch.service.settings import Settings
 from tests.support.live_server import LiveServer
 from tests.support.service import make_settings
 

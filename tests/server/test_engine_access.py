@@ -8,8 +8,8 @@ from pathlib import Path
 
 from phantomtouch.engine import ProcessEngine
 from phantomtouch.schema import DeviceProfile
-from phantomtouch.server import Settings
-from phantomtouch.server.engine_access import describe_output, open_engine
+from phantomtouch.service.engine_access import describe_output, open_engine
+from phantomtouch.service.settings import Settings
 from tests.support.service import make_settings
 
 

@@ -11,8 +11,9 @@ from fastapi.testclient import TestClient
 from pydantic import BaseModel, Field, TypeAdapter, ValidationError
 
 from phantomtouch.errors import DeviceError, EngineBusyError, ParameterError, ProtocolError
-from phantomtouch.server import create_app, errors
-from phantomtouch.server.errors import (
+from phantomtouch.server import create_app
+from phantomtouch.service import errors
+from phantomtouch.service.errors import (
     MAX_FIELDS,
     NotFoundError,
     RateLimitedError,

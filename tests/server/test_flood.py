@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from phantomtouch.server.flood import FloodGuard
+from phantomtouch.service.flood import FloodGuard
 
 
 def test_within_the_rate_nothing_is_dropped() -> None:

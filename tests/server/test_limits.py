@@ -6,8 +6,8 @@ import pytest
 from fastapi import FastAPI, Request
 from fastapi.testclient import TestClient
 
-from phantomtouch.server import errors
-from phantomtouch.server.limits import BodyLimitMiddleware, TokenMiddleware
+from phantomtouch.service import errors
+from phantomtouch.service.limits import BodyLimitMiddleware, TokenMiddleware
 
 TOKEN = "t" * 24
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import FastAPI, Response
 from fastapi.testclient import TestClient
 
-from phantomtouch.server.metrics import CONTENT_TYPE, Metrics, MetricsMiddleware
+from phantomtouch.service.metrics import CONTENT_TYPE, Metrics, MetricsMiddleware
 
 STATUS = {
     "active_voices": 3,

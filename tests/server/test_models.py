@@ -6,7 +6,7 @@ import pytest
 from pydantic import ValidationError
 
 from phantomtouch.renderer import preset
-from phantomtouch.server.models import (
+from phantomtouch.service.models import (
     AnyTouch,
     NamedTouch,
     PatternTouch,

@@ -7,9 +7,9 @@ from fastapi import FastAPI, Request, WebSocket
 from fastapi.testclient import TestClient
 from starlette.testclient import WebSocketDenialResponse
 
-from phantomtouch.server import errors
-from phantomtouch.server.metrics import Metrics
-from phantomtouch.server.origin import (
+from phantomtouch.service import errors
+from phantomtouch.service.metrics import Metrics
+from phantomtouch.service.origin import (
     ContentTypeMiddleware,
     HostOriginMiddleware,
     HostPolicy,

@@ -7,7 +7,7 @@ import tracemalloc
 
 from phantomtouch import DeviceProfile, TouchPattern, preset
 from phantomtouch.renderer import plan
-from phantomtouch.server.plans import PlanCache
+from phantomtouch.service.plans import PlanCache
 
 
 def line(points: int, offset_cm: float) -> TouchPattern:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from phantomtouch.server.errors import QuotaError
-from phantomtouch.server.quotas import VoiceLedger
+from phantomtouch.service.errors import QuotaError
+from phantomtouch.service.quotas import VoiceLedger
 
 
 def playing(job_id: str) -> bool:

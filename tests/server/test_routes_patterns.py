@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from phantomtouch.server import Settings, create_app
+from phantomtouch.server import create_app
+from phantomtouch.service.settings import Settings
 from tests.support.service import STROKE, make_settings
 
 

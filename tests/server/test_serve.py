@@ -14,7 +14,7 @@ import httpx
 import pytest
 
 from phantomtouch.cli import main
-from phantomtouch.server.serve import log_config
+from phantomtouch.service.listen import log_config
 from tests.support.live_server import free_port
 
 

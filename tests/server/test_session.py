@@ -14,7 +14,7 @@ from starlette.testclient import WebSocketTestSession
 from starlette.websockets import WebSocketDisconnect
 
 from phantomtouch.server import create_app
-from phantomtouch.server.errors import (
+from phantomtouch.service.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
     WS_CLOSE_UNSUPPORTED_DATA,

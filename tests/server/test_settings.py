@@ -10,7 +10,7 @@ import pytest
 import soundfile
 from pydantic import ValidationError
 
-from phantomtouch.server.settings import Settings, default_db_path, is_loopback
+from phantomtouch.service.settings import Settings, default_db_path, is_loopback
 
 
 def test_defaults_bind_loopback_port_8000(tmp_path: Path) -> None:

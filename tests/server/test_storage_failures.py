@@ -18,7 +18,7 @@ import pytest
 
 from phantomtouch import plan
 from phantomtouch.schema import TouchPattern
-from phantomtouch.server.store import PatternStore
+from phantomtouch.service.store import PatternStore
 from tests.support.live_server import LiveServer
 from tests.support.service import STROKE
 

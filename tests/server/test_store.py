@@ -12,8 +12,8 @@ import pytest
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.renderer import plan_at, preset
-from phantomtouch.server.errors import StoredPatternError
-from phantomtouch.server.store import DamagedStoreError, PatternStore
+from phantomtouch.service.errors import StoredPatternError
+from phantomtouch.service.store import DamagedStoreError, PatternStore
 
 SUMMARY: dict[str, Any] = plan_at(preset("vr/tap")).summary()
 LONGER = {**SUMMARY, "duration_s": 2.0}

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from phantomtouch.server.models import PresetTouch
-from phantomtouch.server.ws_messages import Down, MessageError, Move, Play, Subscribe, parse
+from phantomtouch.service.models import PresetTouch
+from phantomtouch.service.ws_messages import Down, MessageError, Move, Play, Subscribe, parse
 
 
 def test_move_and_down() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from phantomtouch.server import Settings
+from phantomtouch.service.settings import Settings
 
 STROKE: dict[str, Any] = {
     "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},

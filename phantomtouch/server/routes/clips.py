@@ -14,10 +14,10 @@ from pydantic import TypeAdapter
 
 from phantomtouch.schema import HapticClip
 from phantomtouch.schema.clip import CLIP_NAME_REGEX
-from phantomtouch.server.bodies import strict_body
 from phantomtouch.server.deps import StoreDep
-from phantomtouch.server.errors import NotFoundError, responses
-from phantomtouch.server.models import ClipInfo
+from phantomtouch.service.bodies import strict_body
+from phantomtouch.service.errors import NotFoundError, responses
+from phantomtouch.service.models import ClipInfo
 
 router = APIRouter(prefix="/clips", tags=["patterns"])
 

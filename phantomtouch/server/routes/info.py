@@ -9,11 +9,11 @@ from fastapi import APIRouter, Response
 
 from phantomtouch.renderer import preset_names
 from phantomtouch.schema import DeviceProfile
-from phantomtouch.server import touch
 from phantomtouch.server.deps import EngineDep, ServiceDep
-from phantomtouch.server.errors import responses
-from phantomtouch.server.metrics import CONTENT_TYPE
-from phantomtouch.server.models import ClockInfo, DeviceInfo, Health, PlanSummary, PresetInfo
+from phantomtouch.service import scheduling
+from phantomtouch.service.errors import responses
+from phantomtouch.service.metrics import CONTENT_TYPE
+from phantomtouch.service.models import ClockInfo, DeviceInfo, Health, PlanSummary, PresetInfo
 
 router = APIRouter(tags=["info"])
 
@@ -50,7 +50,9 @@ def _preset_summaries(device: DeviceProfile) -> tuple[PresetInfo, ...]:
         PresetInfo(
             name=name,
             summary=PlanSummary(
-                **touch.plan_summary(touch.plan_for(touch.preset_pattern(name), device))
+                **scheduling.plan_summary(
+                    scheduling.plan_for(scheduling.preset_pattern(name), device)
+                )
             ),
         )
         for name in preset_names()

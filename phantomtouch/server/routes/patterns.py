@@ -8,11 +8,11 @@ from fastapi import APIRouter, Depends, Response
 from pydantic import TypeAdapter
 
 from phantomtouch.schema import TouchPattern
-from phantomtouch.server import touch
-from phantomtouch.server.bodies import strict_body
 from phantomtouch.server.deps import ClientDep, PatternNameParam, ServiceDep, StoreDep
-from phantomtouch.server.errors import NotFoundError, responses
-from phantomtouch.server.models import (
+from phantomtouch.service import scheduling
+from phantomtouch.service.bodies import strict_body
+from phantomtouch.service.errors import NotFoundError, responses
+from phantomtouch.service.models import (
     JobAccepted,
     NamedTouch,
     PatternInfo,
@@ -47,7 +47,7 @@ def list_patterns(store: StoreDep) -> list[PatternInfo]:
 )
 def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
     """The pattern as it was stored with `PUT`."""
-    return touch.stored_pattern(store, name, field="name")
+    return scheduling.stored_pattern(store, name, field="name")
 
 
 @router.put(
@@ -63,7 +63,9 @@ def put_pattern(
     service: ServiceDep,
 ) -> PatternInfo:
     """Store (or replace) a pattern; it is planned first, so only playable patterns are kept."""
-    summary = touch.plan_summary(service.plans.plan(touch.with_clip(pattern, service.store)))
+    summary = scheduling.plan_summary(
+        service.plans.plan(scheduling.with_clip(pattern, service.store))
+    )
     service.store.put(name, pattern, summary)
     return PatternInfo(name=name, summary=PlanSummary(**summary))
 
@@ -98,4 +100,4 @@ async def play_pattern(
 ) -> JobAccepted:
     """As `POST /touch` with `{"stored": name}`; optional `start_in_ms` or `start_at_s`."""
     request = NamedTouch(stored=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
-    return await touch.schedule(service, request, client=client)
+    return await scheduling.schedule(service, request, client=client)

@@ -13,12 +13,12 @@ from starlette.background import BackgroundTask
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.renderer.trajectory import control_gains, positions_at
-from phantomtouch.server import touch
 from phantomtouch.server.deps import ServiceDep
-from phantomtouch.server.errors import responses
-from phantomtouch.server.models import Curves, RenderPlan
 from phantomtouch.server.routes.touch import TOUCH_BODY_OPENAPI, TouchBody
 from phantomtouch.server.wav import wav_bytes, wav_stream
+from phantomtouch.service import scheduling
+from phantomtouch.service.errors import responses
+from phantomtouch.service.models import Curves, RenderPlan
 
 router = APIRouter(tags=["render"])
 
@@ -78,11 +78,11 @@ def post_render(
     are rendered; a few run at once (`max_concurrent_renders`, each until its download
     ends or its client leaves), more are refused with 429.
     """
-    pattern = touch.resolve(request, service.store)
+    pattern = scheduling.resolve(request, service.store)
     plan = service.plans.plan(pattern)
     if accept is not None and "application/json" in accept and WAV_MEDIA_TYPE not in accept:
         with service.render_slot():
-            return RenderPlan(**touch.plan_summary(plan), curves=curves(plan))
+            return RenderPlan(**scheduling.plan_summary(plan), curves=curves(plan))
     cap_s = service.settings.max_render_duration_s
     if plan.duration_s > cap_s:
         raise ParameterError(

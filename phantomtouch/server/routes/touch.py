@@ -7,14 +7,14 @@ from typing import TYPE_CHECKING, Annotated
 from fastapi import APIRouter, Depends, Request
 from fastapi import Path as PathParam
 
-from phantomtouch.server import touch
-from phantomtouch.server.bodies import strict_body
 from phantomtouch.server.deps import ClientDep, EngineDep, ServiceDep
-from phantomtouch.server.errors import NotFoundError, responses
+from phantomtouch.service import scheduling
+from phantomtouch.service.bodies import strict_body
+from phantomtouch.service.errors import NotFoundError, responses
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
-from phantomtouch.server.models import (
+from phantomtouch.service.models import (
     AnyTouch,
     JobAccepted,
     JobInfo,
@@ -55,7 +55,7 @@ async def post_touch(request: TouchBody, service: ServiceDep, client: ClientDep)
     unknown preset or stored pattern; 503 `busy` means the engine's queue is full; 429
     `quota` that this client holds its share of the voices (the message names the quota).
     """
-    return await touch.schedule(service, request, client=client)
+    return await scheduling.schedule(service, request, client=client)
 
 
 @router.post(

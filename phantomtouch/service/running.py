@@ -5,16 +5,18 @@ from __future__ import annotations
 import itertools
 import secrets
 import threading
+from collections.abc import Callable
+from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
 from phantomtouch.schema import DeviceProfile
-from phantomtouch.server.errors import RateLimitedError
-from phantomtouch.server.metrics import Metrics
-from phantomtouch.server.plans import PlanCache
-from phantomtouch.server.quotas import VoiceLedger
-from phantomtouch.server.settings import Settings
-from phantomtouch.server.store import PatternStore
+from phantomtouch.service.errors import RateLimitedError
+from phantomtouch.service.metrics import Metrics
+from phantomtouch.service.plans import PlanCache
+from phantomtouch.service.quotas import VoiceLedger
+from phantomtouch.service.settings import Settings
+from phantomtouch.service.store import PatternStore
 
 if TYPE_CHECKING:
     import asyncio
@@ -96,3 +98,9 @@ class _Slot:
 
     def __exit__(self, *exc: object) -> None:
         self._semaphore.release()
+
+
+Attachment = Callable[[Service], AbstractAsyncContextManager[None]]
+"""Something the server's lifespan enters once the service runs and leaves before it stops:
+the OSC bridge (:func:`phantomtouch.osc.service_link.attach`), an armband node joining a
+fleet (:func:`phantomtouch.fleet.node.attach`)."""

@@ -39,8 +39,8 @@ def _run(args: argparse.Namespace) -> int:
         Path(args.output).write_text(clip.model_dump_json(indent=1) + "\n", encoding="utf-8")
         print(f"{path.name}: {summary}; written to {args.output}")
         return 0
-    from phantomtouch.server.settings import default_db_path
-    from phantomtouch.server.store import PatternStore
+    from phantomtouch.service.settings import default_db_path
+    from phantomtouch.service.store import PatternStore
 
     name = args.name or clip_name(path)
     if not _NAME.fullmatch(name) or name in (".", ".."):

@@ -10,7 +10,7 @@ leaves it out and logs it, ``get`` raises :class:`StoredPatternError` (500); the
 rows stay usable, and ``PUT`` or ``DELETE`` of that name mends it.
 
 A store that fails while the service runs (its disk full, a page of its file damaged)
-raises :class:`~phantomtouch.server.errors.StorageError` (503 ``storage``) and keeps the
+raises :class:`~phantomtouch.service.errors.StorageError` (503 ``storage``) and keeps the
 reason in :attr:`PatternStore.problem`, which ``/health`` reports, until a write succeeds.
 """
 
@@ -32,8 +32,8 @@ from pydantic import ValidationError
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema import HapticClip, TouchPattern
-from phantomtouch.server.errors import StorageError, StoredPatternError
-from phantomtouch.server.models import PlanSummary
+from phantomtouch.service.errors import StorageError, StoredPatternError
+from phantomtouch.service.models import PlanSummary
 
 logger = logging.getLogger("phantomtouch.server.store")
 Table = Literal["patterns", "clips"]

@@ -1,6 +1,6 @@
 """ASGI guards in front of the routes: the token and the request body size.
 
-Both answer with the service's error body (:mod:`phantomtouch.server.errors`). The
+Both answer with the service's error body (:mod:`phantomtouch.service.errors`). The
 WebSocket checks its token itself, after accepting, so that it can close with 1008.
 """
 
@@ -14,7 +14,7 @@ from starlette.datastructures import Headers
 from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from phantomtouch.server.errors import Problem, TooLargeError, UnauthorizedError, describe
+from phantomtouch.service.errors import Problem, TooLargeError, UnauthorizedError, describe
 
 OPEN_PATHS = frozenset({"/health", "/"})
 """Paths that answer without a token: the liveness probe and the web page, which holds no

@@ -9,12 +9,12 @@ from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr, Validat
 
 from phantomtouch.schema import limits
 from phantomtouch.schema.pattern import Carrier, Law
-from phantomtouch.server.errors import (
+from phantomtouch.service.errors import (
     ErrorCode,
     Problem,
     validation_problem,
 )
-from phantomtouch.server.models import AnyTouch, parse_touch_request
+from phantomtouch.service.models import AnyTouch, parse_touch_request
 
 PROTOCOL_VERSION = 1
 MAX_NORMAL_VELOCITY_M_S = 10.0

@@ -16,7 +16,7 @@ clients that are not browsers (game engines, the SDKs, curl) notice none of them
   any host without asking (a CORS "simple request"); JSON needs a preflight, which the
   Origin check refuses.
 
-Refusals answer with the service's error body (:mod:`phantomtouch.server.errors`: 421
+Refusals answer with the service's error body (:mod:`phantomtouch.service.errors`: 421
 ``unknown_host``, 403 ``forbidden_origin``, 415 ``unsupported_media_type``; a WebSocket
 handshake gets the same as its HTTP answer), are counted in ``/metrics``
 (``phantomtouch_refused_requests_total{check, transport}``) and logged, the first time for
@@ -35,7 +35,7 @@ from urllib.parse import urlsplit
 from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from phantomtouch.server.errors import (
+from phantomtouch.service.errors import (
     WS_CLOSE_POLICY_VIOLATION,
     ForbiddenOriginError,
     ServiceError,
@@ -43,8 +43,8 @@ from phantomtouch.server.errors import (
     UnsupportedMediaTypeError,
     describe,
 )
-from phantomtouch.server.limits import send_problem
-from phantomtouch.server.metrics import Metrics
+from phantomtouch.service.limits import send_problem
+from phantomtouch.service.metrics import Metrics
 
 logger = logging.getLogger("phantomtouch.server.origin")
 

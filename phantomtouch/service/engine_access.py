@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from phantomtouch.engine import EngineFront
 from phantomtouch.schema import DeviceProfile
-from phantomtouch.server.settings import Settings
+from phantomtouch.service.settings import Settings
 
 NULL_OUTPUT = "null"
 """``output_device`` value that forces the clocked null output (no sound card)."""

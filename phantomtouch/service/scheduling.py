@@ -10,8 +10,8 @@ from phantomtouch.errors import ParameterError
 from phantomtouch.renderer import plan, preset
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import ClipCarrier, DeviceProfile, TouchPattern
-from phantomtouch.server.errors import NotFoundError
-from phantomtouch.server.models import (
+from phantomtouch.service.errors import NotFoundError
+from phantomtouch.service.models import (
     MAX_START_AHEAD_S,
     AnyTouch,
     JobAccepted,
@@ -19,11 +19,11 @@ from phantomtouch.server.models import (
     PresetTouch,
     Timing,
 )
-from phantomtouch.server.store import PatternStore
+from phantomtouch.service.store import PatternStore
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront, Job
-    from phantomtouch.server.service import Service
+    from phantomtouch.service.running import Service
 
 LATE_START_TOLERANCE_S = 1.0
 """How far in the past a ``start_at_s`` may lie (it then starts at once)."""
@@ -143,7 +143,7 @@ async def schedule(
 ) -> JobAccepted:
     """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
 
-    ``client`` is whose quotas it counts against (:mod:`phantomtouch.server.quotas`).
+    ``client`` is whose quotas it counts against (:mod:`phantomtouch.service.quotas`).
     Reading the store, planning and scheduling (which may build a noise loop) run in a
     worker thread: the event loop never waits for them.
     """

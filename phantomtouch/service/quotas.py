@@ -22,7 +22,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from phantomtouch.server.errors import QuotaError
+from phantomtouch.service.errors import QuotaError
 
 
 @dataclass
