@@ -29,14 +29,7 @@ from phantomtouch.engine.board import ContactBoard
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings, ContactVoice
-from phantomtouch.engine.messages import (
-    Cancelled,
-    Ended,
-    Event,
-    Released,
-    Started,
-    StoppedAll,
-)
+from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.scheduler import Scheduler
 from phantomtouch.engine.sinks import Sink

@@ -14,14 +14,7 @@ from typing import Any
 
 from phantomtouch.engine.jobs import JobTable
 from phantomtouch.engine.log import StimulusLog
-from phantomtouch.engine.messages import (
-    Cancelled,
-    Ended,
-    Event,
-    Released,
-    Started,
-    StoppedAll,
-)
+from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
 
 LOG_PATTERN_MAX_POINTS = 1000
 """Patterns with longer paths are logged by their summary alone."""
