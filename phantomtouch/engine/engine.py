@@ -87,6 +87,7 @@ class LocalAudio:
         self.output_device = sink.output_device
         self.costs = links.costs
         self._lock = threading.Lock()
+        self._events_lock = threading.Lock()  # one thread at a time takes the events
         self._halt = threading.Event()
         self._housekeeper: threading.Thread | None = None
         self._reported_error: BaseException | None = None
@@ -135,7 +136,8 @@ class LocalAudio:
     def sync(self) -> None:
         """Hand what the callback reported to the front; log a new callback error (host:
         the housekeeping thread, or a caller that wants fresh job states)."""
-        self._links.deliver(self.core.events())
+        with self._events_lock:
+            self._links.deliver(self.core.events())
         error = self.core.scheduler.last_error
         if error is not None and error is not self._reported_error:
             self._reported_error = error

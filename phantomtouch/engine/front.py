@@ -271,12 +271,13 @@ class EngineFront:
 
     @property
     def voice_capacity(self) -> int:
-        """Pattern voices that may sound at once (see :class:`Admission`)."""
+        """Pattern voices that may sound at once (see :class:`Admission`); host, any thread."""
         return self._admission.voice_capacity
 
     @property
     def starts_per_block(self) -> int:
-        """Pattern voices that may begin in one block (see :class:`Admission`)."""
+        """Pattern voices that may begin in one block (see :class:`Admission`); host, any
+        thread."""
         return self._admission.starts_per_block
 
     def schedule(
@@ -695,6 +696,7 @@ class EngineFront:
 
     @property
     def device(self) -> DeviceProfile:
+        """The device profile (host, any thread; so are the three below)."""
         return self._device
 
     @property
