@@ -67,7 +67,9 @@ def test_messages_and_events_cross_a_pickle_unchanged() -> None:
 
 def test_a_command_is_applied_through_the_table_and_a_void_one_plays_nothing() -> None:
     sink = CaptureSink(DEVICE)
-    with Engine(DEVICE, sink, prerender_max_s=0.0) as engine:
+    engine = Engine(DEVICE, sink, prerender_max_s=0.0)
+    engine.core.start()  # the core alone: no housekeeping thread takes the events
+    try:
         state = AudioState(engine.core)
         resolved = plan(STROKE, DEVICE)
         perform(state, StartJob("void", 0, resolved, None, None, 0), void=True)
@@ -75,6 +77,8 @@ def test_a_command_is_applied_through_the_table_and_a_void_one_plays_nothing() -
         perform(state, ReleaseJob("played", 4 * DEVICE.block_frames, None))
         sink.pull(40)
         events = engine.core.events() + state.reports
+    finally:
+        engine.close()
     assert Cancelled("job", "void", 0) in events
     started = [e for e in events if isinstance(e, Started)]
     assert [(e.key, e.frame) for e in started] == [("played", 0)]
@@ -102,3 +106,31 @@ def test_an_up_for_a_contact_that_is_not_sounding_is_ignored() -> None:
 def test_every_applier_says_it_runs_in_real_time_or_not(command: type) -> None:
     doc = APPLIERS[command].__doc__ or ""
     assert "real time" in doc.lower(), command
+
+
+def test_the_two_engines_are_one_front_and_add_only_their_constructor_and_accessors() -> None:
+    from phantomtouch.engine import EngineFront, ProcessEngine
+
+    assert Engine.__mro__[1] is EngineFront and ProcessEngine.__mro__[1] is EngineFront
+    own = {
+        name
+        for kind in (Engine, ProcessEngine)
+        for name, value in vars(kind).items()
+        if callable(value) and not name.startswith("__")
+    }
+    assert own == set()  # every method is the front's; properties only name the audio side
+    assert {"__init__"} <= set(vars(Engine)) and {"__init__"} <= set(vars(ProcessEngine))
+
+
+def test_a_touchdown_sounds_with_the_gains_the_front_computed_not_recomputed() -> None:
+    channel = 5
+    unit = np.zeros(DEVICE.channels, dtype=np.float32)
+    unit[channel] = 1.0  # no position of the layout has these gains: the board must not redo them
+    sink = CaptureSink(DEVICE)
+    with Engine(DEVICE, sink, contact=None) as engine:
+        state = AudioState(engine.core)
+        perform(state, ContactDown("o", "c", 0.0, 0.0, unit, 0.25, SineCarrier(), "power", None, 0))
+        recording = sink.pull(20)
+    silent = [k for k in range(DEVICE.channels) if k != channel]
+    assert not np.any(recording[:, silent])
+    assert np.max(np.abs(recording[:, channel])) > 0.0
