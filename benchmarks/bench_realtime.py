@@ -15,7 +15,11 @@ Scenarios (run in the order given by ``--scenarios``; default ``d,a,b,c``):
   core busy (a stand-in for a VR game on the same PC);
 - ``c`` flood: ``wrk -t1 -c16`` posts ``vr/tap`` touches as fast as it can (10 s); the
   excess must be refused (503 ``busy``) or stolen, never heard as a glitch. The per-client
-  voice quota is lifted to the voice cap, so the flood keeps 64 voices sounding.
+  voice quota is lifted to the voice cap, so the flood keeps 64 voices sounding;
+- ``s`` soak (not in the default order): ``POST /touch`` of patterns no request repeats,
+  each a 12,000-point path of about 1.5 s with noise of its own seed (a noise loop the
+  engine process is handed for it alone), 5 per second (60 s); it also reports the
+  resident memory of the service and of its engine process at its start and end.
 
 Each reports the engine's underruns (the delta of ``phantomtouch_underruns`` in
 ``/metrics``), JACK's xruns, the engine's render load (``phantomtouch_render_load``: the
@@ -197,6 +201,10 @@ async def measure(
     }
 
 
+def mb(size: int | None) -> str:
+    return "—" if size is None else f"{size / 1e6:.0f}"
+
+
 def ms(seconds: float | None) -> float | None:
     return None if seconds is None else seconds * 1e3
 
@@ -245,6 +253,36 @@ def hands_and_touches(port: int, args: argparse.Namespace) -> Load:
                 "errors": len(errors),
                 "first_error": errors[0] if errors else None,
             },
+        }
+
+    return run
+
+
+def soak(port: int, server_pid: int, args: argparse.Namespace) -> Load:
+    async def run(deadline: float) -> dict[str, Any]:
+        pids = {"server": server_pid, "engine": load.engine_pid(server_pid)}
+
+        def memory() -> dict[str, int | None]:
+            return {
+                name: None if pid is None else load.rss_bytes(pid) for name, pid in pids.items()
+            }
+
+        start = memory()
+        touches = await load.paced_touches(
+            port,
+            args.soak_rate,
+            deadline,
+            lambda k: load.soak_body(k, args.soak_points),
+        )
+        latencies = touches["latencies_s"]
+        return {
+            "touches": {
+                "sent": len(latencies),
+                "statuses": touches["statuses"],
+                "p50_ms": ms(load.percentile(latencies, 0.50)),
+                "p99_ms": ms(load.percentile(latencies, 0.99)),
+            },
+            "rss_bytes": {"start": start, "end": memory()},
         }
 
     return run
@@ -316,6 +354,8 @@ def parse_args() -> argparse.Namespace:
         default=128,
         help="JACK period = engine block",
     )
+    parser.add_argument("--soak-rate", type=within(float, 0.1, 50), default=5.0)
+    parser.add_argument("--soak-points", type=within(int, 2, 100_000), default=12_000)
     parser.add_argument("--hands", type=within(int, 1, 16), default=4)
     parser.add_argument("--move-hz", type=within(float, 1, 1000), default=90.0)
     parser.add_argument(
@@ -375,6 +415,8 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
                 "flood_connections",
                 "hogs",
                 "health_hz",
+                "soak_rate",
+                "soak_points",
             )
         },
         "scenarios": {},
@@ -415,6 +457,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
             "a": (args.seconds, hands_and_touches(port, args)),
             "b": (args.seconds, with_hogs(hands_and_touches(port, args), hogs, args.hogs)),
             "c": (args.flood_seconds, wrk_flood(wrk or "wrk", port, folder, args)),
+            "s": (args.seconds, soak(port, service.process.pid, args)),
         }
         for key in args.scenarios:
             seconds, make_load = loads[key]
@@ -486,6 +529,16 @@ def main() -> None:
         f"a do-nothing SCHED_FIFO thread: {floor_text(base)} wake-ups a period or more late\n"
     )
     print(table(results))
+    for key, result in results["scenarios"].items():
+        if "rss_bytes" in result:
+            rss = result["rss_bytes"]
+            print(
+                f"\n({key}) resident memory, MB, start -> end: "
+                + "; ".join(
+                    f"{name} {mb(rss['start'][name])} -> {mb(rss['end'][name])}"
+                    for name in rss["start"]
+                )
+            )
     print(
         "\ntarget: 0 underruns and 0 xruns in a, b and c; the flood's excess refused (503) or "
         "stolen; render load p99 <= 25 % of the period"

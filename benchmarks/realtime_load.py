@@ -6,12 +6,14 @@ deadline and every request has a timeout.
 
 - :class:`HttpConnection`: one keep-alive HTTP/1.1 connection (a request at a time);
 - :func:`hand`: a WebSocket client moving one contact along an ellipse at a fixed rate;
-- :func:`paced_touches`: ``POST /touch`` at a fixed rate over one connection;
+- :func:`paced_touches`: ``POST /touch`` at a fixed rate over one connection (the same
+  preset, or with :func:`soak_body` a distinct long pattern with a distinct noise seed);
 - :func:`sample_health`, :func:`sample_metrics`: what the service answers during the load;
 - :func:`flood`: ``wrk`` posting touches as fast as 16 connections can;
 - :func:`start_hogs`: processes that keep every core busy at normal priority;
 - :func:`cpu_seconds`: CPU time of the whole machine and of this process tree, to tell how
-  much of it other programs took during a scenario.
+  much of it other programs took during a scenario;
+- :func:`rss_bytes`, :func:`engine_pid`: the memory of the service and its engine process.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import re
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -193,11 +196,40 @@ async def sample_health(port: int, deadline: float, interval_s: float) -> dict[s
 # -- load ------------------------------------------------------------------------------
 
 
-async def paced_touches(port: int, rate_per_s: float, deadline: float) -> dict[str, Any]:
+def soak_body(index: int, points: int) -> bytes:
+    """A touch no other request repeats: a ``points``-point arc (about 15 cm, so about
+    1.5 s at 10 cm/s: rendered in the engine's callback, not beforehand) shifted by
+    ``index``, with noise seeded by ``index`` (a noise loop the engine holds for no other)."""
+    shift = (index % 97) * 1e-4
+    arc = [
+        [
+            round(1.9 + 1.6 * math.cos(math.pi * k / (points - 1)) + shift, 6),
+            round(7.2 + 6.0 * math.sin(math.pi * k / (points - 1)), 6),
+        ]
+        for k in range(points)
+    ]
+    pattern = {
+        "path": {"kind": "polyline", "points_cm": arc},
+        "speed_cm_s": 10.0,
+        "fade_in_s": 0.05,
+        "fade_out_s": 0.05,
+        "carrier": {"kind": "noise", "seed": index},
+        "intensity": "low",
+    }
+    return json.dumps(pattern).encode()
+
+
+async def paced_touches(
+    port: int,
+    rate_per_s: float,
+    deadline: float,
+    body: Callable[[int], bytes] | None = None,
+) -> dict[str, Any]:
     """``POST /touch`` at ``rate_per_s`` on one connection, one request in flight.
 
-    A late answer delays the next request, and the schedule catches up by sending at once
-    (never more than one at a time): the rate achieved is reported.
+    ``body(k)`` is the ``k``-th request's body (None: ``TOUCH_BODY``). A late answer
+    delays the next request, and the schedule catches up by sending at once (never more
+    than one at a time): the rate achieved is reported.
     """
     connection = HttpConnection(port)
     latencies: list[float] = []
@@ -207,7 +239,8 @@ async def paced_touches(port: int, rate_per_s: float, deadline: float) -> dict[s
         while (now := time.monotonic()) < deadline:
             await asyncio.sleep(max(0.0, due - now))
             due += 1.0 / rate_per_s
-            status, seconds, _ = await timed_request(connection, "POST", "/touch", TOUCH_BODY)
+            payload = TOUCH_BODY if body is None else body(len(latencies))
+            status, seconds, _ = await timed_request(connection, "POST", "/touch", payload)
             count(statuses, status)
             latencies.append(seconds)
     finally:
@@ -401,3 +434,32 @@ def cpu_seconds() -> tuple[float, float]:
         tree.add(pid)
         frontier += [child for child, parent in parents.items() if parent == pid]
     return machine_s, sum(spent.get(pid, 0) for pid in tree) * tick_s
+
+
+def rss_bytes(pid: int) -> int | None:
+    """Resident memory of a process, bytes (``VmRSS``), or None when it is gone."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def engine_pid(server_pid: int) -> int | None:
+    """The engine process of a service: its child started by ``multiprocessing`` spawn
+    (not the resource tracker, its other child), or None."""
+    for task in Path(f"/proc/{server_pid}/task").glob("*"):
+        try:
+            children = [int(c) for c in (task / "children").read_text().split()]
+        except OSError:
+            continue
+        for child in children:
+            try:
+                command = Path(f"/proc/{child}/cmdline").read_bytes()
+            except OSError:
+                continue
+            if b"spawn_main" in command:
+                return child
+    return None

@@ -10,6 +10,7 @@ TITLES = {
     "a": "4 hands at 90 Hz + 50 touches/s",
     "b": "same + CPU hog on every core",
     "c": "wrk flood of POST /touch",
+    "s": "soak: distinct long noise touches",
 }
 
 

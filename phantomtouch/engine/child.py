@@ -1,19 +1,23 @@
 """The engine process: one audio callback that does all of its Python work.
 
-:func:`serve` runs in the child of :class:`~phantomtouch.engine.process.ProcessEngine`.
-It opens the sink a :class:`~phantomtouch.engine.soundcard.SinkSpec` names, builds a
-:class:`~phantomtouch.engine.core.Core`, measures what a voice costs and reports ready;
-once told to start, it starts the sink, and from then on its main thread only waits (in a
-call that holds no interpreter lock) for the host to leave. Everything else happens in
-the audio callback, at the start of each block (:meth:`_Child.intake`):
+:func:`serve` runs in the engine process of a
+:class:`~phantomtouch.engine.process.ChildAudio`. It opens the sink a
+:class:`~phantomtouch.engine.soundcard.SinkSpec` names, builds a
+:class:`~phantomtouch.engine.core.Core`, measures what a voice costs and reports ready
+(non real time); from then on it refuses to build a noise loop it was not handed
+(:func:`~phantomtouch.renderer.carriers.refuse_building`). Once told to start, it starts
+the sink, and its main thread only waits (in a call that holds no interpreter lock) for
+the host to leave. Everything else happens in the audio callback, in real time, at the
+start of each block (:meth:`Intake.run`):
 
 1. report what the last block did (events to the host, figures and a heartbeat into
-   shared memory);
+   shared memory), and unmap the noise loops no voice reads any more;
 2. apply a ``stop_all`` the host raised in shared memory: every message sent before it
    is void;
-3. read the host's messages from a non-blocking pipe and apply them, while the time
-   spent stays within ``INTAKE_SHARE`` of the block's playing time (at least one
-   message a block; the rest wait for the next block);
+3. read the host's messages (``(seq, message)``) from a non-blocking pipe and perform
+   them (:func:`~phantomtouch.engine.messages.perform`), while the time spent stays
+   within ``INTAKE_SHARE`` of the block's playing time (at least one message a block;
+   the rest wait for the next block);
 4. take the newest contact positions from shared memory.
 
 So the callback never waits for the interpreter lock: no other thread of this process
@@ -23,7 +27,6 @@ engine fades out and the process ends.
 
 from __future__ import annotations
 
-import dataclasses
 import gc
 import logging
 import os
@@ -41,12 +44,11 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
 from phantomtouch.engine.link import FrameReader, NonBlockingWriter, encode, widen
-from phantomtouch.engine.prerender import Prerendered
+from phantomtouch.engine.messages import AudioState, Close, StartSink, perform
+from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.soundcard import SinkSpec
-from phantomtouch.renderer.carriers import adopt_noise_loop
-from phantomtouch.renderer.geometry import Geometry
-from phantomtouch.renderer.plan import Plan
+from phantomtouch.renderer.carriers import refuse_building
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger(__name__)
@@ -57,8 +59,8 @@ READ_BYTES = 1 << 18
 """Most bytes read from the host's pipe per block."""
 
 
-class _Child:
-    """The engine process's state, used by its audio callback."""
+class Intake:
+    """The engine process's state, used by its audio callback at each block's start."""
 
     def __init__(
         self,
@@ -75,26 +77,24 @@ class _Child:
         self.mark = mark
         self.slots = slots
         self.status = status
-        self.geometry = Geometry.for_device(core.device)
+        self.state = AudioState(core, slots=slots)
+        self.state.loops = HeldLoops(self.state.reports)
         self.handled_mark = 0
-        self.plans: dict[int, tuple[Plan, Prerendered | None]] = {}
         self.leave = threading.Event()
         period_s = core.device.block_frames / core.device.sample_rate_hz
         self.budget_s = INTAKE_SHARE * period_s
         self.figures: dict[str, Any] = core.figures()
 
-    # -- the audio callback -----------------------------------------------------------
-
-    def intake(self) -> None:
-        """At the start of each block (see the module docstring)."""
+    def run(self) -> None:
+        """At the start of each block (real time; see the module docstring)."""
         began = time.perf_counter()
         self.report()
         self.check_mark()
         reader = self.reader
         reader.fill(READ_BYTES)
-        while (message := reader.next()) is not None:
+        while (framed := reader.next()) is not None:
             self.check_mark()
-            self.apply(message)
+            self.apply(framed)
             if time.perf_counter() - began > self.budget_s:
                 break
         if reader.closed and reader.pending_bytes == 0:
@@ -102,10 +102,17 @@ class _Child:
         self.slots.drain(self.core.board.post_checked)
 
     def report(self) -> None:
+        """Send the last block's events, write figures and a heartbeat (real time)."""
         core = self.core
         scheduler = core.scheduler
+        state = self.state
         self.status.beat(time.monotonic(), scheduler.frames)
+        assert state.loops is not None
+        state.loops.collect()
         events = core.events()
+        if state.reports:
+            events.extend(state.reports)
+            state.reports.clear()
         if events:
             self.writer.send(events)
         else:
@@ -125,74 +132,36 @@ class _Child:
             callback_errors=scheduler.callback_errors,
             output_latency_s=core.clock.output_latency_s,
             dropped_reports=self.writer.dropped,
+            refused_commands=state.refused,
             running=core.running,
         )
         self.status.write(figures)
 
     def check_mark(self) -> None:
+        """Apply a ``stop_all`` the host raised (real time)."""
         mark = int(self.mark.value)
         if mark > self.handled_mark:
             self.handled_mark = mark
             self.core.stop_all()
             self.slots.unbind_all()
 
-    def apply(self, message: tuple[Any, ...]) -> None:
-        kind, seq = message[0], message[1]
-        if kind == "close":
-            self.leave.set()
-            return
-        if kind == "noise":
-            adopt_noise_loop(message[2], message[3])
-            return
-        if kind == "start":
-            self.start(message)
-            return
-        if seq < self.handled_mark:
-            return  # sent before a stop_all: void
-        core = self.core
+    def apply(self, framed: tuple[int, Any]) -> None:
+        """Perform one ``(seq, message)`` of the host (real time); one sent before the
+        last ``stop_all`` is void. Checked by the host: a failure here is a bug, counted
+        as a callback error, never a stop."""
+        seq, message = framed
         try:
-            if kind == "release":
-                core.release_job(*message[2:])
-            elif kind == "down":
-                _, _, owner, contact, slot, kwargs = message
-                core.contact_down(core.board.prepare_down(owner, contact, **kwargs))
-                self.slots.bind(slot[0], slot[1], owner, contact)
-            elif kind == "up":
-                _, _, owner, contact, kwargs = message
-                self.slots.unbind(owner, contact)
-                core.board.up(owner, contact, **kwargs)
-            elif kind == "release_owner":
-                self.slots.unbind(message[2])
-                core.board.release_owner(message[2])
-        except Exception as exc:  # checked by the host; a failure here is a bug, not a stop
-            self.failed(exc)
-
-    def start(self, message: tuple[Any, ...]) -> None:
-        """A job's start: its plan is kept even when the start itself is void (the host
-        sends a plan once), and a job that does not start is reported cancelled."""
-        _, seq, job_id, key, plan, prerendered, forget, owner, frame = message
-        core = self.core
-        for old in forget:
-            self.plans.pop(old, None)
-        if plan is not None:
-            whole = dataclasses.replace(plan, device=core.device, geometry=self.geometry)
-            self.plans[key] = (whole, prerendered)
-        if seq >= self.handled_mark:  # else sent before a stop_all: void
-            try:
-                known, known_prerendered = self.plans[key]
-                core.start_job(job_id, known, owner, frame, known_prerendered)
-                return
-            except Exception as exc:
-                self.failed(exc)
-        self.writer.send([("cancel", "job", job_id, core.scheduler.frames)])
-
-    def failed(self, exc: Exception) -> None:
-        scheduler = self.core.scheduler
-        scheduler.callback_errors += 1
-        scheduler.last_error = exc
+            perform(self.state, message, void=seq < self.handled_mark)
+        except Exception as exc:
+            scheduler = self.core.scheduler
+            scheduler.callback_errors += 1
+            scheduler.last_error = exc
+        if self.state.leave:
+            self.leave.set()
 
     def close(self) -> None:
-        self.core.close(fade=True)  # a capture sink writes its WAV as it closes
+        """Non real time: fade out and close (a capture sink writes its WAV as it closes)."""
+        self.core.close(fade=True)
 
 
 def raise_priority(priority: int | None) -> None:
@@ -205,19 +174,20 @@ def raise_priority(priority: int | None) -> None:
         logger.info("engine process keeps normal priority: %s", exc)
 
 
-def _wait_for_start(child: _Child) -> bool:
-    """Apply the host's messages until it says ``start_sink`` (True) or ``close``."""
-    reader = child.reader
+def _wait_for_start(intake: Intake) -> bool:
+    """Perform the host's messages until it says ``StartSink`` (True) or ``Close``
+    (non real time, before the sink starts)."""
+    reader = intake.reader
     os.set_blocking(reader.fd, True)
     try:
         while not reader.closed:
             reader.fill(READ_BYTES)
-            while (message := reader.next()) is not None:
-                if message[0] == "start_sink":
+            while (framed := reader.next()) is not None:
+                if isinstance(framed[1], StartSink):
                     return True
-                if message[0] == "close":
+                if isinstance(framed[1], Close):
                     return False
-                child.apply(message)
+                intake.apply(framed)
         return False
     finally:
         os.set_blocking(reader.fd, False)
@@ -233,16 +203,18 @@ def serve(
     priority: int | None,
     shared: dict[str, Any],
 ) -> None:
-    """The engine process's main function (the target of the child process).
+    """The engine process's main function (the target of the child process; non real
+    time until the sink starts).
 
     Parameters
     ----------
     commands : Connection
-        The host's messages (read end; framed by :mod:`phantomtouch.engine.link`).
+        The host's ``(seq, message)`` pairs (read end; framed by
+        :mod:`phantomtouch.engine.link`).
     reports : Connection
         Where the engine reports (write end): first ``("ready", (voice_cost,
         start_cost, prerendered_cost), backend, output_device)`` or ``("failed",
-        exception)``, then lists of events.
+        exception)``, then lists of events (:mod:`phantomtouch.engine.messages`).
     device_json : str
         The device profile as JSON.
     spec : SinkSpec
@@ -294,18 +266,19 @@ def serve(
         os.write(report_fd, encode(("failed", exc)))
         return
     widen(commands.fileno())
-    child = _Child(
+    intake = Intake(
         core, FrameReader(commands.fileno()), NonBlockingWriter(report_fd), mark, slots, status
     )
-    core.on_block(child.intake)
+    core.on_block(intake.run)
+    refuse_building()  # from now on a noise loop is only what the host hands over
     os.set_blocking(report_fd, True)
     os.write(report_fd, encode(("ready", costs, sink.backend, sink.output_device)))
     os.set_blocking(report_fd, False)
     gc.freeze()  # what start-up made is never scanned again: collections stay short
-    if not _wait_for_start(child):
+    if not _wait_for_start(intake):
         core.close(fade=False)
         return
     sys.setswitchinterval(0.001)
     core.start()
-    child.leave.wait()
-    child.close()
+    intake.leave.wait()
+    intake.close()

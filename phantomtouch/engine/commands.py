@@ -1,15 +1,19 @@
-"""Commands from control threads to the audio callback, and their bounded queue.
+"""Voice commands for the scheduler, and their bounded queue (the audio side).
 
-Control threads (the web server, a script) build small immutable commands and push them;
-the audio callback pops them at the start of each block and applies each at the sample
-its frame asks for. The queue is bounded: a full queue refuses a new voice with
+The appliers of :mod:`phantomtouch.engine.messages` push small immutable commands (a
+voice to start, a voice to release); the audio callback pops them at the start of each
+block and applies each at the sample its frame asks for. The queue is bounded: a full
+queue refuses a new voice with
 :class:`~phantomtouch.errors.EngineBusyError`, never a silent drop. Releases (stop, lift-off,
 a client gone) are never refused: each ends a voice that was itself admitted, so they
 cannot grow without bound. ``stop_all`` does not queue at all: it raises a sequence mark
 that the callback reads first, so it gets through even when the queue is full.
 
-Only producers take the lock, and only for a few list operations; the callback never
-takes it (``deque.append`` and ``deque.popleft`` are atomic).
+Only producers take the lock, and only for a few list operations; popping never takes it
+(``deque.popleft`` is atomic). In the engine process the one producer is the audio
+callback itself (it performs the host's messages), so the lock is never contended there;
+in the in-process engine the producers are the front's threads, and the callback only
+pops. Every method says whether it runs in real time.
 """
 
 from __future__ import annotations
@@ -90,7 +94,8 @@ class CommandQueue:
         return self._admitted - max(self._retired, self._admitted_before_stop)
 
     def push(self, make: Callable[[int], C], *, bounded: bool) -> C:
-        """Build a command with the next sequence number and append it.
+        """Build a command with the next sequence number and append it (real time in
+        the engine process; the front's threads in the in-process engine).
 
         Parameters
         ----------
@@ -118,7 +123,7 @@ class CommandQueue:
             return command
 
     def push_start(self, voice: Voice, frame: int, asap: bool) -> StartCommand:
-        """Queue the start of ``voice`` (bounded; sets ``voice.seq``)."""
+        """Queue the start of ``voice`` (bounded; sets ``voice.seq``); as :meth:`push`."""
 
         def make(seq: int) -> StartCommand:
             voice.seq = seq
@@ -134,13 +139,14 @@ class CommandQueue:
         *,
         fade_frames: int | None = None,
     ) -> ReleaseCommand:
-        """Queue the release of ``voice``; never refused."""
+        """Queue the release of ``voice``; never refused; as :meth:`push`."""
         return self.push(
             lambda seq: ReleaseCommand(seq, voice, frame, transient, fade_frames), bounded=False
         )
 
     def mark_stop_all(self) -> int:
-        """Void every command pushed so far and everything playing; never refused."""
+        """Void every command pushed so far and everything playing; never refused (real
+        time)."""
         with self._lock:
             self._seq += 1
             self.stop_all_seq = self._seq
@@ -148,12 +154,12 @@ class CommandQueue:
             return self._seq
 
     def pop(self) -> Command | None:
-        """The oldest command, or None (audio callback; never waits)."""
+        """The oldest command, or None (real time: the audio callback; never waits)."""
         try:
             return self._items.popleft()
         except IndexError:
             return None
 
     def retire(self) -> None:
-        """One admitted start has started or was voided (audio callback)."""
+        """One admitted start has started or was voided (real time: the audio callback)."""
         self._retired += 1

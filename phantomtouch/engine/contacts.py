@@ -26,6 +26,10 @@ cut after 7 time constants (0.1 % left). ``A(v)`` grows linearly with ``|v|`` up
 ``transient_full_velocity_m_s`` and is then held at the amplitude of a sine of relative
 intensity ``transient_intensity`` (1 = the device's ``safety.max_level_db``). Without a
 velocity there is no transient and it costs nothing.
+
+Where it runs: :class:`ContactSettings` is checked by the front (non real time); a
+:class:`ContactVoice`'s methods run in real time, inside the audio callback, except its
+mailbox, which the side that posts moves writes.
 """
 
 from __future__ import annotations

@@ -8,15 +8,12 @@ here. The in-thread :class:`~phantomtouch.engine.Engine` calls a core directly; 
 engine process (:mod:`phantomtouch.engine.child`) calls its core from inside the audio
 callback, so that there nothing but the callback does Python work.
 
-What the callback did comes back as plain events (:meth:`Core.events`), tuples that cross
-a process boundary as they are:
+What the callback did comes back as typed events (:meth:`Core.events`,
+:mod:`phantomtouch.engine.messages`: ``Started``, ``Released``, ``Ended``, ``Cancelled``,
+``StoppedAll``), which cross a process boundary as they are.
 
-- ``("start", "job", job_id, frame, late)``
-- ``("start", "contact", (owner, contact), frame, late, x_cm, y_cm, amplitude)``
-- ``("release", kind, key, frame, silent_from)``: a fade-out begins at ``frame``
-- ``("end", kind, key, frame)``: silent from ``frame``
-- ``("cancel", kind, key, frame)``: voided before it started
-- ``("stop_all", frame)``
+Every method says where it runs: "real time" (inside the audio callback in the engine
+process; in the calling thread of the in-process engine) or "non real time".
 """
 
 from __future__ import annotations
@@ -24,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,15 +29,18 @@ from phantomtouch.engine.board import ContactBoard
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings, ContactVoice
+from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.scheduler import Scheduler
 from phantomtouch.engine.sinks import Sink
 from phantomtouch.engine.voices import DONE, JobVoice, PatternVoice, PrerenderedVoice
 from phantomtouch.errors import DeviceError
+from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 
-Event = tuple[Any, ...]
+if TYPE_CHECKING:
+    from phantomtouch.engine.messages import ContactDown
 
 
 class Core:
@@ -104,19 +104,22 @@ class Core:
         )
         self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
         self.running = False
+        self.geometry = Geometry.for_device(device)
         self._jobs: dict[str, JobVoice] = {}
 
-    # -- life cycle (control thread) --------------------------------------------------
+    # -- life cycle (non real time) ---------------------------------------------------
 
     def start(self) -> None:
-        """Anchor the clock and start the sink (the callback runs from now on)."""
+        """Anchor the clock and start the sink (the callback runs from now on); non real
+        time."""
         self.clock.restart(self.scheduler.frames, time.monotonic())
         self.sink.start(self.scheduler.render)
         self.clock.output_latency_s = max(0.0, float(self.sink.output_latency_s))
         self.running = True
 
     def close(self, fade: bool) -> None:
-        """Fade out what sounds (with ``fade`` and a real-time sink), close the sink."""
+        """Fade out what sounds (with ``fade`` and a real-time sink), close the sink; non
+        real time."""
         running, self.running = self.running, False
         if running and fade and self.sink.realtime:
             self.stop_all()
@@ -127,7 +130,13 @@ class Core:
             time.sleep(2 * block_s)  # let the last (silent) block reach the output
         self.sink.close()
 
-    # -- commands (checked by the caller) ---------------------------------------------
+    # -- commands (checked by the front; real time) -------------------------------------
+
+    def widen(self, plan: Plan) -> Plan:
+        """A plan sent without device and geometry (``slim``), given this core's."""
+        if plan.device is not None:
+            return plan
+        return dataclasses.replace(plan, device=self.device, geometry=self.geometry)
 
     def start_job(
         self,
@@ -138,7 +147,13 @@ class Core:
         prerendered: Prerendered | None = None,
     ) -> None:
         """Play ``plan`` from ``frame`` (None: the next block); from ``prerendered``, its samples
-        rendered beforehand, when given."""
+        rendered beforehand, when given. Real time.
+
+        Raises
+        ------
+        LookupError
+            The plan's noise loop was not handed to this process (engine process).
+        """
         release_frames = self.board.release_frames
         voice: JobVoice
         if prerendered is None:
@@ -157,32 +172,36 @@ class Core:
         if voice is not None and voice.state != DONE:
             self.queue.push_release(voice, frame, fade_frames=fade_frames)
 
-    def contact_down(self, voice: ContactVoice) -> None:
-        """Start a contact voice built by ``board.prepare_down``."""
+    def contact_down(self, down: ContactDown) -> None:
+        """Build and start a touchdown's voice (real time; LookupError for a noise loop
+        that was not handed over)."""
+        voice = self.board.voice(down)
         frame = voice.down_target.frame
         first = self.scheduler.next_block_frame() if frame is None else frame
         self.board.down(voice, first, frame is None)
 
     def stop_all(self) -> None:
-        """Void every command so far; everything that sounds fades out."""
+        """Void every command so far; everything that sounds fades out (real time)."""
         self.queue.mark_stop_all()
-        self.board.forget_all()
+        self.board.clear()
 
     def on_block(self, before: Callable[[], None] | None) -> None:
-        """Call ``before()`` at the start of every block, before its commands apply."""
+        """Call ``before()`` at the start of every block, before its commands apply (non
+        real time, before the sink starts)."""
         self.scheduler.intake = before
 
-    # -- what happened (control thread, or the callback after a block) ----------------
+    # -- what happened --------------------------------------------------------------------
 
     def events(self) -> list[Event]:
-        """What the callback did since the last call, as plain tuples (module docstring)."""
+        """What the callback did since the last call (real time in the engine process; the
+        housekeeping thread of the in-process engine)."""
         raw = self.scheduler.events
         out: list[Event] = []
         while raw:
             event = raw.popleft()
             kind = event[0]
             if kind == "stop_all":
-                out.append(("stop_all", event[1]))
+                out.append(StoppedAll(event[1]))
                 continue
             voice, frame = event[1], event[2]
             if isinstance(voice, JobVoice):
@@ -196,19 +215,30 @@ class Core:
             if kind == "start":
                 if isinstance(voice, ContactVoice):
                     target = voice.down_target
-                    late = bool(event[3])
-                    position = (target.x_cm, target.y_cm, target.amplitude)
-                    out.append(("start", what, key, frame, late, *position))
+                    out.append(
+                        Started(
+                            what,
+                            key,
+                            frame,
+                            bool(event[3]),
+                            target.x_cm,
+                            target.y_cm,
+                            target.amplitude,
+                        )
+                    )
                 else:
-                    out.append(("start", what, key, frame, bool(event[3])))
+                    out.append(Started(what, key, frame, bool(event[3])))
             elif kind == "release":
-                out.append(("release", what, key, frame, voice.silent_from))
+                out.append(Released(what, key, frame, voice.silent_from))
+            elif kind == "end":
+                out.append(Ended(what, key, frame))
             else:
-                out.append((kind, what, key, frame))
+                out.append(Cancelled(what, key, frame))
         return out
 
     def figures(self) -> dict[str, Any]:
-        """Clock, voices, levels and counters (any thread; a consistent-enough look)."""
+        """Clock, voices, levels and counters (any thread, real time or not; a
+        consistent-enough look)."""
         scheduler = self.scheduler
         mixer = scheduler.mixer
         load_p99, load_max = scheduler.render_load()
@@ -240,8 +270,8 @@ def measure_costs(
     chunks' worth, once every voice has refilled its ring), what one
     voice adds to the block it begins in (``voices`` begin in one block, against an idle
     block), and what one sounding prerendered voice adds (as the first). Each is the
-    median of three tries, at least 1e-4 (prerendered voices 1e-5). Run before the sink
-    starts.
+    median of three tries, at least 1e-4 (prerendered voices 1e-5). Non real time: run
+    before the sink starts.
     """
     from phantomtouch.engine.sinks import NullSink
 

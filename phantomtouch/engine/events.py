@@ -1,9 +1,9 @@
 """What the audio side reports, turned into job states and stimulus-log records.
 
-The audio side reports plain events (:mod:`phantomtouch.engine.core`); the control side
-hands them to :meth:`Ledger.apply` under its lock: from the in-thread engine's
-housekeeping thread, or from the thread that reads the engine process's reports. The log
-is written outside the lock (:meth:`Ledger.flush`), never by the audio callback.
+The audio side reports typed events (:mod:`phantomtouch.engine.messages`); the front
+hands them to :meth:`Reports.apply` under its lock: from the in-process engine's
+housekeeping thread, or from the host thread that reads the engine process's reports.
+The log is written outside the lock (:meth:`Reports.flush`), never by the audio callback.
 """
 
 from __future__ import annotations
@@ -14,12 +14,15 @@ from typing import Any
 
 from phantomtouch.engine.jobs import JobTable
 from phantomtouch.engine.log import StimulusLog
+from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
 
 LOG_PATTERN_MAX_POINTS = 1000
 """Patterns with longer paths are logged by their summary alone."""
+_NAMES: dict[type, str] = {Started: "start", Released: "release", Ended: "end", Cancelled: "cancel"}
+"""The stimulus log's name of each event."""
 
 
-class Ledger:
+class Reports:
     """Applies events to the job table and keeps the stimulus-log records due.
 
     Parameters
@@ -38,36 +41,41 @@ class Ledger:
         self._log = log
         self._backlog: list[dict[str, Any]] = []
 
-    def apply(self, events: Iterable[tuple[Any, ...]]) -> None:
-        """Apply events (the caller holds the engine's lock)."""
+    def apply(self, events: Iterable[Event]) -> None:
+        """Apply events (host, the caller holds the front's lock); events about anything
+        but voices (a noise loop released, a refusal) are not the ledger's and pass."""
         for event in events:
-            if event[0] == "stop_all":
-                self._note({"event": "stop_all"}, event[1])
-            elif event[1] == "job":
-                self._job_event(event)
-            else:
-                owner, contact = event[2]
-                record: dict[str, Any] = {
-                    "event": event[0],
-                    "kind": "contact",
-                    "owner": owner,
-                    "contact": contact,
-                }
-                if event[0] == "start":
-                    record.update(x_cm=event[5], y_cm=event[6], amplitude=event[7])
-                self._note(record, event[3])
+            if isinstance(event, StoppedAll):
+                self._note({"event": "stop_all"}, event.frame)
+            elif isinstance(event, Started | Released | Ended | Cancelled):
+                if event.kind == "job":
+                    self._job_event(event)
+                else:
+                    self._contact_event(event)
 
-    def _job_event(self, event: tuple[Any, ...]) -> None:
-        kind, job_id, frame = event[0], event[2], event[3]
+    def _contact_event(self, event: Started | Released | Ended | Cancelled) -> None:
+        owner, contact = event.key
+        record: dict[str, Any] = {
+            "event": _NAMES[type(event)],
+            "kind": "contact",
+            "owner": owner,
+            "contact": contact,
+        }
+        if isinstance(event, Started):
+            record.update(x_cm=event.x_cm, y_cm=event.y_cm, amplitude=event.amplitude)
+        self._note(record, event.frame)
+
+    def _job_event(self, event: Started | Released | Ended | Cancelled) -> None:
+        job_id, frame = event.key, event.frame
         job = self._jobs.get(job_id)
         record: dict[str, Any] = {
-            "event": kind,
+            "event": _NAMES[type(event)],
             "kind": "job",
             "job_id": job_id,
             "owner": None if job is None else job.owner,
         }
-        if kind == "start" and self._log is not None and job is not None and job.plan:
-            record.update(late=bool(event[4]), summary=job.plan.summary())
+        if isinstance(event, Started) and self._log is not None and job is not None and job.plan:
+            record.update(late=event.late, summary=job.plan.summary())
             pattern = job.plan.pattern
             path = pattern.path
             points = getattr(path, "points_cm", None) or getattr(path, "keyframes", None) or ()
@@ -76,18 +84,18 @@ class Ledger:
         self._note(record, frame)
         if job is None:
             return
-        if kind == "start":
-            job.start_frame, job.late = frame, bool(event[4])
+        if isinstance(event, Started):
+            job.start_frame, job.late = frame, event.late
             if job.state == "scheduled":
                 job.state = "playing"
-        elif kind == "release":
-            job.end_frame = event[4]
-        elif kind == "end":
+        elif isinstance(event, Released):
+            job.end_frame = event.silent_from
+        elif isinstance(event, Ended):
             job.end_frame = frame
             if job.state != "stopped":
                 job.state = "finished"
             self._jobs.retire(job)
-        elif kind == "cancel":
+        else:
             job.state = "stopped"
             job.end_frame = job.requested_start_frame
             self._jobs.retire(job)
@@ -104,12 +112,12 @@ class Ledger:
         self._backlog.append(record)
 
     def take_backlog(self) -> list[dict[str, Any]]:
-        """The log records due (the caller holds the engine's lock)."""
+        """The log records due (host; the caller holds the front's lock)."""
         backlog, self._backlog = self._backlog, []
         return backlog
 
     def flush(self, records: list[dict[str, Any]]) -> None:
-        """Write records taken with :meth:`take_backlog` (outside the lock)."""
+        """Write records taken with :meth:`take_backlog` (host, outside the lock)."""
         if self._log is not None:
             self._log.write(records)
 

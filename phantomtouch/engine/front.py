@@ -1,13 +1,18 @@
-"""The control side of the engine, the same for the in-thread engine and the process one.
+"""The engine's front: its API and every fact the host keeps, over one audio side.
 
 :class:`EngineFront` is the engine's API (``schedule``, ``stop``, ``contact_down`` ...)
-and owns every fact the control side keeps, each in one place: the job table (job
-states and admission by the voice budget), the contacts that are down, the stimulus log.
-It checks every argument, decides, and hands small commands to its audio side through
-a few hooks (``_send_*``) that the two engines implement: the in-thread
-:class:`~phantomtouch.engine.Engine` calls its :class:`~phantomtouch.engine.core.Core`
-directly, :class:`~phantomtouch.engine.ProcessEngine` writes messages to its engine
-process without waiting for an answer. No call waits for the audio side.
+and owns every fact the host keeps, each in one place: the job table (job states and
+admission by the voice budget), the contacts that are down, the stimulus log. It checks
+every argument and computes what the audio side needs (a touchdown's gains, a
+transient's samples, prerendered samples), decides, and posts one typed message
+(:mod:`phantomtouch.engine.messages`) through its audio side's ``post``. The audio side is
+one of two: :class:`~phantomtouch.engine.engine.LocalAudio` performs the message at once
+in this process; :class:`~phantomtouch.engine.process.ChildAudio` writes it to the engine
+process, whose audio callback performs it. No call waits for the audio side.
+
+Every public method runs in the host (the process that made the engine), on any thread
+the caller has (the web server's event loop, its workers, a script); the front's lock
+makes them safe to call at once.
 
 Admission by budget
 -------------------
@@ -27,13 +32,13 @@ import contextlib
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Self
+from typing import TYPE_CHECKING, Self
 
 from phantomtouch.engine.admission import RENDER_BUDGET, Admission
-from phantomtouch.engine.board import MAX_VELOCITY_M_S, check_contact_carrier, contact_amplitude
 from phantomtouch.engine.checks import (
     check_ahead,
     check_frame,
@@ -43,7 +48,7 @@ from phantomtouch.engine.checks import (
     check_seconds,
 )
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.events import Ledger
+from phantomtouch.engine.events import Reports
 from phantomtouch.engine.jobs import (
     POLICIES,
     Job,
@@ -54,15 +59,33 @@ from phantomtouch.engine.jobs import (
     resolve_plan,
 )
 from phantomtouch.engine.log import StimulusLog
-from phantomtouch.engine.prerender import PRERENDER_MAX_S, PrerenderCache, Prerendered
+from phantomtouch.engine.messages import (
+    Command,
+    ContactDown,
+    ContactMove,
+    ContactUp,
+    Event,
+    ReleaseJob,
+    ReleaseOwner,
+    StartJob,
+)
+from phantomtouch.engine.prerender import PRERENDER_MAX_S, PrerenderCache
 from phantomtouch.engine.status import EngineStatus
+from phantomtouch.engine.touchdown import (
+    Touchdowns,
+    check_contact_carrier,
+    check_law,
+    contact_amplitude,
+)
 from phantomtouch.errors import EngineBusyError, ParameterError, ProtocolError
-from phantomtouch.renderer.carriers import make_source
-from phantomtouch.renderer.gains import LAWS
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import Carrier, TouchPattern
+
+if TYPE_CHECKING:
+    from phantomtouch.engine.engine import LocalAudio
+    from phantomtouch.engine.process import ChildAudio
 
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
@@ -76,19 +99,37 @@ STEAL_FADE_S = 0.005
 
 @dataclass
 class ContactRecord:
-    """A contact that is down: its newest position, and where its moves go."""
+    """A contact that is down: its newest position, and its move slot in the engine
+    process (``(slot, generation)``; None in this process)."""
 
     x_cm: float
     y_cm: float
     slot: tuple[int, int] | None = None
 
 
+@dataclass(frozen=True)
+class Links:
+    """What an audio side gets from the front that makes it: the checked arguments it
+    needs, ``deliver(events)`` (its events to the front) and ``lost(state)`` (it died or
+    stalled: everything it played is gone)."""
+
+    settings: ContactSettings
+    queue_capacity: int
+    max_voices: int
+    costs: tuple[float, float, float] | None
+    deliver: Callable[[list[Event]], None]
+    lost: Callable[[str], None]
+
+
 class EngineFront:
-    """The engine's API and its control-side state (see the module docstring).
+    """The engine's API and the host's state, over one audio side (module docstring).
 
     Parameters
     ----------
     device : DeviceProfile
+    audio : callable
+        ``audio(links)`` makes the audio side (:class:`Links`), once the arguments below
+        were checked.
     queue_capacity : int, 1 <= queue_capacity <= 1_000_000
         Most jobs scheduled or playing at once, and most voices waiting to start.
     max_voices : int, 1 <= max_voices <= 1_000_000
@@ -104,11 +145,17 @@ class EngineFront:
         Plans at most this long are rendered whole when scheduled, so that the callback
         only adds their samples (:mod:`phantomtouch.engine.prerender`); 0: every plan
         renders in the callback.
+    voice_cost, start_cost : float or None, 1e-6 <= cost <= 100
+        Render load of one sounding pattern voice, and what one adds to the block it
+        begins in, as shares of a block; None: measured by the audio side
+        (:func:`~phantomtouch.engine.core.measure_costs`). A ``voice_cost`` given alone
+        leaves the starts per block unbounded.
     """
 
     def __init__(
         self,
         device: DeviceProfile,
+        audio: Callable[[Links], LocalAudio | ChildAudio],
         *,
         queue_capacity: int = 4096,
         max_voices: int = MAX_VOICES,
@@ -117,6 +164,8 @@ class EngineFront:
         render_budget: float = RENDER_BUDGET,
         voice_policy: Policy = "steal-oldest",
         prerender_max_s: float = PRERENDER_MAX_S,
+        voice_cost: float | None = None,
+        start_cost: float | None = None,
     ) -> None:
         if not isinstance(device, DeviceProfile):
             raise ParameterError(f"device={device!r} must be a DeviceProfile")
@@ -126,6 +175,13 @@ class EngineFront:
         check_range("prerender_max_s", prerender_max_s, 0.0, 10.0, "s")
         if contact is not None and not isinstance(contact, ContactSettings):
             raise ParameterError(f"contact={contact!r} must be ContactSettings or None")
+        costs = None
+        if voice_cost is not None:
+            check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
+            costs = (voice_cost, 0.0, voice_cost)  # given, not measured
+        if start_cost is not None:
+            check_range("start_cost", start_cost, 1e-6, 100.0, "")
+            costs = (voice_cost or 0.0, start_cost, voice_cost or 0.0)
         self._device = device
         self._settings = contact or ContactSettings()
         self._queue_capacity = queue_capacity
@@ -133,12 +189,20 @@ class EngineFront:
         self._policy = self._check_policy(voice_policy)
         self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
         self._prerendered = PrerenderCache(device.sample_rate_hz, max_s=prerender_max_s)
+        self._touchdowns = Touchdowns(device, self._settings)
         self._lock = threading.RLock()
         self._jobs = JobTable()
         self._contacts: dict[tuple[str, str], ContactRecord] = {}
         self._stop_count = 0
+        self._closed = False
         log = StimulusLog(log_path) if log_path is not None else None
-        self._ledger = Ledger(self._jobs, self.time_at, log)
+        self._reports = Reports(self._jobs, self.time_at, log)
+        links = Links(
+            self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost
+        )
+        self._audio: LocalAudio | ChildAudio = audio(links)
+        if self._audio.costs is not None:
+            self._admission.set_costs(self._audio.costs)
 
     @staticmethod
     def _check_policy(policy: object) -> Policy:
@@ -147,90 +211,73 @@ class EngineFront:
                 return known
         raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
 
-    # -- what the two engines provide -------------------------------------------------
+    # -- life cycle and the sample clock (host) ------------------------------------------
 
     def start(self) -> None:
-        raise NotImplementedError
+        """Start playing (no-op when playing): measure a voice's cost if the audio side
+        must, start its sink and wait until it plays. Host, any thread.
+
+        Raises
+        ------
+        DeviceError
+            The engine is closed, or the audio side cannot start.
+        """
+        self._audio.start()
+        costs = self._audio.costs
+        if costs is not None and self._admission.voice_cost <= 0.0:
+            self._admission.set_costs(costs)
 
     def close(self) -> None:
-        raise NotImplementedError
+        """Fade everything out, close the audio side, flush the log. Idempotent; host,
+        any thread."""
+        try:
+            self._audio.close()
+        finally:
+            with self._lock:
+                closed, self._closed = self._closed, True
+            if not closed:
+                self._reports.close()
 
     @property
     def now_frames(self) -> int:
-        """The sample clock: frames handed to the sink so far."""
-        raise NotImplementedError
+        """The sample clock: frames handed to the sink so far (host, any thread)."""
+        return self._audio.now_frames
 
     def frames_at(self, server_time_s: float) -> int:
-        """The frame that leaves the sound card at ``server_time_s`` (server clock)."""
-        raise NotImplementedError
+        """The frame that leaves the sound card at ``server_time_s`` (server clock; host,
+        any thread)."""
+        return self._audio.frames_at(check_server_time(server_time_s))
 
     def time_at(self, frame: int) -> float:
-        """Server time, s, at which ``frame`` leaves the sound card."""
-        raise NotImplementedError
+        """Server time, s, at which ``frame`` leaves the sound card (host, any thread)."""
+        return self._audio.time_at(check_frame_number(frame))
 
-    def _next_block_frame(self) -> int:
-        raise NotImplementedError
-
-    def _check_ready(self) -> None:
-        """Raise DeviceError unless the audio side takes commands."""
-        raise NotImplementedError
-
-    def _send_start(
-        self,
-        job_id: str,
-        plan: Plan,
-        owner: str | None,
-        frame: int | None,
-        prerendered: Prerendered | None,
-    ) -> None:
-        raise NotImplementedError
-
-    def _send_release(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
-        raise NotImplementedError
-
-    def _send_down(self, owner: str, contact: str, record: ContactRecord, **kw: Any) -> None:
-        raise NotImplementedError
-
-    def _send_move(
-        self,
-        owner: str,
-        contact: str,
-        record: ContactRecord,
-        intensity: float | None,
-        frame: int | None,
-    ) -> None:
-        raise NotImplementedError
-
-    def _send_up(self, owner: str, contact: str, record: ContactRecord | None, **kw: Any) -> None:
-        raise NotImplementedError
-
-    def _send_release_owner(self, owner: str, records: list[ContactRecord]) -> None:
-        raise NotImplementedError
-
-    def _send_stop_all(self, records: list[ContactRecord]) -> None:
-        raise NotImplementedError
-
-    def _figures(self) -> dict[str, Any]:
-        """The audio side's figures (see :meth:`Core.figures`) and ``backend``,
-        ``output_device``, ``state``."""
-        raise NotImplementedError
+    def _lost(self, state: str) -> None:
+        """The audio side is gone or stalled: nothing it played sounds any more (host,
+        the engine process's watchdog)."""
+        with self._lock:
+            self._jobs.drop_all(self.now_frames)
+            self._contacts.clear()
+            self._admission.forget_starts()
 
     # -- clock ------------------------------------------------------------------------
 
     def server_time_s(self) -> float:
-        """The server clock, s (``time.monotonic()``, the same in every process)."""
+        """The server clock, s (``time.monotonic()``, the same in every process; host,
+        any thread)."""
         return time.monotonic()
 
     # -- jobs -------------------------------------------------------------------------
 
     @property
     def voice_capacity(self) -> int:
-        """Pattern voices that may sound at once (see :class:`Admission`)."""
+        """Pattern voices that may sound at once (see :class:`Admission`); host, any thread."""
         return self._admission.voice_capacity
 
     @property
     def starts_per_block(self) -> int:
-        """Pattern voices that may begin in one block (see :class:`Admission`)."""
+        """Pattern voices that may begin in one block (see :class:`Admission`); host, any
+        thread."""
         return self._admission.starts_per_block
 
     def schedule(
@@ -242,7 +289,7 @@ class EngineFront:
         policy: Policy | None = None,
         stop_count: int | None = None,
     ) -> Job:
-        """Play a pattern from ``start_frame`` on, sample-exact.
+        """Play a pattern from ``start_frame`` on, sample-exact (host, any thread).
 
         Parameters
         ----------
@@ -283,9 +330,11 @@ class EngineFront:
             check_ahead(frame, self.now_frames, self.sample_rate_hz, MAX_SCHEDULE_AHEAD_S)
         job_id = uuid.uuid4().hex
         prerendered = self._prerendered.get(resolved)
+        carrier = None if prerendered is not None else resolved.pattern.carrier
+        self._audio.prepare(carrier)
         with self._lock:
-            self._check_ready()
-            first = self._next_block_frame() if frame is None else frame
+            self._audio.check_ready()
+            first = self._audio.next_block_frame() if frame is None else frame
             record = JobRecord(
                 plan=resolved,
                 job_id=job_id,
@@ -314,11 +363,12 @@ class EngineFront:
                 self._admission.charge_churn(now_frames)
                 first, frame = self._admission.place_start(first, frame, now_frames)
                 record.requested_start_frame = first
-            self._send_start(job_id, resolved, owner, frame, prerendered)
+            self._audio.provide(carrier)
+            self._audio.post(StartJob(job_id, 0, resolved, prerendered, owner, frame))
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
                 victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames
-                self._send_release(victim.job_id, first, self._steal_fade_frames)
+                self._post_release(ReleaseJob(victim.job_id, first, self._steal_fade_frames))
             self._jobs.add(record)
         return self._job(record, resolved)
 
@@ -332,9 +382,15 @@ class EngineFront:
             summary=resolved.summary(),
         )
 
+    def _post_release(self, message: Command) -> None:
+        """Post a release; a full pipe drops it (the voice ends on its own, or the
+        contact's slot is gone)."""
+        with contextlib.suppress(EngineBusyError):
+            self._audio.post(message)
+
     @property
     def stop_count(self) -> int:
-        """How many times :meth:`stop_all` was called."""
+        """How many times :meth:`stop_all` was called (host, any thread)."""
         return self._stop_count
 
     async def schedule_async(
@@ -346,19 +402,23 @@ class EngineFront:
         policy: Policy | None = None,
         stop_count: int | None = None,
     ) -> Job:
-        """:meth:`schedule` for a coroutine (it never waits for the audio side)."""
+        """:meth:`schedule` for a coroutine (host, the event loop; it never waits for the
+        audio side)."""
         return self.schedule(
             pattern, start_frame=start_frame, owner=owner, policy=policy, stop_count=stop_count
         )
 
     def job_state(self, job_id: str) -> JobState | None:
-        """The state of a job, or None if unknown (or too old: the last 1000 are kept)."""
+        """The state of a job, or None if unknown (or too old: the last 1000 are kept);
+        host, any thread."""
+        self._audio.sync()
         with self._lock:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
             return None if record is None else record.snapshot()
 
     def stop(self, job_id: str) -> bool:
-        """Stop a job: it fades out over ``contact.release_s`` (or never starts).
+        """Stop a job: it fades out over ``contact.release_s`` (or never starts); host,
+        any thread.
 
         Returns
         -------
@@ -369,12 +429,13 @@ class EngineFront:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
             if record is None or record.plan is None or record.state in ("finished", "stopped"):
                 return False
-            self._send_release(job_id, None, None)
+            self._post_release(ReleaseJob(job_id, None, None))
             self._jobs.mark_stopped(record)
             return True
 
     def stop_all(self) -> None:
-        """Everything off: every job and every contact of every client fades out.
+        """Everything off: every job and every contact of every client fades out (host,
+        any thread).
 
         Never refused, never waits: jobs and touchdowns accepted before this call never
         start, whatever state the audio side is in.
@@ -384,19 +445,21 @@ class EngineFront:
             records = list(self._contacts.values())
             self._contacts.clear()
             self._jobs.stop_all()
-            self._send_stop_all(records)
+            for record in records:
+                self._audio.free_slot(record.slot)
+            self._audio.stop_all()
 
     # -- contacts ---------------------------------------------------------------------
 
     def prepare_carrier(self, carrier: Carrier | None) -> None:
         """Build what a carrier needs ahead (a noise loop, about 60 ms the first time for
         a band and seed), so that a later ``contact_down`` with it does not wait for it.
-        Meant for a worker thread; a carrier the device cannot play is left to
+        Host, meant for a worker thread; a carrier the device cannot play is left to
         ``contact_down`` to refuse."""
         if carrier is None:
             return
         with contextlib.suppress(ParameterError):
-            make_source(check_contact_carrier(self._device, carrier), self.sample_rate_hz)
+            self._audio.prepare(check_contact_carrier(self._device, carrier))
 
     def contact_down(
         self,
@@ -411,7 +474,8 @@ class EngineFront:
         normal_velocity_m_s: float | None = None,
         at_frame: int | None = None,
     ) -> None:
-        """A contact touches down at (x_cm, y_cm) and vibrates there until ``up``.
+        """A contact touches down at (x_cm, y_cm) and vibrates there until ``up`` (host,
+        any thread).
 
         Parameters
         ----------
@@ -444,36 +508,46 @@ class EngineFront:
         """
         check_id("owner", owner)
         check_id("contact", contact)
-        if not isinstance(law, str) or law not in LAWS:
-            raise ParameterError(f"law={law!r} must be one of {sorted(LAWS)}")
+        law = check_law(law)
         checked = check_contact_carrier(self._device, carrier)
-        contact_amplitude(self._device, intensity, checked)
+        amplitude = contact_amplitude(self._device, intensity, checked)
         x, y = _check_position(x_cm, y_cm)
-        _check_velocity(normal_velocity_m_s)
+        burst = self._touchdowns.burst(normal_velocity_m_s)
         frame = check_frame("at_frame", at_frame)
+        unit_gains = self._touchdowns.unit_gains(x, y, law)
+        self._audio.prepare(checked)
         key = (owner, contact)
         with self._lock:
-            self._check_ready()
+            self._audio.check_ready()
             held = self._contacts.get(key)
             if held is None and len(self._contacts) >= self._settings.max_contacts:
                 raise EngineBusyError(
                     f"{len(self._contacts)} contacts are down; at most "
                     f"max_contacts={self._settings.max_contacts}"
                 )
-            record = ContactRecord(x, y, None if held is None else held.slot)
-            self._send_down(
-                owner,
-                contact,
-                record,
-                x_cm=x,
-                y_cm=y,
-                intensity=intensity,
-                carrier=checked,
-                law=law,
-                normal_velocity_m_s=normal_velocity_m_s,
-                at_frame=frame,
-            )
-            self._contacts[key] = record
+            slot = self._audio.claim_slot(None if held is None else held.slot)
+            try:
+                self._audio.provide(checked)
+                self._audio.post(
+                    ContactDown(
+                        owner,
+                        contact,
+                        x,
+                        y,
+                        unit_gains,
+                        amplitude,
+                        checked,
+                        law,
+                        burst,
+                        frame,
+                        *(() if slot is None else slot),
+                    )
+                )
+            except BaseException:
+                if held is None:
+                    self._audio.free_slot(slot)
+                raise
+            self._contacts[key] = ContactRecord(x, y, slot)
 
     def contact_move(
         self,
@@ -486,6 +560,7 @@ class EngineFront:
         at_frame: int | None = None,
     ) -> None:
         """The contact's newest position (and intensity); latest wins, nothing queues.
+        Host, any thread.
 
         The gains ramp from where the last block ended to this position across the
         block that contains ``at_frame`` (None: the next block).
@@ -510,7 +585,7 @@ class EngineFront:
                     f"contact={contact!r} of owner={owner!r} is not down: expected down, got move"
                 )
             record.x_cm, record.y_cm = x, y
-            self._send_move(owner, contact, record, intensity, frame)
+            self._audio.move(record.slot, ContactMove(owner, contact, x, y, intensity, frame))
 
     def contact_up(
         self,
@@ -520,7 +595,7 @@ class EngineFront:
         normal_velocity_m_s: float | None = None,
         at_frame: int | None = None,
     ) -> None:
-        """Lift-off: the contact fades out over ``contact.release_s``.
+        """Lift-off: the contact fades out over ``contact.release_s`` (host, any thread).
 
         A contact that is not down is ignored (``up`` is idempotent). With
         ``normal_velocity_m_s``, a lift-off transient is added at the last position.
@@ -533,39 +608,41 @@ class EngineFront:
         """
         check_id("owner", owner)
         check_id("contact", contact)
-        _check_velocity(normal_velocity_m_s)
+        burst = self._touchdowns.burst(normal_velocity_m_s)
         frame = check_frame("at_frame", at_frame)
         with self._lock:
             record = self._contacts.pop((owner, contact), None)
             if record is not None:
-                self._send_up(
-                    owner, contact, record, normal_velocity_m_s=normal_velocity_m_s, at_frame=frame
-                )
+                self._audio.free_slot(record.slot)
+                self._post_release(ContactUp(owner, contact, burst, frame))
 
     def release_owner(self, owner: str) -> None:
         """Release every contact of a client that went away (with the release ramp).
 
-        Never refused; unknown owners are ignored.
+        Host, any thread. Never refused; unknown owners are ignored.
         """
         with self._lock:
             keys = [key for key in self._contacts if key[0] == owner]
             records = [self._contacts.pop(key) for key in keys]
             if records:
-                self._send_release_owner(owner, records)
+                for record in records:
+                    self._audio.free_slot(record.slot)
+                self._post_release(ReleaseOwner(owner))
 
     # -- monitoring -------------------------------------------------------------------
 
-    def _apply_events(self, events: list[tuple[Any, ...]]) -> None:
-        """Apply the audio side's events, then write the log records due."""
+    def _apply_events(self, events: list[Event]) -> None:
+        """Apply the audio side's events, then write the log records due (host: the
+        housekeeping thread, or the thread reading the engine process's reports)."""
         with self._lock:
-            self._ledger.apply(events)
-            records = self._ledger.take_backlog()
-        self._ledger.flush(records)
+            self._reports.apply(events)
+            records = self._reports.take_backlog()
+        self._reports.flush(records)
 
     def status(self) -> EngineStatus:
-        """A snapshot of clock, voices, levels and counters; never waits for the audio
-        side (its figures are at most a block old)."""
-        figures = self._figures()
+        """A snapshot of clock, voices, levels and counters (host, any thread); never
+        waits for the audio side (its figures are at most a block old)."""
+        figures = self._audio.figures()
         with self._lock:
             contacts = [
                 {"owner": owner, "contact": contact, "x_cm": r.x_cm, "y_cm": r.y_cm}
@@ -600,6 +677,7 @@ class EngineFront:
             render_budget=self._admission.render_budget,
             callback_errors=int(figures["callback_errors"]),
             restarts=int(figures.get("restarts", 0)),
+            refused_commands=int(figures["refused_commands"]),
         )
 
     # -- the device's figures, and use as a context manager ---------------------------
@@ -618,6 +696,7 @@ class EngineFront:
 
     @property
     def device(self) -> DeviceProfile:
+        """The device profile (host, any thread; so are the three below)."""
         return self._device
 
     @property
@@ -638,13 +717,6 @@ def _check_position(x_cm: object, y_cm: object) -> tuple[float, float]:
         check_range("x_cm", x_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm"),
         check_range("y_cm", y_cm, -limits.MAX_COORD_CM, limits.MAX_COORD_CM, "cm"),
     )
-
-
-def _check_velocity(normal_velocity_m_s: object) -> None:
-    if normal_velocity_m_s is not None:
-        check_range(
-            "normal_velocity_m_s", normal_velocity_m_s, -MAX_VELOCITY_M_S, MAX_VELOCITY_M_S, "m/s"
-        )
 
 
 def check_server_time(server_time_s: object) -> float:

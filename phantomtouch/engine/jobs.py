@@ -237,7 +237,7 @@ class JobTable:
         for record in list(self._live.values()):
             self.mark_stopped(record)
 
-    def forget_all(self, frame: int) -> None:
+    def drop_all(self, frame: int) -> None:
         """Every job not over is over from ``frame`` (the engine that played them is gone)."""
         for record in [*self._live.values(), *self._stopping.values()]:
             record.state = "stopped"

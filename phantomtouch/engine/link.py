@@ -14,19 +14,18 @@ ever waits for the other:
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import os
 import pickle
 import struct
+import sys
 import threading
 from collections import deque
 from typing import Any
 
 _HEADER = struct.Struct("<I")
-MAX_MESSAGE_BYTES = 1 << 30
 PIPE_BYTES = 1 << 20
 """Pipe buffer asked for (Linux ``F_SETPIPE_SZ``; the system's ``pipe-max-size``, 1 MB by
-default, caps it): a plan or a noise loop crosses in a few reads."""
+default, caps it): a plan crosses in a few reads."""
 
 
 def encode(message: Any) -> bytes:
@@ -37,6 +36,10 @@ def encode(message: Any) -> bytes:
 
 def widen(fd: int) -> None:
     """Ask for a larger pipe buffer (no-op where the system does not offer it)."""
+    if sys.platform == "win32":
+        return
+    import fcntl
+
     set_size = getattr(fcntl, "F_SETPIPE_SZ", None)
     if set_size is None:
         return
@@ -151,10 +154,6 @@ class Outbox:
         self.broken = False
         self._thread = threading.Thread(target=self._run, name="phantomtouch-outbox", daemon=True)
         self._thread.start()
-
-    @property
-    def waiting_bytes(self) -> int:
-        return self._bytes
 
     def put(self, frame: bytes) -> bool:
         """Queue a frame (see :func:`encode`); False when the outbox is full or closed."""

@@ -6,6 +6,9 @@ peak exceeds ``threshold_ratio`` times the ceiling, and is exactly transparent o
 The renderer's :class:`~phantomtouch.renderer.OutputStage` follows: calibration, optional
 FIR, NaN/Inf muting and the hard clip at the ceiling as the last line — the same stage an
 offline render goes through, so a pattern played alone arrives with the offline samples.
+
+Where it runs: construction is non real time; every other method runs in real time,
+inside the audio callback.
 """
 
 from __future__ import annotations

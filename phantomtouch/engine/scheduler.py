@@ -11,6 +11,9 @@ deque that the control side drains.
 Events are tuples: ``("start", voice, frame, late)``, ``("release", voice, frame)``,
 ``("end", voice, frame)`` (silent from ``frame``), ``("cancel", voice, frame)`` (voided
 before it started) and ``("stop_all", frame)``.
+
+Where it runs: every method runs in real time (inside the audio callback) unless its
+docstring names another thread; construction is non real time.
 """
 
 from __future__ import annotations

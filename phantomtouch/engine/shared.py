@@ -327,6 +327,7 @@ STATUS_FIELDS = (
     "running",
     "callback_errors",
     "dropped_reports",
+    "refused_commands",
 )
 
 

@@ -1,10 +1,10 @@
 """Starting an engine process, and what the host shares with it.
 
-:func:`spawn` starts the child of :class:`~phantomtouch.engine.process.ProcessEngine`
+:func:`spawn` starts the engine process of a :class:`~phantomtouch.engine.process.ChildAudio`
 (``spawn``: a fresh interpreter running :func:`~phantomtouch.engine.child.serve`) with its
-pipes and shared memory, and waits for its first report. :class:`EngineProcess` holds
+pipes and shared memory, and waits for its first report. :class:`ChildProcess` holds
 what belongs to one such process: the process, its outbox, the shared clock, contact
-slots and figures, the stop mark, the plans and noise loops it was sent.
+slots and figures, the stop mark. All of it runs in the host, non real time.
 """
 
 from __future__ import annotations
@@ -16,8 +16,6 @@ import os
 import select
 import threading
 import time
-import weakref
-from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -47,8 +45,8 @@ def slim(plan: Plan) -> Plan:
 
 
 @dataclasses.dataclass
-class EngineProcess:
-    """One engine process and what is shared with it."""
+class ChildProcess:
+    """One engine process and what is shared with it (host)."""
 
     process: Any
     outbox: Outbox
@@ -62,13 +60,6 @@ class EngineProcess:
     costs: tuple[float, float, float]
     backend: str
     output_device: str | None
-    seq: int = 0
-    plans: OrderedDict[int, tuple[int, weakref.ref[Plan], int]] = dataclasses.field(
-        default_factory=OrderedDict
-    )  # id(plan): key, the plan (not kept alive here), bytes the engine process keeps
-    plan_bytes: int = 0
-    forget: list[int] = dataclasses.field(default_factory=list)
-    noise: OrderedDict[Any, None] = dataclasses.field(default_factory=OrderedDict)
     reader: threading.Thread | None = None
 
     def end(self, *, kill: bool) -> None:
@@ -95,7 +86,7 @@ def spawn(
     slot_count: int,
     *,
     timeout_s: float = START_TIMEOUT_S,
-) -> EngineProcess:
+) -> ChildProcess:
     """Start an engine process and wait for its first report (ready, or the error).
 
     Raises
@@ -148,7 +139,7 @@ def spawn(
         process.kill()
         process.join(CLOSE_TIMEOUT_S)
         raise
-    return EngineProcess(
+    return ChildProcess(
         process=process,
         outbox=Outbox(commands_fd),
         reports_fd=reports_fd,

@@ -58,6 +58,9 @@ class EngineStatus:
         Blocks replaced by silence because rendering raised.
     restarts : int
         Times the engine process was restarted after it died or stalled.
+    refused_commands : int
+        Commands the audio side refused because their data (a plan, a noise loop) was
+        not handed to it; 0 unless the host has a bug: the audio side never builds them.
     """
 
     backend: str
@@ -88,6 +91,7 @@ class EngineStatus:
     render_budget: float
     callback_errors: int
     restarts: int
+    refused_commands: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

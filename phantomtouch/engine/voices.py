@@ -26,6 +26,10 @@ chunk; the engine bounds how many voices may begin in one block by what that cos
 (:mod:`phantomtouch.engine.admission`). With the pool empty, or ``chunk_frames`` 0, a
 voice renders each block directly (touching only the channels its gains drive when they
 span at most half of them).
+
+Where it runs: a voice is made where its message is performed (real time in the engine
+process, the front's thread in the in-process engine); every rendering method runs in
+real time, inside the audio callback. The ring pool is made non real time, at start-up.
 """
 
 from __future__ import annotations

@@ -113,6 +113,7 @@ def noise_loop(low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) ->
 NoiseKey = tuple[float, float, int, int]
 """``(low_hz, high_hz, seed, sample_rate_hz)`` of a noise loop."""
 _ADOPTED: dict[NoiseKey, np.ndarray] = {}
+_REFUSE_BUILDING = False
 
 
 def noise_key(low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) -> NoiseKey:
@@ -121,23 +122,35 @@ def noise_key(low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) -> 
 
 def adopt_noise_loop(key: NoiseKey, loop: np.ndarray) -> None:
     """Use ``loop`` (computed by :func:`noise_loop` elsewhere, e.g. in another process)
-    for ``key`` from now on; the oldest of more than ``_NOISE_TABLES`` is forgotten."""
-    _ADOPTED.pop(key, None)
+    for ``key`` until :func:`forget_noise_loop`; the caller owns its lifetime."""
     _ADOPTED[key] = loop
-    while len(_ADOPTED) > _NOISE_TABLES:
-        del _ADOPTED[next(iter(_ADOPTED))]
+
+
+def forget_noise_loop(key: NoiseKey) -> None:
+    """Stop using the loop adopted for ``key`` (voices that read it keep it)."""
+    _ADOPTED.pop(key, None)
+
+
+def refuse_building() -> None:
+    """From now on a noise source whose loop was not adopted raises LookupError instead
+    of building it (an engine process's audio side: it never computes a loop)."""
+    global _REFUSE_BUILDING
+    _REFUSE_BUILDING = True
 
 
 class NoiseSource:
     """Seeded band-limited Gaussian noise, RMS 1/sqrt(2), a loop of ``NOISE_PERIOD_FRAMES``.
 
     Frame ``n`` is frame ``n mod NOISE_PERIOD_FRAMES`` of :func:`noise_loop` (or of the
-    same loop adopted with :func:`adopt_noise_loop`).
+    same loop adopted with :func:`adopt_noise_loop`; after :func:`refuse_building`, only
+    an adopted loop: else LookupError).
     """
 
     def __init__(self, low_hz: float, high_hz: float, seed: int, sample_rate_hz: int) -> None:
         key = noise_key(low_hz, high_hz, seed, sample_rate_hz)
         adopted = _ADOPTED.get(key)
+        if adopted is None and _REFUSE_BUILDING:
+            raise LookupError(f"noise loop {key} was not handed to this process")
         self._loop = adopted if adopted is not None else noise_loop(*key)
 
     def block(self, start_frame: int, frames: int) -> np.ndarray:

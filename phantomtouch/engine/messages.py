@@ -1,0 +1,382 @@
+"""Every command the audio side takes and every event it reports, each one typed.
+
+A command is one frozen, slotted dataclass here and one applier (its perform function,
+as scsynth has them) in :data:`APPLIERS`; the front builds it, the audio side's
+:func:`perform` looks its applier up by class and runs it. The same messages and the
+same appliers serve both audio sides: in this process the front's thread performs them
+at once (they only push into the core's queue), in the engine process the audio callback
+performs what it reads from the pipe. Adding a command means adding its class, its
+applier and the front's public method that posts it.
+
+Events travel back the same way: the audio side reports what it did as the event classes
+below (``Started``, ``Released``, ``Ended``, ``Cancelled``, ``StoppedAll``, and, from the
+engine process, ``NoiseReleased`` and ``Refused``), which
+:class:`~phantomtouch.engine.events.Reports` turns into job states and log lines.
+
+Every applier runs in real time in the engine process (inside the audio callback), and
+in the front's calling thread in the in-process engine; none of them computes anything
+heavy: what they need (a plan, a noise loop, a touchdown's gains, a transient's samples)
+arrives with the message or was handed over before, and what was not handed over is
+refused (:class:`Refused`), never built.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from phantomtouch.engine.prerender import Prerendered
+from phantomtouch.renderer.carriers import NoiseKey
+from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema.pattern import CombinedCarrier, NoiseCarrier, SineCarrier
+
+if TYPE_CHECKING:
+    from phantomtouch.engine.core import Core
+    from phantomtouch.engine.noise import HeldLoops
+    from phantomtouch.engine.shared import MoveSlots
+
+# -- commands, front -> audio side ------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class StartJob:
+    """Play a plan from ``frame`` (None: the next block).
+
+    ``plan`` is None when the audio side holds it under ``plan_key`` already (the engine
+    process keeps plans it was sent; ``forget`` lists keys it may drop). ``prerendered``
+    is the plan's samples rendered whole, or None to render in the callback.
+    """
+
+    job_id: str
+    plan_key: int
+    plan: Plan | None
+    prerendered: Prerendered | None
+    owner: str | None
+    frame: int | None
+    forget: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class ReleaseJob:
+    """Fade a job out from ``frame`` (None: the next block) over ``fade_frames`` (None:
+    the contact settings' ``release_s``)."""
+
+    job_id: str
+    frame: int | None
+    fade_frames: int | None
+
+
+@dataclass(frozen=True, slots=True)
+class ContactDown:
+    """A touchdown, checked and computed by the front: the audio side only builds the
+    voice from these parts.
+
+    ``unit_gains`` (shape (channels,), float32) are the phantom gains of the position
+    (projected onto the layout), ``amplitude`` the voice's linear amplitude, ``burst``
+    the impact transient's samples (or None); ``slot`` and ``generation`` name the
+    shared-memory move slot of the engine process (None in this process).
+    """
+
+    owner: str
+    contact: str
+    x_cm: float
+    y_cm: float
+    unit_gains: np.ndarray
+    amplitude: float
+    carrier: SineCarrier | NoiseCarrier | CombinedCarrier
+    law: str
+    burst: np.ndarray | None
+    frame: int | None
+    slot: int | None = None
+    generation: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class ContactMove:
+    """A contact's newest position, checked by the front (in-process engine only: the
+    engine process takes moves from shared memory)."""
+
+    owner: str
+    contact: str
+    x_cm: float
+    y_cm: float
+    intensity: float | None
+    frame: int | None
+
+
+@dataclass(frozen=True, slots=True)
+class ContactUp:
+    """Lift-off from ``frame`` (None: the next block), with a transient ``burst`` or None."""
+
+    owner: str
+    contact: str
+    burst: np.ndarray | None
+    frame: int | None
+
+
+@dataclass(frozen=True, slots=True)
+class ReleaseOwner:
+    """Release every contact of ``owner``."""
+
+    owner: str
+
+
+@dataclass(frozen=True, slots=True)
+class HoldNoise:
+    """A noise loop the host wrote into the shared memory named ``name``: use it for
+    ``key`` until :class:`DropNoise`."""
+
+    key: NoiseKey
+    name: str
+
+
+@dataclass(frozen=True, slots=True)
+class DropNoise:
+    """Stop using the noise loop of ``key``; report :class:`NoiseReleased` once no voice
+    reads it any more, so that the host may free it."""
+
+    key: NoiseKey
+
+
+@dataclass(frozen=True, slots=True)
+class StartSink:
+    """Start playing (engine process, before its first block)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Close:
+    """Fade out and end (engine process)."""
+
+
+Command = (
+    StartJob
+    | ReleaseJob
+    | ContactDown
+    | ContactMove
+    | ContactUp
+    | ReleaseOwner
+    | HoldNoise
+    | DropNoise
+    | StartSink
+    | Close
+)
+
+# -- events, audio side -> front ----------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Started:
+    """A voice began at ``frame`` (``late``: its frame had passed). A contact's carries
+    its touchdown position and amplitude."""
+
+    kind: str
+    key: Any
+    frame: int
+    late: bool
+    x_cm: float | None = None
+    y_cm: float | None = None
+    amplitude: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Released:
+    """A voice's fade-out begins at ``frame``; it is silent from ``silent_from``."""
+
+    kind: str
+    key: Any
+    frame: int
+    silent_from: int | None
+
+
+@dataclass(frozen=True, slots=True)
+class Ended:
+    """A voice is silent from ``frame``."""
+
+    kind: str
+    key: Any
+    frame: int
+
+
+@dataclass(frozen=True, slots=True)
+class Cancelled:
+    """A voice was voided before it started."""
+
+    kind: str
+    key: Any
+    frame: int
+
+
+@dataclass(frozen=True, slots=True)
+class StoppedAll:
+    """Everything began fading out at ``frame``."""
+
+    frame: int
+
+
+@dataclass(frozen=True, slots=True)
+class NoiseReleased:
+    """The engine process no longer reads the noise loop of ``key``: the host may free it."""
+
+    key: NoiseKey
+
+
+@dataclass(frozen=True, slots=True)
+class Refused:
+    """The audio side refused a command whose data it was not handed (``what``: "plan",
+    "noise loop"), or that failed; ``key`` names the job or contact."""
+
+    what: str
+    key: Any
+    reason: str
+
+
+Event = Started | Released | Ended | Cancelled | StoppedAll | NoiseReleased | Refused
+
+# -- the audio side's state, and the appliers -------------------------------------------
+
+
+@dataclass
+class AudioState:
+    """What the appliers act on: the core, and in the engine process the move slots,
+    the plans and noise loops it was handed, and events of its own to report."""
+
+    core: Core
+    slots: MoveSlots | None = None
+    loops: HeldLoops | None = None
+    plans: dict[int, tuple[Plan, Prerendered | None]] = field(default_factory=dict)
+    reports: list[Event] = field(default_factory=list)
+    refused: int = 0
+    leave: bool = False
+    start_sink: bool = False
+
+    def refuse(self, what: str, key: Any, reason: str) -> None:
+        """Count and report a refusal (real time)."""
+        self.refused += 1
+        self.reports.append(Refused(what, key, reason))
+
+
+def _start_job(state: AudioState, message: StartJob, void: bool) -> None:
+    """Real time. Keep the plan it carries (even when void: the host sends a plan
+    once), then start its voice; a void or refused start is reported cancelled."""
+    core = state.core
+    for old in message.forget:
+        state.plans.pop(old, None)
+    held = None
+    if message.plan is not None:
+        held = (core.widen(message.plan), message.prerendered)
+        if message.plan_key:
+            state.plans[message.plan_key] = held
+    elif message.plan_key in state.plans:
+        held = state.plans[message.plan_key]
+    if not void:
+        if held is None:
+            state.refuse("plan", message.job_id, f"plan {message.plan_key} was not handed over")
+        else:
+            try:
+                core.start_job(message.job_id, held[0], message.owner, message.frame, held[1])
+                return
+            except LookupError as exc:  # a noise loop not handed over
+                state.refuse("noise loop", message.job_id, str(exc))
+    state.reports.append(Cancelled("job", message.job_id, core.scheduler.frames))
+
+
+def _release_job(state: AudioState, message: ReleaseJob, void: bool) -> None:
+    """Real time."""
+    if not void:
+        state.core.release_job(message.job_id, message.frame, message.fade_frames)
+
+
+def _contact_down(state: AudioState, message: ContactDown, void: bool) -> None:
+    """Real time. Build the contact voice from the front's parts and start it."""
+    if void:
+        return
+    try:
+        state.core.contact_down(message)
+    except LookupError as exc:  # a noise loop not handed over
+        state.refuse("noise loop", (message.owner, message.contact), str(exc))
+        return
+    if state.slots is not None and message.slot is not None:
+        state.slots.bind(message.slot, message.generation, message.owner, message.contact)
+
+
+def _contact_move(state: AudioState, message: ContactMove, void: bool) -> None:
+    """Real time."""
+    if not void:
+        state.core.board.post_checked(
+            message.owner,
+            message.contact,
+            message.x_cm,
+            message.y_cm,
+            message.intensity,
+            message.frame,
+        )
+
+
+def _contact_up(state: AudioState, message: ContactUp, void: bool) -> None:
+    """Real time."""
+    if void:
+        return
+    if state.slots is not None:
+        state.slots.unbind(message.owner, message.contact)
+    state.core.board.up(message.owner, message.contact, message.burst, message.frame)
+
+
+def _release_owner(state: AudioState, message: ReleaseOwner, void: bool) -> None:
+    """Real time."""
+    if void:
+        return
+    if state.slots is not None:
+        state.slots.unbind(message.owner)
+    state.core.board.release_owner(message.owner)
+
+
+def _hold_noise(state: AudioState, message: HoldNoise, void: bool) -> None:
+    """Real time: map the host's shared memory (no copy, nothing computed)."""
+    if state.loops is None:
+        state.refuse("noise loop", message.key, "this audio side takes no shared loops")
+        return
+    state.loops.hold(message.key, message.name)
+
+
+def _drop_noise(state: AudioState, message: DropNoise, void: bool) -> None:
+    """Real time: stop handing the loop to new voices; it is released (and reported)
+    once no voice reads it."""
+    if state.loops is not None:
+        state.loops.drop(message.key)
+
+
+def _start_sink(state: AudioState, message: StartSink, void: bool) -> None:
+    """Non real time (before the first block)."""
+    state.start_sink = True
+
+
+def _close(state: AudioState, message: Close, void: bool) -> None:
+    """Real time: the engine process's main thread fades out and ends."""
+    state.leave = True
+
+
+APPLIERS: dict[type, Callable[[AudioState, Any, bool], None]] = {
+    StartJob: _start_job,
+    ReleaseJob: _release_job,
+    ContactDown: _contact_down,
+    ContactMove: _contact_move,
+    ContactUp: _contact_up,
+    ReleaseOwner: _release_owner,
+    HoldNoise: _hold_noise,
+    DropNoise: _drop_noise,
+    StartSink: _start_sink,
+    Close: _close,
+}
+"""Each command's applier, by the command's class."""
+
+
+def perform(state: AudioState, message: Command, *, void: bool = False) -> None:
+    """Apply one command (real time in the engine process).
+
+    ``void``: the command was sent before a ``stop_all`` the audio side has seen; its
+    applier keeps what must outlive it (a plan, a noise loop) and plays nothing.
+    """
+    APPLIERS[type(message)](state, message, void)

@@ -1,0 +1,118 @@
+"""A touchdown's checks and computations, done once, by the front, outside real time.
+
+:class:`Touchdowns` checks a contact's carrier, intensity and position (a bad one raises
+ParameterError naming it) and computes what the audio side needs to start its voice: the
+phantom gains of the position, the voice's amplitude, and the impact transient's samples.
+The audio side (:class:`~phantomtouch.engine.board.ContactBoard`) only builds the voice
+from them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from phantomtouch.engine.checks import check_range
+from phantomtouch.engine.contacts import ContactSettings
+from phantomtouch.errors import ParameterError
+from phantomtouch.renderer.gains import LAWS, gains_for_points
+from phantomtouch.renderer.geometry import Geometry
+from phantomtouch.renderer.levels import amplitude_for_level, table_i_level_db
+from phantomtouch.renderer.plan import check_carrier_frequencies
+from phantomtouch.schema.device import DeviceProfile
+from phantomtouch.schema.pattern import CombinedCarrier, NoiseCarrier, SineCarrier
+
+MAX_VELOCITY_M_S = 10.0
+_TRANSIENT_TIME_CONSTANTS = 7.0
+
+CarrierModel = SineCarrier | NoiseCarrier | CombinedCarrier
+
+
+def check_law(law: object) -> str:
+    """An interpolation law of the renderer."""
+    if not isinstance(law, str) or law not in LAWS:
+        raise ParameterError(f"law={law!r} must be one of {sorted(LAWS)}")
+    return law
+
+
+def contact_amplitude(device: DeviceProfile, intensity: object, carrier: object) -> float:
+    """Voice amplitude of a relative intensity (None: Table I "low" for the carrier)."""
+    max_db = device.safety.max_level_db
+    if intensity is None:
+        level_db = table_i_level_db("low", carrier)
+        if level_db > max_db:
+            raise ParameterError(
+                f"intensity=None gives Table I 'low' = {level_db:g} dB re 1 µm/s²; the "
+                f"device allows at most safety.max_level_db={max_db:g} dB"
+            )
+        return amplitude_for_level(level_db, device)
+    relative = check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
+    if relative == 0.0:
+        return 0.0
+    return amplitude_for_level(max_db + 20.0 * math.log10(relative), device)
+
+
+def check_contact_carrier(device: DeviceProfile, carrier: object) -> CarrierModel:
+    """A carrier the device's sample rate can play (None: a 100 Hz sine)."""
+    if carrier is None:
+        return SineCarrier()
+    if not isinstance(carrier, SineCarrier | NoiseCarrier | CombinedCarrier):
+        raise ParameterError(
+            f"carrier={carrier!r} must be a SineCarrier, NoiseCarrier or CombinedCarrier"
+        )
+    check_carrier_frequencies(carrier, device.sample_rate_hz)
+    return carrier
+
+
+class Touchdowns:
+    """Gains and transients of touchdowns and lift-offs (the front's threads).
+
+    Parameters
+    ----------
+    device : DeviceProfile
+    settings : ContactSettings
+    """
+
+    def __init__(self, device: DeviceProfile, settings: ContactSettings) -> None:
+        self.device = device
+        self.settings = settings
+        self._geometry = Geometry.for_device(device)
+        sample_rate_hz = device.sample_rate_hz
+        decay_frames = settings.transient_decay_s * sample_rate_hz
+        n = np.arange(math.ceil(_TRANSIENT_TIME_CONSTANTS * decay_frames), dtype=np.float64)
+        shape = np.exp(-n / decay_frames) * np.sin(
+            2.0 * np.pi * settings.transient_freq_hz * n / sample_rate_hz
+        )
+        self._burst_shape = shape.astype(np.float32)
+        full = settings.transient_intensity
+        self._burst_amplitude = (
+            amplitude_for_level(device.safety.max_level_db + 20.0 * math.log10(full), device)
+            if full > 0
+            else 0.0
+        )
+
+    def burst(self, normal_velocity_m_s: object) -> np.ndarray | None:
+        """The impact transient for a normal velocity, m/s, or None without one.
+
+        Raises
+        ------
+        ParameterError
+            ``normal_velocity_m_s`` is not within +-``MAX_VELOCITY_M_S``.
+        """
+        if normal_velocity_m_s is None:
+            return None
+        velocity = check_range(
+            "normal_velocity_m_s", normal_velocity_m_s, -MAX_VELOCITY_M_S, MAX_VELOCITY_M_S, "m/s"
+        )
+        scale = min(1.0, abs(velocity) / self.settings.transient_full_velocity_m_s)
+        amplitude = scale * self._burst_amplitude
+        if amplitude <= 0.0:
+            return None
+        return self._burst_shape * np.float32(amplitude)
+
+    def unit_gains(self, x_cm: float, y_cm: float, law: str) -> np.ndarray:
+        """Phantom gains of a checked position, shape (channels,), float32; points outside
+        the layout are projected onto it."""
+        unit, _ = gains_for_points(self._geometry, np.array([[x_cm, y_cm]]), law=law, mode="2d")
+        return unit[0].astype(np.float32)
