@@ -25,12 +25,12 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.front import (
     MAX_VOICES,
-    ContactRecord,
     EngineFront,
     check_frame_number,
     check_server_time,
 )
 from phantomtouch.engine.jobs import JobState, Policy
+from phantomtouch.engine.owners import ContactRecord
 from phantomtouch.engine.prerender import PRERENDER_MAX_S, Prerendered
 from phantomtouch.engine.sinks import NullSink, Sink
 from phantomtouch.errors import DeviceError, ParameterError

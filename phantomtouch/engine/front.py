@@ -24,10 +24,12 @@ the one the user sees) or ``steal-quietest``; a stolen job fades out over
 from __future__ import annotations
 
 import contextlib
+import logging
+import math
 import threading
 import time
 import uuid
-from dataclasses import dataclass
+from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Self
@@ -54,9 +56,10 @@ from phantomtouch.engine.jobs import (
     resolve_plan,
 )
 from phantomtouch.engine.log import StimulusLog
+from phantomtouch.engine.owners import ContactRecord, DeadlineThread, OwnerTable, ReleasedListener
 from phantomtouch.engine.prerender import PRERENDER_MAX_S, PrerenderCache, Prerendered
 from phantomtouch.engine.status import EngineStatus
-from phantomtouch.errors import EngineBusyError, ParameterError, ProtocolError
+from phantomtouch.errors import ParameterError, ProtocolError
 from phantomtouch.renderer.carriers import make_source
 from phantomtouch.renderer.gains import LAWS
 from phantomtouch.renderer.plan import Plan
@@ -73,14 +76,10 @@ the budget allows."""
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
 
+logger = logging.getLogger("phantomtouch.engine")
 
-@dataclass
-class ContactRecord:
-    """A contact that is down: its newest position, and where its moves go."""
-
-    x_cm: float
-    y_cm: float
-    slot: tuple[int, int] | None = None
+Released = tuple[str, tuple[str, ...], str]
+"""``(owner, contacts, reason)`` of one ``released`` event."""
 
 
 class EngineFront:
@@ -135,7 +134,9 @@ class EngineFront:
         self._prerendered = PrerenderCache(device.sample_rate_hz, max_s=prerender_max_s)
         self._lock = threading.RLock()
         self._jobs = JobTable()
-        self._contacts: dict[tuple[str, str], ContactRecord] = {}
+        self._contacts = OwnerTable(self._settings.max_contacts)
+        self._listeners: dict[str | None, list[ReleasedListener]] = {}
+        self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
         log = StimulusLog(log_path) if log_path is not None else None
         self._ledger = Ledger(self._jobs, self.time_at, log)
@@ -308,6 +309,7 @@ class EngineFront:
                 budget=self._admission.render_budget,
                 voices=self._admission.max_voices,
                 policy=chosen,
+                owner=owner,
             )
             if prerendered is None:  # nothing to render in the callback
                 now_frames = self.now_frames
@@ -377,14 +379,15 @@ class EngineFront:
         """Everything off: every job and every contact of every client fades out.
 
         Never refused, never waits: jobs and touchdowns accepted before this call never
-        start, whatever state the audio side is in.
+        start, whatever state the audio side is in. Each owner's contacts are published
+        as ``released`` with reason ``stop``.
         """
         with self._lock:
             self._stop_count += 1
-            records = list(self._contacts.values())
-            self._contacts.clear()
+            owners = self._contacts.pop_all()
             self._jobs.stop_all()
-            self._send_stop_all(records)
+            self._send_stop_all([r for held in owners.values() for r in held.values()])
+        self._publish([(owner, tuple(held), "stop") for owner, held in owners.items()])
 
     # -- contacts ---------------------------------------------------------------------
 
@@ -410,6 +413,7 @@ class EngineFront:
         law: str = "power",
         normal_velocity_m_s: float | None = None,
         at_frame: int | None = None,
+        deadline_s: float | None = None,
     ) -> None:
         """A contact touches down at (x_cm, y_cm) and vibrates there until ``up``.
 
@@ -432,13 +436,22 @@ class EngineFront:
             Speed of the hand towards the skin: adds an impact transient scaled by it.
         at_frame : int or None
             Frame of touchdown; None: the next block.
+        deadline_s : float or None, 0.001 <= deadline_s <= 3600
+            The contact is released (``released`` with reason ``watchdog``, by the
+            front's deadline thread) once this long passes without a move of it or a
+            :meth:`renew_owner` of its owner; None: it stays down until ``up``.
+
+        When ``contact.max_contacts`` contacts are down and ``owner`` holds fewer than
+        the largest holder, the largest holder's oldest contact is released (reason
+        ``quota``) to make room (:mod:`phantomtouch.engine.owners`).
 
         Raises
         ------
         ParameterError
             An argument is out of range (the message names it).
         EngineBusyError
-            ``contact.max_contacts`` contacts are down.
+            ``contact.max_contacts`` contacts are down and no owner holds more than
+            ``owner``.
         DeviceError
             The engine is closed, or its audio side is not running.
         """
@@ -451,16 +464,18 @@ class EngineFront:
         x, y = _check_position(x_cm, y_cm)
         _check_velocity(normal_velocity_m_s)
         frame = check_frame("at_frame", at_frame)
-        key = (owner, contact)
+        term_s = math.inf
+        if deadline_s is not None:
+            term_s = check_range("deadline_s", deadline_s, 1e-3, 3600.0, "s")
+        taken: list[Released] = []
         with self._lock:
             self._check_ready()
-            held = self._contacts.get(key)
-            if held is None and len(self._contacts) >= self._settings.max_contacts:
-                raise EngineBusyError(
-                    f"{len(self._contacts)} contacts are down; at most "
-                    f"max_contacts={self._settings.max_contacts}"
-                )
-            record = ContactRecord(x, y, None if held is None else held.slot)
+            held = self._contacts.get(owner, contact)
+            if held is None and (victim := self._contacts.make_room(owner)) is not None:
+                self._send_up(*victim, normal_velocity_m_s=None, at_frame=None)
+                taken.append((victim[0], (victim[1],), "quota"))
+            record = ContactRecord(x, y, None if held is None else held.slot, term_s)
+            record.renew(time.monotonic())
             self._send_down(
                 owner,
                 contact,
@@ -473,7 +488,10 @@ class EngineFront:
                 normal_velocity_m_s=normal_velocity_m_s,
                 at_frame=frame,
             )
-            self._contacts[key] = record
+            self._contacts.put(owner, contact, record)
+        if term_s != math.inf:
+            self._deadlines.wake()
+        self._publish(taken)
 
     def contact_move(
         self,
@@ -486,6 +504,7 @@ class EngineFront:
         at_frame: int | None = None,
     ) -> None:
         """The contact's newest position (and intensity); latest wins, nothing queues.
+        It pushes the contact's deadline on.
 
         The gains ramp from where the last block ended to this position across the
         block that contains ``at_frame`` (None: the next block).
@@ -504,12 +523,13 @@ class EngineFront:
             intensity = check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
         frame = check_frame("at_frame", at_frame)
         with self._lock:
-            record = self._contacts.get((owner, contact))
+            record = self._contacts.get(owner, contact)
             if record is None:
                 raise ProtocolError(
                     f"contact={contact!r} of owner={owner!r} is not down: expected down, got move"
                 )
             record.x_cm, record.y_cm = x, y
+            record.renew(time.monotonic())
             self._send_move(owner, contact, record, intensity, frame)
 
     def contact_up(
@@ -536,22 +556,115 @@ class EngineFront:
         _check_velocity(normal_velocity_m_s)
         frame = check_frame("at_frame", at_frame)
         with self._lock:
-            record = self._contacts.pop((owner, contact), None)
+            record = self._contacts.pop(owner, contact)
             if record is not None:
                 self._send_up(
                     owner, contact, record, normal_velocity_m_s=normal_velocity_m_s, at_frame=frame
                 )
 
-    def release_owner(self, owner: str) -> None:
-        """Release every contact of a client that went away (with the release ramp).
+    def release_owner(self, owner: str, reason: str = "released") -> None:
+        """Release every contact of ``owner`` (with the release ramp) and publish them as
+        ``released`` with ``reason`` (an input that went away or whose thread died).
 
-        Never refused; unknown owners are ignored.
+        Never refused; unknown owners are ignored. Any thread.
         """
         with self._lock:
-            keys = [key for key in self._contacts if key[0] == owner]
-            records = [self._contacts.pop(key) for key in keys]
-            if records:
-                self._send_release_owner(owner, records)
+            held = self._contacts.pop_owner(owner)
+            if held:
+                self._send_release_owner(owner, list(held.values()))
+        if held:
+            self._publish([(owner, tuple(held), reason)])
+
+    def renew_owner(self, owner: str, now_s: float | None = None) -> None:
+        """Push the deadline of every contact of ``owner`` on (its input is alive).
+
+        ``now_s`` is on the ``time.monotonic()`` clock (None: now). Any thread.
+        """
+        now_s = time.monotonic() if now_s is None else now_s
+        with self._lock:
+            self._contacts.renew(owner, now_s)
+
+    def holds(self, owner: str, contact: str) -> bool:
+        """Whether ``contact`` of ``owner`` is down. Any thread."""
+        with self._lock:
+            return self._contacts.get(owner, contact) is not None
+
+    def contacts_of(self, owner: str) -> list[str]:
+        """The contacts ``owner`` holds down, oldest first. Any thread."""
+        with self._lock:
+            return self._contacts.contacts_of(owner)
+
+    def contact_owners(self, prefix: str = "") -> dict[str, list[str]]:
+        """The contacts down of every owner whose name starts with ``prefix``."""
+        with self._lock:
+            found: dict[str, list[str]] = {}
+            for owner, contact, _ in self._contacts.items():
+                if owner.startswith(prefix):
+                    found.setdefault(owner, []).append(contact)
+            return found
+
+    def subscribe_released(
+        self, listener: ReleasedListener, owner: str | None = None
+    ) -> Callable[[], None]:
+        """Call ``listener(owner, contacts, reason)`` whenever the front lets go of
+        contacts it did not get an ``up`` for (of ``owner`` only, or of any owner).
+
+        Returns the function that unsubscribes it. The listener runs in the thread that
+        released them (see :data:`phantomtouch.engine.owners.ReleasedListener`).
+        """
+        with self._lock:
+            self._listeners.setdefault(owner, []).append(listener)
+
+        def unsubscribe() -> None:
+            with self._lock:
+                listeners = self._listeners.get(owner, [])
+                if listener in listeners:
+                    listeners.remove(listener)
+                if not listeners:
+                    self._listeners.pop(owner, None)
+
+        return unsubscribe
+
+    def release_expired(self, now_s: float | None = None, prefix: str = "") -> list[str]:
+        """Release every contact whose deadline is at or before ``now_s`` (None: now)
+        of owners whose name starts with ``prefix``; returns those owners.
+
+        The front's deadline thread does this on its own; an input may ask sooner.
+        """
+        now_s = time.monotonic() if now_s is None else now_s
+        with self._lock:
+            due = self._contacts.expired(now_s, prefix)
+            for owner, held in due.items():
+                for contact, record in held.items():
+                    self._send_up(owner, contact, record, normal_velocity_m_s=None, at_frame=None)
+        self._publish([(owner, tuple(held), "watchdog") for owner, held in due.items()])
+        return list(due)
+
+    def _expire_deadlines(self, now_s: float) -> float | None:
+        """The deadline thread's step: release what is due, return the next deadline."""
+        self.release_expired(now_s)
+        with self._lock:
+            return self._contacts.next_deadline()
+
+    def _drop_contacts(self, reason: str) -> list[Released]:
+        """Forget every contact (the audio side that played them is gone), the lock
+        held; the caller publishes what this returns (:meth:`_publish`)."""
+        return [(owner, tuple(held), reason) for owner, held in self._contacts.pop_all().items()]
+
+    def _publish(self, events: list[Released]) -> None:
+        """Tell the listeners of each event's owner, and those of every owner; never
+        with the lock held."""
+        if not events:
+            return
+        with self._lock:
+            listeners = {owner: list(self._listeners.get(owner, ())) for owner, _, _ in events}
+            anyone = list(self._listeners.get(None, ()))
+        for owner, contacts, reason in events:
+            for listener in [*listeners[owner], *anyone]:
+                try:
+                    listener(owner, contacts, reason)
+                except Exception:
+                    logger.exception("a released listener failed")
 
     # -- monitoring -------------------------------------------------------------------
 
@@ -569,7 +682,7 @@ class EngineFront:
         with self._lock:
             contacts = [
                 {"owner": owner, "contact": contact, "x_cm": r.x_cm, "y_cm": r.y_cm}
-                for (owner, contact), r in self._contacts.items()
+                for owner, contact, r in self._contacts.items()
             ]
         return EngineStatus(
             backend=figures["backend"],

@@ -41,13 +41,13 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import (
     MAX_VOICES,
-    ContactRecord,
     EngineFront,
     check_frame_number,
     check_server_time,
 )
 from phantomtouch.engine.jobs import Policy
 from phantomtouch.engine.link import encode, read_frames
+from phantomtouch.engine.owners import ContactRecord
 from phantomtouch.engine.prerender import PRERENDER_MAX_S, Prerendered
 from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
@@ -222,8 +222,9 @@ class ProcessEngine(EngineFront):
                 return
             self._state = state
             self._jobs.forget_all(self.now_frames)
-            self._contacts.clear()
+            released = self._drop_contacts(f"engine {state}")
             self._admission.forget_starts()
+        self._publish(released)
         if self.on_fault is not None:
             try:
                 self.on_fault(state)
