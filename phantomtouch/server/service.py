@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from phantomtouch.schema import DeviceProfile
+from phantomtouch.server.connections import ConnectionCaps
 from phantomtouch.server.errors import RateLimitedError
 from phantomtouch.server.metrics import Metrics
 from phantomtouch.server.plans import PlanCache
@@ -35,6 +36,7 @@ class Service:
     metrics: Metrics
     plans: PlanCache = field(init=False)
     voices: VoiceLedger = field(init=False)
+    connections: ConnectionCaps = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
     loop: asyncio.AbstractEventLoop | None = field(default=None, init=False)
@@ -42,6 +44,9 @@ class Service:
     def __post_init__(self) -> None:
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
         self.plans = PlanCache(self.device)
+        self.connections = ConnectionCaps(
+            self.settings.max_ws_connections, self.settings.max_ws_connections_per_address
+        )
         self.voices = VoiceLedger(
             self.settings.voices_per_client, self.settings.max_voice_seconds_per_client
         )

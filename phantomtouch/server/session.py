@@ -4,6 +4,8 @@
 
     CONNECTING --accept--> OPEN --client closes / limit broken--> CLOSED
          \\--token missing: accept, close 1008--> CLOSED
+         \\--a connection cap reached: accept, close 1013--> CLOSED
+           (:mod:`phantomtouch.server.connections`)
 
 In ``OPEN`` each text frame is parsed and handled at once, in arrival order: ``move``
 goes straight to the engine's contact mailbox (latest wins, nothing queues here). Each
@@ -26,6 +28,7 @@ become ``released`` messages. Closing, in any way, releases them all.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import enum
 import json
 import time
@@ -39,6 +42,7 @@ from phantomtouch.server import touch
 from phantomtouch.server.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
+    WS_CLOSE_TRY_AGAIN_LATER,
     WS_CLOSE_UNSUPPORTED_DATA,
     NotFoundError,
     Problem,
@@ -112,10 +116,28 @@ class Session:
         self.state = new
 
     async def run(self) -> None:
-        """Accept, check the token, serve frames until the connection ends, release."""
+        """Accept, check the connection caps and the token, serve frames until the
+        connection ends, release."""
+        peer = self.websocket.client
+        host = None if peer is None else peer.host
+        refused = self.service.connections.enter(host)
+        if refused is not None:
+            self._expect(SessionState.CONNECTING, SessionState.CLOSED)
+            self.service.metrics.ws_refused.labels(refused[0]).inc()
+            with contextlib.suppress(*_GONE):
+                await self.websocket.accept()
+                await self.websocket.close(WS_CLOSE_TRY_AGAIN_LATER, refused[1])
+            return
+        try:
+            await self._run()
+        finally:
+            self.service.connections.leave(host)
+
+    async def _run(self) -> None:
         await self.websocket.accept()
         self._expect(SessionState.CONNECTING, SessionState.OPEN)
         self.service.metrics.ws_connections.inc()
+        self.service.metrics.ws_open.inc()
         loop = asyncio.get_running_loop()
 
         def released(owner: str, contacts: tuple[str, ...], reason: str) -> None:
@@ -141,6 +163,7 @@ class Session:
             if self._state_task is not None:
                 self._state_task.cancel()
             self.engine.release_owner(self.owner, "closed")
+            self.service.metrics.ws_open.dec()
         if code is not None:
             try:
                 await self.websocket.close(code, reason)
