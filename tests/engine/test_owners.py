@@ -56,8 +56,8 @@ def test_moves_keep_a_contact_down_past_its_deadline() -> None:
     released = Released()
     with Engine(DEVICE, CaptureSink(DEVICE)) as engine:
         engine.subscribe_released(released, owner="input")
-        engine.contact_down("input", "finger", 1.9, 7.2, deadline_s=1.0)
-        for k in range(30):  # 1.5 s of moves, each well within the deadline
+        engine.contact_down("input", "finger", 1.9, 7.2, deadline_s=1.5)
+        for k in range(40):  # 2 s of moves, each well within the deadline
             engine.contact_move("input", "finger", 1.9, 7.2 - 0.1 * (k % 2))
             time.sleep(0.05)
         assert engine.holds("input", "finger")
