@@ -24,7 +24,6 @@ the one the user sees) or ``steal-quietest``; a stolen job fades out over
 from __future__ import annotations
 
 import contextlib
-import logging
 import math
 import threading
 import time
@@ -56,7 +55,14 @@ from phantomtouch.engine.jobs import (
     resolve_plan,
 )
 from phantomtouch.engine.log import StimulusLog
-from phantomtouch.engine.owners import ContactRecord, DeadlineThread, OwnerTable, ReleasedListener
+from phantomtouch.engine.owners import (
+    ContactRecord,
+    DeadlineThread,
+    Listeners,
+    OwnerTable,
+    Released,
+    ReleasedListener,
+)
 from phantomtouch.engine.prerender import PRERENDER_MAX_S, PrerenderCache, Prerendered
 from phantomtouch.engine.status import EngineStatus
 from phantomtouch.errors import ParameterError, ProtocolError
@@ -75,11 +81,6 @@ MAX_VOICES = 64
 the budget allows."""
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
-
-logger = logging.getLogger("phantomtouch.engine")
-
-Released = tuple[str, tuple[str, ...], str]
-"""``(owner, contacts, reason)`` of one ``released`` event."""
 
 
 class EngineFront:
@@ -135,7 +136,7 @@ class EngineFront:
         self._lock = threading.RLock()
         self._jobs = JobTable()
         self._contacts = OwnerTable(self._settings.max_contacts)
-        self._listeners: dict[str | None, list[ReleasedListener]] = {}
+        self._listeners = Listeners()
         self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
         log = StimulusLog(log_path) if log_path is not None else None
@@ -474,8 +475,8 @@ class EngineFront:
             if held is None and (victim := self._contacts.make_room(owner)) is not None:
                 self._send_up(*victim, normal_velocity_m_s=None, at_frame=None)
                 taken.append((victim[0], (victim[1],), "quota"))
-            record = ContactRecord(x, y, None if held is None else held.slot, term_s)
-            record.renew(time.monotonic())
+            slot = None if held is None else held.slot
+            record = ContactRecord(x, y, slot, term_s, time.monotonic() + term_s)
             self._send_down(
                 owner,
                 contact,
@@ -612,18 +613,7 @@ class EngineFront:
         Returns the function that unsubscribes it. The listener runs in the thread that
         released them (see :data:`phantomtouch.engine.owners.ReleasedListener`).
         """
-        with self._lock:
-            self._listeners.setdefault(owner, []).append(listener)
-
-        def unsubscribe() -> None:
-            with self._lock:
-                listeners = self._listeners.get(owner, [])
-                if listener in listeners:
-                    listeners.remove(listener)
-                if not listeners:
-                    self._listeners.pop(owner, None)
-
-        return unsubscribe
+        return self._listeners.subscribe(listener, owner)
 
     def release_expired(self, now_s: float | None = None, prefix: str = "") -> list[str]:
         """Release every contact whose deadline is at or before ``now_s`` (None: now)
@@ -652,19 +642,9 @@ class EngineFront:
         return [(owner, tuple(held), reason) for owner, held in self._contacts.pop_all().items()]
 
     def _publish(self, events: list[Released]) -> None:
-        """Tell the listeners of each event's owner, and those of every owner; never
+        """Tell the listeners (:class:`~phantomtouch.engine.owners.Listeners`); never
         with the lock held."""
-        if not events:
-            return
-        with self._lock:
-            listeners = {owner: list(self._listeners.get(owner, ())) for owner, _, _ in events}
-            anyone = list(self._listeners.get(None, ()))
-        for owner, contacts, reason in events:
-            for listener in [*listeners[owner], *anyone]:
-                try:
-                    listener(owner, contacts, reason)
-                except Exception:
-                    logger.exception("a released listener failed")
+        self._listeners.publish(events)
 
     # -- monitoring -------------------------------------------------------------------
 

@@ -54,6 +54,49 @@ engine's watchdog thread): a listener must return at once and must not call the 
 back while it runs (hand the event to its own thread or event loop)."""
 
 
+Released = tuple[str, tuple[str, ...], str]
+"""``(owner, contacts, reason)`` of one ``released`` event."""
+
+
+class Listeners:
+    """The ``released`` listeners, of one owner or of every owner (any thread)."""
+
+    def __init__(self) -> None:
+        self._by_owner: dict[str | None, list[ReleasedListener]] = {}
+        self._lock = threading.Lock()
+
+    def subscribe(self, listener: ReleasedListener, owner: str | None) -> Callable[[], None]:
+        """Add ``listener`` for ``owner`` (None: every owner); returns the function that
+        removes it."""
+        with self._lock:
+            self._by_owner.setdefault(owner, []).append(listener)
+
+        def unsubscribe() -> None:
+            with self._lock:
+                listeners = self._by_owner.get(owner, [])
+                if listener in listeners:
+                    listeners.remove(listener)
+                if not listeners:
+                    self._by_owner.pop(owner, None)
+
+        return unsubscribe
+
+    def publish(self, events: list[Released]) -> None:
+        """Tell the listeners of each event's owner, then those of every owner; a
+        listener that fails is logged and the others are still told."""
+        if not events:
+            return
+        with self._lock:
+            mine = {owner: list(self._by_owner.get(owner, ())) for owner, _, _ in events}
+            anyone = list(self._by_owner.get(None, ()))
+        for owner, contacts, reason in events:
+            for listener in [*mine[owner], *anyone]:
+                try:
+                    listener(owner, contacts, reason)
+                except Exception:
+                    logger.exception("a released listener failed")
+
+
 @dataclass
 class ContactRecord:
     """A contact that is down: its newest position, where its moves go, its deadline.
@@ -69,8 +112,8 @@ class ContactRecord:
     deadline_s: float = math.inf
 
     def renew(self, now_s: float) -> None:
-        """Push the deadline to ``term_s`` after ``now_s``."""
-        self.deadline_s = now_s + self.term_s
+        """Push the deadline on to ``term_s`` after ``now_s`` (never earlier than it is)."""
+        self.deadline_s = max(self.deadline_s, now_s + self.term_s)
 
 
 class OwnerTable:

@@ -159,3 +159,11 @@ def test_an_owner_with_nothing_to_steal_at_the_start_is_refused() -> None:
         table.add(job(f"late{k}", "large", 50))  # the largest holder begins after the start
     with pytest.raises(EngineBusyError):
         admit(table, 10, "other", "steal-oldest")
+
+
+def test_a_renewal_never_brings_a_deadline_forward() -> None:
+    record = ContactRecord(0.0, 0.0, term_s=1.0, deadline_s=10.0)
+    record.renew(5.0)  # a message stamped with an older time than the touchdown's
+    assert record.deadline_s == 10.0
+    record.renew(9.5)
+    assert record.deadline_s == 10.5
