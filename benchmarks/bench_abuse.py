@@ -9,7 +9,12 @@ abuse runs in a process of its own, bounded in count and time:
 - ``invalid bodies``: POST /touch bodies of 99,000 points, the last one not a number,
   next to ``valid bodies`` of the same size (refused after validation: a start time too
   far ahead), what reading such a body costs anyway;
-- ``hang-ups``: clients announcing a 1000-byte body, sending 2 bytes and hanging up.
+- ``hang-ups``: clients announcing a 1000-byte body, sending 2 bytes and hanging up;
+- fair shares (:func:`fairness_abuses`): ``play ws x2`` (one program floods ``play`` from
+  two WebSocket connections), ``play 4 addresses`` (the same over HTTP from 127.0.0.4-7)
+  and ``contacts x13`` (13 connections hold every contact slot); meanwhile another client
+  plays a 3 s touch, or puts a contact down, and the row reports how that ended
+  (``finished`` / ``ok`` is what fair shares promise).
 
 Each line reports the probe's p50, p99 and slowest answer while the abuse ran and the
 underruns the engine counted meanwhile (``/metrics``)::
@@ -25,6 +30,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +39,13 @@ import httpx
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tests.support.abuse import HealthProbe, hang_ups, in_process, large_bodies, ping_flood
+from tests.support.fairness import (
+    contact_hoard,
+    http_play_flood,
+    victim_contact,
+    victim_touch,
+    ws_play_flood,
+)
 from tests.support.live_server import LiveServer
 
 
@@ -61,6 +74,36 @@ def measure(server: LiveServer, abuse: Callable[[], Any]) -> dict[str, Any]:
     }
 
 
+def beside(flood: Callable[[], Any], other: Callable[[], str]) -> dict[str, Any]:
+    """Run ``flood`` (in its own process); a second into it, ``other`` client's try."""
+    with ThreadPoolExecutor(1) as pool:
+        flooding = pool.submit(flood)
+        time.sleep(1.0)
+        ended = other()
+        return {"other": ended, "flood": flooding.result()}
+
+
+def fairness_abuses(server: LiveServer, seconds: float) -> dict[str, Callable[[], Any]]:
+    """The fair-share attacks: ``play ws x2``, ``play 4 addresses`` and ``contacts x13``,
+    each for ``seconds`` (at least 5: the other client's touch lasts 3 s)."""
+    seconds = max(seconds, 5.0)
+    addresses = ("127.0.0.4", "127.0.0.5", "127.0.0.6", "127.0.0.7")
+    return {
+        "play ws x2": lambda: beside(
+            lambda: in_process(ws_play_flood, server.ws_url, seconds),
+            lambda: victim_touch(server.url),
+        ),
+        "play 4 addresses": lambda: beside(
+            lambda: in_process(http_play_flood, server.url, seconds, addresses),
+            lambda: victim_touch(server.url),
+        ),
+        "contacts x13": lambda: beside(
+            lambda: in_process(contact_hoard, server.ws_url, seconds),
+            lambda: victim_contact(server.ws_url),
+        ),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of the baseline")
@@ -72,6 +115,7 @@ def main(argv: list[str] | None = None) -> int:
             "valid bodies": lambda: in_process(large_bodies, server.url, 10, True),
             "invalid bodies": lambda: in_process(large_bodies, server.url, 10),
             "hang-ups": lambda: in_process(hang_ups, server.port, 500),
+            **fairness_abuses(server, args.seconds),
         }
         print(
             f"{'abuse':<16} {'s':>5} {'n':>6} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} underruns"
@@ -81,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"{name:<16} {row['took_s']:5.2f} {row['answers']:6d} {row['p50_ms']:7.2f} "
                 f"{row['p99_ms']:7.2f} {row['max_ms']:7.1f} {row['underruns']:9.0f}"
-                + (f"   {row['outcome']}" if name == "ping flood" else "")
+                + (f"   {row['outcome']}" if isinstance(row["outcome"], dict) else "")
             )
     return 0
 

@@ -29,6 +29,7 @@ the one the user sees) or ``steal-quietest``; a stolen job fades out over
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 import time
 import uuid
@@ -69,6 +70,14 @@ from phantomtouch.engine.messages import (
     ReleaseOwner,
     StartJob,
 )
+from phantomtouch.engine.owners import (
+    ContactRecord,
+    DeadlineThread,
+    Listeners,
+    OwnerTable,
+    Released,
+    ReleasedListener,
+)
 from phantomtouch.engine.prerender import PRERENDER_MAX_S, PrerenderCache
 from phantomtouch.engine.status import EngineStatus
 from phantomtouch.engine.touchdown import (
@@ -95,16 +104,6 @@ MAX_VOICES = 64
 the budget allows."""
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
-
-
-@dataclass
-class ContactRecord:
-    """A contact that is down: its newest position, and its move slot in the engine
-    process (``(slot, generation)``; None in this process)."""
-
-    x_cm: float
-    y_cm: float
-    slot: tuple[int, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -192,7 +191,9 @@ class EngineFront:
         self._touchdowns = Touchdowns(device, self._settings)
         self._lock = threading.RLock()
         self._jobs = JobTable()
-        self._contacts: dict[tuple[str, str], ContactRecord] = {}
+        self._contacts = OwnerTable(self._settings.max_contacts)
+        self._listeners = Listeners()
+        self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
         self._closed = False
         log = StimulusLog(log_path) if log_path is not None else None
@@ -254,11 +255,13 @@ class EngineFront:
 
     def _lost(self, state: str) -> None:
         """The audio side is gone or stalled: nothing it played sounds any more (host,
-        the engine process's watchdog)."""
+        the engine process's watchdog). Every contact is published as ``released`` with
+        reason ``engine <state>``."""
         with self._lock:
             self._jobs.drop_all(self.now_frames)
-            self._contacts.clear()
+            released = self._drop_contacts(f"engine {state}")
             self._admission.forget_starts()
+        self._publish(released)
 
     # -- clock ------------------------------------------------------------------------
 
@@ -357,6 +360,7 @@ class EngineFront:
                 budget=self._admission.render_budget,
                 voices=self._admission.max_voices,
                 policy=chosen,
+                owner=owner,
             )
             if prerendered is None:  # nothing to render in the callback
                 now_frames = self.now_frames
@@ -438,16 +442,18 @@ class EngineFront:
         any thread).
 
         Never refused, never waits: jobs and touchdowns accepted before this call never
-        start, whatever state the audio side is in.
+        start, whatever state the audio side is in. Each owner's contacts are published
+        as ``released`` with reason ``stop``.
         """
         with self._lock:
             self._stop_count += 1
-            records = list(self._contacts.values())
-            self._contacts.clear()
+            owners = self._contacts.pop_all()
             self._jobs.stop_all()
-            for record in records:
-                self._audio.free_slot(record.slot)
+            for held in owners.values():
+                for record in held.values():
+                    self._audio.free_slot(record.slot)
             self._audio.stop_all()
+        self._publish([(owner, tuple(held), "stop") for owner, held in owners.items()])
 
     # -- contacts ---------------------------------------------------------------------
 
@@ -473,6 +479,7 @@ class EngineFront:
         law: str = "power",
         normal_velocity_m_s: float | None = None,
         at_frame: int | None = None,
+        deadline_s: float | None = None,
     ) -> None:
         """A contact touches down at (x_cm, y_cm) and vibrates there until ``up`` (host,
         any thread).
@@ -496,13 +503,22 @@ class EngineFront:
             Speed of the hand towards the skin: adds an impact transient scaled by it.
         at_frame : int or None
             Frame of touchdown; None: the next block.
+        deadline_s : float or None, 0.001 <= deadline_s <= 3600
+            The contact is released (``released`` with reason ``watchdog``, by the
+            front's deadline thread) once this long passes without a move of it or a
+            :meth:`renew_owner` of its owner; None: it stays down until ``up``.
+
+        When ``contact.max_contacts`` contacts are down and ``owner`` holds fewer than
+        the largest holder, the largest holder's oldest contact is released (reason
+        ``quota``) to make room (:mod:`phantomtouch.engine.owners`).
 
         Raises
         ------
         ParameterError
             An argument is out of range (the message names it).
         EngineBusyError
-            ``contact.max_contacts`` contacts are down.
+            ``contact.max_contacts`` contacts are down and no owner holds more than
+            ``owner``.
         DeviceError
             The engine is closed, or its audio side is not running.
         """
@@ -515,16 +531,17 @@ class EngineFront:
         burst = self._touchdowns.burst(normal_velocity_m_s)
         frame = check_frame("at_frame", at_frame)
         unit_gains = self._touchdowns.unit_gains(x, y, law)
+        term_s = math.inf
+        if deadline_s is not None:
+            term_s = check_range("deadline_s", deadline_s, 1e-3, 3600.0, "s")
         self._audio.prepare(checked)
-        key = (owner, contact)
+        taken: list[Released] = []
         with self._lock:
             self._audio.check_ready()
-            held = self._contacts.get(key)
-            if held is None and len(self._contacts) >= self._settings.max_contacts:
-                raise EngineBusyError(
-                    f"{len(self._contacts)} contacts are down; at most "
-                    f"max_contacts={self._settings.max_contacts}"
-                )
+            held = self._contacts.get(owner, contact)
+            if held is None and (victim := self._contacts.make_room(owner)) is not None:
+                self._lift(*victim)
+                taken.append((victim[0], (victim[1],), "quota"))
             slot = self._audio.claim_slot(None if held is None else held.slot)
             try:
                 self._audio.provide(checked)
@@ -547,7 +564,11 @@ class EngineFront:
                 if held is None:
                     self._audio.free_slot(slot)
                 raise
-            self._contacts[key] = ContactRecord(x, y, slot)
+            record = ContactRecord(x, y, slot, term_s, time.monotonic() + term_s)
+            self._contacts.put(owner, contact, record)
+        if term_s != math.inf:
+            self._deadlines.wake()
+        self._publish(taken)
 
     def contact_move(
         self,
@@ -560,7 +581,7 @@ class EngineFront:
         at_frame: int | None = None,
     ) -> None:
         """The contact's newest position (and intensity); latest wins, nothing queues.
-        Host, any thread.
+        It pushes the contact's deadline on. Host, any thread.
 
         The gains ramp from where the last block ended to this position across the
         block that contains ``at_frame`` (None: the next block).
@@ -579,12 +600,13 @@ class EngineFront:
             intensity = check_range("intensity", intensity, 0.0, 1.0, "(1 = safety.max_level_db)")
         frame = check_frame("at_frame", at_frame)
         with self._lock:
-            record = self._contacts.get((owner, contact))
+            record = self._contacts.get(owner, contact)
             if record is None:
                 raise ProtocolError(
                     f"contact={contact!r} of owner={owner!r} is not down: expected down, got move"
                 )
             record.x_cm, record.y_cm = x, y
+            record.renew(time.monotonic())
             self._audio.move(record.slot, ContactMove(owner, contact, x, y, intensity, frame))
 
     def contact_up(
@@ -611,23 +633,100 @@ class EngineFront:
         burst = self._touchdowns.burst(normal_velocity_m_s)
         frame = check_frame("at_frame", at_frame)
         with self._lock:
-            record = self._contacts.pop((owner, contact), None)
+            record = self._contacts.pop(owner, contact)
             if record is not None:
                 self._audio.free_slot(record.slot)
                 self._post_release(ContactUp(owner, contact, burst, frame))
 
-    def release_owner(self, owner: str) -> None:
-        """Release every contact of a client that went away (with the release ramp).
+    def release_owner(self, owner: str, reason: str = "released") -> None:
+        """Release every contact of ``owner`` (with the release ramp) and publish them as
+        ``released`` with ``reason`` (an input that went away or whose thread died).
 
         Host, any thread. Never refused; unknown owners are ignored.
         """
         with self._lock:
-            keys = [key for key in self._contacts if key[0] == owner]
-            records = [self._contacts.pop(key) for key in keys]
-            if records:
-                for record in records:
+            held = self._contacts.pop_owner(owner)
+            if held:
+                for record in held.values():
                     self._audio.free_slot(record.slot)
                 self._post_release(ReleaseOwner(owner))
+        if held:
+            self._publish([(owner, tuple(held), reason)])
+
+    def renew_owner(self, owner: str, now_s: float | None = None) -> None:
+        """Push the deadline of every contact of ``owner`` on (its input is alive).
+
+        ``now_s`` is on the ``time.monotonic()`` clock (None: now). Any thread.
+        """
+        now_s = time.monotonic() if now_s is None else now_s
+        with self._lock:
+            self._contacts.renew(owner, now_s)
+
+    def holds(self, owner: str, contact: str) -> bool:
+        """Whether ``contact`` of ``owner`` is down. Any thread."""
+        with self._lock:
+            return self._contacts.get(owner, contact) is not None
+
+    def contacts_of(self, owner: str) -> list[str]:
+        """The contacts ``owner`` holds down, oldest first. Any thread."""
+        with self._lock:
+            return self._contacts.contacts_of(owner)
+
+    def contact_owners(self, prefix: str = "") -> dict[str, list[str]]:
+        """The contacts down of every owner whose name starts with ``prefix``."""
+        with self._lock:
+            found: dict[str, list[str]] = {}
+            for owner, contact, _ in self._contacts.items():
+                if owner.startswith(prefix):
+                    found.setdefault(owner, []).append(contact)
+            return found
+
+    def subscribe_released(
+        self, listener: ReleasedListener, owner: str | None = None
+    ) -> Callable[[], None]:
+        """Call ``listener(owner, contacts, reason)`` whenever the front lets go of
+        contacts it did not get an ``up`` for (of ``owner`` only, or of any owner).
+
+        Returns the function that unsubscribes it. The listener runs in the thread that
+        released them (see :data:`phantomtouch.engine.owners.ReleasedListener`).
+        """
+        return self._listeners.subscribe(listener, owner)
+
+    def release_expired(self, now_s: float | None = None, prefix: str = "") -> list[str]:
+        """Release every contact whose deadline is at or before ``now_s`` (None: now)
+        of owners whose name starts with ``prefix``; returns those owners.
+
+        The front's deadline thread does this on its own; an input may ask sooner.
+        """
+        now_s = time.monotonic() if now_s is None else now_s
+        with self._lock:
+            due = self._contacts.expired(now_s, prefix)
+            for owner, held in due.items():
+                for contact, record in held.items():
+                    self._lift(owner, contact, record)
+        self._publish([(owner, tuple(held), "watchdog") for owner, held in due.items()])
+        return list(due)
+
+    def _expire_deadlines(self, now_s: float) -> float | None:
+        """The deadline thread's step: release what is due, return the next deadline."""
+        self.release_expired(now_s)
+        with self._lock:
+            return self._contacts.next_deadline()
+
+    def _lift(self, owner: str, contact: str, record: ContactRecord) -> None:
+        """Lift a contact the table let go of, without a transient (the lock held)."""
+        self._audio.free_slot(record.slot)
+        self._post_release(ContactUp(owner, contact, None, None))
+
+    def _drop_contacts(self, reason: str) -> list[Released]:
+        """Forget every contact (the audio side that played them is gone), the lock
+        held; the caller publishes what this returns (:meth:`_publish`)."""
+        return [(owner, tuple(held), reason) for owner, held in self._contacts.pop_all().items()]
+
+    def _publish(self, events: list[Released]) -> None:
+        """Tell the listeners (:class:`~phantomtouch.engine.owners.Listeners`); never
+        with the lock held."""
+        self._listeners.publish(events)
 
     # -- monitoring -------------------------------------------------------------------
 
@@ -646,7 +745,7 @@ class EngineFront:
         with self._lock:
             contacts = [
                 {"owner": owner, "contact": contact, "x_cm": r.x_cm, "y_cm": r.y_cm}
-                for (owner, contact), r in self._contacts.items()
+                for owner, contact, r in self._contacts.items()
             ]
         return EngineStatus(
             backend=figures["backend"],

@@ -7,7 +7,8 @@ release). The table keeps every job that is not over and the most recent ones th
 
 from __future__ import annotations
 
-from collections import OrderedDict
+from collections import Counter, OrderedDict
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
@@ -175,15 +176,20 @@ class JobTable:
         budget: float,
         voices: int,
         policy: Policy,
+        owner: str | None = None,
     ) -> list[JobRecord]:
-        """Make room for a job of ``frames`` from ``start_frame`` costing ``cost``, or refuse.
+        """Make room for a job of ``owner`` of ``frames`` from ``start_frame`` costing
+        ``cost``, or refuse.
 
         Refused when ``jobs`` are scheduled or playing already. When, together with the
         jobs sounding at the same time, it would exceed the render ``budget`` (the sum of
         their costs, shares of a block) or ``voices`` voices, ``policy`` decides:
-        ``refuse``, or the jobs to steal (the oldest started, or the quietest, among
-        those sounding at its start, as few as make room) are returned; the caller fades
-        them out.
+        ``refuse``, or the jobs to steal, as few as make room, are returned; the caller
+        fades them out. Each is taken from whoever holds the most voices then (max-min
+        fairness, the new job counted for its owner; on a tie the new job's owner first),
+        and among that owner's jobs sounding at the start, the oldest started or the
+        quietest. An owner holding fewer voices than another is never stolen from: if
+        the largest holder has nothing to steal at the start, the job is refused.
 
         Raises
         ------
@@ -200,14 +206,9 @@ class JobTable:
         count = len(sounding) + 1
         if _fits(load, count, budget, voices):
             return []
-        at_start = [r for r in sounding if r.first_frame <= start_frame and r.state != "stopped"]
-        if policy == "steal-oldest":
-            at_start.sort(key=lambda r: (r.first_frame, r.job_id))
-        else:
-            at_start.sort(key=lambda r: (r.amplitude, r.first_frame))
         victims: list[JobRecord] = []
         if policy != "refuse":
-            for record in at_start:
+            for record in _fair_victims(sounding, start_frame, owner, policy):
                 victims.append(record)
                 load -= record.cost
                 count -= 1
@@ -272,6 +273,45 @@ def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
     if isinstance(pattern, TouchPattern):
         return plan(pattern, device)
     raise ParameterError(f"pattern must be a TouchPattern or a Plan, got {type(pattern).__name__}")
+
+
+def _fair_victims(
+    sounding: list[JobRecord], start_frame: int, owner: str | None, policy: Policy
+) -> Iterator[JobRecord]:
+    """Jobs to steal, in turn, each from the largest holder of the voices left (see
+    :meth:`JobTable.admit`); ends when the largest holder has nothing to steal."""
+    held = Counter(record.owner for record in sounding)
+    held[owner] += 1
+    candidates: dict[str | None, list[JobRecord]] = {}
+    for record in sounding:
+        if record.first_frame <= start_frame and record.state != "stopped":
+            candidates.setdefault(record.owner, []).append(record)
+    for group in candidates.values():
+        group.sort(key=_age if policy == "steal-oldest" else _quiet, reverse=True)
+    while True:
+        most = max(held.values())
+        largest = [o for o, n in held.items() if n == most]
+        holder = owner
+        if owner not in largest:
+            ready = [o for o in largest if candidates.get(o)]
+            if not ready:
+                return  # the largest holders have nothing to steal; the others hold less
+            order = _age if policy == "steal-oldest" else _quiet
+            holder = min(ready, key=lambda o: order(candidates[o][-1]))
+        taken = candidates.get(holder)
+        if not taken:
+            return
+        record = taken.pop()
+        held[holder] -= 1
+        yield record
+
+
+def _age(record: JobRecord) -> tuple[int, str]:
+    return record.first_frame, record.job_id
+
+
+def _quiet(record: JobRecord) -> tuple[float, int]:
+    return record.amplitude, record.first_frame
 
 
 def _fits(load: float, count: int, budget: float, voices: int) -> bool:

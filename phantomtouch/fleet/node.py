@@ -131,8 +131,8 @@ class ArmbandNode:
         """Leave the registry at once, release remote contacts, disconnect."""
         for task in self._loops:
             task.cancel()
-        for owner in list(self.contacts.owners):
-            self.contacts.release(owner)
+        self.contacts.release_all()
+        self.contacts.close()
         if self._nc is None:
             return
         with contextlib.suppress(Exception):
@@ -312,7 +312,6 @@ class ArmbandNode:
             engine = self.service.engine
             if request.job_id is None:
                 self.service.stop_everything()
-                self.contacts.forget_all()
             elif engine.job_state(request.job_id) is None:
                 raise NotFoundError(
                     f"job_id={request.job_id!r} is not a job of armband {self.armband!r}",

@@ -7,15 +7,18 @@ models), a ``ping`` that keeps the owner alive, or a ``release`` of all its cont
 nothing queues. Nobody waits for an answer to a published message, so a message that
 is malformed, oversized or not allowed in its contact's state is counted and dropped.
 
-The fleet watchdog releases an owner silent for ``watchdog_s``: a gateway or a client
-that vanishes leaves nothing vibrating on any armband it touched.
+No contact state is kept here: the engine's front holds every contact of every owner
+(its owner table, :mod:`phantomtouch.engine.owners`), each with a deadline of
+``watchdog_s`` that the owner's messages (``ping`` included) push on. A gateway or a
+client that vanishes leaves nothing vibrating on any armband it touched, whatever
+happens to this node's NATS task.
 """
 
 from __future__ import annotations
 
+import collections
 import json
 import time
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
@@ -32,14 +35,11 @@ OWNER_PREFIX = "fleet:"
 MAX_OWNER_CHARS = 128
 
 
-@dataclass
-class _Owner:
-    last_seen_s: float
-    contacts: set[str] = field(default_factory=set)
-
-
 class RemoteContacts:
-    """The remote owners of one node and their contacts."""
+    """The remote owners of one node: their messages, applied to the engine's front.
+
+    Call :meth:`close` when the node stops listening (it unsubscribes from the front).
+    """
 
     def __init__(
         self, engine: EngineFront, *, watchdog_s: float, max_contacts: int, max_bytes: int
@@ -48,7 +48,16 @@ class RemoteContacts:
         self.watchdog_s = watchdog_s
         self.max_contacts = max_contacts
         self.max_bytes = max_bytes
-        self.owners: dict[str, _Owner] = {}
+        self._silent: collections.deque[str] = collections.deque()
+        self._unsubscribe = engine.subscribe_released(self._released)
+
+    def _released(self, owner: str, contacts: tuple[str, ...], reason: str) -> None:
+        """The front's deadline thread let go of a silent owner (any thread)."""
+        if reason == "watchdog" and owner.startswith(OWNER_PREFIX):
+            self._silent.append(owner.removeprefix(OWNER_PREFIX))
+
+    def close(self) -> None:
+        self._unsubscribe()
 
     def handle(self, data: bytes, *, now_s: float | None = None) -> str:
         """Apply one message; returns its type.
@@ -73,49 +82,46 @@ class RemoteContacts:
             raise ProtocolError(f"owner={owner_id!r}: must be a string of 1 to 128 characters")
         now_s = time.monotonic() if now_s is None else now_s
         kind = message.get("type")
-        owner = self.owners.get(owner_id)
+        engine_owner = OWNER_PREFIX + owner_id
         if kind == "release":
             self.release(owner_id)
             return kind
         if kind == "ping":
-            if owner is not None:
-                owner.last_seen_s = now_s
+            self.engine.renew_owner(engine_owner, now_s)
             return kind
-        engine_owner = OWNER_PREFIX + owner_id
+        held = self.engine.contacts_of(engine_owner)
         if kind == "down":
             down = Down.model_validate_json(json.dumps(message), strict=True)
-            owner = self.owners.setdefault(owner_id, _Owner(now_s))
-            owner.last_seen_s = now_s
-            self._down(engine_owner, owner, down)
+            self.engine.renew_owner(engine_owner, now_s)
+            self._down(engine_owner, held, down)
         elif kind in ("move", "up"):
-            if owner is None:
+            if not held:
                 raise ProtocolError(f"owner={owner_id!r} holds no contact: expected down")
-            owner.last_seen_s = now_s
+            self.engine.renew_owner(engine_owner, now_s)
             if kind == "move":
                 move = Move.model_validate_json(json.dumps(message), strict=True)
-                self._held(owner, move.contact, "move")
+                self._held(held, move.contact, "move")
                 self.engine.contact_move(
                     engine_owner, move.contact, move.x_cm, move.y_cm, intensity=move.intensity
                 )
             else:
                 up = Up.model_validate_json(json.dumps(message), strict=True)
-                self._held(owner, up.contact, "up")
+                self._held(held, up.contact, "up")
                 self.engine.contact_up(
                     engine_owner, up.contact, normal_velocity_m_s=up.normal_velocity_m_s
                 )
-                owner.contacts.discard(up.contact)
         else:
             raise ProtocolError(
                 f"type={kind!r} is not a contact message; expected down, move, up, ping, release"
             )
         return str(kind)
 
-    def _down(self, engine_owner: str, owner: _Owner, down: Down) -> None:
-        if down.contact in owner.contacts:
+    def _down(self, engine_owner: str, held: list[str], down: Down) -> None:
+        if down.contact in held:
             raise ProtocolError(
                 f"contact={down.contact!r} is already down: expected move or up, got down"
             )
-        if len(owner.contacts) >= self.max_contacts:
+        if len(held) >= self.max_contacts:
             raise QuotaError(
                 f"contact={down.contact!r}: quota max_contacts_per_connection="
                 f"{self.max_contacts} is used up",
@@ -131,35 +137,35 @@ class RemoteContacts:
             carrier=down.carrier,
             law=down.law,
             normal_velocity_m_s=down.normal_velocity_m_s,
+            deadline_s=self.watchdog_s,
         )
-        owner.contacts.add(down.contact)
 
     @staticmethod
-    def _held(owner: _Owner, contact: str, got: str) -> None:
-        if contact not in owner.contacts:
+    def _held(held: list[str], contact: str, got: str) -> None:
+        if contact not in held:
             raise ProtocolError(f"contact={contact!r} is not down: expected down, got {got}")
 
     def release(self, owner_id: str) -> None:
         """Let go of every contact of ``owner_id`` (with the release ramp)."""
-        if self.owners.pop(owner_id, None) is not None:
-            self.engine.release_owner(OWNER_PREFIX + owner_id)
+        self.engine.release_owner(OWNER_PREFIX + owner_id)
+
+    def release_all(self) -> None:
+        """Let go of every remote owner's contacts (the node is leaving)."""
+        for owner in self.engine.contact_owners(OWNER_PREFIX):
+            self.engine.release_owner(owner)
 
     def release_silent(self, *, now_s: float | None = None) -> list[str]:
-        """Release every owner silent for ``watchdog_s``; returns their ids."""
-        now_s = time.monotonic() if now_s is None else now_s
-        silent = [
-            o for o, held in self.owners.items() if now_s - held.last_seen_s > self.watchdog_s
-        ]
-        for owner_id in silent:
-            self.release(owner_id)
+        """The owners released for silence (``watchdog_s`` without a message) since the
+        last call, those due at ``now_s`` (None: now) included."""
+        self.engine.release_expired(now_s, OWNER_PREFIX)
+        silent: list[str] = []
+        while self._silent:
+            silent.append(self._silent.popleft())
         return silent
 
-    def forget_all(self) -> None:
-        """A stop released every contact in the engine: forget the owners too."""
-        self.owners.clear()
-
     def count(self) -> int:
-        return sum(len(owner.contacts) for owner in self.owners.values())
+        """Remote contacts down on this node."""
+        return sum(len(held) for held in self.engine.contact_owners(OWNER_PREFIX).values())
 
 
 def drop_reason(exc: BaseException) -> str:

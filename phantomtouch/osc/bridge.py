@@ -12,9 +12,12 @@ datagrams without counting them, hence the loop here).
 
 Safety: every message is checked and a bad one dropped and counted
 (:class:`~phantomtouch.osc.counters.OscCounters`); a token bucket bounds the message
-rate; silence for ``watchdog_s`` (no accepted message) releases every contact of the
-bridge, and so does closing it. A contact that the engine let go of meanwhile (``POST
-/stop``, an engine restart) touches down again on its next message.
+rate. The bridge keeps no contact state: its contacts are held by the engine's front
+(owner ``osc``, :mod:`phantomtouch.engine.owners`), each with the map's ``watchdog_s`` as
+its deadline, which every accepted message pushes on. Silence for ``watchdog_s``
+releases them -- by the front's deadline thread, so also when this thread is gone --
+and so does closing the bridge. A contact that the engine let go of meanwhile (``POST
+/stop``, an engine restart, its deadline) touches down again on its next message.
 """
 
 from __future__ import annotations
@@ -52,8 +55,10 @@ RATE_PER_S = 20_000.0
 """Default of the message rate limit: 8 receivers at 90 Hz are 720 messages/s."""
 MAX_CONTACTS = 10
 """Generic contacts (``/phantomtouch/contact/{id}``) the bridge holds at once."""
+CONTACT_PREFIX = "contact-"
+"""Engine contact ids of generic contacts start with this (receivers' with ``receivers-``)."""
 _POLL_S = 0.05
-"""The receive timeout: how often the watchdog looks when nothing arrives."""
+"""The receive timeout: how often the loop looks at the closing flag when nothing arrives."""
 _MAX_DATAGRAM = 65_536
 _RECEIVE_BUFFER_BYTES = 1 << 20
 """Room for bursts (every parameter of an avatar at once) while the thread is busy."""
@@ -112,8 +117,8 @@ class OscBridge:
         )
         self._proximity = [0.0] * len(receiver_map.receiver)
         self._tracker = ContactTracker(receiver_map.smoothing_s)
-        self._contacts: set[str] = set()
-        self._last_s = time.monotonic()
+        self._let_go: collections.deque[str] = collections.deque()
+        self._unsubscribe = engine.subscribe_released(self._released, OWNER)
         self._logged: set[str] = set()
         self._closing = threading.Event()
         self._thread: threading.Thread | None = None
@@ -128,8 +133,15 @@ class OscBridge:
 
     @property
     def contacts(self) -> list[str]:
-        """Engine contact ids the bridge holds down now."""
-        return sorted([*self._tracker.live, *self._contacts])
+        """Engine contact ids the bridge holds down now (as the engine's front says)."""
+        return sorted(self.engine.contacts_of(OWNER))
+
+    def _released(self, owner: str, contacts: tuple[str, ...], reason: str) -> None:
+        """The front let go of contacts of the bridge (any thread): count a watchdog
+        release; the receive thread forgets their smoothing state (:meth:`_let_go`)."""
+        if reason == "watchdog":
+            self.watchdog_releases += 1
+        self._let_go.extend(contacts)
 
     def start(self) -> None:
         """Start the receive thread."""
@@ -143,7 +155,9 @@ class OscBridge:
         if self._thread is not None:
             self._thread.join()
         self._socket.close()
-        self._release_all()
+        self._forget()
+        self.engine.release_owner(OWNER, "closed")
+        self._unsubscribe()
 
     def __enter__(self) -> OscBridge:
         self.start()
@@ -160,15 +174,15 @@ class OscBridge:
             try:
                 data, _ = receive(_MAX_DATAGRAM)
             except TimeoutError:
-                self._watchdog(time.monotonic())
                 continue
             except OSError:
                 return
             received_s = time.perf_counter()
+            while self._let_go:
+                self._tracker.live.pop(self._let_go.popleft(), None)
             self._datagram(data, time.monotonic())
             if self.latencies_s is not None:
                 self.latencies_s.append(time.perf_counter() - received_s)
-            self._watchdog(time.monotonic())
 
     def _datagram(self, data: bytes, now_s: float) -> None:
         try:
@@ -192,7 +206,7 @@ class OscBridge:
                 self.counters.count("refused")
             else:
                 self.counters.count("accepted")
-                self._last_s = now_s
+                self.engine.renew_owner(OWNER)
 
     def _drop(self, reason: str, message: str) -> None:
         self.counters.count(reason)
@@ -200,19 +214,8 @@ class OscBridge:
             self._logged.add(reason)
             logger.warning("osc: dropped (%s): %s; later ones are only counted", reason, message)
 
-    def _watchdog(self, now_s: float) -> None:
-        if now_s - self._last_s < self.map.watchdog_s or not self.contacts:
-            return
-        self.watchdog_releases += 1
-        self._release_all()
-
-    def _release_all(self) -> None:
-        self._forget()
-        self.engine.release_owner(OWNER)
-
     def _forget(self) -> None:
         self._tracker.forget()
-        self._contacts.clear()
         self._proximity = [0.0] * len(self._proximity)
 
     # -- messages -------------------------------------------------------------------------
@@ -261,7 +264,13 @@ class OscBridge:
 
     def _down(self, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
         self.engine.contact_down(
-            OWNER, contact, x_cm, y_cm, intensity=intensity, carrier=self.map.carrier
+            OWNER,
+            contact,
+            x_cm,
+            y_cm,
+            intensity=intensity,
+            carrier=self.map.carrier,
+            deadline_s=self.map.watchdog_s,
         )
 
     def _move(self, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
@@ -271,24 +280,22 @@ class OscBridge:
             self._down(contact, x_cm, y_cm, intensity)
 
     def _contact(self, address: str, args: tuple[Any, ...]) -> None:
-        contact = "contact-" + messages.contact_id(address)
+        contact = CONTACT_PREFIX + messages.contact_id(address)
         x_cm, y_cm, intensity = messages.contact(address, args)
         if intensity == 0.0:
-            if contact in self._contacts:
-                self._contacts.discard(contact)
-                self.engine.contact_up(OWNER, contact)
+            self.engine.contact_up(OWNER, contact)
             return
-        if contact in self._contacts:
+        held = [c for c in self.engine.contacts_of(OWNER) if c.startswith(CONTACT_PREFIX)]
+        if contact in held:
             self._move(contact, x_cm, y_cm, intensity)
             return
-        if len(self._contacts) >= MAX_CONTACTS:
+        if len(held) >= MAX_CONTACTS:
             raise messages.BadMessage(
                 "refused",
                 f"{address}: {MAX_CONTACTS} contacts are down (the bridge's most); "
                 "lift one with intensity 0 first",
             )
         self._down(contact, x_cm, y_cm, intensity)
-        self._contacts.add(contact)
 
     def _play_preset(self, name: str) -> None:
         from phantomtouch.renderer import plan, preset

@@ -55,15 +55,13 @@ def _lifespan(settings: Settings, metrics: Metrics, attach: Sequence[Attachment]
             else DeviceProfile.default()
         )
         store = PatternStore.open(settings.db_path)
-        faults: list[Service] = []
         try:
-            engine = open_engine(settings, device, lambda state: faults[0].engine_fault(state))
+            engine = open_engine(settings, device)
         except BaseException:
             store.close()
             raise
         service = Service(settings, device, engine, store, metrics)
         service.loop = asyncio.get_running_loop()
-        faults.append(service)
         app.state.service = service
         logger.info("phantomtouch: %s; patterns in %s", describe_output(engine), store.path)
         metrics.watch_engine(lambda: engine.status().to_dict())

@@ -4,6 +4,8 @@
 
     CONNECTING --accept--> OPEN --client closes / limit broken--> CLOSED
          \\--token missing: accept, close 1008--> CLOSED
+         \\--a connection cap reached: accept, close 1013--> CLOSED
+           (:mod:`phantomtouch.service.connections`)
 
 In ``OPEN`` each text frame is parsed and handled at once, in arrival order: ``move``
 goes straight to the engine's contact mailbox (latest wins, nothing queues here). Each
@@ -16,13 +18,17 @@ Messages over the rate are dropped and counted; only the first of a flood is ans
 The loop yields to the event loop after every frame, so that a connection whose frames
 are already buffered cannot keep HTTP requests and other connections waiting.
 
-Every message resets the watchdog; silence longer than ``watchdog_s`` releases the
-connection's contacts (``released``). Closing, in any way, releases them all.
+The connection keeps no contact state: the engine's front holds its contacts (its owner
+table, :mod:`phantomtouch.engine.owners`) with a deadline of ``watchdog_s`` that every
+message of the connection pushes on; silence longer than that releases them, and the
+front's ``released`` events (``watchdog``, ``quota``, ``stop``, ``engine gone`` ...)
+become ``released`` messages. Closing, in any way, releases them all.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import enum
 import json
 import time
@@ -36,6 +42,7 @@ from phantomtouch.service import scheduling
 from phantomtouch.service.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
+    WS_CLOSE_TRY_AGAIN_LATER,
     WS_CLOSE_UNSUPPORTED_DATA,
     NotFoundError,
     Problem,
@@ -96,8 +103,6 @@ class Session:
         self.limiter = FloodGuard(settings.ws_messages_per_s)
         self.owner = service.new_owner()
         self.state = SessionState.CONNECTING
-        self.contacts: set[str] = set()
-        self.last_message_s = time.monotonic()
         self._send_lock = asyncio.Lock()
         self._state_task: asyncio.Task[None] | None = None
         self._notices: set[asyncio.Task[None]] = set()
@@ -111,12 +116,34 @@ class Session:
         self.state = new
 
     async def run(self) -> None:
-        """Accept, check the token, serve frames until the connection ends, release."""
+        """Accept, check the connection caps and the token, serve frames until the
+        connection ends, release."""
+        peer = self.websocket.client
+        host = None if peer is None else peer.host
+        refused = self.service.connections.enter(host)
+        if refused is not None:
+            self._expect(SessionState.CONNECTING, SessionState.CLOSED)
+            self.service.metrics.ws_refused.labels(refused[0]).inc()
+            with contextlib.suppress(*_GONE):
+                await self.websocket.accept()
+                await self.websocket.close(WS_CLOSE_TRY_AGAIN_LATER, refused[1])
+            return
+        try:
+            await self._run()
+        finally:
+            self.service.connections.leave(host)
+
+    async def _run(self) -> None:
         await self.websocket.accept()
         self._expect(SessionState.CONNECTING, SessionState.OPEN)
         self.service.metrics.ws_connections.inc()
-        self.service.holders.add(self)
-        watchdog = asyncio.create_task(self._watchdog())
+        self.service.metrics.ws_open.inc()
+        loop = asyncio.get_running_loop()
+
+        def released(owner: str, contacts: tuple[str, ...], reason: str) -> None:
+            loop.call_soon_threadsafe(self.contacts_released, contacts, reason)
+
+        unsubscribe = self.engine.subscribe_released(released, self.owner)
         code: int | None = None
         reason = ""
         try:
@@ -132,12 +159,11 @@ class Session:
             pass
         finally:
             self._expect(SessionState.OPEN, SessionState.CLOSED)
-            self.service.holders.discard(self)
-            watchdog.cancel()
+            unsubscribe()
             if self._state_task is not None:
                 self._state_task.cancel()
-            self.engine.release_owner(self.owner)
-            self.contacts.clear()
+            self.engine.release_owner(self.owner, "closed")
+            self.service.metrics.ws_open.dec()
         if code is not None:
             try:
                 await self.websocket.close(code, reason)
@@ -151,7 +177,8 @@ class Session:
             if frame["type"] == "websocket.disconnect":
                 raise WebSocketDisconnect(frame.get("code", 1000))
             received_s = time.perf_counter()
-            self.last_message_s = time.monotonic()
+            now_s = time.monotonic()
+            self.engine.renew_owner(self.owner, now_s)
             text = frame.get("text")
             if text is None:
                 raise SessionClosed(
@@ -165,10 +192,10 @@ class Session:
                     WS_CLOSE_MESSAGE_TOO_BIG,
                     f"message over the limit of {self.max_message_bytes} bytes",
                 )
-            if self.limiter.admit(self.last_message_s):
+            if self.limiter.admit(now_s):
                 await self._handle_text(text, received_s)
             else:
-                await self._refuse_rate(self.last_message_s)
+                await self._refuse_rate(now_s)
             await asyncio.sleep(0)
 
     async def _refuse_rate(self, now_s: float) -> None:
@@ -223,7 +250,6 @@ class Session:
             self.engine.contact_up(
                 self.owner, message.contact, normal_velocity_m_s=message.normal_velocity_m_s
             )
-            self.contacts.discard(message.contact)
             await self._ok(message)
         elif isinstance(message, Ping):
             await self._send(
@@ -243,19 +269,20 @@ class Session:
             await self._ok(message)
 
     def _check_down(self, contact: str, got: str) -> None:
-        if contact not in self.contacts:
+        if not self.engine.holds(self.owner, contact):
             raise ProtocolError(
                 f"contact={contact!r} is not down: expected down, got {got} "
                 "(a contact is released by up, the watchdog or stop)"
             )
 
     async def _down(self, message: Down) -> None:
-        if message.contact in self.contacts:
+        held = self.engine.contacts_of(self.owner)
+        if message.contact in held:
             raise ProtocolError(
                 f"contact={message.contact!r} is already down: expected move or up, got down"
             )
         limit = self.service.settings.max_contacts_per_connection
-        if len(self.contacts) >= limit:
+        if len(held) >= limit:
             raise QuotaError(
                 f"contact={message.contact!r}: quota max_contacts_per_connection={limit} "
                 "(contacts one connection holds down at once) is used up; send up for one first",
@@ -273,8 +300,8 @@ class Session:
             carrier=message.carrier,
             law=message.law,
             normal_velocity_m_s=message.normal_velocity_m_s,
+            deadline_s=self.watchdog_s,
         )
-        self.contacts.add(message.contact)
         await self._ok(message)
 
     async def _stop(self, message: Stop) -> None:
@@ -344,25 +371,14 @@ class Session:
             due = max(due + period_s, loop.time())
             await asyncio.sleep(due - loop.time())
 
-    async def _watchdog(self) -> None:
-        while True:
-            silent_s = time.monotonic() - self.last_message_s
-            if silent_s < self.watchdog_s:
-                await asyncio.sleep(self.watchdog_s - silent_s)
-                continue
-            if self.contacts:
-                self.engine.release_owner(self.owner)
-                self.service.metrics.ws_watchdog_releases.inc()
-                self.contacts_released("watchdog")
-            await asyncio.sleep(self.watchdog_s)
-
-    def contacts_released(self, reason: str) -> None:
-        """The engine let go of this connection's contacts: forget them, tell the client."""
-        if not self.contacts or self.state is not SessionState.OPEN:
-            self.contacts.clear()
+    def contacts_released(self, contacts: tuple[str, ...], reason: str) -> None:
+        """The engine let go of ``contacts`` of this connection: tell the client (on the
+        event loop; the front's ``released`` event is handed here)."""
+        if reason == "watchdog":
+            self.service.metrics.ws_watchdog_releases.inc()
+        if not contacts or self.state is not SessionState.OPEN:
             return
-        notice = {"type": "released", "reason": reason, "contacts": sorted(self.contacts)}
-        self.contacts.clear()
+        notice = {"type": "released", "reason": reason, "contacts": sorted(contacts)}
         task = asyncio.get_running_loop().create_task(self._send_unless_gone(notice))
         self._notices.add(task)
         task.add_done_callback(self._notices.discard)

@@ -78,6 +78,9 @@ WS_CLOSE_POLICY_VIOLATION = 1008
 HTTP status, or the message rate limit exceeded for a second on end."""
 WS_CLOSE_MESSAGE_TOO_BIG = 1009
 """A message over ``max_ws_message_bytes``."""
+WS_CLOSE_TRY_AGAIN_LATER = 1013
+"""Too many WebSocket connections are open (``max_ws_connections`` in all, or
+``max_ws_connections_per_address`` from the address); never for a loopback address."""
 
 
 class ServiceError(PhantomTouchError):

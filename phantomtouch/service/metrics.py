@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -170,6 +170,18 @@ class Metrics:
         )
         self.ws_connections = Counter(
             "phantomtouch_ws_connections", "WebSocket connections accepted.", registry=self.registry
+        )
+        self.ws_open = Gauge(
+            "phantomtouch_ws_open_connections",
+            "WebSocket connections open now.",
+            registry=self.registry,
+        )
+        self.ws_refused = Counter(
+            "phantomtouch_ws_refused_connections",
+            "WebSocket connections refused (close 1013) by a connection cap "
+            "(cap: total, per_address).",
+            ["cap"],
+            registry=self.registry,
         )
         self.refused_requests = Counter(
             "phantomtouch_refused_requests",

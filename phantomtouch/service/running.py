@@ -8,9 +8,10 @@ import threading
 from collections.abc import Callable
 from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 from phantomtouch.schema import DeviceProfile
+from phantomtouch.service.connections import ConnectionCaps
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.metrics import Metrics
 from phantomtouch.service.plans import PlanCache
@@ -26,13 +27,6 @@ if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
 
 
-class ContactHolder(Protocol):
-    """A connection that holds contacts (a WebSocket session)."""
-
-    def contacts_released(self, reason: str) -> None:
-        """The engine let go of every contact of this connection."""
-
-
 @dataclass
 class Service:
     """The running parts, built by the app's lifespan and shared by every request."""
@@ -44,14 +38,17 @@ class Service:
     metrics: Metrics
     plans: PlanCache = field(init=False)
     voices: VoiceLedger = field(init=False)
+    connections: ConnectionCaps = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
-    holders: set[ContactHolder] = field(default_factory=set, init=False)
     loop: asyncio.AbstractEventLoop | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
         self.plans = PlanCache(self.device)
+        self.connections = ConnectionCaps(
+            self.settings.max_ws_connections, self.settings.max_ws_connections_per_address
+        )
         self.voices = VoiceLedger(
             self.settings.voices_per_client, self.settings.max_voice_seconds_per_client
         )
@@ -63,20 +60,10 @@ class Service:
     def stop_everything(self) -> None:
         """Every job and every contact of every client off, at once (never queued).
 
-        Each connection is told which of its contacts were let go (``released``).
+        The engine's front tells each owner which of its contacts were let go
+        (``released``, reason ``stop``).
         """
         self.engine.stop_all()
-        for holder in list(self.holders):
-            holder.contacts_released("stop")
-
-    def engine_fault(self, state: str) -> None:
-        """The engine dropped every contact (its process died or stalled): tell each
-        connection, on the event loop (called from the engine's watchdog thread)."""
-        loop = self.loop
-        if loop is None or loop.is_closed():
-            return
-        for holder in list(self.holders):
-            loop.call_soon_threadsafe(holder.contacts_released, f"engine {state}")
 
     def render_slot(self) -> AbstractContextManager[None]:
         """Hold one of the ``max_concurrent_renders`` slots, or refuse with 429."""

@@ -143,11 +143,14 @@ async def schedule(
 ) -> JobAccepted:
     """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
 
-    ``client`` is whose quotas it counts against (:mod:`phantomtouch.service.quotas`).
+    ``client`` is whose quotas it counts against (:mod:`phantomtouch.service.quotas`) and,
+    unless ``owner`` is given, whose share of the voices it is when voices are stolen
+    (:meth:`~phantomtouch.engine.jobs.JobTable.admit`).
     Reading the store, planning and scheduling (which may build a noise loop) run in a
     worker thread: the event loop never waits for them.
     """
     engine = service.engine
+    owner = client if owner is None else owner
     stops = engine.stop_count  # a stop that comes while this one is planned voids it
 
     def plan_and_schedule() -> JobAccepted:

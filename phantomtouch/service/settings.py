@@ -86,6 +86,24 @@ class Settings(BaseSettings):
         description="Messages per second one WebSocket connection may send (1 s of burst).",
     )
     watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
+    max_ws_connections: int = Field(
+        default=64,
+        ge=1,
+        le=100_000,
+        description=(
+            "WebSocket connections open at once in all, beyond which one from an address "
+            "other than loopback is refused (close 1013); loopback ones are never refused."
+        ),
+    )
+    max_ws_connections_per_address: int = Field(
+        default=16,
+        ge=1,
+        le=100_000,
+        description=(
+            "WebSocket connections open at once from one address other than loopback "
+            "(close 1013 beyond it)."
+        ),
+    )
     max_contacts_per_connection: int = Field(
         default=10,
         ge=1,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -46,10 +47,11 @@ def test_a_silent_owner_is_released_by_the_watchdog(
     captured: tuple[RemoteContacts, CaptureSink],
 ) -> None:
     contacts, sink = captured
-    contacts.handle(_message(type="down", contact="f", x_cm=1.9, y_cm=7.2), now_s=0.0)
-    contacts.handle(_message(type="ping"), now_s=0.4)
-    assert contacts.release_silent(now_s=0.4 + WATCHDOG_S / 2) == []
-    assert contacts.release_silent(now_s=0.4 + WATCHDOG_S * 1.01) == ["gw-1"]
+    start_s = time.monotonic()  # the engine's deadlines run on this clock
+    contacts.handle(_message(type="down", contact="f", x_cm=1.9, y_cm=7.2), now_s=start_s)
+    contacts.handle(_message(type="ping"), now_s=start_s + 0.4)
+    assert contacts.release_silent(now_s=start_s + 0.4 + WATCHDOG_S / 2) == []
+    assert contacts.release_silent(now_s=start_s + 0.4 + WATCHDOG_S * 1.01) == ["gw-1"]
     sink.pull(40)  # the release ramp
     assert not np.any(sink.pull(2))
 
