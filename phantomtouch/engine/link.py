@@ -14,10 +14,10 @@ ever waits for the other:
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import os
 import pickle
 import struct
+import sys
 import threading
 from collections import deque
 from typing import Any
@@ -36,7 +36,14 @@ def encode(message: Any) -> bytes:
 
 
 def widen(fd: int) -> None:
-    """Ask for a larger pipe buffer (no-op where the system does not offer it)."""
+    """Ask for a larger pipe buffer (no-op where the system does not offer it: Windows
+    has no ``fcntl``, macOS no ``F_SETPIPE_SZ``)."""
+    if sys.platform == "win32":
+        return
+    try:
+        import fcntl
+    except ImportError:  # a POSIX system's Python built without it
+        return
     set_size = getattr(fcntl, "F_SETPIPE_SZ", None)
     if set_size is None:
         return
