@@ -225,7 +225,10 @@ def _cmd_devices(args: argparse.Namespace) -> int:
         )
     if not devices:
         print("no sound card outputs found")
-    print(f"* = at least {needed} outputs; an output is chosen by its index or a part of its name")
+    print(
+        f"* = at least {needed} outputs; --output takes an index, a part of a name, or "
+        "HOSTAPI:NAME (e.g. 'ASIO:Focusrite', 'WASAPI:Speakers', 'CoreAudio:Aggregate')"
+    )
     return 0
 
 

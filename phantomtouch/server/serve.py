@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import copy
+import signal
 import socket
-from typing import Any
+from types import FrameType
+from typing import Any, NoReturn
 
-from phantomtouch.errors import PhantomTouchError
+from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
 from phantomtouch.server.app import Attachment, create_app
 from phantomtouch.server.settings import Settings
 from phantomtouch.server.store import PatternStore
@@ -37,6 +39,67 @@ def check_library(settings: Settings) -> None:
     PatternStore.open(settings.db_path).close()
 
 
+def check_device_profile(settings: Settings) -> None:
+    """Load the device profile once, before anything starts.
+
+    Raises
+    ------
+    ParameterError
+        The file is missing or not a valid profile (bad input: ``serve`` exits 2).
+    """
+    from phantomtouch.schema import DeviceProfile
+
+    if settings.device_profile is None:
+        return
+    try:
+        DeviceProfile.load(settings.device_profile)
+    except DeviceError as exc:
+        raise ParameterError(str(exc)) from exc
+
+
+def check_output(settings: Settings) -> None:
+    """Find the sound-card output the settings name, before anything starts.
+
+    Nothing to find without ``output_device`` (the first that fits, else the null
+    output), for ``null`` and for ``capture:FILE.wav``.
+
+    Raises
+    ------
+    ParameterError
+        No output matches the name, several do, it has too few outputs, or ``--exclusive``
+        names a device that is not a WASAPI one (bad input: ``serve`` exits 2).
+    DeviceError
+        PortAudio (or ``sounddevice``) is missing or cannot list the devices (exit 1).
+    """
+    from phantomtouch.engine.soundcard import find_output_device, list_output_devices
+    from phantomtouch.server.engine_access import NULL_OUTPUT, output_of
+
+    output = output_of(settings)
+    if settings.capture_path is not None or output == NULL_OUTPUT:
+        return
+    if output is None and not settings.wasapi_exclusive:
+        return
+    list_output_devices()  # a failure to list is the machine's, not the input's
+    channels = profile_channels(settings)
+    try:
+        found = find_output_device(output, channels)
+    except DeviceError as exc:
+        raise ParameterError(str(exc)) from exc
+    if settings.wasapi_exclusive and "wasapi" not in found["hostapi"].lower():
+        raise ParameterError(
+            f"--exclusive is WASAPI's exclusive mode; output device {found['name']!r} is a "
+            f"{found['hostapi']} device (name a WASAPI one: 'WASAPI:{found['name']}')"
+        )
+
+
+def profile_channels(settings: Settings) -> int:
+    """The channels of the settings' device profile (the paper's armband: 8)."""
+    from phantomtouch.schema import DeviceProfile
+
+    path = settings.device_profile
+    return (DeviceProfile.load(path) if path is not None else DeviceProfile.default()).channels
+
+
 def check_port_free(host: str, port: int) -> None:
     """Refuse, before anything starts, a port that cannot be listened on.
 
@@ -64,6 +127,21 @@ def check_port_free(host: str, port: int) -> None:
             ) from exc
 
 
+def _exit_zero(signum: int, frame: FrameType | None) -> NoReturn:
+    raise SystemExit(0)
+
+
+def exit_zero_after_sigterm() -> None:
+    """Make SIGTERM end the process with status 0 once uvicorn has shut down.
+
+    uvicorn catches SIGTERM, shuts the application down (the engine fades out and
+    closes), restores the handler it found and raises the signal again: with this
+    handler that ends the process as a finished command, exit 0, rather than as one
+    killed by the signal. Call it before ``uvicorn.run``.
+    """
+    signal.signal(signal.SIGTERM, _exit_zero)
+
+
 def serve(settings: Settings, *, attach: Attachment | None = None) -> None:
     """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly).
 
@@ -78,6 +156,7 @@ def serve(settings: Settings, *, attach: Attachment | None = None) -> None:
 
     from phantomtouch.server.wire import FairWebSocketProtocol, JsonErrorProtocol
 
+    exit_zero_after_sigterm()
     uvicorn.run(
         create_app(settings, attach=attach),
         http=JsonErrorProtocol,
