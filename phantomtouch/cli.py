@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -246,6 +247,8 @@ def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
     if any(not 1 <= n <= top for n in args.frames):
         raise ParameterError(f"--frames {args.frames} must each be within [1, {top}]")
     settings = default_settings(args.frames)
+    if args.plot:
+        _check_plot_path(args.plot)  # before the run, not after it
     with tqdm(
         total=len(strokes) * (len(settings) + (0 if 1 in args.frames else 1)),
         desc="bench accuracy",
@@ -474,7 +477,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     try:
-        return func(args)
+        status = func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return status
+    except BrokenPipeError:  # the reader has gone (`phantomtouch presets | head -1`)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except ValidationError as exc:
         print(f"phantomtouch: invalid input: {describe_validation_error(exc)}", file=sys.stderr)
         return EXIT_USAGE

@@ -216,10 +216,10 @@ class ProcessEngine(EngineFront):
 
     def _fault(self, state: str) -> None:
         """Drop everything, tell ``on_fault``, replace the child."""
-        logger.error("the engine process is %s; restarting it", state)
         with self._lock:
-            if self._halt.is_set():
+            if self._halt.is_set():  # closing: a child that ends now is no fault
                 return
+            logger.error("the engine process is %s; restarting it", state)
             self._state = state
             self._jobs.forget_all(self.now_frames)
             self._contacts.clear()

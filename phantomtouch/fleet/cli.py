@@ -80,6 +80,7 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
     _require_nats()
     from phantomtouch.fleet.gateway import create_gateway
     from phantomtouch.fleet.gateway_settings import GatewaySettings
+    from phantomtouch.server.runner import run_app
     from phantomtouch.server.serve import check_port_free, log_config
 
     options = {"host": args.host, "port": args.port, "token": args.token}
@@ -95,9 +96,7 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
         file=sys.stdout,
         flush=True,
     )
-    import uvicorn
-
-    uvicorn.run(
+    run_app(
         create_gateway(settings, fleet),
         host=settings.host,
         port=settings.port,

@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import copy
-import signal
 import socket
-from types import FrameType
-from typing import Any, NoReturn
+from typing import Any
 
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
 from phantomtouch.server.app import Attachment, create_app
@@ -15,10 +13,13 @@ from phantomtouch.server.store import PatternStore
 
 
 def log_config() -> dict[str, Any]:
-    """uvicorn's logging, plus the ``phantomtouch`` logger (start-up lines, errors)."""
+    """uvicorn's logging, plus the ``phantomtouch`` logger (start-up lines, errors), less
+    uvicorn's "Application startup failed" lines (the command says what failed)."""
     from uvicorn.config import LOGGING_CONFIG
 
     config = copy.deepcopy(LOGGING_CONFIG)
+    config["filters"] = {"failures": {"()": "phantomtouch.server.runner.DropFailureLines"}}
+    config["handlers"]["default"]["filters"] = ["failures"]
     config["loggers"]["phantomtouch"] = {
         "handlers": ["default"],
         "level": "INFO",
@@ -127,21 +128,6 @@ def check_port_free(host: str, port: int) -> None:
             ) from exc
 
 
-def _exit_zero(signum: int, frame: FrameType | None) -> NoReturn:
-    raise SystemExit(0)
-
-
-def exit_zero_after_sigterm() -> None:
-    """Make SIGTERM end the process with status 0 once uvicorn has shut down.
-
-    uvicorn catches SIGTERM, shuts the application down (the engine fades out and
-    closes), restores the handler it found and raises the signal again: with this
-    handler that ends the process as a finished command, exit 0, rather than as one
-    killed by the signal. Call it before ``uvicorn.run``.
-    """
-    signal.signal(signal.SIGTERM, _exit_zero)
-
-
 def serve(settings: Settings, *, attach: Attachment | None = None) -> None:
     """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly).
 
@@ -151,13 +137,17 @@ def serve(settings: Settings, *, attach: Attachment | None = None) -> None:
     Requests uvicorn cannot parse are answered with the service's JSON error body, and
     WebSocket frames are parsed at the pace their session handles them
     (:mod:`phantomtouch.server.wire`).
-    """
-    import uvicorn
 
+    Raises
+    ------
+    PhantomTouchError
+        The service could not start (the engine, the fleet) or stop cleanly; see
+        :func:`~phantomtouch.server.runner.run_app`.
+    """
+    from phantomtouch.server.runner import run_app
     from phantomtouch.server.wire import FairWebSocketProtocol, JsonErrorProtocol
 
-    exit_zero_after_sigterm()
-    uvicorn.run(
+    run_app(
         create_app(settings, attach=attach),
         http=JsonErrorProtocol,
         ws=FairWebSocketProtocol,
