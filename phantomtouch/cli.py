@@ -128,12 +128,43 @@ def _projection_note(plan: Plan) -> str | None:
     )
 
 
+def _with_library_clip(pattern: TouchPattern, db: str | None) -> TouchPattern:
+    """``pattern`` with its clip carrier's clip read from the library ``db`` (the service's
+    default library without it), unless the carrier holds the clip itself."""
+    from phantomtouch.schema import ClipCarrier
+
+    carrier = pattern.carrier
+    if not isinstance(carrier, ClipCarrier) or carrier.data is not None or carrier.clip is None:
+        return pattern
+    from phantomtouch.server.settings import default_db_path
+    from phantomtouch.server.store import PatternStore
+
+    path = Path(db) if db is not None else default_db_path()
+    if not path.is_file():
+        raise ParameterError(
+            f"carrier.clip={carrier.clip!r}: no clip library at {str(path)!r}; name one with "
+            "--db FILE, or give the clip itself in carrier.data (phantomtouch import -o)"
+        )
+    store = PatternStore.open(path)
+    try:
+        clip = store.get_clip(carrier.clip)
+    finally:
+        store.close()
+    if clip is None:
+        raise ParameterError(
+            f"carrier.clip={carrier.clip!r} is not in the clip library {str(path)!r} "
+            "(phantomtouch import adds one)"
+        )
+    return pattern.model_copy(update={"carrier": carrier.model_copy(update={"data": clip})})
+
+
 def _cmd_render(args: argparse.Namespace) -> int:
     if (args.pattern is None) == (args.preset is None):
         raise ParameterError("give a PATTERN.json file or --preset NAME (one of them)")
     if args.plot is not None:
         _check_plot_path(args.plot)
     pattern = preset(args.preset) if args.preset else _load_pattern(args.pattern)
+    pattern = _with_library_clip(pattern, args.db)
     plan = plan_at(pattern, _load_device(args.device), sample_rate_hz=args.sample_rate)
     clipped_fraction = write_wav(plan, args.output, plot_path=args.plot)
     if args.json:
@@ -390,6 +421,9 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--json", action="store_true", help="print the plan as JSON")
     render.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
     render.add_argument("--sample-rate", type=int, help="sample rate in Hz (default: device's)")
+    render.add_argument(
+        "--db", help="clip library (SQLite) for a clip carrier named by clip (default: serve's)"
+    )
     render.set_defaults(func=_cmd_render)
 
     presets = sub.add_parser("presets", help="list the preset patterns")

@@ -69,7 +69,7 @@ def with_clip(pattern: TouchPattern, store: PatternStore) -> TouchPattern:
     that is not in the library is a :class:`NotFoundError` naming ``carrier.clip``.
     """
     carrier = pattern.carrier
-    if not isinstance(carrier, ClipCarrier) or carrier.data is not None:
+    if not isinstance(carrier, ClipCarrier) or carrier.data is not None or carrier.clip is None:
         return pattern
     clip = store.get_clip(carrier.clip)
     if clip is None:
