@@ -406,7 +406,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="phantomtouch", description=__doc__.splitlines()[0].replace("``", "")
+    )
     parser.add_argument("--version", action="version", version=f"phantomtouch {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -415,7 +417,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")
-    render.add_argument("--preset", help="a preset name (see `phantomtouch presets`)")
+    render.add_argument("--preset", help="a preset name (phantomtouch presets lists them)")
     render.add_argument("-o", "--output", required=True, help="output WAV file (float32)")
     render.add_argument("--plot", help="also write the Fig. 3 view to this PNG")
     render.add_argument("--json", action="store_true", help="print the plan as JSON")

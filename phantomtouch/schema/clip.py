@@ -96,7 +96,10 @@ def _clip_carrier_schema(schema: dict[str, Any]) -> None:
     """``kind`` is required on the wire, as for the other carriers, its default aside;
     and ``clip``, ``data`` or both."""
     schema["required"] = ["kind", *schema.get("required", [])]
-    schema["anyOf"] = [{"required": ["clip"]}, {"required": ["data"]}]
+    given = {"not": {"type": "null"}}
+    schema["anyOf"] = [
+        {"required": [name], "properties": {name: given}} for name in ("clip", "data")
+    ]
 
 
 class ClipCarrier(_Model):
