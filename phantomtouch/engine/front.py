@@ -314,6 +314,7 @@ class EngineFront:
                 self._admission.charge_churn(now_frames)
                 first, frame = self._admission.place_start(first, frame, now_frames)
                 record.requested_start_frame = first
+            record.requested_start_at_s = self.time_at(first)  # one value for every answer
             self._send_start(job_id, resolved, owner, frame, prerendered)
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
@@ -330,6 +331,7 @@ class EngineFront:
             frames=resolved.frames,
             duration_s=resolved.duration_s,
             summary=resolved.summary(),
+            start_at_s=record.requested_start_at_s,
         )
 
     @property

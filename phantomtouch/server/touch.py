@@ -117,7 +117,7 @@ def accepted(engine: EngineFront, job: Job, plan: Plan) -> JobAccepted:
     summary = job.summary
     return JobAccepted(
         job_id=str(job.job_id),
-        start_at_s=engine.time_at(job.start_frame),
+        start_at_s=engine.time_at(job.start_frame) if job.start_at_s is None else job.start_at_s,
         start_frame=job.start_frame,
         duration_s=job.duration_s,
         path_length_cm=summary["path_length_cm"],
