@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -127,12 +128,43 @@ def _projection_note(plan: Plan) -> str | None:
     )
 
 
+def _with_library_clip(pattern: TouchPattern, db: str | None) -> TouchPattern:
+    """``pattern`` with its clip carrier's clip read from the library ``db`` (the service's
+    default library without it), unless the carrier holds the clip itself."""
+    from phantomtouch.schema import ClipCarrier
+
+    carrier = pattern.carrier
+    if not isinstance(carrier, ClipCarrier) or carrier.data is not None or carrier.clip is None:
+        return pattern
+    from phantomtouch.service.settings import default_db_path
+    from phantomtouch.service.store import PatternStore
+
+    path = Path(db) if db is not None else default_db_path()
+    if not path.is_file():
+        raise ParameterError(
+            f"carrier.clip={carrier.clip!r}: no clip library at {str(path)!r}; name one with "
+            "--db FILE, or give the clip itself in carrier.data (phantomtouch import -o)"
+        )
+    store = PatternStore.open(path)
+    try:
+        clip = store.get_clip(carrier.clip)
+    finally:
+        store.close()
+    if clip is None:
+        raise ParameterError(
+            f"carrier.clip={carrier.clip!r} is not in the clip library {str(path)!r} "
+            "(phantomtouch import adds one)"
+        )
+    return pattern.model_copy(update={"carrier": carrier.model_copy(update={"data": clip})})
+
+
 def _cmd_render(args: argparse.Namespace) -> int:
     if (args.pattern is None) == (args.preset is None):
         raise ParameterError("give a PATTERN.json file or --preset NAME (one of them)")
     if args.plot is not None:
         _check_plot_path(args.plot)
     pattern = preset(args.preset) if args.preset else _load_pattern(args.pattern)
+    pattern = _with_library_clip(pattern, args.db)
     plan = plan_at(pattern, _load_device(args.device), sample_rate_hz=args.sample_rate)
     clipped_fraction = write_wav(plan, args.output, plot_path=args.plot)
     if args.json:
@@ -225,7 +257,10 @@ def _cmd_devices(args: argparse.Namespace) -> int:
         )
     if not devices:
         print("no sound card outputs found")
-    print(f"* = at least {needed} outputs; an output is chosen by its index or a part of its name")
+    print(
+        f"* = at least {needed} outputs; --output takes an index, a part of a name, or "
+        "HOSTAPI:NAME (e.g. 'ASIO:Focusrite', 'WASAPI:Speakers', 'CoreAudio:Aggregate')"
+    )
     return 0
 
 
@@ -243,6 +278,8 @@ def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
     if any(not 1 <= n <= top for n in args.frames):
         raise ParameterError(f"--frames {args.frames} must each be within [1, {top}]")
     settings = default_settings(args.frames)
+    if args.plot:
+        _check_plot_path(args.plot)  # before the run, not after it
     with tqdm(
         total=len(strokes) * (len(settings) + (0 if 1 in args.frames else 1)),
         desc="bench accuracy",
@@ -369,7 +406,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="phantomtouch", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="phantomtouch", description=__doc__.splitlines()[0].replace("``", "")
+    )
     parser.add_argument("--version", action="version", version=f"phantomtouch {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -378,12 +417,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")
-    render.add_argument("--preset", help="a preset name (see `phantomtouch presets`)")
+    render.add_argument("--preset", help="a preset name (phantomtouch presets lists them)")
     render.add_argument("-o", "--output", required=True, help="output WAV file (float32)")
     render.add_argument("--plot", help="also write the Fig. 3 view to this PNG")
     render.add_argument("--json", action="store_true", help="print the plan as JSON")
     render.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
     render.add_argument("--sample-rate", type=int, help="sample rate in Hz (default: device's)")
+    render.add_argument(
+        "--db", help="clip library (SQLite) for a clip carrier named by clip (default: serve's)"
+    )
     render.set_defaults(func=_cmd_render)
 
     presets = sub.add_parser("presets", help="list the preset patterns")
@@ -471,7 +513,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     try:
-        return func(args)
+        status = func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return status
+    except BrokenPipeError:  # the reader has gone (`phantomtouch presets | head -1`)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except ValidationError as exc:
         print(f"phantomtouch: invalid input: {describe_validation_error(exc)}", file=sys.stderr)
         return EXIT_USAGE

@@ -42,7 +42,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from pydantic import ValidationError
 
     _require("server", "fastapi", "uvicorn", "pydantic_settings")
-    from phantomtouch.server.serve import check_library, serve
+    from phantomtouch.server.serve import check_device_profile, check_library, check_output, serve
     from phantomtouch.service.listen import check_port_free
     from phantomtouch.service.settings import Settings
 
@@ -62,6 +62,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         "token": args.token,
         "osc_listen": args.osc,
         "osc_map": args.osc_map,
+        "wasapi_exclusive": args.exclusive or None,
     }
     if args.osc is not None:
         _require("osc", "pythonosc")
@@ -69,6 +70,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         settings = Settings(**{k: v for k, v in options.items() if v is not None})
     except ValidationError as exc:
         raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
+    check_device_profile(settings)
+    check_output(settings)
     fleet = fleet_cli.attachment(args)
     try:
         check_library(settings)
@@ -107,8 +110,14 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", help="device profile (TOML or JSON); default: the paper's")
     parser.add_argument(
         "--output",
-        help="sound-card output name or index, 'null', or 'capture:FILE.wav' (records what plays; "
-        "written at exit) (default: first that fits)",
+        help="sound-card output: a part of its name, its index or HOSTAPI:NAME (e.g. "
+        "'ASIO:Focusrite', 'WASAPI:Speakers'; see 'phantomtouch devices'), 'null', or "
+        "'capture:FILE.wav' (records what plays; written at exit) (default: first that fits)",
+    )
+    parser.add_argument(
+        "--exclusive",
+        action="store_true",
+        help="open a WASAPI output in exclusive mode (Windows)",
     )
     parser.add_argument("--db", help="pattern library, SQLite file")
     parser.add_argument("--token", help="bearer token every request must carry")

@@ -131,7 +131,7 @@ def test_intensity_and_level_db_together_are_refused():
 def test_too_many_path_points_are_refused(kind):
     points = [[1.0, 1.0 + i * 1e-4] for i in range(limits.MAX_PATH_POINTS + 1)]
     message = refusal({**base(), "path": {"kind": kind, "points_cm": points}})
-    assert f"path.{kind}.points_cm=" in message
+    assert "path.points_cm=" in message  # the field; the union's branch name is no field
     assert "at most 100000 items" in message and "not 100001" in message
 
 
@@ -140,7 +140,7 @@ def test_too_many_keyframes_are_refused():
     data = {**base(), "path": {"kind": "keyframes", "keyframes": frames}}
     data.pop("speed_cm_s")
     message = refusal(data)
-    assert "path.keyframes.keyframes=" in message
+    assert "path.keyframes=" in message and "keyframes.keyframes" not in message
     assert "at most 100000 items" in message
 
 

@@ -11,13 +11,16 @@ The file is JSON::
          "frequency": [{"time": 0.0, "frequency": 0.5}]}}}}
 
 Times in seconds; amplitude and frequency 0-1, joined by straight lines. An ``emphasis``
-on an amplitude breakpoint is a transient at that breakpoint's time. Keys this does not
-use (``metadata``, and whatever later versions add) are ignored.
+on an amplitude breakpoint is a transient at that breakpoint's time. Checked against the
+format: ``version`` with ``major`` 1 (``minor`` and ``patch`` any), both envelopes, each
+with at least one breakpoint, times strictly increasing within an envelope. Keys this does
+not use (``metadata``, and whatever later minor versions add) are ignored. docs/clips.md
+shows a whole file.
 """
 
 from __future__ import annotations
 
-from typing import Any, Self
+from typing import Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -53,16 +56,22 @@ class FrequencyPoint(_Lenient):
 
 def _increasing(points: list[Any], field: str) -> None:
     for i in range(1, len(points)):
-        if points[i].time < points[i - 1].time:
+        if points[i].time <= points[i - 1].time:
             raise ValueError(
-                f"{field}[{i}].time={points[i].time!r} is before {field}[{i - 1}].time="
-                f"{points[i - 1].time!r}; times never decrease"
+                f"{field}[{i}].time={points[i].time!r} must be after {field}[{i - 1}].time="
+                f"{points[i - 1].time!r} (times strictly increase)"
             )
+
+
+class Version(_Lenient):
+    major: Literal[1] = Field(description="The format's major version: 1.")
+    minor: int = Field(ge=0)
+    patch: int = Field(ge=0)
 
 
 class Envelopes(_Lenient):
     amplitude: list[AmplitudePoint] = Field(min_length=1, max_length=MAX_CLIP_POINTS)
-    frequency: list[FrequencyPoint] = Field(default_factory=list, max_length=MAX_CLIP_POINTS)
+    frequency: list[FrequencyPoint] = Field(min_length=1, max_length=MAX_CLIP_POINTS)
 
     @model_validator(mode="after")
     def _times(self) -> Self:
@@ -82,7 +91,7 @@ class Signals(_Lenient):
 class HapticFile(_Lenient):
     """The parts of a ``.haptic`` document a clip is made of."""
 
-    version: dict[str, Any] | None = None
+    version: Version
     signals: Signals
 
 
@@ -100,7 +109,7 @@ def clip_of_haptic(document: HapticFile) -> HapticClip:
     return HapticClip(
         duration_s=end_s if end_s > 0.0 else _TRANSIENT_ONLY_S,
         amplitude=amplitude,
-        frequency=frequency or [Breakpoint(t_s=0.0, value=0.5)],
+        frequency=frequency,
         transients=transients,
     )
 

@@ -165,8 +165,12 @@ class Intake:
 
 
 def raise_priority(priority: int | None) -> None:
-    """Run this thread, and the threads it starts, with SCHED_FIFO ``priority``."""
-    if priority is None or not hasattr(os, "sched_setscheduler"):
+    """Run this thread, and the threads it starts, with SCHED_FIFO ``priority``.
+
+    Linux only: elsewhere the sound card's callback thread already runs at real-time
+    priority (PortAudio's WASAPI, ASIO and CoreAudio host APIs), and this does nothing.
+    """
+    if priority is None or sys.platform != "linux" or not hasattr(os, "sched_setscheduler"):
         return
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
@@ -230,8 +234,11 @@ def serve(
         The shared memory: ``clock``, ``slots`` and ``slot_count``, ``status``, ``loads``
         (the scheduler's render loads).
     """
-    # Ctrl+C reaches the whole process group: the host closes the engine (with its fade-out)
+    # Ctrl+C and a SIGTERM to the group (`timeout`, a service manager) reach this process
+    # too: the host closes the engine (with its fade-out); without a host, the closed pipe
+    # ends this process
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise_priority(priority)
     report_fd = reports.fileno()
     try:

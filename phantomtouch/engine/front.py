@@ -367,6 +367,7 @@ class EngineFront:
                 self._admission.charge_churn(now_frames)
                 first, frame = self._admission.place_start(first, frame, now_frames)
                 record.requested_start_frame = first
+            record.requested_start_at_s = self.time_at(first)  # one value for every answer
             self._audio.provide(carrier)
             self._audio.post(StartJob(job_id, 0, resolved, prerendered, owner, frame))
             for victim in victims:
@@ -384,6 +385,7 @@ class EngineFront:
             frames=resolved.frames,
             duration_s=resolved.duration_s,
             summary=resolved.summary(),
+            start_at_s=record.requested_start_at_s,
         )
 
     def _post_release(self, message: Command) -> None:

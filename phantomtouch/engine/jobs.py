@@ -43,6 +43,9 @@ class Job:
     duration_s : float
     summary : dict
         The plan's summary (``Plan.summary()``).
+    start_at_s : float or None
+        Server time, s, at which ``start_frame`` leaves the sound card, fixed when the job
+        was scheduled (:attr:`JobState.requested_start_at_s` answers the same value).
     """
 
     job_id: str
@@ -50,6 +53,7 @@ class Job:
     frames: int
     duration_s: float
     summary: dict[str, Any] = field(hash=False)
+    start_at_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,9 @@ class JobState:
     requested_start_frame : int
     late : bool
         It started after its requested frame (its command arrived too late).
+    requested_start_at_s : float or None
+        Server time, s, of ``requested_start_frame`` as :attr:`Job.start_at_s` gave it
+        (the clock's mapping of frames to time moves a little as it tracks the card).
     """
 
     job_id: str
@@ -82,6 +89,7 @@ class JobState:
     duration_s: float
     requested_start_frame: int
     late: bool
+    requested_start_at_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -109,6 +117,7 @@ class JobRecord:
     end_frame: int | None = None
     late: bool = False
     stolen: bool = False
+    requested_start_at_s: float | None = None
 
     @property
     def first_frame(self) -> int:
@@ -127,6 +136,7 @@ class JobRecord:
             duration_s=self.duration_s,
             requested_start_frame=self.requested_start_frame,
             late=self.late,
+            requested_start_at_s=self.requested_start_at_s,
         )
 
 

@@ -35,11 +35,14 @@ def encode(message: Any) -> bytes:
 
 
 def widen(fd: int) -> None:
-    """Ask for a larger pipe buffer (no-op where the system does not offer it)."""
+    """Ask for a larger pipe buffer (no-op where the system does not offer it: Windows
+    has no ``fcntl``, macOS no ``F_SETPIPE_SZ``)."""
     if sys.platform == "win32":
         return
-    import fcntl
-
+    try:
+        import fcntl
+    except ImportError:  # a POSIX system's Python built without it
+        return
     set_size = getattr(fcntl, "F_SETPIPE_SZ", None)
     if set_size is None:
         return

@@ -271,10 +271,11 @@ class ChildAudio:
                 self._fault("stalled")
 
     def _fault(self, state: str) -> None:
-        """Drop everything, tell the front and ``on_fault``, replace the engine process."""
-        logger.error("the engine process is %s; restarting it", state)
+        """Drop everything, tell the front and ``on_fault``, replace the engine process
+        (a process that ends while the engine closes is no fault)."""
         if not self._set_state(state):
             return
+        logger.error("the engine process is %s; restarting it", state)
         self._links.lost(state)
         if self.on_fault is not None:
             try:

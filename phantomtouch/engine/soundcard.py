@@ -1,7 +1,13 @@
 """The sound card sink (PortAudio through ``sounddevice``) and output device lookup.
 
 ``sounddevice`` is imported only when a sound card is asked for: the engine runs without
-it (``phantomtouch[audio]`` installs it), falling back to the null sink.
+it (``phantomtouch[audio]`` installs it), falling back to the null sink. On Windows its
+bundled PortAudio is asked for ASIO (``SD_ENABLE_ASIO``, set before the import), so ASIO
+drivers are listed beside MME, DirectSound, WASAPI and WDM-KS.
+
+An output is named by its index, a part of its name, or ``HOSTAPI:NAME``: a host API
+(a case-insensitive part of its name, spaces ignored: ``ASIO``, ``WASAPI``, ``CoreAudio``,
+``ALSA``, ``JACK``) and a part of the device's name, e.g. ``ASIO:Focusrite``.
 
 PortAudio callback contract (:meth:`SoundDeviceSink._callback`): ``outdata`` is float32,
 shape (frames, stream channels), frames = ``block_frames``; it is filled entirely; the
@@ -13,6 +19,8 @@ counted; both are read outside the callback.
 from __future__ import annotations
 
 import logging
+import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import ModuleType
@@ -36,6 +44,8 @@ def device_error(exc: BaseException, action: str) -> DeviceError:
 
 
 def _sounddevice() -> ModuleType:
+    if sys.platform == "win32":  # read once, at the import: sounddevice's bundled ASIO
+        os.environ.setdefault("SD_ENABLE_ASIO", "1")
     try:
         import sounddevice
     except ImportError as exc:
@@ -83,14 +93,39 @@ def list_output_devices() -> list[dict[str, Any]]:
     ]
 
 
+def _squeezed(name: str) -> str:
+    return "".join(name.lower().split()).replace("-", "")
+
+
+def split_host_api(output: str, host_apis: Sequence[str]) -> tuple[str | None, str]:
+    """``HOSTAPI:NAME`` as (host API, name); (None, output) when the part before the first
+    colon names none of ``host_apis`` (device names have colons too: ``hw:0,0``).
+
+    A host API is named by a case-insensitive part of its name, spaces and hyphens
+    ignored: ``WASAPI`` is ``Windows WASAPI``, ``CoreAudio`` is ``Core Audio``.
+    """
+    prefix, colon, name = output.partition(":")
+    if not colon or not prefix.strip():
+        return None, output
+    wanted = _squeezed(prefix)
+    matches = [api for api in host_apis if wanted in _squeezed(api)]
+    exact = [api for api in matches if _squeezed(api) == wanted]
+    chosen = exact or matches
+    if len(chosen) != 1:
+        return None, output
+    return chosen[0], name.strip()
+
+
 def find_output_device(output: int | str | None, channels: int) -> dict[str, Any]:
     """The output device to open, as listed by :func:`list_output_devices`.
 
     Parameters
     ----------
     output : int, str or None
-        A device index, a (case-insensitive) part of its name, or None: the default
-        output if it has enough outputs, else the first device that has.
+        A device index, a (case-insensitive) part of its name, ``HOSTAPI:NAME`` (that
+        part of a name among the devices of that host API; ``HOSTAPI:`` alone: its
+        first device with enough outputs), or None: the default output if it has
+        enough outputs, else the first device that has.
     channels : int
         Outputs needed.
 
@@ -100,6 +135,19 @@ def find_output_device(output: int | str | None, channels: int) -> dict[str, Any
         No such device, several match the name, or it has fewer than ``channels`` outputs.
     """
     devices = list_output_devices()
+    asked = output
+    if isinstance(output, str):
+        host_api, name = split_host_api(output, sorted({d["hostapi"] for d in devices}))
+        if host_api is not None:
+            devices = [d for d in devices if d["hostapi"] == host_api]
+            if not name:
+                suitable = [d for d in devices if d["max_output_channels"] >= channels]
+                if not suitable:
+                    raise DeviceError(
+                        f"output={output!r}: no {host_api} device has {channels} or more outputs"
+                    )
+                return suitable[0]
+            output = name
     if output is None:
         suitable = [d for d in devices if d["max_output_channels"] >= channels]
         if not suitable:
@@ -114,10 +162,12 @@ def find_output_device(output: int | str | None, channels: int) -> dict[str, Any
         matches = exact or [d for d in devices if output.lower() in d["name"].lower()]
     if not matches:
         names = ", ".join(f"{d['index']}: {d['name']}" for d in devices) or "none"
-        raise DeviceError(f"output={output!r} matches no output device (outputs: {names})")
+        raise DeviceError(f"output={asked!r} matches no output device (outputs: {names})")
     if len(matches) > 1:
-        names = ", ".join(f"{d['index']}: {d['name']}" for d in matches)
-        raise DeviceError(f"output={output!r} matches several devices ({names}); give an index")
+        names = ", ".join(f"{d['index']}: {d['name']} ({d['hostapi']})" for d in matches)
+        raise DeviceError(
+            f"output={asked!r} matches several devices ({names}); give an index or HOSTAPI:NAME"
+        )
     found = matches[0]
     if found["max_output_channels"] < channels:
         raise DeviceError(
@@ -145,11 +195,15 @@ class SoundDeviceSink:
         on output k.
     latency : {"low", "high"} or float
         PortAudio's suggested output latency; a float is seconds, 0 < latency <= 1.
+    exclusive : bool
+        WASAPI exclusive mode (``sounddevice.WasapiSettings(exclusive=True)``): the
+        stream alone on the device, at its own block size, bypassing Windows' mixer.
 
     Raises
     ------
     DeviceError
-        The device is missing, has too few outputs, or PortAudio cannot open it.
+        The device is missing, has too few outputs, PortAudio cannot open it, or
+        ``exclusive`` is asked of a device that is not a WASAPI one.
     """
 
     backend = "sounddevice"
@@ -162,6 +216,7 @@ class SoundDeviceSink:
         *,
         channel_map: Sequence[int] | None = None,
         latency: float | str = "low",
+        exclusive: bool = False,
     ) -> None:
         self.sample_rate_hz = device.sample_rate_hz
         self.block_frames = device.block_frames
@@ -178,6 +233,14 @@ class SoundDeviceSink:
         self.flags = sd.CallbackFlags()
         self._underruns = 0
         self._dac_delay_s: float | None = None
+        extra_settings = None
+        if exclusive:
+            if "wasapi" not in found["hostapi"].lower():
+                raise DeviceError(
+                    f"exclusive mode is WASAPI's; output device {self._name!r} is a "
+                    f"{found['hostapi']} device (name a WASAPI one: 'WASAPI:{self._name}')"
+                )
+            extra_settings = sd.WasapiSettings(exclusive=True)
         try:
             self._stream = sd.OutputStream(
                 samplerate=self.sample_rate_hz,
@@ -187,6 +250,7 @@ class SoundDeviceSink:
                 dtype="float32",
                 latency=latency,
                 callback=self._callback,
+                extra_settings=extra_settings,
             )
         except (sd.PortAudioError, ValueError) as exc:
             raise device_error(exc, f"cannot open output device {self._name!r}") from exc
@@ -274,22 +338,27 @@ class SoundDeviceSink:
             raise device_error(exc, f"cannot close output device {self._name!r}") from exc
 
 
-def open_default_sink(device: DeviceProfile, output: int | str | None = None) -> Sink:
+def open_default_sink(
+    device: DeviceProfile, output: int | str | None = None, *, exclusive: bool = False
+) -> Sink:
     """The sound card with enough outputs if there is one, else the null sink.
 
     Parameters
     ----------
     device : DeviceProfile
     output : int, str or None
-        A device index or part of its name; then that device or :class:`DeviceError`.
-        None: the default output if it has ``device.channels`` outputs, else the first
-        device that has; without one (or without PortAudio), a :class:`NullSink`.
+        A device index, part of its name or ``HOSTAPI:NAME``; then that device or
+        :class:`DeviceError`. None: the default output if it has ``device.channels``
+        outputs, else the first device that has; without one (or without PortAudio), a
+        :class:`NullSink`.
+    exclusive : bool
+        WASAPI exclusive mode (see :class:`SoundDeviceSink`).
     """
     if output is not None:
-        return SoundDeviceSink(device, output)
+        return SoundDeviceSink(device, output, exclusive=exclusive)
     try:
         found = find_output_device(None, device.channels)
-        return SoundDeviceSink(device, found["index"])
+        return SoundDeviceSink(device, found["index"], exclusive=exclusive)
     except DeviceError as exc:
         logger.info("no usable sound card (%s); using the null sink", exc)
         return NullSink(device)
@@ -313,6 +382,8 @@ class SinkSpec:
     wav_path : str or None
         For "capture": a real-time capture sink whose recording is written to this
         float32 WAV when the engine closes.
+    exclusive : bool
+        For "default" and "sounddevice": WASAPI exclusive mode.
     """
 
     backend: str = "default"
@@ -320,6 +391,7 @@ class SinkSpec:
     channel_map: tuple[int, ...] | None = None
     latency: float | str = "low"
     wav_path: str | None = None
+    exclusive: bool = False
 
     def __post_init__(self) -> None:
         if self.backend not in ("default", "sounddevice", "null", "capture"):
@@ -335,6 +407,10 @@ class SinkSpec:
             return CaptureSink(device, realtime=True, wav_path=self.wav_path)
         if self.backend == "sounddevice":
             return SoundDeviceSink(
-                device, self.output, channel_map=self.channel_map, latency=self.latency
+                device,
+                self.output,
+                channel_map=self.channel_map,
+                latency=self.latency,
+                exclusive=self.exclusive,
             )
-        return open_default_sink(device, self.output)
+        return open_default_sink(device, self.output, exclusive=self.exclusive)

@@ -81,6 +81,7 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
     from phantomtouch.fleet.gateway import create_gateway
     from phantomtouch.fleet.gateway_settings import GatewaySettings
     from phantomtouch.service.listen import check_port_free, log_config
+    from phantomtouch.service.runner import run_app
 
     options = {"host": args.host, "port": args.port, "token": args.token}
     try:
@@ -95,9 +96,7 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
         file=sys.stdout,
         flush=True,
     )
-    import uvicorn
-
-    uvicorn.run(
+    run_app(
         create_gateway(settings, fleet),
         host=settings.host,
         port=settings.port,

@@ -92,22 +92,30 @@ class HapticClip(_Model):
         return self
 
 
-def _kind_required(schema: dict[str, Any]) -> None:
-    """``kind`` is required on the wire, as for the other carriers, its default aside."""
+def _clip_carrier_schema(schema: dict[str, Any]) -> None:
+    """``kind`` is required on the wire, as for the other carriers, its default aside;
+    and ``clip``, ``data`` or both."""
     schema["required"] = ["kind", *schema.get("required", [])]
+    given = {"not": {"type": "null"}}
+    schema["anyOf"] = [
+        {"required": [name], "properties": {name: given}} for name in ("clip", "data")
+    ]
 
 
 class ClipCarrier(_Model):
-    """A haptic clip from the library as the carrier (it brings its own envelope).
+    """A haptic clip as the carrier (it brings its own envelope): the library's clip
+    named ``clip``, or the clip itself in ``data`` (with or without a name).
 
     The service fills in ``data`` from the library when the pattern is played or
-    rendered; a pattern may also carry the clip itself in ``data``.
+    rendered; ``phantomtouch render`` does so from ``--db``, or plays ``data`` alone.
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid", json_schema_extra=_kind_required)
+    model_config = ConfigDict(frozen=True, extra="forbid", json_schema_extra=_clip_carrier_schema)
 
     kind: Literal["clip"] = "clip"
-    clip: ClipName
+    clip: ClipName | None = Field(
+        default=None, description="A clip of the library; optional when data is given."
+    )
     loop: bool = Field(
         default=False,
         description="Repeat the clip while the pattern lasts (else once, then silence).",
@@ -115,3 +123,12 @@ class ClipCarrier(_Model):
     data: HapticClip | None = Field(
         default=None, description="The clip itself; omitted, the library's clip of that name."
     )
+
+    @model_validator(mode="after")
+    def _named_or_given(self) -> Self:
+        if self.clip is None and self.data is None:
+            raise ValueError(
+                "a clip carrier needs clip (the name of a clip in the library) or data "
+                "(the clip itself, as phantomtouch import -o writes it)"
+            )
+        return self

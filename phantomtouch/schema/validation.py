@@ -1,20 +1,160 @@
-"""Turn pydantic validation errors into messages that name field, value and range."""
+"""Turn pydantic validation errors into messages that name field, value and range.
+
+pydantic's locations carry the names of union branches (``constrained-float``,
+``literal['low','high']``, ``function-after[...]``, a model's class name, a discriminated
+union's tag such as ``sine``); they are no field a user wrote and are left out. An unknown
+field is answered with the closest field names (did you mean ...?). An error of a whole
+model whose message starts with ``name=value`` (the project's own checks) names that
+field rather than the model.
+"""
 
 from __future__ import annotations
 
+import difflib
+import re
+from collections.abc import Iterable, Sequence
 from typing import Any
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
+
+SCHEMA_TAGS = frozenset(
+    {"polyline", "arc", "spline", "keyframes", "sine", "noise", "combined", "clip"}
+)
+"""The tags of the schema's discriminated unions (``path.kind``, ``carrier.kind``)."""
+_TYPE_NAMES = frozenset({"str", "int", "float", "bool", "none", "bytes", "list", "dict"})
+_BRANCH_CHARACTERS = re.compile(r"[-\[\]'(),=\s]")
+_MESSAGE_FIELD = re.compile(r"([a-z_][a-z0-9_]*(?:\[\d+\])*(?:\.[a-z_][a-z0-9_]*(?:\[\d+\])*)*)=")
+_STEP = re.compile(r"\.?([a-z_][a-z0-9_]*)|\[(\d+)\]")
 
 
-def _location(loc: tuple[int | str, ...]) -> str:
+def field_location(loc: Sequence[int | str], *, tags: Iterable[str] = ()) -> list[int | str]:
+    """``loc`` without union branch names; ``tags`` are more union tags to leave out.
+
+    A union's tag is left out where it follows the union's field and something follows
+    it (``path.keyframes.keyframes[0]`` is the field ``path.keyframes[0]``); a model's
+    class name where it is one of the package's models.
+    """
+    tag_names = SCHEMA_TAGS | frozenset(tags)
+    models = _model_names()
+    kept: list[int | str] = []
+    for index, item in enumerate(loc):
+        if isinstance(item, int):
+            kept.append(item)
+            continue
+        last = index == len(loc) - 1
+        if _BRANCH_CHARACTERS.search(item) or item in _TYPE_NAMES or item in models:
+            continue
+        follows_field = index > 0 and isinstance(loc[index - 1], str)
+        if item in tag_names and follows_field and not last and loc[index - 1] not in tag_names:
+            continue
+        kept.append(item)
+    return kept
+
+
+def dotted(loc: Sequence[int | str]) -> str:
+    """``["overrides", "points_cm", 2]`` as ``overrides.points_cm[2]``."""
     parts: list[str] = []
     for item in loc:
-        if isinstance(item, int):
-            parts.append(f"[{item}]")
+        parts.append(f"[{item}]" if isinstance(item, int) else ("." if parts else "") + item)
+    return "".join(parts)
+
+
+def _models() -> list[type[BaseModel]]:
+    found = []
+    pending = list(BaseModel.__subclasses__())
+    while pending:
+        model = pending.pop()
+        pending.extend(model.__subclasses__())
+        if model.__module__.startswith("phantomtouch"):
+            found.append(model)
+    return found
+
+
+def _model_names() -> frozenset[str]:
+    return frozenset(model.__name__ for model in _models())
+
+
+def _field_names() -> list[str]:
+    return sorted({name for model in _models() for name in model.model_fields})
+
+
+def did_you_mean(name: str) -> str:
+    """pydantic's message for an unknown field ``name``, with the closest field names."""
+    names = _field_names()
+    longer = [n for n in names if n.startswith(name) and n != name]  # a unit left out
+    close = (longer + difflib.get_close_matches(name, names, n=3, cutoff=0.6))[:3]
+    close = list(dict.fromkeys(close))
+    hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+    return f"Extra inputs are not permitted{hint}"
+
+
+def _walk(value: Any, path: str) -> Any:
+    for name, index in _STEP.findall(path):
+        if name and isinstance(value, dict) and name in value:
+            value = value[name]
+        elif index and isinstance(value, list) and int(index) < len(value):
+            value = value[int(index)]
         else:
-            parts.append(("." if parts else "") + item)
-    return "".join(parts) or "body"
+            return value
+    return value
+
+
+def error_item(
+    err: Any, *, prefixes: Iterable[str] = (), tags: Iterable[str] = ()
+) -> dict[str, Any]:
+    """One pydantic error dict as ``{"field", "value", "message"}``.
+
+    ``prefixes``: first location items that are no field (FastAPI's ``body``, ``query``);
+    ``tags``: the tags of a union the whole body is (its first item after the prefix);
+    ``field`` is ``""`` when the error belongs to no field at all.
+    """
+    loc = list(err.get("loc", ()))
+    if loc and loc[0] in set(prefixes):
+        loc = loc[1:]
+    if len(loc) > 1 and loc[0] in set(tags):  # the branch of a body that is a union
+        loc = loc[1:]
+    kept = field_location(loc, tags=tags)
+    message = str(err.get("msg", "invalid")).removeprefix("Value error, ")
+    missing = err.get("type") == "missing"
+    value = None if missing else err.get("input")  # a missing field's input is its parent
+    if err.get("type") == "extra_forbidden" and kept and isinstance(kept[-1], str):
+        message = did_you_mean(kept[-1])
+    field = dotted(kept)
+    named = _MESSAGE_FIELD.match(message)
+    if named is not None and not field.endswith(named.group(1)):
+        value = _walk(value, named.group(1))
+        field = f"{field}.{named.group(1)}" if field else named.group(1)
+    return {"field": field, "value": value, "message": message}
+
+
+def error_items(exc: ValidationError) -> list[dict[str, Any]]:
+    """One dict per problem: ``field`` (dotted path), ``value`` and ``message``; the
+    branches of a union refused for the same field and value are one problem."""
+    return merge_branches([error_item(err) for err in exc.errors(include_url=False)])
+
+
+def merge_branches(items: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Problems of one field and value (a union's branches) as one, messages joined."""
+    merged: list[dict[str, Any]] = []
+    for item in items:
+        if merged and merged[-1]["field"] == item["field"] and merged[-1]["value"] == item["value"]:
+            message = item["message"]
+            joined = f"{merged[-1]['message']}, or {message[:1].lower()}{message[1:]}"
+            merged[-1] = {**merged[-1], "message": joined}
+        else:
+            merged.append(item)
+    return merged
+
+
+def problem_line(field: str, value_text: str, message: str) -> str:
+    """``field=value: message``, or the message alone after the field's parents when it
+    names the field and value itself (``carrier.data.amplitude[1].t_s=0.2 must ...``)."""
+    if not field:
+        return message
+    named = _MESSAGE_FIELD.match(message)
+    if named is not None and field.endswith(named.group(1)):
+        return field[: len(field) - len(named.group(1))] + message
+    return f"{field}={value_text}: {message}"
 
 
 def _short(value: Any) -> str:
@@ -22,20 +162,11 @@ def _short(value: Any) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def error_items(exc: ValidationError) -> list[dict[str, Any]]:
-    """One dict per problem: ``field`` (dotted path), ``value`` and ``message``."""
-    items = []
-    for err in exc.errors(include_url=False):
-        message = err["msg"].removeprefix("Value error, ")
-        items.append(
-            {"field": _location(err["loc"]), "value": err.get("input"), "message": message}
-        )
-    return items
-
-
 def describe_validation_error(exc: ValidationError) -> str:
     """A one-line-per-problem text: ``field=value: message``."""
-    lines = [
-        f"{item['field']}={_short(item['value'])}: {item['message']}" for item in error_items(exc)
-    ]
-    return "; ".join(lines)
+    return "; ".join(
+        f"{item['field']}: {item['message']}"
+        if item["value"] is None and item["message"] == "Field required"
+        else problem_line(item["field"], _short(item["value"]), item["message"])
+        for item in error_items(exc)
+    )

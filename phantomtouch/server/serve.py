@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.server.app import create_app
 from phantomtouch.service.listen import log_config
 from phantomtouch.service.running import Attachment
@@ -23,6 +24,67 @@ def check_library(settings: Settings) -> None:
     PatternStore.open(settings.db_path).close()
 
 
+def check_device_profile(settings: Settings) -> None:
+    """Load the device profile once, before anything starts.
+
+    Raises
+    ------
+    ParameterError
+        The file is missing or not a valid profile (bad input: ``serve`` exits 2).
+    """
+    from phantomtouch.schema import DeviceProfile
+
+    if settings.device_profile is None:
+        return
+    try:
+        DeviceProfile.load(settings.device_profile)
+    except DeviceError as exc:
+        raise ParameterError(str(exc)) from exc
+
+
+def check_output(settings: Settings) -> None:
+    """Find the sound-card output the settings name, before anything starts.
+
+    Nothing to find without ``output_device`` (the first that fits, else the null
+    output), for ``null`` and for ``capture:FILE.wav``.
+
+    Raises
+    ------
+    ParameterError
+        No output matches the name, several do, it has too few outputs, or ``--exclusive``
+        names a device that is not a WASAPI one (bad input: ``serve`` exits 2).
+    DeviceError
+        PortAudio (or ``sounddevice``) is missing or cannot list the devices (exit 1).
+    """
+    from phantomtouch.engine.soundcard import find_output_device, list_output_devices
+    from phantomtouch.service.engine_access import NULL_OUTPUT, output_of
+
+    output = output_of(settings)
+    if settings.capture_path is not None or output == NULL_OUTPUT:
+        return
+    if output is None and not settings.wasapi_exclusive:
+        return
+    list_output_devices()  # a failure to list is the machine's, not the input's
+    channels = profile_channels(settings)
+    try:
+        found = find_output_device(output, channels)
+    except DeviceError as exc:
+        raise ParameterError(str(exc)) from exc
+    if settings.wasapi_exclusive and "wasapi" not in found["hostapi"].lower():
+        raise ParameterError(
+            f"--exclusive is WASAPI's exclusive mode; output device {found['name']!r} is a "
+            f"{found['hostapi']} device (name a WASAPI one: 'WASAPI:{found['name']}')"
+        )
+
+
+def profile_channels(settings: Settings) -> int:
+    """The channels of the settings' device profile (the paper's armband: 8)."""
+    from phantomtouch.schema import DeviceProfile
+
+    path = settings.device_profile
+    return (DeviceProfile.load(path) if path is not None else DeviceProfile.default()).channels
+
+
 def serve(settings: Settings, *, attach: Sequence[Attachment] = ()) -> None:
     """Serve until interrupted (SIGINT/SIGTERM shut the engine down cleanly).
 
@@ -32,12 +94,17 @@ def serve(settings: Settings, *, attach: Sequence[Attachment] = ()) -> None:
     Requests uvicorn cannot parse are answered with the service's JSON error body, and
     WebSocket frames are parsed at the pace their session handles them
     (:mod:`phantomtouch.server.wire`).
+
+    Raises
+    ------
+    PhantomTouchError
+        The service could not start (the engine, the fleet) or stop cleanly; see
+        :func:`~phantomtouch.service.runner.run_app`.
     """
-    import uvicorn
-
     from phantomtouch.server.wire import FairWebSocketProtocol, JsonErrorProtocol
+    from phantomtouch.service.runner import run_app
 
-    uvicorn.run(
+    run_app(
         create_app(settings, attach=attach),
         http=JsonErrorProtocol,
         ws=FairWebSocketProtocol,

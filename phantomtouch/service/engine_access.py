@@ -20,7 +20,8 @@ NULL_OUTPUT = "null"
 """``output_device`` value that forces the clocked null output (no sound card)."""
 
 
-def _output(settings: Settings) -> int | str | None:
+def output_of(settings: Settings) -> int | str | None:
+    """The settings' ``output_device``: an index as an int, else the text or None."""
     output = settings.output_device
     return int(output) if output is not None and output.isdecimal() else output
 
@@ -48,7 +49,7 @@ def open_engine(
     )
 
     engine: EngineFront
-    output = _output(settings)
+    output = output_of(settings)
     common = {
         "queue_capacity": settings.queue_capacity,
         "max_voices": settings.max_voices,
@@ -63,7 +64,7 @@ def open_engine(
         elif output == NULL_OUTPUT:
             spec = SinkSpec("null")
         else:
-            spec = SinkSpec("default", output=output)
+            spec = SinkSpec("default", output=output, exclusive=settings.wasapi_exclusive)
         engine = ProcessEngine(device, spec, on_fault=on_fault, **common)  # type: ignore[arg-type]
     else:
         sink: Sink
@@ -72,7 +73,7 @@ def open_engine(
         elif output == NULL_OUTPUT:
             sink = NullSink(device)
         else:
-            sink = open_default_sink(device, output)
+            sink = open_default_sink(device, output, exclusive=settings.wasapi_exclusive)
         engine = Engine(device, sink, **common)  # type: ignore[arg-type]
     engine.start()
     return engine

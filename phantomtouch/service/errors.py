@@ -9,6 +9,7 @@ The exception tree the server adds below the package root::
     ├── ProtocolError                    422 invalid
     └── ServiceError                     (this module)
         ├── NotFoundError                404 not_found
+        ├── MissingReferenceError        422 invalid     (a body field names what is not held)
         ├── TooLargeError                413 too_large   (WebSocket: close 1009)
         ├── RateLimitedError             429 rate_limited (WebSocket: close 1008 if sustained)
         ├── QuotaError                   429 quota       (one client's fair share is used up)
@@ -50,6 +51,7 @@ from phantomtouch.errors import (
     PhantomTouchError,
     ProtocolError,
 )
+from phantomtouch.schema.validation import error_item, merge_branches, problem_line
 
 ErrorCode = Literal[
     "invalid",
@@ -101,6 +103,14 @@ class NotFoundError(ServiceError, LookupError):
 
     status_code = 404
     code: ErrorCode = "not_found"
+
+
+class MissingReferenceError(ServiceError):
+    """A body field names something the service does not hold (a pattern's clip that is
+    not in the library): the body is at fault, 422 naming the field."""
+
+    status_code = 422
+    code: ErrorCode = "invalid"
 
 
 class TooLargeError(ServiceError):
@@ -265,14 +275,15 @@ def field_problems(errors: Sequence[Any], *, tags: set[str] = _UNION_TAGS) -> li
     problems = []
     for err in errors[:MAX_FIELDS]:
         missing = err.get("type") == "missing"
+        item = error_item(err, prefixes=_LOCATION_PREFIXES, tags=tags)
         problems.append(
             {
-                "field": _location(err.get("loc", ()), tags=tags),
-                "value": None if missing else _short_value(err.get("input")),
-                "message": str(err.get("msg", "invalid")).removeprefix("Value error, "),
+                "field": item["field"] or _location(err.get("loc", ()), tags=tags),
+                "value": None if missing else _short_value(item["value"]),
+                "message": item["message"],
             }
         )
-    return problems
+    return merge_branches(problems)
 
 
 def _summary(problems: list[dict[str, Any]], total: int) -> str:
@@ -281,7 +292,7 @@ def _summary(problems: list[dict[str, Any]], total: int) -> str:
         if item["value"] is None and item["message"] == "Field required":
             parts.append(f"{item['field']}: field required")
         else:
-            parts.append(f"{item['field']}={json.dumps(item['value'])}: {item['message']}")
+            parts.append(problem_line(item["field"], json.dumps(item["value"]), item["message"]))
     more = total - len(parts)
     if more > 0:
         parts.append(f"and {more} more problems ({total} in all; the first {len(parts)} listed)")
@@ -296,10 +307,10 @@ def invalid(problems: list[dict[str, Any]], *, total: int | None = None) -> Prob
 
 def validation_problem(exc: ValidationError | RequestValidationError) -> Problem:
     """A validation error as a 422 ``invalid`` problem with at most :data:`MAX_FIELDS` fields."""
-    if isinstance(exc, ValidationError):
-        return invalid(field_problems(exc.errors(include_url=False)), total=exc.error_count())
-    errors = exc.errors()
-    return invalid(field_problems(errors), total=len(errors))
+    errors = exc.errors(include_url=False) if isinstance(exc, ValidationError) else exc.errors()
+    problems = field_problems(errors)
+    merged = min(len(errors), MAX_FIELDS) - len(problems)  # a union's branches, as one
+    return invalid(problems, total=len(errors) - merged)
 
 
 def _problem(field: str, value: Any, message: str) -> dict[str, Any]:

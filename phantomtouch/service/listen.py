@@ -11,10 +11,13 @@ from phantomtouch.errors import PhantomTouchError
 
 
 def log_config() -> dict[str, Any]:
-    """uvicorn's logging, plus the ``phantomtouch`` logger (start-up lines, errors)."""
+    """uvicorn's logging, plus the ``phantomtouch`` logger (start-up lines, errors), less
+    uvicorn's "Application startup failed" lines (the command says what failed)."""
     from uvicorn.config import LOGGING_CONFIG
 
     config = copy.deepcopy(LOGGING_CONFIG)
+    config["filters"] = {"failures": {"()": "phantomtouch.service.runner.DropFailureLines"}}
+    config["handlers"]["default"]["filters"] = ["failures"]
     config["loggers"]["phantomtouch"] = {
         "handlers": ["default"],
         "level": "INFO",

@@ -10,7 +10,7 @@ from phantomtouch.errors import ParameterError
 from phantomtouch.renderer import plan, preset
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import ClipCarrier, DeviceProfile, TouchPattern
-from phantomtouch.service.errors import NotFoundError
+from phantomtouch.service.errors import MissingReferenceError, NotFoundError
 from phantomtouch.service.models import (
     MAX_START_AHEAD_S,
     AnyTouch,
@@ -66,14 +66,15 @@ def with_clip(pattern: TouchPattern, store: PatternStore) -> TouchPattern:
     """``pattern`` with its clip carrier's ``data`` read from the library.
 
     A pattern without a clip, or whose clip is given inline, is returned as it is; a clip
-    that is not in the library is a :class:`NotFoundError` naming ``carrier.clip``.
+    that is not in the library is a :class:`MissingReferenceError` (422) naming
+    ``carrier.clip``.
     """
     carrier = pattern.carrier
-    if not isinstance(carrier, ClipCarrier) or carrier.data is not None:
+    if not isinstance(carrier, ClipCarrier) or carrier.data is not None or carrier.clip is None:
         return pattern
     clip = store.get_clip(carrier.clip)
     if clip is None:
-        raise NotFoundError(
+        raise MissingReferenceError(
             f"carrier.clip={carrier.clip!r} is not in the clip library (GET /clips; "
             "PUT /clips/{name} or phantomtouch import adds one)",
             field="carrier.clip",
@@ -116,7 +117,7 @@ def accepted(engine: EngineFront, job: Job, plan: Plan) -> JobAccepted:
     summary = job.summary
     return JobAccepted(
         job_id=str(job.job_id),
-        start_at_s=engine.time_at(job.start_frame),
+        start_at_s=engine.time_at(job.start_frame) if job.start_at_s is None else job.start_at_s,
         start_frame=job.start_frame,
         duration_s=job.duration_s,
         path_length_cm=summary["path_length_cm"],

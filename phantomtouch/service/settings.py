@@ -52,9 +52,17 @@ class Settings(BaseSettings):
     output_device: str | None = Field(
         default=None,
         description=(
-            "Sound-card output (name or index) for the engine; None: the first output with "
-            "enough channels, else the null output. 'null' forces the null output; "
-            "'capture:FILE.wav' records what plays and writes it to that WAV at exit."
+            "Sound-card output (name, index or 'HOSTAPI:NAME', e.g. 'ASIO:Focusrite') for "
+            "the engine; None: the first output with enough channels, else the null "
+            "output. 'null' forces the null output; 'capture:FILE.wav' records what plays "
+            "and writes it to that WAV at exit."
+        ),
+    )
+    wasapi_exclusive: bool = Field(
+        default=False,
+        description=(
+            "Open the WASAPI output in exclusive mode (Windows; the output must be a WASAPI "
+            "device, e.g. 'WASAPI:Speakers')."
         ),
     )
     db_path: Path = Field(default_factory=default_db_path, description="SQLite pattern store.")

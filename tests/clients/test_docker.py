@@ -27,7 +27,8 @@ from tests.support.live_server import free_port
 DOCKER = ROOT / "docker"
 DOCKERFILE = DOCKER / "Dockerfile"
 COMPOSE = DOCKER / "compose.yaml"
-README = ROOT / "README.md"
+README = ROOT / "docs" / "service.md"
+"""Where the image is documented (the README links it)."""
 TOKEN_ENV = "PHANTOMTOUCH_TOKEN"
 
 

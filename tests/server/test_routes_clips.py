@@ -61,7 +61,7 @@ def test_a_bad_clip_is_refused_naming_the_field(client: TestClient) -> None:
 def test_a_pattern_plays_the_library_clip(client: TestClient) -> None:
     """Stored by name, rendered with the clip filled in: the render is the clip's."""
     missing = client.put("/patterns/knocking", json=ON_ACTUATOR_1)
-    assert missing.status_code == 404
+    assert missing.status_code == 422  # a body field names a clip the library lacks
     assert missing.json()["error"]["fields"][0]["field"] == "carrier.clip"
     assert client.put("/clips/knock", json=KNOCK).status_code == 200
     assert client.put("/patterns/knocking", json=ON_ACTUATOR_1).status_code == 200
@@ -84,7 +84,7 @@ def test_a_pattern_plays_the_library_clip(client: TestClient) -> None:
     assert client.post("/touch", json=ON_ACTUATOR_1).status_code == 202
     client.delete("/clips/knock")
     gone = client.post("/touch", json={"stored": "knocking"})
-    assert gone.status_code == 404
+    assert gone.status_code == 422
     assert gone.json()["error"]["fields"][0]["field"] == "carrier.clip"
 
 

@@ -82,7 +82,12 @@ def job_info(engine: EngineFront, job_id: str) -> JobInfo:
     return JobInfo(
         job_id=job_id,
         state=state.state,
-        start_at_s=engine.time_at(state.start_frame),
+        start_at_s=(
+            state.requested_start_at_s
+            if state.requested_start_at_s is not None
+            and state.start_frame == state.requested_start_frame
+            else engine.time_at(state.start_frame)
+        ),
         start_frame=state.start_frame,
         end_at_s=engine.time_at(state.end_frame),
         end_frame=state.end_frame,

@@ -1,0 +1,79 @@
+"""Imported by every interpreter started with this folder on ``PYTHONPATH``: the modules
+and ``os`` functions that exist on POSIX systems only are made unavailable, as on Windows.
+
+An import of one of :data:`POSIX_ONLY_MODULES` raises ``ModuleNotFoundError``; the
+functions in :data:`POSIX_ONLY_OS_FUNCTIONS` are removed from ``os``. Functions the
+standard library itself calls on Linux to start a process or a thread (``os.fork``,
+``os.waitpid``, ``os.pipe`` ...) stay, since they have Windows counterparts behind the
+same standard-library calls. When ``PHANTOMTOUCH_WINDOWS_LIKE_MARKS`` names a folder, each
+interpreter writes a file named by its process id there, so a test can tell that the
+server and its engine process both ran this way.
+"""
+
+from __future__ import annotations
+
+import importlib.abc
+import os
+import sys
+from collections.abc import Sequence
+from types import ModuleType
+
+POSIX_ONLY_MODULES = frozenset(
+    {"fcntl", "termios", "tty", "pty", "resource", "pwd", "grp", "syslog", "posix_ipc"}
+)
+POSIX_ONLY_OS_FUNCTIONS = (
+    "sched_setscheduler",
+    "sched_getscheduler",
+    "sched_param",
+    "sched_setaffinity",
+    "sched_getaffinity",
+    "getuid",
+    "geteuid",
+    "getgid",
+    "getegid",
+    "getgroups",
+    "setuid",
+    "setgid",
+    "setsid",
+    "getsid",
+    "setpgid",
+    "getpgid",
+    "killpg",
+    "nice",
+    "getpriority",
+    "setpriority",
+    "mlockall",
+    "munlockall",
+    "sync",
+    "chown",
+    "lchown",
+    "fchown",
+    "mkfifo",
+    "mknod",
+    "getloadavg",
+    "ttyname",
+    "openpty",
+    "forkpty",
+)
+
+
+class _Refuse(importlib.abc.MetaPathFinder):
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> None:
+        if fullname.partition(".")[0] in POSIX_ONLY_MODULES:
+            raise ModuleNotFoundError(f"No module named {fullname!r}", name=fullname)
+        return None
+
+
+for _name in POSIX_ONLY_MODULES:
+    sys.modules.pop(_name, None)
+sys.meta_path.insert(0, _Refuse())
+for _function in POSIX_ONLY_OS_FUNCTIONS:
+    if hasattr(os, _function):
+        delattr(os, _function)
+
+_marks = os.environ.get("PHANTOMTOUCH_WINDOWS_LIKE_MARKS")
+if _marks:
+    with open(os.path.join(_marks, str(os.getpid())), "w", encoding="utf-8") as _mark:
+        _mark.write(" ".join(sys.argv))
