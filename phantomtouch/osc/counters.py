@@ -1,25 +1,36 @@
 """What the OSC bridge accepted and what it dropped, and why.
 
 Every received message is counted once: ``accepted``, or dropped for one reason. A
-datagram that is not OSC at all counts once as ``malformed``.
+datagram dropped as a whole (not OSC, too deep, ...) counts once. Drops are logged one
+line each, at most one line per reason and interval (:class:`LimitedLog`).
 """
 
 from __future__ import annotations
 
+import logging
 import threading
+import time
 
 REASONS = (
     "malformed",
+    "not_utf8",
+    "bad_type_tag",
+    "too_deep",
+    "bad_bundle_size",
     "unknown_address",
     "bad_arguments",
     "not_finite",
     "out_of_range",
     "flood",
     "refused",
+    "failed",
 )
-"""Why a message is dropped: not OSC; an address the bridge does not know; arguments of
-the wrong type or number; NaN or infinity; a value outside its range; over the message
-rate; refused by the engine or the library (a contact quota, an unknown pattern)."""
+"""Why a message is dropped: not OSC or cut short; an address or string that is not
+UTF-8; unknown type tags; bundles nested too deep; a bundle element whose declared size
+exceeds what follows (:mod:`~phantomtouch.osc.packets`); an address the bridge does not
+know; arguments of the wrong type or number; NaN or infinity; a value outside its range;
+over the message rate; refused by the engine or the library (a contact quota, an unknown
+pattern); its handling failed unexpectedly (logged, the bridge goes on)."""
 
 
 class OscCounters:
@@ -47,3 +58,34 @@ class OscCounters:
         """Every count, ``accepted`` and each reason."""
         with self._lock:
             return dict(self._counts)
+
+
+class LimitedLog:
+    """Warnings of one kind, one line per ``interval_s`` at most, with how many were held back.
+
+    Parameters
+    ----------
+    logger : logging.Logger
+    interval_s : float, > 0
+        Lines of one ``kind`` are at least this far apart; the ones between are counted and
+        the next line says how many.
+    """
+
+    def __init__(self, logger: logging.Logger, interval_s: float) -> None:
+        self._logger = logger
+        self._interval_s = interval_s
+        self._lock = threading.Lock()
+        self._next_s: dict[str, float] = {}
+        self._held: dict[str, int] = {}
+
+    def warning(self, kind: str, line: str) -> None:
+        """Log ``line`` unless a line of ``kind`` was logged within the interval."""
+        now_s = time.monotonic()
+        with self._lock:
+            if now_s < self._next_s.get(kind, 0.0):
+                self._held[kind] = self._held.get(kind, 0) + 1
+                return
+            self._next_s[kind] = now_s + self._interval_s
+            held = self._held.pop(kind, 0)
+        suffix = f" ({held} more like it in the last {self._interval_s:g} s)" if held else ""
+        self._logger.warning("%s%s", line, suffix)

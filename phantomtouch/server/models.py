@@ -396,10 +396,18 @@ class ClockInfo(BaseModel):
     unix_time_s: float
 
 
+class InputState(BaseModel):
+    """One supervised input (``osc``): ``running`` or ``restarting``."""
+
+    state: str = Field(description="running, or restarting after its thread died")
+    restarts: int = Field(description="Times its thread died and was started again.")
+    last_failure: str | None = Field(default=None, description="What killed it last.")
+
+
 class Health(BaseModel):
     """``ok``; or ``degraded`` with the part that fails named (the service still runs):
     ``engine`` while the engine process is being restarted, ``storage`` when the pattern
-    store fails."""
+    store fails, ``degraded_inputs`` while an input is down or was just restarted."""
 
     status: Literal["ok", "degraded"] = "ok"
     backend: str
@@ -412,6 +420,13 @@ class Health(BaseModel):
     )
     storage: str | None = Field(
         default=None, description="Why the pattern store fails (only when it does)."
+    )
+    inputs: dict[str, InputState] | None = Field(
+        default=None, description="Supervised inputs (the OSC bridge), when any runs."
+    )
+    degraded_inputs: list[str] | None = Field(
+        default=None,
+        description="Inputs down, or restarted within the last minute (only when any is).",
     )
 
 
