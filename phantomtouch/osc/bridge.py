@@ -31,10 +31,10 @@ import numpy as np
 
 from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError
 from phantomtouch.osc import messages
-from phantomtouch.osc.counters import LimitedLog, OscCounters
+from phantomtouch.osc.counters import OscCounters
 from phantomtouch.osc.mapping import ReceiverMap
 from phantomtouch.osc.receivers import Change, ContactTracker, ReceiverLayout
-from phantomtouch.server.flood import FloodGuard
+from phantomtouch.server.flood import FloodGuard, LimitedLog
 from phantomtouch.server.service import InputHealth
 
 try:

@@ -2,14 +2,13 @@
 
 Every received message is counted once: ``accepted``, or dropped for one reason. A
 datagram dropped as a whole (not OSC, too deep, ...) counts once. Drops are logged one
-line each, at most one line per reason and interval (:class:`LimitedLog`).
+line each, at most one line per reason and interval
+(:class:`~phantomtouch.server.flood.LimitedLog`).
 """
 
 from __future__ import annotations
 
-import logging
 import threading
-import time
 
 REASONS = (
     "malformed",
@@ -58,34 +57,3 @@ class OscCounters:
         """Every count, ``accepted`` and each reason."""
         with self._lock:
             return dict(self._counts)
-
-
-class LimitedLog:
-    """Warnings of one kind, one line per ``interval_s`` at most, with how many were held back.
-
-    Parameters
-    ----------
-    logger : logging.Logger
-    interval_s : float, > 0
-        Lines of one ``kind`` are at least this far apart; the ones between are counted and
-        the next line says how many.
-    """
-
-    def __init__(self, logger: logging.Logger, interval_s: float) -> None:
-        self._logger = logger
-        self._interval_s = interval_s
-        self._lock = threading.Lock()
-        self._next_s: dict[str, float] = {}
-        self._held: dict[str, int] = {}
-
-    def warning(self, kind: str, line: str) -> None:
-        """Log ``line`` unless a line of ``kind`` was logged within the interval."""
-        now_s = time.monotonic()
-        with self._lock:
-            if now_s < self._next_s.get(kind, 0.0):
-                self._held[kind] = self._held.get(kind, 0) + 1
-                return
-            self._next_s[kind] = now_s + self._interval_s
-            held = self._held.pop(kind, 0)
-        suffix = f" ({held} more like it in the last {self._interval_s:g} s)" if held else ""
-        self._logger.warning("%s%s", line, suffix)
