@@ -70,6 +70,10 @@ class JobState:
     requested_start_frame : int
     late : bool
         It started after its requested frame (its command arrived too late).
+    reason : str or None
+        Why a ``stopped`` job stopped when no one asked it to: ``stolen`` (faded out to
+        make room for another), or the engine's fault (``engine gone before it played``,
+        ``engine stalled while it played``); None otherwise.
     """
 
     job_id: str
@@ -81,6 +85,7 @@ class JobState:
     duration_s: float
     requested_start_frame: int
     late: bool
+    reason: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -108,6 +113,7 @@ class JobRecord:
     end_frame: int | None = None
     late: bool = False
     stolen: bool = False
+    reason: str | None = None
 
     @property
     def first_frame(self) -> int:
@@ -126,6 +132,7 @@ class JobRecord:
             duration_s=self.duration_s,
             requested_start_frame=self.requested_start_frame,
             late=self.late,
+            reason="stolen" if self.stolen and self.reason is None else self.reason,
         )
 
 
@@ -237,9 +244,13 @@ class JobTable:
         for record in list(self._live.values()):
             self.mark_stopped(record)
 
-    def forget_all(self, frame: int) -> None:
-        """Every job not over is over from ``frame`` (the engine that played them is gone)."""
+    def forget_all(self, frame: int, *, fault: str = "gone") -> None:
+        """Every job not over is over from ``frame`` (the engine that played them is
+        ``fault``: gone or stalled); each says so in its ``reason``."""
         for record in [*self._live.values(), *self._stopping.values()]:
+            if record.state != "stopped":
+                when = "while it played" if record.first_frame < frame else "before it played"
+                record.reason = f"engine {fault} {when}"
             record.state = "stopped"
             record.end_frame = max(frame, record.first_frame)
             self.retire(record)

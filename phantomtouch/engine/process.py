@@ -221,7 +221,7 @@ class ProcessEngine(EngineFront):
             if self._halt.is_set():
                 return
             self._state = state
-            self._jobs.forget_all(self.now_frames)
+            self._jobs.forget_all(self.now_frames, fault=state)
             self._contacts.clear()
             self._admission.forget_starts()
         if self.on_fault is not None:

@@ -348,6 +348,12 @@ class JobInfo(BaseModel):
     end_frame: int
     duration_s: float = Field(description="The pattern's duration, s.")
     late: bool = Field(description="It started after its requested start.")
+    reason: str | None = Field(
+        default=None,
+        description="Why a stopped job stopped unasked: `stolen` (room for another), or "
+        "the engine's fault (`engine gone before it played`, `engine stalled while it "
+        "played`: accepted just before the fault was noticed).",
+    )
 
 
 class StopAnswer(BaseModel):
