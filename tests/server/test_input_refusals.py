@@ -105,17 +105,13 @@ def test_several_token_parameters_are_refused_1008(guarded: LiveServer, query: s
     assert closed.value.rcvd.code == 1008
 
 
-@pytest.mark.parametrize("order", [("wrong", TOKEN), (TOKEN, "wrong")])
-def test_several_bearer_headers_are_refused_401(
-    guarded: LiveServer, order: tuple[str, str]
-) -> None:
-    headers = [("Authorization", f"Bearer {value}") for value in order]
-    answer = httpx.get(f"{guarded.url}/device", headers=headers)
-    assert answer.status_code == 401
-    assert (
-        httpx.get(f"{guarded.url}/device", headers={"Authorization": f"Bearer {TOKEN}"}).status_code
-        == 200
-    )
+def test_several_bearer_headers_are_refused_401_in_either_order(guarded: LiveServer) -> None:
+    for order in [("wrong", TOKEN), (TOKEN, "wrong")]:
+        headers = [("Authorization", f"Bearer {value}") for value in order]
+        answer = httpx.get(f"{guarded.url}/device", headers=headers)
+        assert answer.status_code == 401, order
+    one = httpx.get(f"{guarded.url}/device", headers={"Authorization": f"Bearer {TOKEN}"})
+    assert one.status_code == 200
 
 
 def test_a_bearer_header_is_the_only_guess_over_a_query_token(guarded: LiveServer) -> None:
