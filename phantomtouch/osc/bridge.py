@@ -1,20 +1,24 @@
 """The OSC bridge: a UDP socket, its receive thread, and what each message does.
 
-One thread receives datagrams, parses them with python-osc's packet parser and handles
-each message at once, in arrival order: receiver proximities become live contacts
-(:mod:`~phantomtouch.osc.receivers`), ``/phantomtouch/...`` messages touch, move, lift,
-play and stop (:mod:`~phantomtouch.osc.messages`). It calls the engine's control side
+One thread receives datagrams, takes them apart (:mod:`~phantomtouch.osc.packets`, which
+reads each message with python-osc) and handles each message at once, in arrival order:
+receiver proximities become live contacts (:mod:`~phantomtouch.osc.receivers`),
+``/phantomtouch/...`` messages touch, move, lift, play and stop
+(:mod:`~phantomtouch.osc.messages`). It calls the engine's control side
 (:class:`~phantomtouch.engine.EngineFront`), which never waits for the audio: a move
 reaches the audio at the next block. Bundles are taken apart and their messages applied
 on arrival; their time tags are ignored (python-osc's own dispatcher would sleep until a
 future time tag, which lets one datagram stall the bridge, and drops unparsable
 datagrams without counting them, hence the loop here).
 
-Safety: every message is checked and a bad one dropped and counted
-(:class:`~phantomtouch.osc.counters.OscCounters`); a token bucket bounds the message
-rate; silence for ``watchdog_s`` (no accepted message) releases every contact of the
-bridge, and so does closing it. A contact that the engine let go of meanwhile (``POST
-/stop``, an engine restart) touches down again on its next message.
+Safety: every datagram and message is checked and a bad one dropped, counted
+(:class:`~phantomtouch.osc.counters.OscCounters`) and logged in one line, at most one per
+reason every :data:`LOG_INTERVAL_S`; a token bucket bounds the message rate; silence for
+``watchdog_s`` (no accepted message) releases every contact of the bridge, and so does
+closing it. The receive thread is supervised: should it die anyway, the bridge's contacts
+are released at once and a new thread started (:meth:`OscBridge.health`). A contact that
+the engine let go of meanwhile (``POST /stop``, an engine restart) touches down again on
+its next message.
 """
 
 from __future__ import annotations
