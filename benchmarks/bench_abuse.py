@@ -15,6 +15,12 @@ abuse runs in a process of its own, bounded in count and time:
   and ``contacts x13`` (13 connections hold every contact slot); meanwhile another client
   plays a 3 s touch, or puts a contact down, and the row reports how that ended
   (``finished`` / ``ok`` is what fair shares promise).
+- ``osc bad datagrams``: a flood of datagrams the OSC bridge drops as a whole (address or
+  string not UTF-8, unknown type tag, cut short, a bundle element larger than what
+  follows, random bytes);
+- ``osc deep bundles``: bundles nested 500 deep (10 KB each), as fast as they go;
+- ``invalid utf-8``: WebSocket connections each sending one text frame that is not UTF-8
+  (closed with 1007, one log line per 10 s).
 
 Each line reports the probe's p50, p99 and slowest answer while the abuse ran and the
 underruns the engine counted meanwhile (``/metrics``)::
@@ -26,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import socket
 import sys
 import tempfile
 import time
@@ -39,6 +46,7 @@ import httpx
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tests.support.abuse import HealthProbe, hang_ups, in_process, large_bodies, ping_flood
+from tests.support.abuse_inputs import invalid_utf8_frames, osc_bad_datagrams, osc_deep_bundles
 from tests.support.fairness import (
     contact_hoard,
     http_play_flood,
@@ -104,11 +112,30 @@ def fairness_abuses(server: LiveServer, seconds: float) -> dict[str, Callable[[]
     }
 
 
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def input_abuses(server: LiveServer, osc_port: int) -> dict[str, Callable[[], Any]]:
+    """The attacks on the inputs (OSC datagrams, WebSocket frames)."""
+    return {
+        "osc bad datagrams": lambda: in_process(osc_bad_datagrams, osc_port),
+        "osc deep bundles": lambda: in_process(osc_deep_bundles, osc_port),
+        "invalid utf-8": lambda: in_process(invalid_utf8_frames, server.port),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of the baseline")
     args = parser.parse_args(argv)
-    with tempfile.TemporaryDirectory() as folder, LiveServer(Path(folder) / "p.db") as server:
+    osc_port = free_udp_port()
+    with (
+        tempfile.TemporaryDirectory() as folder,
+        LiveServer(Path(folder) / "p.db", args=("--osc", f"127.0.0.1:{osc_port}")) as server,
+    ):
         abuses: dict[str, Callable[[], Any]] = {
             "none": lambda: time.sleep(args.seconds),
             "ping flood": lambda: in_process(ping_flood, server.ws_url),
@@ -116,16 +143,22 @@ def main(argv: list[str] | None = None) -> int:
             "invalid bodies": lambda: in_process(large_bodies, server.url, 10),
             "hang-ups": lambda: in_process(hang_ups, server.port, 500),
             **fairness_abuses(server, args.seconds),
+            **input_abuses(server, osc_port),
         }
+        inputs = set(input_abuses(server, osc_port))
         print(
-            f"{'abuse':<16} {'s':>5} {'n':>6} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} underruns"
+            f"{'abuse':<18} {'s':>5} {'n':>6} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} underruns"
         )
         for name, abuse in abuses.items():
             row = measure(server, abuse)
             print(
-                f"{name:<16} {row['took_s']:5.2f} {row['answers']:6d} {row['p50_ms']:7.2f} "
+                f"{name:<18} {row['took_s']:5.2f} {row['answers']:6d} {row['p50_ms']:7.2f} "
                 f"{row['p99_ms']:7.2f} {row['max_ms']:7.1f} {row['underruns']:9.0f}"
-                + (f"   {row['outcome']}" if isinstance(row["outcome"], dict) else "")
+                + (
+                    f"   {row['outcome']}"
+                    if isinstance(row["outcome"], dict) or name == "ping flood" or name in inputs
+                    else ""
+                )
             )
     return 0
 

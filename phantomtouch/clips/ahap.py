@@ -18,18 +18,20 @@ the sounding continuous events plus ``HapticSharpnessControl`` (default 0), with
 each transient event a transient with its intensity times the intensity control and its
 sharpness plus the sharpness control. Attack and release ramps are straight lines here
 (Core Haptics shapes them itself); the envelopes are sampled at every corner of the
-events and curves and four times between, where two ramps multiply.
+events and curves and four times between, where two ramps multiply. The conversion takes
+time linear in the file (:mod:`~phantomtouch.clips.ahap_envelope`; benchmarks/bench_clips.py).
 """
 
 from __future__ import annotations
 
-import itertools
 from typing import Literal, Self
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from phantomtouch.schema.clip import MAX_CLIP_POINTS, Breakpoint, ClipTime, HapticClip, Transient
+from phantomtouch.clips.ahap_envelope import SOUNDING, Control, kept_points, summed_envelope
+from phantomtouch.errors import ParameterError
+from phantomtouch.schema.clip import MAX_CLIP_POINTS, ClipTime, HapticClip
 
 EventParameterId = Literal[
     "HapticIntensity",
@@ -55,6 +57,8 @@ DynamicParameterId = Literal[
     "AudioBrightnessControl",
 ]
 _SUBDIVISIONS = 4
+DIGITS = 12
+"""Decimals kept of each envelope value (the audio path is float32, 7 digits)."""
 _EMPTY_S = 0.1
 """Length of a clip with nothing but transients at time 0, s."""
 
@@ -138,38 +142,16 @@ class AhapFile(_Lenient):
     Pattern: list[Entry] = Field(min_length=1, max_length=MAX_CLIP_POINTS)
 
 
-class _Control:
-    """One dynamic parameter over time: steps (Parameter) and ramps (ParameterCurve)."""
-
-    def __init__(self, default: float) -> None:
-        self.default = default
-        self.pieces: list[tuple[float, np.ndarray, np.ndarray]] = []
-
-    def add_step(self, t_s: float, value: float) -> None:
-        self.pieces.append((t_s, np.array([t_s]), np.array([value])))
-
-    def add_curve(self, curve: AhapCurve) -> None:
-        points = curve.ParameterCurveControlPoints
-        times = curve.Time + np.array([p.Time for p in points])
-        self.pieces.append((float(times[0]), times, np.array([p.ParameterValue for p in points])))
-
-    def corners(self) -> list[float]:
-        return [float(t) for _, times, _ in self.pieces for t in times]
-
-    def at(self, t_s: float, *, left: bool) -> float:
-        """The value at ``t_s``: the latest piece begun by then (strictly before, ``left``)."""
-        value = self.default
-        self.pieces.sort(key=lambda piece: piece[0])
-        for start_s, times, values in self.pieces:
-            if start_s < t_s or (start_s == t_s and not left):
-                value = float(np.interp(t_s, times, values))
-        return value
-
-
 def clip_of_ahap(document: AhapFile) -> HapticClip:
-    """The clip a validated ``.ahap`` document describes."""
-    intensity = _Control(1.0)
-    sharpness = _Control(0.0)
+    """The clip a validated ``.ahap`` document describes, in time linear in its entries.
+
+    Raises
+    ------
+    ParameterError
+        The clip would have more than ``MAX_CLIP_POINTS`` breakpoints in an envelope.
+    """
+    intensity = Control(1.0)
+    sharpness = Control(0.0)
     continuous: list[AhapEvent] = []
     transients: list[AhapEvent] = []
     for entry in document.Pattern:
@@ -181,57 +163,114 @@ def clip_of_ahap(document: AhapFile) -> HapticClip:
         elif entry.Parameter is not None:
             control = _control(entry.Parameter.ParameterID, intensity, sharpness)
             if control is not None:
-                control.add_step(entry.Parameter.Time, entry.Parameter.ParameterValue)
+                control.add(
+                    np.array([entry.Parameter.Time]), np.array([entry.Parameter.ParameterValue])
+                )
         elif entry.ParameterCurve is not None:
             control = _control(entry.ParameterCurve.ParameterID, intensity, sharpness)
             if control is not None:
-                control.add_curve(entry.ParameterCurve)
+                curve = entry.ParameterCurve
+                points = curve.ParameterCurveControlPoints
+                control.add(
+                    curve.Time + np.array([p.Time for p in points]),
+                    np.array([p.ParameterValue for p in points]),
+                )
 
-    corners = {0.0, *intensity.corners(), *sharpness.corners()}
-    for event in continuous:
-        start, end = event.Time, event.Time + float(event.EventDuration or 0.0)
-        attack, release = _ramps(event)
-        corners |= {start, end, start + attack, end - release}
-    end_s = max([*corners, *(e.Time for e in transients)])
-    grid = sorted(t for t in corners if t <= end_s)
-    fine = [
-        a + (b - a) * k / _SUBDIVISIONS
-        for a, b in itertools.pairwise(grid)
-        for k in range(_SUBDIVISIONS)
-    ] + [grid[-1]]
-
-    amplitude: list[Breakpoint] = []
-    frequency: list[Breakpoint] = []
-    last_sharpness = 0.5
-    for t_s in fine:
-        for left in (True, False):
-            level, sharp = _continuous_at(continuous, t_s, left=left)
-            if sharp is not None:
-                last_sharpness = sharp
-            value_a = min(1.0, level) * min(1.0, max(0.0, intensity.at(t_s, left=left)))
-            value_f = min(1.0, max(0.0, last_sharpness + sharpness.at(t_s, left=left)))
-            _append(amplitude, t_s, value_a)
-            _append(frequency, t_s, value_f)
-    clicks = [
-        Transient(
-            t_s=e.Time,
-            amplitude=min(1.0, max(0.0, e.value("HapticIntensity", 1.0)))
-            * min(1.0, max(0.0, intensity.at(e.Time, left=False))),
-            frequency=min(
-                1.0, max(0.0, e.value("HapticSharpness", 0.5) + sharpness.at(e.Time, left=False))
-            ),
+    starts = np.array([e.Time for e in continuous], dtype=np.float64)
+    ends = starts + np.array([float(e.EventDuration or 0.0) for e in continuous])
+    ramps = np.array([_ramps(e) for e in continuous], dtype=np.float64).reshape(-1, 2)
+    attacks, releases = ramps[:, 0], ramps[:, 1]
+    levels = np.array([_unit(e.value("HapticIntensity", 1.0)) for e in continuous])
+    weights = levels * np.array([_unit(e.value("HapticSharpness", 0.5)) for e in continuous])
+    clicks_s = np.array(sorted(e.Time for e in transients), dtype=np.float64)
+    grid = np.unique(
+        np.concatenate(
+            (
+                [0.0],
+                intensity.corners(),
+                sharpness.corners(),
+                starts,
+                ends,
+                starts + attacks,
+                ends - releases,
+            )
         )
-        for e in sorted(transients, key=lambda e: e.Time)
+    )
+    end_s = float(max(grid[-1], clicks_s[-1] if len(clicks_s) else 0.0))
+    steps = np.arange(_SUBDIVISIONS)
+    fine = np.concatenate(
+        (
+            (grid[:-1, None] + np.diff(grid)[:, None] * steps[None, :] / _SUBDIVISIONS).ravel(),
+            grid[-1:],
+        )
+    )
+
+    sums = summed_envelope(fine, starts, ends, attacks, releases, levels, weights)
+    level = _sides(sums[0], sums[1])
+    weighted = _sides(sums[2], sums[3])
+    sounding = level > SOUNDING
+    sharp = np.where(sounding, weighted / np.where(sounding, level, 1.0), np.nan)
+    last = np.maximum.accumulate(np.where(np.isnan(sharp), -1, np.arange(len(sharp))))
+    last_sharpness = np.where(last >= 0, sharp[np.maximum(last, 0)], 0.5)
+    times = np.repeat(fine, 2)
+    value_a = np.minimum(1.0, np.where(sounding, level, 0.0)) * np.clip(
+        _sides(intensity.at(fine, left=True), intensity.at(fine, left=False)), 0.0, 1.0
+    )
+    value_f = np.clip(
+        last_sharpness + _sides(sharpness.at(fine, left=True), sharpness.at(fine, left=False)),
+        0.0,
+        1.0,
+    )
+    # Plain dicts, validated at once by the clip's model (one pass in pydantic-core).
+    clicks = [
+        {
+            "t_s": float(e.Time),
+            "amplitude": _unit(e.value("HapticIntensity", 1.0)) * _unit(float(control_i)),
+            "frequency": _unit(e.value("HapticSharpness", 0.5) + float(control_s)),
+        }
+        for e, control_i, control_s in zip(
+            sorted(transients, key=lambda e: e.Time),
+            intensity.at(clicks_s, left=False),
+            sharpness.at(clicks_s, left=False),
+            strict=True,
+        )
     ]
-    return HapticClip(
-        duration_s=end_s if end_s > 0.0 else _EMPTY_S,
-        amplitude=amplitude,
-        frequency=frequency,
-        transients=clicks,
+    return HapticClip.model_validate(
+        {
+            "duration_s": end_s if end_s > 0.0 else _EMPTY_S,
+            "amplitude": _breakpoints(times, value_a, "amplitude"),
+            "frequency": _breakpoints(times, value_f, "frequency"),
+            "transients": clicks,
+        }
     )
 
 
-def _control(parameter: str, intensity: _Control, sharpness: _Control) -> _Control | None:
+def _unit(value: float) -> float:
+    return min(1.0, max(0.0, value))
+
+
+def _sides(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """Each grid time's two sides in a row: left, right, left, right, ..."""
+    return np.stack((left, right), axis=1).ravel()
+
+
+def _breakpoints(times: np.ndarray, values: np.ndarray, field: str) -> list[dict[str, float]]:
+    """The breakpoints that draw ``values``; they are rounded to :data:`DIGITS` decimals
+    first, so that sums equal but for rounding form one flat run."""
+    values = np.round(values, DIGITS)
+    kept = kept_points(times, values)
+    if len(kept) > MAX_CLIP_POINTS:
+        raise ParameterError(
+            f"{field}: the events make {len(kept)} breakpoints; a clip may have "
+            f"{MAX_CLIP_POINTS} (max_clip_points)"
+        )
+    return [
+        {"t_s": t_s, "value": value}
+        for t_s, value in zip(times[kept].tolist(), values[kept].tolist(), strict=True)
+    ]
+
+
+def _control(parameter: str, intensity: Control, sharpness: Control) -> Control | None:
     if parameter == "HapticIntensityControl":
         return intensity
     if parameter == "HapticSharpnessControl":
@@ -244,39 +283,3 @@ def _ramps(event: AhapEvent) -> tuple[float, float]:
     attack = min(max(0.0, event.value("AttackTime", 0.0)), duration)
     release = min(max(0.0, event.value("ReleaseTime", 0.0)), duration - attack)
     return attack, release
-
-
-def _continuous_at(
-    events: list[AhapEvent], t_s: float, *, left: bool
-) -> tuple[float, float | None]:
-    """Summed envelope of the continuous events at ``t_s`` and their weighted sharpness
-    (None when none sounds); ``left``: the limit from before ``t_s``."""
-    total = 0.0
-    weighted = 0.0
-    for event in events:
-        start, end = event.Time, event.Time + float(event.EventDuration or 0.0)
-        inside = start < t_s <= end if left else start <= t_s < end
-        if not inside:
-            continue
-        attack, release = _ramps(event)
-        level = max(0.0, min(1.0, event.value("HapticIntensity", 1.0)))
-        if attack > 0.0 and t_s < start + attack:
-            level *= (t_s - start) / attack
-        if release > 0.0 and t_s > end - release:
-            level *= (end - t_s) / release
-        total += level
-        weighted += level * min(1.0, max(0.0, event.value("HapticSharpness", 0.5)))
-    if total <= 0.0:
-        return 0.0, None
-    return total, weighted / total
-
-
-def _append(points: list[Breakpoint], t_s: float, value: float) -> None:
-    """Add a breakpoint, unless it repeats the last one or extends a flat run (a step
-    keeps both of its sides)."""
-    if points and points[-1].t_s == t_s and points[-1].value == value:
-        return
-    if len(points) >= 2 and points[-1].value == value == points[-2].value:
-        points[-1] = Breakpoint(t_s=t_s, value=value)
-        return
-    points.append(Breakpoint(t_s=t_s, value=value))

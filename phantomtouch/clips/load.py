@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any, Literal
 
@@ -15,6 +16,9 @@ from phantomtouch.schema.validation import describe_validation_error
 ClipFormat = Literal["haptic", "ahap"]
 MAX_FILE_BYTES = 16 << 20
 """Largest clip file read, bytes."""
+CLIP_DEPTH = 6
+"""How deep an ``.ahap`` file's arrays and objects nest (``.haptic``: 5). Deeper JSON is
+read up to the interpreter's recursion limit and refused beyond, in one line."""
 
 
 def detect_format(document: Any, suffix: str = "") -> ClipFormat:
@@ -48,8 +52,9 @@ def parse_clip(text: str | bytes, *, suffix: str = "", source: str = "clip") -> 
     Raises
     ------
     ParameterError
-        Not JSON, not either format, or a field outside its range; the message names the
-        field by its path in the file (``signals.continuous.envelopes.amplitude[2].time``).
+        Not JSON (or nested deeper than the interpreter reads), not either format, or a
+        field outside its range; the message names the field by its path in the file
+        (``signals.continuous.envelopes.amplitude[2].time``).
     """
     from phantomtouch.clips.ahap import AhapFile, clip_of_ahap
     from phantomtouch.clips.haptic_file import HapticFile, clip_of_haptic
@@ -58,6 +63,11 @@ def parse_clip(text: str | bytes, *, suffix: str = "", source: str = "clip") -> 
         document = json.loads(text)
     except ValueError as exc:
         raise ParameterError(f"{source}: not JSON ({exc})") from exc
+    except RecursionError:
+        raise ParameterError(
+            f"{source}: JSON nested deeper than {sys.getrecursionlimit()} levels (max_depth; "
+            f"a clip file nests {CLIP_DEPTH})"
+        ) from None
     kind = detect_format(document, suffix)
     try:
         if kind == "haptic":

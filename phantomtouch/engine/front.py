@@ -258,7 +258,7 @@ class EngineFront:
         the engine process's watchdog). Every contact is published as ``released`` with
         reason ``engine <state>``."""
         with self._lock:
-            self._jobs.drop_all(self.now_frames)
+            self._jobs.drop_all(self.now_frames, fault=state)
             released = self._drop_contacts(f"engine {state}")
             self._admission.forget_starts()
         self._publish(released)

@@ -78,6 +78,10 @@ class JobState:
     requested_start_at_s : float or None
         Server time, s, of ``requested_start_frame`` as :attr:`Job.start_at_s` gave it
         (the clock's mapping of frames to time moves a little as it tracks the card).
+    reason : str or None
+        Why a ``stopped`` job stopped when no one asked it to: ``stolen`` (faded out to
+        make room for another), or the engine's fault (``engine gone before it played``,
+        ``engine stalled while it played``); None otherwise.
     """
 
     job_id: str
@@ -90,6 +94,7 @@ class JobState:
     requested_start_frame: int
     late: bool
     requested_start_at_s: float | None = None
+    reason: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -118,6 +123,7 @@ class JobRecord:
     late: bool = False
     stolen: bool = False
     requested_start_at_s: float | None = None
+    reason: str | None = None
 
     @property
     def first_frame(self) -> int:
@@ -137,6 +143,7 @@ class JobRecord:
             requested_start_frame=self.requested_start_frame,
             late=self.late,
             requested_start_at_s=self.requested_start_at_s,
+            reason="stolen" if self.stolen and self.reason is None else self.reason,
         )
 
 
@@ -248,9 +255,13 @@ class JobTable:
         for record in list(self._live.values()):
             self.mark_stopped(record)
 
-    def drop_all(self, frame: int) -> None:
-        """Every job not over is over from ``frame`` (the engine that played them is gone)."""
+    def drop_all(self, frame: int, *, fault: str = "gone") -> None:
+        """Every job not over is over from ``frame`` (the engine that played them is
+        ``fault``: gone or stalled); each says so in its ``reason``."""
         for record in [*self._live.values(), *self._stopping.values()]:
+            if record.state != "stopped":
+                when = "while it played" if record.first_frame < frame else "before it played"
+                record.reason = f"engine {fault} {when}"
             record.state = "stopped"
             record.end_frame = max(frame, record.first_frame)
             self.retire(record)

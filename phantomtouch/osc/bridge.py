@@ -1,23 +1,27 @@
 """The OSC bridge: a UDP socket, its receive thread, and what each message does.
 
-One thread receives datagrams, parses them with python-osc's packet parser and handles
-each message at once, in arrival order: receiver proximities become live contacts
-(:mod:`~phantomtouch.osc.receivers`), ``/phantomtouch/...`` messages touch, move, lift,
-play and stop (:mod:`~phantomtouch.osc.messages`). It calls the engine's control side
+One thread receives datagrams, takes them apart (:mod:`~phantomtouch.osc.packets`, which
+reads each message with python-osc) and handles each message at once, in arrival order:
+receiver proximities become live contacts (:mod:`~phantomtouch.osc.receivers`),
+``/phantomtouch/...`` messages touch, move, lift, play and stop
+(:mod:`~phantomtouch.osc.messages`). It calls the engine's control side
 (:class:`~phantomtouch.engine.EngineFront`), which never waits for the audio: a move
 reaches the audio at the next block. Bundles are taken apart and their messages applied
 on arrival; their time tags are ignored (python-osc's own dispatcher would sleep until a
 future time tag, which lets one datagram stall the bridge, and drops unparsable
 datagrams without counting them, hence the loop here).
 
-Safety: every message is checked and a bad one dropped and counted
-(:class:`~phantomtouch.osc.counters.OscCounters`); a token bucket bounds the message
-rate. The bridge keeps no contact state: its contacts are held by the engine's front
-(owner ``osc``, :mod:`phantomtouch.engine.owners`), each with the map's ``watchdog_s`` as
-its deadline, which every accepted message pushes on. Silence for ``watchdog_s``
-releases them -- by the front's deadline thread, so also when this thread is gone --
-and so does closing the bridge. A contact that the engine let go of meanwhile (``POST
-/stop``, an engine restart, its deadline) touches down again on its next message.
+Safety: every datagram and message is checked and a bad one dropped, counted
+(:class:`~phantomtouch.osc.counters.OscCounters`) and logged in one line, at most one per
+reason every :data:`LOG_INTERVAL_S`; a token bucket bounds the message rate. The bridge
+keeps no contact state: its contacts are held by the engine's front (owner ``osc``,
+:mod:`phantomtouch.engine.owners`), each with the map's ``watchdog_s`` as its deadline,
+which every accepted message pushes on. Silence for ``watchdog_s`` releases them -- by the
+front's deadline thread, so also when this thread is gone -- and so does closing the
+bridge. The receive thread is supervised: should it die anyway, the bridge's contacts are
+released at once and a new thread started (:meth:`OscBridge.health`). A contact that the
+engine let go of meanwhile (``POST /stop``, an engine restart, its deadline) touches down
+again on its next message.
 """
 
 from __future__ import annotations
@@ -37,10 +41,11 @@ from phantomtouch.osc import messages
 from phantomtouch.osc.counters import OscCounters
 from phantomtouch.osc.mapping import ReceiverMap
 from phantomtouch.osc.receivers import Change, ContactTracker, ReceiverLayout
-from phantomtouch.service.flood import FloodGuard
+from phantomtouch.service.flood import FloodGuard, LimitedLog
+from phantomtouch.service.running import InputHealth
 
 try:
-    from pythonosc.osc_packet import OscPacket, ParseError
+    from phantomtouch.osc.packets import BadDatagram, messages_of
 except ImportError as exc:  # pragma: no cover - the osc extra is missing
     raise ImportError("OSC input needs python-osc: pip install 'phantomtouch[osc]'") from exc
 
@@ -63,6 +68,12 @@ _MAX_DATAGRAM = 65_536
 _RECEIVE_BUFFER_BYTES = 1 << 20
 """Room for bursts (every parameter of an avatar at once) while the thread is busy."""
 _LATENCIES = 1 << 20
+DEGRADED_AFTER_RESTART_S = 60.0
+"""``/health`` names the input as degraded this long after its thread was restarted."""
+MAX_RESTART_PAUSE_S = 1.0
+"""The longest pause before a failed receive thread is started again."""
+LOG_INTERVAL_S = 10.0
+"""Drops of one reason log one line per this interval at most (a flood is counted)."""
 
 
 class OscBridge:
@@ -119,7 +130,10 @@ class OscBridge:
         self._tracker = ContactTracker(receiver_map.smoothing_s)
         self._let_go: collections.deque[str] = collections.deque()
         self._unsubscribe = engine.subscribe_released(self._released, OWNER)
-        self._logged: set[str] = set()
+        self._log = LimitedLog(logger, LOG_INTERVAL_S)
+        self.restarts = 0
+        self.last_failure: str | None = None
+        self._restarted_s: float | None = None
         self._closing = threading.Event()
         self._thread: threading.Thread | None = None
         self._socket = open_socket(host, port)
@@ -144,19 +158,70 @@ class OscBridge:
         self._let_go.extend(contacts)
 
     def start(self) -> None:
-        """Start the receive thread."""
+        """Start the receive thread (in the caller's thread)."""
         self.engine.prepare_carrier(self.map.carrier)
-        self._thread = threading.Thread(target=self._run, name="phantomtouch-osc", daemon=True)
+        self._spawn()
+
+    def health(self) -> InputHealth:
+        """How the receive thread fares (any thread): ``running`` or ``restarting``, its
+        restarts and the last failure; ``degraded`` while it is down or for
+        :data:`DEGRADED_AFTER_RESTART_S` after a restart."""
+        thread = self._thread
+        alive = thread is not None and thread.is_alive()
+        recent = (
+            self._restarted_s is not None
+            and time.monotonic() - self._restarted_s < DEGRADED_AFTER_RESTART_S
+        )
+        return InputHealth(
+            state="running" if alive else "restarting",
+            degraded=not alive or recent,
+            restarts=self.restarts,
+            last_failure=self.last_failure,
+        )
+
+    def _spawn(self) -> None:
+        self._thread = threading.Thread(
+            target=self._supervised, name="phantomtouch-osc", daemon=True
+        )
         self._thread.start()
+
+    def _supervised(self) -> None:
+        """The receive thread: the loop, and what happens if it dies anyway."""
+        try:
+            self._run()
+        except BaseException as exc:  # the input outlives its own failure
+            if not self._closing.is_set():
+                self._restart(exc)
+
+    def _restart(self, exc: BaseException) -> None:
+        """The loop died: release its contacts at once, then start a new thread (after
+        a pause that grows with repeated failures, at most :data:`MAX_RESTART_PAUSE_S`)."""
+        self.restarts += 1
+        self.last_failure = f"{type(exc).__name__}: {exc}"[:200]
+        self._restarted_s = time.monotonic()
+        logger.error(
+            "osc: the receive thread died (%s); its contacts are released and it restarts",
+            self.last_failure,
+        )
+        try:
+            self._release_all("input failed")
+        except Exception as release_exc:  # the engine has its own watchdog
+            logger.error("osc: releasing the bridge's contacts failed (%s)", release_exc)
+        pause_s = min(MAX_RESTART_PAUSE_S, 0.05 * 2 ** min(self.restarts, 10))
+        if not self._closing.wait(pause_s):
+            self._spawn()
 
     def close(self) -> None:
         """Stop receiving and release every contact of the bridge."""
         self._closing.set()
-        if self._thread is not None:
-            self._thread.join()
+        thread = self._thread
+        while thread is not None:
+            thread.join()
+            thread, done = self._thread, thread
+            if thread is done:
+                break
         self._socket.close()
-        self._forget()
-        self.engine.release_owner(OWNER, "closed")
+        self._release_all("closed")
         self._unsubscribe()
 
     def __enter__(self) -> OscBridge:
@@ -176,7 +241,9 @@ class OscBridge:
             except TimeoutError:
                 continue
             except OSError:
-                return
+                if self._closing.is_set():
+                    return
+                raise
             received_s = time.perf_counter()
             while self._let_go:
                 self._tracker.live.pop(self._let_go.popleft(), None)
@@ -186,33 +253,35 @@ class OscBridge:
 
     def _datagram(self, data: bytes, now_s: float) -> None:
         try:
-            packet = OscPacket(data)
-        except ParseError as exc:
-            self._drop("malformed", f"a datagram of {len(data)} bytes is not OSC ({exc})")
+            found = messages_of(data)
+        except BadDatagram as exc:
+            self._drop(exc.reason, f"a datagram of {len(data)} bytes: {exc}")
             return
-        for timed in packet.messages:
-            message = timed.message
+        for address, args in found:
             if not self._flood.admit(now_s):
                 self._drop("flood", f"over the rate limit of {self._flood.rate_per_s:g}/s")
                 continue
             try:
-                self._handle(message.address, tuple(message.params), now_s)
+                self._handle(address, args, now_s)
             except messages.BadMessage as exc:
                 self._drop(exc.reason, str(exc))
             except PhantomTouchError as exc:
                 self._drop("refused", str(exc))
-            except Exception:  # the loop (and its watchdog) must outlive any message
-                logger.exception("osc: %s failed", message.address)
-                self.counters.count("refused")
+            except Exception as exc:  # the loop (and its watchdog) must outlive any message
+                self._drop("failed", f"{address[:64]}: {type(exc).__name__}: {exc}")
             else:
                 self.counters.count("accepted")
                 self.engine.renew_owner(OWNER)
 
     def _drop(self, reason: str, message: str) -> None:
         self.counters.count(reason)
-        if reason not in self._logged:
-            self._logged.add(reason)
-            logger.warning("osc: dropped (%s): %s; later ones are only counted", reason, message)
+        self._log.warning(reason, f"osc: dropped ({reason}): {message}")
+
+    def _release_all(self, reason: str) -> None:
+        """Forget the smoothing state and let the front release every contact of the
+        bridge, published with ``reason`` (the receive thread, or the one closing it)."""
+        self._forget()
+        self.engine.release_owner(OWNER, reason)
 
     def _forget(self) -> None:
         self._tracker.forget()

@@ -1,7 +1,9 @@
 """What the OSC bridge accepted and what it dropped, and why.
 
 Every received message is counted once: ``accepted``, or dropped for one reason. A
-datagram that is not OSC at all counts once as ``malformed``.
+datagram dropped as a whole (not OSC, too deep, ...) counts once. Drops are logged one
+line each, at most one line per reason and interval
+(:class:`~phantomtouch.service.flood.LimitedLog`).
 """
 
 from __future__ import annotations
@@ -10,16 +12,24 @@ import threading
 
 REASONS = (
     "malformed",
+    "not_utf8",
+    "bad_type_tag",
+    "too_deep",
+    "bad_bundle_size",
     "unknown_address",
     "bad_arguments",
     "not_finite",
     "out_of_range",
     "flood",
     "refused",
+    "failed",
 )
-"""Why a message is dropped: not OSC; an address the bridge does not know; arguments of
-the wrong type or number; NaN or infinity; a value outside its range; over the message
-rate; refused by the engine or the library (a contact quota, an unknown pattern)."""
+"""Why a message is dropped: not OSC or cut short; an address or string that is not
+UTF-8; unknown type tags; bundles nested too deep; a bundle element whose declared size
+exceeds what follows (:mod:`~phantomtouch.osc.packets`); an address the bridge does not
+know; arguments of the wrong type or number; NaN or infinity; a value outside its range;
+over the message rate; refused by the engine or the library (a contact quota, an unknown
+pattern); its handling failed unexpectedly (logged, the bridge goes on)."""
 
 
 class OscCounters:

@@ -6,7 +6,8 @@
 client ``osc``; the bridge's thread waits for it (planning takes a millisecond or so, a new
 noise band about 60 ms the first time), at most ``PLAY_TIMEOUT_S``.
 ``/phantomtouch/stop`` is :meth:`Service.stop_everything`. The bridge's
-counts appear in ``/metrics`` as ``phantomtouch_osc_messages_total{outcome}``.
+counts appear in ``/metrics`` as ``phantomtouch_osc_messages_total{outcome}`` (with
+``phantomtouch_osc_restarts_total``), and its health in ``/health`` under ``inputs``.
 """
 
 from __future__ import annotations
@@ -51,6 +52,11 @@ class _Counts(Collector):
             "phantomtouch_osc_watchdog_releases",
             "Times silence on OSC released the bridge's contacts.",
             value=self.bridge.watchdog_releases,
+        )
+        yield CounterMetricFamily(
+            "phantomtouch_osc_restarts",
+            "Times the OSC receive thread died and was started again (its contacts released).",
+            value=self.bridge.restarts,
         )
 
 
@@ -100,6 +106,7 @@ def start_osc(service: Service) -> OscBridge:
         rate_per_s=settings.osc_messages_per_s,
     )
     service.metrics.registry.register(_Counts(bridge))
+    service.inputs[OWNER] = bridge.health
     bridge.start()
     return bridge
 

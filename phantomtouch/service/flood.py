@@ -8,10 +8,15 @@ ends only when the client is calm again: no message refused for ``calm_s``, or a
 second's worth of messages (``rate_per_s``) admitted since the last refusal. The few
 messages the refilled bucket admits in between, or a burst it admits after the server
 was held up for a moment, do not end it.
+
+:class:`LimitedLog` keeps a flood of refusals from flooding the log: one line per kind
+of refusal and interval, with how many were held back.
 """
 
 from __future__ import annotations
 
+import logging
+import threading
 import time
 
 CLOSE_AFTER_S = 1.0
@@ -72,3 +77,34 @@ class FloodGuard:
     def sustained(self, now_s: float) -> bool:
         """Whether the connection has stayed over its rate for ``close_after_s``."""
         return self._flood_since_s is not None and now_s - self._flood_since_s >= self.close_after_s
+
+
+class LimitedLog:
+    """Warnings of one kind, one line per ``interval_s`` at most, with how many were held back.
+
+    Parameters
+    ----------
+    logger : logging.Logger
+    interval_s : float, > 0
+        Lines of one ``kind`` are at least this far apart; the ones between are counted and
+        the next line says how many.
+    """
+
+    def __init__(self, logger: logging.Logger, interval_s: float) -> None:
+        self._logger = logger
+        self._interval_s = interval_s
+        self._lock = threading.Lock()
+        self._next_s: dict[str, float] = {}
+        self._held: dict[str, int] = {}
+
+    def warning(self, kind: str, line: str) -> None:
+        """Log ``line`` unless a line of ``kind`` was logged within the interval."""
+        now_s = time.monotonic()
+        with self._lock:
+            if now_s < self._next_s.get(kind, 0.0):
+                self._held[kind] = self._held.get(kind, 0) + 1
+                return
+            self._next_s[kind] = now_s + self._interval_s
+            held = self._held.pop(kind, 0)
+        suffix = f" ({held} more like it in the last {self._interval_s:g} s)" if held else ""
+        self._logger.warning("%s%s", line, suffix)

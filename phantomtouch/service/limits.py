@@ -31,22 +31,29 @@ def is_open_path(path: str) -> bool:
 def token_matches(scope: Scope, token: str) -> bool:
     """Whether the request carries ``token``: ``Authorization: Bearer`` or ``?token=``.
 
-    Both sides are compared as bytes with ``hmac.compare_digest`` (its time does not depend
-    on where they differ; ``str`` with non-ASCII characters it refuses): the header as it
-    came off the wire, the query value percent-decoded as UTF-8, the token as UTF-8.
+    One guess per request: a request with a Bearer ``Authorization`` header is judged by
+    it alone, and one with several Bearer headers or several ``token`` query parameters
+    never matches (``?token=wrong&token=right`` is refused). Both sides are
+    compared as bytes with ``hmac.compare_digest`` (its time does not depend on where they
+    differ; ``str`` with non-ASCII characters it refuses): the header as it came off the
+    wire, the query value percent-decoded as UTF-8, the token as UTF-8.
     """
     expected = token.encode()
-    header = Headers(scope=scope).get("authorization", "")
-    scheme, _, given = header.partition(" ")
-    if scheme.lower() == "bearer" and hmac.compare_digest(
-        given.strip().encode("latin-1"), expected
-    ):
-        return True
+    bearers = [
+        given
+        for scheme, _, given in (
+            value.partition(" ") for value in Headers(scope=scope).getlist("authorization")
+        )
+        if scheme.lower() == "bearer"
+    ]
+    if bearers:
+        return len(bearers) == 1 and hmac.compare_digest(
+            bearers[0].strip().encode("latin-1"), expected
+        )
     if scope["type"] == "websocket":
         query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
-        return any(
-            hmac.compare_digest(value.encode(), expected) for value in query.get("token", [])
-        )
+        values = query.get("token", [])
+        return len(values) == 1 and hmac.compare_digest(values[0].encode(), expected)
     return False
 
 

@@ -7,6 +7,7 @@ figures (active voices, underruns, late commands, peak level ...) are read from
 
 from __future__ import annotations
 
+import collections
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -37,6 +38,24 @@ _INGEST_BUCKETS_S = (
 )
 
 StatusReader = Callable[[], dict[str, Any]]
+
+FRAME_REFUSALS: collections.Counter[str] = collections.Counter()
+"""WebSocket frames refused before any session reads them, by reason (``invalid_utf8``):
+counted by the server's protocol (:mod:`phantomtouch.server.wire`, on the event loop),
+one count per process, which serves one app."""
+
+
+class _FrameCollector(Collector):
+    def collect(self) -> Iterator[Metric]:
+        family = CounterMetricFamily(
+            "phantomtouch_ws_refused_frames",
+            "WebSocket frames refused by the protocol before a session read them, by reason "
+            "(invalid_utf8: a text frame that is not UTF-8, closed with 1007).",
+            labels=["reason"],
+        )
+        for reason in ("invalid_utf8", *sorted(set(FRAME_REFUSALS) - {"invalid_utf8"})):
+            family.add_metric([reason], FRAME_REFUSALS[reason])
+        yield family
 
 
 class _EngineCollector(Collector):
@@ -192,6 +211,7 @@ class Metrics:
         )
         self._engine = _EngineCollector()
         self.registry.register(self._engine)
+        self.registry.register(_FrameCollector())
 
     def watch_engine(self, read: StatusReader | None) -> None:
         """Read the engine's figures with ``read`` at scrape time (None: stop)."""

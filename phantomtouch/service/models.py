@@ -348,6 +348,12 @@ class JobInfo(BaseModel):
     end_frame: int
     duration_s: float = Field(description="The pattern's duration, s.")
     late: bool = Field(description="It started after its requested start.")
+    reason: str | None = Field(
+        default=None,
+        description="Why a stopped job stopped unasked: `stolen` (room for another), or "
+        "the engine's fault (`engine gone before it played`, `engine stalled while it "
+        "played`: accepted just before the fault was noticed).",
+    )
 
 
 class StopAnswer(BaseModel):
@@ -396,10 +402,18 @@ class ClockInfo(BaseModel):
     unix_time_s: float
 
 
+class InputState(BaseModel):
+    """One supervised input (``osc``): ``running`` or ``restarting``."""
+
+    state: str = Field(description="running, or restarting after its thread died")
+    restarts: int = Field(description="Times its thread died and was started again.")
+    last_failure: str | None = Field(default=None, description="What killed it last.")
+
+
 class Health(BaseModel):
     """``ok``; or ``degraded`` with the part that fails named (the service still runs):
     ``engine`` while the engine process is being restarted, ``storage`` when the pattern
-    store fails."""
+    store fails, ``degraded_inputs`` while an input is down or was just restarted."""
 
     status: Literal["ok", "degraded"] = "ok"
     backend: str
@@ -412,6 +426,13 @@ class Health(BaseModel):
     )
     storage: str | None = Field(
         default=None, description="Why the pattern store fails (only when it does)."
+    )
+    inputs: dict[str, InputState] | None = Field(
+        default=None, description="Supervised inputs (the OSC bridge), when any runs."
+    )
+    degraded_inputs: list[str] | None = Field(
+        default=None,
+        description="Inputs down, or restarted within the last minute (only when any is).",
     )
 
 

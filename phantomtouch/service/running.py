@@ -21,10 +21,24 @@ from phantomtouch.service.store import PatternStore
 
 if TYPE_CHECKING:
     import asyncio
-    from collections.abc import Iterator
+    from collections.abc import Callable, Iterator
     from contextlib import AbstractContextManager
 
     from phantomtouch.engine import EngineFront
+
+
+@dataclass(frozen=True)
+class InputHealth:
+    """How one input (the OSC bridge) fares, for ``/health``.
+
+    ``state`` is ``running`` or ``restarting``; ``degraded`` while it is down or shortly
+    after it was restarted; ``restarts`` since start; ``last_failure`` what killed it last.
+    """
+
+    state: str
+    degraded: bool
+    restarts: int
+    last_failure: str | None
 
 
 @dataclass
@@ -41,6 +55,8 @@ class Service:
     connections: ConnectionCaps = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
+    inputs: dict[str, Callable[[], InputHealth]] = field(default_factory=dict, init=False)
+    """Supervised inputs by name (``osc``): how each fares, for ``/health``."""
     loop: asyncio.AbstractEventLoop | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:

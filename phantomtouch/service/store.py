@@ -20,6 +20,7 @@ import builtins
 import json
 import logging
 import shlex
+import shutil
 import sqlite3
 import threading
 import time
@@ -110,10 +111,14 @@ class PatternStore:
             db.execute(_CLIP_SCHEMA)
         except sqlite3.DatabaseError as exc:
             if isinstance(exc, sqlite3.OperationalError):
-                raise DeviceError(f"cannot open the pattern store {str(path)!r}: {exc}") from exc
+                raise DeviceError(
+                    f"cannot open the pattern store {str(path)!r}: {_full_disk(path) or exc}"
+                ) from exc
             raise DamagedStoreError(path, str(exc)) from exc
         except (OSError, sqlite3.Error) as exc:
-            raise DeviceError(f"cannot open the pattern store {str(path)!r}: {exc}") from exc
+            raise DeviceError(
+                f"cannot open the pattern store {str(path)!r}: {_full_disk(path) or exc}"
+            ) from exc
         return cls(db, path)
 
     def close(self) -> None:
@@ -127,7 +132,7 @@ class PatternStore:
             try:
                 yield self._db
             except sqlite3.Error as exc:
-                self.problem = _reason(exc)
+                self.problem = _reason(exc, self.path)
                 raise StorageError(
                     f"the pattern store {str(self.path)!r} failed: {self.problem}"
                 ) from exc
@@ -235,10 +240,29 @@ class PatternStore:
         return self._delete("clips", name)
 
 
-def _reason(exc: sqlite3.Error) -> str:
+FULL_DISK_BYTES = 1 << 20
+"""Less free space than this on the store's disk names a failure as the full disk (SQLite
+says ``disk I/O error`` when it cannot create its shared-memory file, 32 KiB)."""
+
+
+def _full_disk(path: Path) -> str | None:
+    """``the disk is full (...)`` if the disk holding ``path`` has almost no room, else None."""
+    try:
+        free = shutil.disk_usage(path.parent).free
+    except OSError:
+        return None
+    if free >= FULL_DISK_BYTES:
+        return None
+    return f"the disk is full ({free} bytes free in {str(path.parent)!r}); free some space"
+
+
+def _reason(exc: sqlite3.Error, path: Path | None = None) -> str:
     """SQLite's failure in words a reader of ``/health`` can act on."""
     if isinstance(exc, sqlite3.OperationalError) and "full" in str(exc):
         return f"the disk is full ({exc})"
+    full = _full_disk(path) if path is not None else None
+    if full is not None:
+        return f"{full} ({exc})"
     if isinstance(exc, sqlite3.DatabaseError) and "malformed" in str(exc):
         return f"the file is damaged ({exc})"
     return str(exc)

@@ -174,3 +174,32 @@ def test_the_sound_card_vanishes_then_comes_back(tmp_path: Path) -> None:
             assert health(client)["backend"] == "sounddevice"
     finally:
         card.stop()
+
+
+@pytest.mark.parametrize(
+    ("fault", "named"), [(signal.SIGSTOP, "stalled"), (signal.SIGKILL, "gone")]
+)
+def test_a_touch_accepted_before_the_fault_is_noticed_says_why_it_never_played(
+    live_null: LiveServer, fault: signal.Signals, named: str
+) -> None:
+    live = live_null
+    with httpx.Client(base_url=live.url, timeout=10) as client:
+        old = engine_pid(live)
+        os.kill(old, fault)
+        try:
+            # Sent at once: the fault is noticed 0.1-0.6 s later, so these are accepted
+            # (202) into an engine that will never play them, or refused (503) once noticed.
+            answers = [client.post("/touch", json=LONG_TOUCH) for _ in range(3)]
+            accepted = [a.json()["job_id"] for a in answers if a.status_code == 202]
+            assert accepted, [a.status_code for a in answers]
+            assert all(a.status_code in (202, 503) for a in answers)
+            wait_for(lambda: health(client)["status"] == "degraded", timeout_s=3.0, server=live)
+            for job_id in accepted:
+                job = client.get(f"/jobs/{job_id}").json()
+                assert job["state"] == "stopped"
+                assert job["reason"] == f"engine {named} before it played"
+                assert job["end_frame"] == job["start_frame"]  # not one frame sounded
+        finally:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(old, signal.SIGCONT)
+        wait_for(lambda: health(client)["engine"] == "running", timeout_s=60.0, server=live)

@@ -8,8 +8,10 @@ naming the cause, and ``/health`` says ``degraded`` and why.
 
 from __future__ import annotations
 
+import contextlib
 import sqlite3
 import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -71,6 +73,31 @@ def test_a_full_disk_answers_503_storage_and_health_degraded(
         assert len(listed.json()) == answers.count(200)
         log = server.log()
     assert "Traceback" not in log
+
+
+def test_serve_on_a_full_disk_exits_naming_the_full_disk_in_one_line(small_disk: Path) -> None:
+    # A library written earlier; then the disk fills up (SQLite then cannot create its
+    # shared-memory file and says only "disk I/O error").
+    db = small_disk / "patterns.db"
+    connection = sqlite3.connect(db)
+    connection.execute("PRAGMA journal_mode=WAL")
+    connection.execute("CREATE TABLE earlier (a)")
+    connection.close()
+    with contextlib.suppress(OSError), (small_disk / "filler").open("wb") as filler:
+        while True:
+            filler.write(b"\0" * 4096)
+            filler.flush()
+    done = subprocess.run(
+        [sys.executable, "-m", "phantomtouch", "serve", "--output", "null", "--db", str(db)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode != 0
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert "disk is full" in lines[0]
+    assert str(small_disk) in lines[0]
 
 
 def test_a_damaged_page_answers_503_storage_and_health_degraded(tmp_path: Path) -> None:

@@ -13,7 +13,14 @@ from phantomtouch.server.deps import EngineDep, ServiceDep
 from phantomtouch.service import scheduling
 from phantomtouch.service.errors import responses
 from phantomtouch.service.metrics import CONTENT_TYPE
-from phantomtouch.service.models import ClockInfo, DeviceInfo, Health, PlanSummary, PresetInfo
+from phantomtouch.service.models import (
+    ClockInfo,
+    DeviceInfo,
+    Health,
+    InputState,
+    PlanSummary,
+    PresetInfo,
+)
 
 router = APIRouter(tags=["info"])
 
@@ -86,13 +93,23 @@ async def get_health(service: ServiceDep) -> Health:
     (its figures come from shared memory)."""
     status = service.engine.status()
     problem = service.store.problem
+    inputs = {name: health() for name, health in service.inputs.items()}
+    degraded = sorted(name for name, state in inputs.items() if state.degraded)
     return Health(
-        status="ok" if status.state == "running" and problem is None else "degraded",
+        status="ok"
+        if status.state == "running" and problem is None and not degraded
+        else "degraded",
         backend=status.backend,
         engine=status.state,
         underruns=status.underruns,
         render_load_p99=status.render_load_p99,
         storage=problem,
+        inputs={
+            name: InputState(state=s.state, restarts=s.restarts, last_failure=s.last_failure)
+            for name, s in inputs.items()
+        }
+        or None,
+        degraded_inputs=degraded or None,
     )
 
 

@@ -93,20 +93,27 @@ def job_info(engine: EngineFront, job_id: str) -> JobInfo:
         end_frame=state.end_frame,
         duration_s=state.duration_s,
         late=state.late,
+        reason=state.reason,
     )
 
 
 @router.get(
-    "/jobs/{job_id}", response_model=JobInfo, responses=responses(401, 404, 422), summary="A job"
+    "/jobs/{job_id}",
+    response_model=JobInfo,
+    response_model_exclude_none=True,
+    responses=responses(401, 404, 422),
+    summary="A job",
 )
 async def get_job(job_id: JobIdParam, engine: EngineDep) -> JobInfo:
-    """Where a job is: `scheduled`, `playing`, `finished` or `stopped`."""
+    """Where a job is: `scheduled`, `playing`, `finished` or `stopped` (with a `reason`
+    when it stopped unasked: stolen, or the engine's fault)."""
     return job_info(engine, job_id)
 
 
 @router.delete(
     "/jobs/{job_id}",
     response_model=JobInfo,
+    response_model_exclude_none=True,
     responses=responses(401, 404, 422),
     summary="Stop a job",
 )
