@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from phantomtouch.errors import DeviceError
+from phantomtouch.fleet.errors import FleetJoinError
 from phantomtouch.fleet.settings import FleetSettings
 
 logger = logging.getLogger("phantomtouch.fleet")
@@ -32,7 +32,7 @@ async def connect(settings: FleetSettings, name: str) -> Any:
 
     Raises
     ------
-    DeviceError
+    FleetJoinError
         No server of ``settings.servers`` accepted the connection (the message names
         the servers, never the credentials).
     """
@@ -76,7 +76,7 @@ async def connect(settings: FleetSettings, name: str) -> Any:
     try:
         client = await nats.connect(**options)
     except Exception as exc:
-        raise DeviceError(
+        raise FleetJoinError(
             f"fleet: no NATS server of {', '.join(settings.servers)} accepted the connection "
             f"({type(exc).__name__})"
         ) from None

@@ -146,7 +146,7 @@ class GatewaySession:
     ) -> None:
         client = self.gateway.client
         if kind == "hello":
-            records = await self.gateway.registry.online()
+            records = self.gateway.registry.online()
             assert self.grant is not None
             await self._send(
                 {

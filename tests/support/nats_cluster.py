@@ -1,6 +1,7 @@
 """A real NATS cluster (``nats-server``, JetStream on) on loopback ports, for tests.
 
-Three servers by default, each with its own store folder, client port, cluster port and
+Three servers by default (JetStream may be left off, as on a server that has no registry),
+each with its own store folder, client port, cluster port and
 monitoring port, all on 127.0.0.1; :meth:`NatsCluster.kill` ends one with SIGKILL, as in a
 crash, and :meth:`NatsCluster.restart` brings it back. Missing ``nats-server`` fails the
 test under ``CI=true`` and skips it elsewhere (:func:`require_nats_server`).
@@ -43,11 +44,18 @@ class NatsCluster:
     """``size`` clustered ``nats-server`` processes with JetStream, in ``folder``."""
 
     def __init__(
-        self, folder: Path, *, size: int = 3, user: str | None = None, password: str | None = None
+        self,
+        folder: Path,
+        *,
+        size: int = 3,
+        user: str | None = None,
+        password: str | None = None,
+        jetstream: bool = True,
     ) -> None:
         self.binary = require_nats_server()
         self.folder = folder
         self.size = size
+        self.jetstream = jetstream
         self.user = user
         self.password = password
         self.client_ports = [free_port() for _ in range(size)]
@@ -76,6 +84,9 @@ class NatsCluster:
 server_name: n{index}
 listen: {HOST}:{self.client_ports[index]}
 http: {HOST}:{self.monitor_ports[index]}
+"""
+        if self.jetstream:
+            text += f"""
 jetstream {{
   store_dir: "{store}"
   max_memory_store: 64MB
