@@ -99,4 +99,3 @@ def test_a_gateway_that_cannot_read_the_registry_exits_1(tmp_path: Path) -> None
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("phantomtouch gateway: fleet: gateway-")
     assert "could not open the registry within 1 s" in last
-
