@@ -47,7 +47,13 @@ from phantomtouch.server.bodies import strict_body
 from phantomtouch.server.errors import UnauthorizedError
 from phantomtouch.server.limits import BodyLimitMiddleware
 from phantomtouch.server.metrics import CONTENT_TYPE, Metrics, MetricsMiddleware
-from phantomtouch.server.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
+from phantomtouch.server.origin import (
+    ContentTypeMiddleware,
+    HostOriginMiddleware,
+    HostPolicy,
+    OriginPolicy,
+    Refusals,
+)
 
 logger = logging.getLogger("phantomtouch.fleet")
 
@@ -324,12 +330,15 @@ def create_gateway(settings: GatewaySettings, fleet: FleetSettings) -> FastAPI:
     )
     errors.install(app)
     app.include_router(router)
+    refusals = Refusals(metrics)
+    # Outermost last: metrics, Host and Origin, content type, body size (as the service).
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
+    app.add_middleware(ContentTypeMiddleware, refusals=refusals)
     app.add_middleware(
         HostOriginMiddleware,
         hosts=HostPolicy.build(settings.host, settings.allowed_hosts),
         origins=OriginPolicy.build([]),
-        refusals=Refusals(metrics),
+        refusals=refusals,
     )
     app.add_middleware(MetricsMiddleware, metrics=metrics)
     return app
