@@ -65,10 +65,10 @@ def attachment(
 ) -> Callable[[Service], AbstractAsyncContextManager[None]] | None:
     """What ``serve`` attaches to the service: the armband node, or None without ``--fleet``."""
     if args.fleet is None:
-        if args.armband is not None or args.site is not None or args.fleet_insecure:
-            raise ParameterError(
-                "--armband, --site and --fleet-insecure need --fleet nats://HOST:4222"
-            )
+        if args.armband is not None or args.site is not None:
+            raise ParameterError("--armband and --site need --fleet nats://HOST:4222")
+        if args.fleet_insecure:
+            raise ParameterError("--fleet-insecure needs --fleet nats://HOST:4222")
         return None
     if args.armband is None:
         raise ParameterError("--fleet needs --armband ID: the id this armband has in the fleet")

@@ -13,7 +13,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import httpx
@@ -37,32 +36,24 @@ def test_three_nodes_and_a_gateway_started_together_register_every_time(
 
 
 def test_real_processes_started_at_the_same_instant_all_register(tmp_path: Path) -> None:
+    """Launched together; each engine measures its render budget first, which takes long
+    on a busy machine, so the bound here is generous: what counts is that none exits."""
     with NatsCluster(tmp_path / "nats") as cluster:
         nodes = [ArmbandNode(tmp_path, cluster, f"r{i}", "lab") for i in range(3)]
         gateway = Gateway(tmp_path, cluster)
-        starters = [*nodes, gateway]
-        barrier = threading.Barrier(len(starters))
-        errors: list[BaseException] = []
-
-        def start(part: ArmbandNode | Gateway) -> None:
-            barrier.wait()
-            try:
-                part.start()
-            except BaseException as exc:
-                errors.append(exc)
-
-        threads = [threading.Thread(target=start, args=(part,)) for part in starters]
         try:
-            for thread in threads:
-                thread.start()
-            for thread in threads:
-                thread.join(60.0)
-            assert errors == []
+            processes = [part.launch() for part in (*nodes, gateway)]
 
             def listed() -> set[str]:
-                return {r["armband"] for r in httpx.get(f"{gateway.url}/armbands").json()}
+                exited = [p.args for p in processes if p.poll() is not None]
+                assert exited == [], "\n".join(part.log() for part in (*nodes, gateway))
+                try:
+                    answer = httpx.get(f"{gateway.url}/armbands", timeout=2.0)
+                except httpx.TransportError:
+                    return set()
+                return {r["armband"] for r in answer.json()}
 
-            wait_until(lambda: listed() == {"r0", "r1", "r2"}, 10.0, "all three listed")
+            wait_until(lambda: listed() == {"r0", "r1", "r2"}, 120.0, "all three listed")
         finally:
             gateway.stop()
             for node in nodes:
@@ -73,7 +64,7 @@ def test_a_node_that_cannot_register_says_why_in_one_line_and_exits_1(tmp_path: 
     with NatsCluster(tmp_path / "nats", size=1, jetstream=False) as cluster:
         command = [sys.executable, "-m", "phantomtouch", "serve", "--output", "null"]
         command += ["--host", HOST, "--port", str(free_port()), "--db", str(tmp_path / "a.db")]
-        command += ["--fleet", cluster.servers, "--armband", "x1"]
+        command += ["--fleet", cluster.servers, "--armband", "x1", "--fleet-insecure"]
         env = {"PHANTOMTOUCH_FLEET_START_DEADLINE_S": "1", "PHANTOMTOUCH_ENGINE_PROCESS": "false"}
         done = subprocess.run(
             command, env={**os.environ, **env}, capture_output=True, text=True, timeout=60
@@ -89,7 +80,7 @@ def test_a_node_that_cannot_register_says_why_in_one_line_and_exits_1(tmp_path: 
 def test_a_gateway_that_cannot_read_the_registry_exits_1(tmp_path: Path) -> None:
     with NatsCluster(tmp_path / "nats", size=1, jetstream=False) as cluster:
         command = [sys.executable, "-m", "phantomtouch", "gateway", "--fleet", cluster.servers]
-        command += ["--port", str(free_port())]
+        command += ["--port", str(free_port()), "--insecure-nats"]
         env = {"PHANTOMTOUCH_FLEET_START_DEADLINE_S": "1"}
         done = subprocess.run(
             command, env={**os.environ, **env}, capture_output=True, text=True, timeout=60

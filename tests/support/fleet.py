@@ -66,6 +66,14 @@ class ArmbandNode(LiveServer):
             output=output,
         )
 
+    def launch(self) -> subprocess.Popen[bytes]:
+        """Start the process without waiting for it (:meth:`start` waits until healthy)."""
+        with self.log_path.open("ab") as log:
+            self.process = subprocess.Popen(
+                self.command(), env={**os.environ, **self.env}, stdout=log, stderr=subprocess.STDOUT
+            )
+        return self.process
+
     def played(self) -> list[dict[str, Any]]:
         """The ``start`` records of jobs in the stimulus log so far."""
         if not self.stimulus_log.exists():
@@ -117,7 +125,8 @@ class Gateway:
     def ws_url(self) -> str:
         return f"ws://{HOST}:{self.port}/ws"
 
-    def start(self) -> Gateway:
+    def launch(self) -> subprocess.Popen[bytes]:
+        """Start the process without waiting for it (:meth:`start` waits until healthy)."""
         command = [sys.executable, "-m", "phantomtouch", "gateway", "--fleet"]
         command += [self.cluster.servers, "--port", str(self.port)]
         if not self.cluster.secured:
@@ -126,6 +135,10 @@ class Gateway:
             self.process = subprocess.Popen(
                 command, env={**os.environ, **self.env}, stdout=log, stderr=subprocess.STDOUT
             )
+        return self.process
+
+    def start(self) -> Gateway:
+        self.process = self.launch()
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
