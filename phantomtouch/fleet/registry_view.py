@@ -14,8 +14,8 @@ through a failover, and the last ones expire ``STALL_S`` after their TTL when al
 have died.
 
 The watch is started again when it has been silent for :data:`SILENT_HEARTBEATS`
-heartbeats while records exist (its consumer may have lived on the server that died);
-the new watch replays the last value of every key.
+heartbeats (its consumer may have lived on the server that died; with no record at all,
+every three seconds); the new watch replays the last value of every key.
 """
 
 from __future__ import annotations
@@ -127,9 +127,7 @@ class RegistryView:
                     await self._rewatch()
                 entry = await self._watcher.updates(timeout=self._silence_s())
             except (nats.errors.Error, TimeoutError) as exc:
-                if self._watcher is not None and not self._entries:
-                    continue
-                if self._watcher is not None:
+                if self._watcher is not None and self._entries:
                     logger.info("fleet: registry watch silent (%s); watching again", exc)
                 self._watcher = None
                 await asyncio.sleep(REWATCH_PAUSE_S)
