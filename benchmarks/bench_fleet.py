@@ -18,6 +18,9 @@ time, and everything stays on 127.0.0.1. Measured:
   applied says how many reached the engine (published moves are never queued for a
   client: a move the node never saw is lost, the next one carries the position).
 
+- start-up, listings across a server loss and refusal latency
+  (:mod:`benchmarks.fleet_failures`), each beside its yardstick.
+
 Run: ``python benchmarks/bench_fleet.py [--quick] [--json]``. The figures depend on what
 else the machine runs (two cores shared by 3 NATS servers, N nodes, the gateway and this
 client): compare them with the yardstick of the same run.
@@ -38,6 +41,8 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import fleet_failures
 
 from tests.support.fleet import ArmbandNode, Gateway, wait_until
 from tests.support.nats_cluster import NatsCluster
@@ -256,6 +261,8 @@ def run(quick: bool, concurrency: int) -> dict[str, Any]:
     folder = Path(tempfile.mkdtemp(prefix="bench-fleet-"))
     results: dict[str, Any] = {"concurrency": concurrency, "fleets": {}}
     with NatsCluster(folder / "nats") as cluster:
+        print("measuring simultaneous start-ups ...", file=sys.stderr, flush=True)
+        results["startup"] = fleet_failures.startup(cluster, 5 if quick else 20)
         nodes: list[ArmbandNode] = []
         gateway = Gateway(folder, cluster, env=GATEWAY_ENV).start()
         try:
@@ -284,6 +291,13 @@ def run(quick: bool, concurrency: int) -> dict[str, Any]:
             results["contact_moves"] = asyncio.run(
                 contact_moves(gateway, nodes[0], 2000 if quick else 10000)
             )
+            print("measuring listings across a server loss ...", file=sys.stderr, flush=True)
+            armbands = {n.armband for n in nodes}
+            results["listings"] = fleet_failures.listings_across_loss(
+                cluster, gateway, armbands, 50
+            )
+            print("measuring refusal latency ...", file=sys.stderr, flush=True)
+            results["refusals"] = fleet_failures.refusals(cluster, gateway, nodes[-1], nodes[0])
         finally:
             gateway.stop()
             for node in nodes:
@@ -316,6 +330,7 @@ def report(results: dict[str, Any]) -> None:
         f"live contact: {moves['moves_per_s']:.0f} moves/s through the gateway; "
         f"{moves['applied_by_node']:.0f} of {moves['sent']} applied by the node"
     )
+    fleet_failures.report(results)
 
 
 def main() -> int:

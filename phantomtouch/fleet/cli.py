@@ -2,7 +2,10 @@
 
 ``phantomtouch serve --fleet nats://HOST:4222 --armband ID [--site NAME]`` joins the
 service to a fleet as an armband node; ``phantomtouch gateway --fleet nats://...`` runs a
-gateway. NATS credentials come from the environment (docs/fleet.md), never from a flag.
+gateway; ``phantomtouch fleet-config`` writes a closed NATS configuration for them. NATS
+credentials come from the environment (docs/fleet.md), never from a flag. Both refuse a
+NATS server open to anonymous publishers unless told they may
+(:mod:`phantomtouch.fleet.openness`).
 """
 
 from __future__ import annotations
@@ -27,6 +30,12 @@ def add_serve_options(serve: argparse.ArgumentParser) -> None:
     )
     serve.add_argument("--armband", help="this armband's id in the fleet (with --fleet)")
     serve.add_argument("--site", help="this armband's site in the fleet (default: 'default')")
+    serve.add_argument(
+        "--fleet-insecure",
+        action="store_true",
+        help="join even a NATS server that lets anonymous clients publish on the armbands' "
+        "subjects (anyone reaching it can play on every armband)",
+    )
 
 
 def _fleet_settings(args: argparse.Namespace, **more: Any) -> FleetSettings:
@@ -58,6 +67,8 @@ def attachment(
     if args.fleet is None:
         if args.armband is not None or args.site is not None:
             raise ParameterError("--armband and --site need --fleet nats://HOST:4222")
+        if args.fleet_insecure:
+            raise ParameterError("--fleet-insecure needs --fleet nats://HOST:4222")
         return None
     if args.armband is None:
         raise ParameterError("--fleet needs --armband ID: the id this armband has in the fleet")
@@ -65,6 +76,10 @@ def attachment(
     from phantomtouch.fleet.node import attach
 
     settings = _fleet_settings(args, armband=args.armband, site=args.site)
+    if not args.fleet_insecure:
+        from phantomtouch.fleet.openness import require_closed
+
+        require_closed(settings.servers, "--fleet-insecure")
     print(
         f"phantomtouch serve: armband {settings.armband!r} of site {settings.site!r} on the "
         f"fleet at {', '.join(settings.servers)}"
@@ -90,6 +105,10 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
         raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
     fleet = _fleet_settings(args)
     check_port_free(settings.host, settings.port)
+    if not args.insecure_nats:
+        from phantomtouch.fleet.openness import require_closed
+
+        require_closed(fleet.servers, "--insecure-nats")
     print(
         f"phantomtouch gateway: http://{settings.host}:{settings.port} for the fleet at "
         f"{', '.join(fleet.servers)}",
@@ -119,4 +138,45 @@ def register(sub: Any) -> None:
     gateway.add_argument(
         "--token", help="a token of every armband (also PHANTOMTOUCH_GATEWAY_TOKEN)"
     )
+    gateway.add_argument(
+        "--insecure-nats",
+        action="store_true",
+        help="run even on a NATS server that lets anonymous clients publish on the armbands' "
+        "subjects (anyone reaching it can play on every armband)",
+    )
     gateway.set_defaults(func=_cmd_gateway)
+    config = sub.add_parser(
+        "fleet-config",
+        help="write a closed NATS configuration: a user per armband node and per gateway",
+    )
+    config.add_argument(
+        "--armband",
+        action="append",
+        default=[],
+        metavar="ID:SITE",
+        help="an armband node's id and site (repeat for each)",
+    )
+    config.add_argument(
+        "--gateway", action="append", default=[], metavar="NAME", help="a gateway (repeat)"
+    )
+    config.add_argument("--out", required=True, help="folder for authorization.conf and USER.env")
+    config.set_defaults(func=_cmd_fleet_config)
+
+
+def _cmd_fleet_config(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from phantomtouch.fleet.nats_config import plan, write
+
+    armbands = []
+    for given in args.armband:
+        armband, _, site = given.partition(":")
+        armbands.append((armband, site or "default"))
+    users = plan(armbands, args.gateway)
+    for path in write(Path(args.out), users):
+        print(f"phantomtouch fleet-config: wrote {path}")
+    print(
+        "include authorization.conf in every NATS server's configuration; start each node "
+        "and gateway with the variables of its USER.env (docs/fleet.md)"
+    )
+    return 0

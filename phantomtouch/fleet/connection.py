@@ -4,6 +4,9 @@ Joining fails at once, naming the servers, when none of them accepts the connect
 (each is tried :data:`JOIN_ATTEMPTS` times). Once joined, the connection reconnects for
 ever (every 0.25 s, to any server of the cluster it knows); disconnects and reconnects are
 logged with the server's address only, never a credential, and an error once per outage.
+A user's replies arrive on its own inbox prefix
+(:func:`~phantomtouch.fleet.nats_config.inbox_prefix`), which a configuration from
+``phantomtouch fleet-config`` lets only that user read.
 """
 
 from __future__ import annotations
@@ -11,7 +14,8 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from phantomtouch.errors import DeviceError
+from phantomtouch.fleet.errors import FleetJoinError
+from phantomtouch.fleet.nats_config import inbox_prefix
 from phantomtouch.fleet.settings import FleetSettings
 
 logger = logging.getLogger("phantomtouch.fleet")
@@ -32,7 +36,7 @@ async def connect(settings: FleetSettings, name: str) -> Any:
 
     Raises
     ------
-    DeviceError
+    FleetJoinError
         No server of ``settings.servers`` accepted the connection (the message names
         the servers, never the credentials).
     """
@@ -68,6 +72,7 @@ async def connect(settings: FleetSettings, name: str) -> Any:
     }
     if settings.user is not None and settings.password is not None:
         options["user"] = settings.user
+        options["inbox_prefix"] = inbox_prefix(settings.user)
         options["password"] = settings.password.get_secret_value()
     if settings.token is not None:
         options["token"] = settings.token.get_secret_value()
@@ -76,7 +81,7 @@ async def connect(settings: FleetSettings, name: str) -> Any:
     try:
         client = await nats.connect(**options)
     except Exception as exc:
-        raise DeviceError(
+        raise FleetJoinError(
             f"fleet: no NATS server of {', '.join(settings.servers)} accepted the connection "
             f"({type(exc).__name__})"
         ) from None

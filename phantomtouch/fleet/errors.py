@@ -9,10 +9,14 @@ other refusal, to their status and code::
     ├── ArmbandUnavailableError      503 device     (registered, but no answer in time)
     │   └── NoNodeError              503 device     (no node listens on its subjects)
     └── ForbiddenArmbandError        403 forbidden  (outside the gateway token's scope)
+
+:class:`FleetJoinError` is no refusal: a node or gateway that could not join the fleet
+at start (:mod:`phantomtouch.fleet.startup`).
 """
 
 from __future__ import annotations
 
+from phantomtouch.errors import DeviceError
 from phantomtouch.service.errors import ErrorCode, NotFoundError, ServiceError
 
 
@@ -59,3 +63,7 @@ class ForbiddenArmbandError(ServiceError):
             field="armband",
             value=armband,
         )
+
+
+class FleetJoinError(DeviceError):
+    """A node or gateway could not join the fleet within its start deadline."""

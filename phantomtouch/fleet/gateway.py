@@ -34,20 +34,26 @@ from phantomtouch.errors import ParameterError, PhantomTouchError
 from phantomtouch.fleet import subjects
 from phantomtouch.fleet.auth import Grant, Grants
 from phantomtouch.fleet.client import FleetClient
-from phantomtouch.fleet.connection import connect
-from phantomtouch.fleet.errors import ArmbandNotFoundError, NoNodeError
+from phantomtouch.fleet.errors import ArmbandNotFoundError, FleetJoinError, NoNodeError
 from phantomtouch.fleet.gateway_settings import GatewaySettings
 from phantomtouch.fleet.gateway_ws import GatewaySession
 from phantomtouch.fleet.records import ArmbandRecord, FleetAnswer, StopScope
-from phantomtouch.fleet.registry import Registry, open_bucket
+from phantomtouch.fleet.registry_view import RegistryView
 from phantomtouch.fleet.requests import pop_start_at_unix_s, request_token
 from phantomtouch.fleet.settings import FleetSettings
+from phantomtouch.fleet.startup import Deadline, exit_join_failed, open_registry
 from phantomtouch.service import errors
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import UnauthorizedError
 from phantomtouch.service.limits import BodyLimitMiddleware
 from phantomtouch.service.metrics import CONTENT_TYPE, Metrics, MetricsMiddleware
-from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
+from phantomtouch.service.origin import (
+    ContentTypeMiddleware,
+    HostOriginMiddleware,
+    HostPolicy,
+    OriginPolicy,
+    Refusals,
+)
 
 logger = logging.getLogger("phantomtouch.fleet")
 
@@ -63,13 +69,13 @@ class Gateway:
     fleet: FleetSettings
     grants: Grants
     client: FleetClient
-    registry: Registry
+    registry: RegistryView
     metrics: Metrics
     nc: Any
 
     async def online(self, armband: str) -> ArmbandRecord:
         """The armband's record; :class:`ArmbandNotFoundError` when it is not online."""
-        record = await self.registry.lookup(armband)
+        record = self.registry.lookup(armband)
         if record is None:
             raise ArmbandNotFoundError(armband)
         return record
@@ -88,7 +94,6 @@ class Gateway:
                 armband, touch, start_at_unix_s=start_at_unix_s, client=client
             )
         except NoNodeError:
-            self.registry.forget(armband)
             await self.online(armband)
             raise
 
@@ -101,7 +106,7 @@ class Gateway:
             await self.online(scope.armband)
             targets = [(subjects.stop_armband(scope.armband), {scope.armband})]
         else:
-            records = await self.registry.online()
+            records = self.registry.online()
             if scope.scope == "site":
                 records = [r for r in records if r.site == scope.site]
             ids = {r.armband for r in records}
@@ -174,7 +179,7 @@ def answered(answer: FleetAnswer) -> JSONResponse:
 @router.get("/armbands", summary="Armbands online")
 async def get_armbands(gateway: GatewayDep, grant: GrantDep) -> list[dict[str, Any]]:
     """Every armband in the registry that this token may address, with its device."""
-    records = await gateway.registry.online()
+    records = gateway.registry.online()
     return [r.model_dump() for r in records if grant.allows(r.armband)]
 
 
@@ -283,16 +288,29 @@ def create_gateway(settings: GatewaySettings, fleet: FleetSettings) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        nc = await connect(fleet, f"gateway-{gateway_id}")
+        who = f"gateway {gateway_id}"
+        deadline = Deadline(fleet.start_deadline_s)
+        nc: Any = None
+        view: RegistryView | None = None
         try:
-            kv = await open_bucket(nc.jetstream(timeout=fleet.request_timeout_s), fleet)
+            nc, kv = await open_registry(fleet, f"gateway-{gateway_id}", deadline)
+            view = RegistryView(kv)
+            await view.start(who, deadline)
+        except FleetJoinError as exc:
+            if view is not None:
+                await view.close()
+            if nc is not None:
+                await nc.close()
+            exit_join_failed("phantomtouch gateway", exc)
+        assert view is not None and nc is not None
+        try:
             app.state.gateway = Gateway(
                 id=gateway_id,
                 settings=settings,
                 fleet=fleet,
                 grants=settings.grants(),
                 client=FleetClient(nc, timeout_s=fleet.request_timeout_s),
-                registry=Registry(kv, cache_s=fleet.heartbeat_s),
+                registry=view,
                 metrics=metrics,
                 nc=nc,
             )
@@ -301,6 +319,7 @@ def create_gateway(settings: GatewaySettings, fleet: FleetSettings) -> FastAPI:
             )
             yield
         finally:
+            await view.close()
             await nc.drain()
 
     app = FastAPI(
@@ -311,12 +330,15 @@ def create_gateway(settings: GatewaySettings, fleet: FleetSettings) -> FastAPI:
     )
     errors.install(app)
     app.include_router(router)
+    refusals = Refusals(metrics)
+    # Outermost last: metrics, Host and Origin, content type, body size (as the service).
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
+    app.add_middleware(ContentTypeMiddleware, refusals=refusals)
     app.add_middleware(
         HostOriginMiddleware,
         hosts=HostPolicy.build(settings.host, settings.allowed_hosts),
         origins=OriginPolicy.build([]),
-        refusals=Refusals(metrics),
+        refusals=refusals,
     )
     app.add_middleware(MetricsMiddleware, metrics=metrics)
     return app

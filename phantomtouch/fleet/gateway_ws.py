@@ -8,6 +8,11 @@ with the armbands online, ``ping`` with ``pong``. Contacts are tracked here per
 on an armband's own ``/ws``; ``down`` is a request the armband answers, ``move`` and
 ``up`` are published (the latest position wins, nothing queues).
 
+``subscribe`` (``rate_hz`` 0–120, 0 stops; optional ``armband``) pushes ``state``
+messages at that rate: each armband the token may address (or the one named), with its
+status and load as its last heartbeat reported them (the gateway's view of the registry,
+so as fresh as the heartbeats).
+
 While the client talks, the gateway pings every armband it holds contacts on; when it
 goes silent for ``watchdog_s`` or disconnects, the gateway releases them, and if the
 gateway itself vanishes the armbands' own fleet watchdog does.
@@ -61,6 +66,7 @@ class GatewaySession:
         self.limiter = FloodGuard(self.settings.ws_messages_per_s)
         self.grant: Grant | None = None
         self._send_lock = asyncio.Lock()
+        self._state_task: asyncio.Task[None] | None = None
 
     async def run(self) -> None:
         await self.websocket.accept()
@@ -80,6 +86,7 @@ class GatewaySession:
             pass
         finally:
             keepalive.cancel()
+            self._subscribe(0.0, None)
             await self._release_all()
         if code is not None:
             with contextlib.suppress(*_GONE):
@@ -146,7 +153,7 @@ class GatewaySession:
     ) -> None:
         client = self.gateway.client
         if kind == "hello":
-            records = await self.gateway.registry.online()
+            records = self.gateway.registry.online()
             assert self.grant is not None
             await self._send(
                 {
@@ -197,8 +204,49 @@ class GatewaySession:
                 await self._send({"type": "ok", "id": message_id})
         elif kind == "stop":
             await self._stop(armband, data.get("job_id"), message_id)
+        elif kind == "subscribe":
+            self._subscribe(float(data["rate_hz"]), armband)
+            if message_id is not None:
+                await self._send({"type": "ok", "id": message_id})
         else:
             raise ProtocolError(f"type={kind!r} is not available through a gateway")
+
+    def _subscribe(self, rate_hz: float, armband: str | None) -> None:
+        if self._state_task is not None:
+            self._state_task.cancel()
+            self._state_task = None
+        if rate_hz > 0:
+            self._state_task = asyncio.create_task(self._stream_state(1.0 / rate_hz, armband))
+
+    async def _stream_state(self, period_s: float, armband: str | None) -> None:
+        assert self.grant is not None
+        loop = asyncio.get_running_loop()
+        due = loop.time()
+        while True:
+            records = [
+                r
+                for r in self.gateway.registry.online()
+                if self.grant.allows(r.armband) and armband in (None, r.armband)
+            ]
+            await self._send_unless_gone(
+                {
+                    "type": "state",
+                    "unix_time_s": time.time(),
+                    "armbands": [
+                        {
+                            "armband": r.armband,
+                            "site": r.site,
+                            "status": r.status,
+                            "load": r.load.model_dump(),
+                            "unix_time_s": r.unix_time_s,
+                            "clock_offset_s": r.clock_offset_s,
+                        }
+                        for r in records
+                    ],
+                }
+            )
+            due = max(due + period_s, loop.time())
+            await asyncio.sleep(due - loop.time())
 
     async def _stop(self, armband: str | None, job_id: str | None, message_id: Any) -> None:
         assert self.grant is not None

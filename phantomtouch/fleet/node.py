@@ -35,7 +35,7 @@ from pydantic import ValidationError
 from phantomtouch import __version__
 from phantomtouch.errors import ParameterError, PhantomTouchError
 from phantomtouch.fleet import subjects
-from phantomtouch.fleet.connection import connect
+from phantomtouch.fleet.errors import FleetJoinError
 from phantomtouch.fleet.records import (
     ArmbandRecord,
     ClockAnswer,
@@ -44,9 +44,9 @@ from phantomtouch.fleet.records import (
     Load,
     StopRequest,
 )
-from phantomtouch.fleet.registry import open_bucket
 from phantomtouch.fleet.remote_contacts import RemoteContacts, drop_reason
 from phantomtouch.fleet.settings import FleetSettings
+from phantomtouch.fleet.startup import Deadline, announce, exit_join_failed, open_registry
 from phantomtouch.service import scheduling
 from phantomtouch.service.engine_access import describe_output
 from phantomtouch.service.errors import (
@@ -97,11 +97,16 @@ class ArmbandNode:
     # -- life ---------------------------------------------------------------------------
 
     async def start(self) -> None:
-        """Connect, register, and answer the armband's subjects."""
-        self._nc = await connect(self.settings, f"armband-{self.armband}")
-        self._kv = await open_bucket(
-            self._nc.jetstream(timeout=self.settings.request_timeout_s), self.settings
-        )
+        """Connect, register, and answer the armband's subjects.
+
+        Raises
+        ------
+        FleetJoinError
+            The registry could not be opened, watched or written within
+            ``start_deadline_s`` (each step is retried with backoff until then).
+        """
+        deadline = Deadline(self.settings.start_deadline_s)
+        self._nc, self._kv = await open_registry(self.settings, f"armband-{self.armband}", deadline)
         handlers: dict[str, Callable[[Any], Any]] = {
             subjects.touch(self.armband): self._on_touch,
             subjects.contact(self.armband): self._on_contact,
@@ -112,8 +117,7 @@ class ArmbandNode:
         }
         for subject, handler in handlers.items():
             await self._nc.subscribe(subject, cb=handler)
-        self._watcher = await self._kv.watch(self.armband)
-        await self._beat()
+        self._watcher = await announce(self._kv, self.armband, self._beat, deadline)
         self._loops = [
             asyncio.create_task(self._heartbeats()),
             asyncio.create_task(self._stamps()),
@@ -352,12 +356,22 @@ class ArmbandNode:
 
 
 def attach(settings: FleetSettings) -> Callable[[Service], AbstractAsyncContextManager[None]]:
-    """What ``create_app(attach=...)`` enters once the service runs: this node on the fleet."""
+    """What ``create_app(attach=...)`` enters once the service runs: this node on the fleet.
+
+    A node that cannot join says why in one line and the process exits with status 1
+    (:func:`~phantomtouch.fleet.startup.exit_join_failed`), its engine and library closed.
+    """
 
     @asynccontextmanager
     async def joined(service: Service) -> AsyncIterator[None]:
         node = ArmbandNode(service, settings)
-        await node.start()
+        try:
+            await node.start()
+        except FleetJoinError as exc:
+            await node.close()
+            service.engine.close()
+            service.store.close()
+            exit_join_failed("phantomtouch serve", exc)
         try:
             yield
         finally:

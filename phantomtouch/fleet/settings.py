@@ -40,6 +40,13 @@ class FleetSettings(BaseSettings):
         description="A node missing heartbeats this long leaves the registry (the bucket's TTL).",
     )
     request_timeout_s: float = Field(default=2.0, gt=0.0, le=60.0)
+    start_deadline_s: float = Field(
+        default=20.0,
+        gt=0.0,
+        le=600.0,
+        description="How long a node or gateway keeps trying to open and write the registry "
+        "at start before it gives up (exit 1).",
+    )
     sync_lead_s: float = Field(
         default=0.15,
         ge=0.0,

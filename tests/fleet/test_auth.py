@@ -122,3 +122,28 @@ def test_nats_credentials_come_from_the_environment_and_stay_out_of_logs(tmp_pat
         for log in (node.log(), gateway.log(), refused.log()):
             assert password not in log
         assert "accepted the connection" in refused.log()
+
+
+def test_subscribe_pushes_the_state_of_the_players_armbands_only(guarded: Gateway) -> None:
+    with connect(f"{guarded.ws_url}?token={ALICE}") as ws:
+        ws.send(json.dumps({"type": "subscribe", "armband": "a3", "rate_hz": 20, "id": 1}))
+        refused = json.loads(ws.recv(timeout=5.0))
+        assert (refused["type"], refused["code"], refused["id"]) == ("error", "forbidden", 1)
+        ws.send(json.dumps({"type": "subscribe", "rate_hz": 20, "id": 2}))
+        played = httpx.post(
+            f"{guarded.url}/armbands/a1/touch", json=LONG, headers=_bearer(ALICE), timeout=5.0
+        )
+        assert played.status_code == 202, played.text
+        busy = False
+        for _ in range(100):
+            message = json.loads(ws.recv(timeout=5.0))
+            if message["type"] != "state":
+                assert message == {"type": "ok", "id": 2}
+                continue
+            assert sorted(a["armband"] for a in message["armbands"]) == ["a1", "a2"]
+            loads = {a["armband"]: a["load"] for a in message["armbands"]}
+            if loads["a1"]["active_voices"] >= 1:
+                busy = True
+                break
+        assert busy, "a1's playing touch never showed in its state"
+        ws.send(json.dumps({"type": "stop", "armband": "a1", "id": 3}))

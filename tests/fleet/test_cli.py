@@ -13,6 +13,7 @@ from phantomtouch.cli import EXIT_USAGE, main
     ("argv", "message"),
     [
         (["serve", "--armband", "a1"], "--armband and --site need --fleet"),
+        (["serve", "--fleet-insecure"], "--fleet-insecure needs --fleet"),
         (["serve", "--fleet", "nats://127.0.0.1:4222"], "--fleet needs --armband ID"),
         (["serve", "--fleet", "nats://127.0.0.1:4222", "--armband", "a.1"], "armband"),
         (["serve", "--fleet", "http://127.0.0.1:4222", "--armband", "a1"], "nats://HOST:PORT"),

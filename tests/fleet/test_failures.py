@@ -9,7 +9,8 @@ import time
 import httpx
 import nats
 
-from tests.fleet.conftest import Fleet
+from phantomtouch.fleet.nats_config import inbox_prefix
+from tests.fleet.conftest import CLIENT, Fleet
 from tests.support.fleet import TTL_S, ArmbandNode, wait_until
 from tests.support.service import STROKE
 
@@ -42,8 +43,8 @@ def test_a_dead_armband_is_refused_by_name_never_accepted(fleet: Fleet) -> None:
         node.kill()
 
 
-async def _send_bad_messages(url: str) -> dict[str, object]:
-    nc = await nats.connect(url)
+async def _send_bad_messages(url: str, user: str, password: str) -> dict[str, object]:
+    nc = await nats.connect(url, user=user, password=password, inbox_prefix=inbox_prefix(user))
     try:
         subject = "phantomtouch.armband.a1.contact"
         await nc.publish(subject, b"not json")
@@ -78,7 +79,14 @@ def test_malformed_fleet_messages_are_counted_and_dropped(fleet: Fleet) -> None:
         )
 
     before = {k: count("contact", k) for k in ("invalid", "refused", "too_large")}
-    answer = asyncio.run(_send_bad_messages(fleet.cluster.urls[1]))
+    access = fleet.cluster.credentials(CLIENT)
+    answer = asyncio.run(
+        _send_bad_messages(
+            fleet.cluster.urls[1],
+            access["PHANTOMTOUCH_FLEET_USER"],
+            access["PHANTOMTOUCH_FLEET_PASSWORD"],
+        )
+    )
     assert answer["status"] == 422
     assert answer["body"]["error"]["code"] == "invalid"  # type: ignore[index]
     wait_until(lambda: count("contact", "too_large") > before["too_large"], 3.0, "counted")

@@ -6,6 +6,7 @@ of the frame each job started on and that frame's wall-clock time.
 
 from __future__ import annotations
 
+import json
 import time
 from typing import Any
 
@@ -72,6 +73,26 @@ def test_a_refusal_is_the_one_rest_gives(fleet: Fleet) -> None:
     assert remote.status_code == local.status_code == 422
     assert remote.json() == local.json()
     assert remote.json()["error"]["fields"][0]["field"] == "speed_cm_s"
+
+
+@pytest.mark.parametrize("path", ["/armbands/a1/touch", "/touch", "/stop"])
+def test_a_body_not_sent_as_json_is_refused_as_the_service_refuses_it(
+    fleet: Fleet, path: str
+) -> None:
+    """415 from the gateway as from the armband's own service, and nothing plays."""
+    body = json.dumps({**STROKE, "armbands": ["a1"]} if path == "/touch" else STROKE)
+    headers = {"Content-Type": "text/plain"}
+    node = fleet.nodes["a1"]
+    before = len(node.played())
+    local = httpx.post(f"{node.url}/touch", content=body, headers=headers, timeout=5.0)
+    remote = httpx.post(
+        f"{fleet.gateways[0].url}{path}", content=body, headers=headers, timeout=5.0
+    )
+    assert remote.status_code == local.status_code == 415
+    assert remote.json() == local.json()
+    assert remote.json()["error"]["code"] == "unsupported_media_type"
+    time.sleep(0.3)
+    assert len(node.played()) == before
 
 
 def test_an_unknown_armband_is_refused_by_name(fleet: Fleet) -> None:

@@ -3,7 +3,9 @@
 Armband nodes are real ``phantomtouch serve --fleet`` processes on the null output; each
 keeps the engine's stimulus log (what it played, from which frame, at which time) in the
 test's folder, which is how a test sees what reached which armband. Gateways are real
-``phantomtouch gateway`` processes. Everything listens on 127.0.0.1.
+``phantomtouch gateway`` processes. Everything listens on 127.0.0.1. On a cluster that runs
+the closed configuration each starts with its own user's credentials; on an open one with
+the flag that accepts it (``--fleet-insecure``, ``--insecure-nats``).
 """
 
 from __future__ import annotations
@@ -50,12 +52,27 @@ class ArmbandNode(LiveServer):
         self.armband = armband
         self.site = site
         self.stimulus_log = folder / f"{armband}.jsonl"
+        access = cluster.credentials(armband) if cluster.secured else {}
+        insecure = () if cluster.secured else ("--fleet-insecure",)
         super().__init__(
             folder / f"{armband}.db",
-            env={**NODE_ENV, "PHANTOMTOUCH_ENGINE_LOG_PATH": str(self.stimulus_log), **(env or {})},
-            args=("--fleet", cluster.servers, "--armband", armband, "--site", site),
+            env={
+                **NODE_ENV,
+                **access,
+                "PHANTOMTOUCH_ENGINE_LOG_PATH": str(self.stimulus_log),
+                **(env or {}),
+            },
+            args=("--fleet", cluster.servers, "--armband", armband, "--site", site, *insecure),
             output=output,
         )
+
+    def launch(self) -> subprocess.Popen[bytes]:
+        """Start the process without waiting for it (:meth:`start` waits until healthy)."""
+        with self.log_path.open("ab") as log:
+            self.process = subprocess.Popen(
+                self.command(), env={**os.environ, **self.env}, stdout=log, stderr=subprocess.STDOUT
+            )
+        return self.process
 
     def played(self) -> list[dict[str, Any]]:
         """The ``start`` records of jobs in the stimulus log so far."""
@@ -86,11 +103,18 @@ class ArmbandNode(LiveServer):
 class Gateway:
     """``phantomtouch gateway --fleet ...`` on a free port."""
 
-    def __init__(self, folder: Path, cluster: NatsCluster, env: dict[str, str] | None = None):
+    def __init__(
+        self,
+        folder: Path,
+        cluster: NatsCluster,
+        env: dict[str, str] | None = None,
+        name: str = "gateway",
+    ):
         self.port = free_port()
         self.cluster = cluster
         self.log_path = folder / f"gateway-{self.port}.log"
-        self.env = env or {}
+        access = cluster.credentials(name) if cluster.secured else {}
+        self.env = {**access, **(env or {})}
         self.process: subprocess.Popen[bytes] | None = None
 
     @property
@@ -101,13 +125,20 @@ class Gateway:
     def ws_url(self) -> str:
         return f"ws://{HOST}:{self.port}/ws"
 
-    def start(self) -> Gateway:
+    def launch(self) -> subprocess.Popen[bytes]:
+        """Start the process without waiting for it (:meth:`start` waits until healthy)."""
         command = [sys.executable, "-m", "phantomtouch", "gateway", "--fleet"]
         command += [self.cluster.servers, "--port", str(self.port)]
+        if not self.cluster.secured:
+            command.append("--insecure-nats")
         with self.log_path.open("ab") as log:
             self.process = subprocess.Popen(
                 command, env={**os.environ, **self.env}, stdout=log, stderr=subprocess.STDOUT
             )
+        return self.process
+
+    def start(self) -> Gateway:
+        self.process = self.launch()
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
             if self.process.poll() is not None:

@@ -1,9 +1,11 @@
 """A real NATS cluster (``nats-server``, JetStream on) on loopback ports, for tests.
 
 Three servers by default, each with its own store folder, client port, cluster port and
-monitoring port, all on 127.0.0.1; :meth:`NatsCluster.kill` ends one with SIGKILL, as in a
-crash, and :meth:`NatsCluster.restart` brings it back. Missing ``nats-server`` fails the
-test under ``CI=true`` and skips it elsewhere (:func:`require_nats_server`).
+monitoring port, all on 127.0.0.1. JetStream may be left off (a server with no registry);
+``users`` closes the cluster with the configuration ``phantomtouch fleet-config`` writes.
+:meth:`NatsCluster.kill` ends one with SIGKILL, as in a crash, and
+:meth:`NatsCluster.restart` brings it back. Missing ``nats-server`` fails the test under
+``CI=true`` and skips it elsewhere (:func:`require_nats_server`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 import httpx
 import pytest
 
+from phantomtouch.fleet.nats_config import FleetUser, authorization
 from tests.support.live_server import HOST, free_port
 
 START_TIMEOUT_S = 20.0
@@ -43,11 +46,20 @@ class NatsCluster:
     """``size`` clustered ``nats-server`` processes with JetStream, in ``folder``."""
 
     def __init__(
-        self, folder: Path, *, size: int = 3, user: str | None = None, password: str | None = None
+        self,
+        folder: Path,
+        *,
+        size: int = 3,
+        user: str | None = None,
+        password: str | None = None,
+        jetstream: bool = True,
+        users: list[FleetUser] | None = None,
     ) -> None:
         self.binary = require_nats_server()
         self.folder = folder
         self.size = size
+        self.jetstream = jetstream
+        self.users = {user.name: user for user in users or []}
         self.user = user
         self.password = password
         self.client_ports = [free_port() for _ in range(size)]
@@ -59,6 +71,16 @@ class NatsCluster:
     @property
     def urls(self) -> list[str]:
         return [f"nats://{HOST}:{port}" for port in self.client_ports]
+
+    @property
+    def secured(self) -> bool:
+        """Whether the cluster runs the closed configuration of ``phantomtouch fleet-config``."""
+        return bool(self.users)
+
+    def credentials(self, name: str) -> dict[str, str]:
+        """The environment of user ``name`` of the closed configuration."""
+        user = self.users[name]
+        return {"PHANTOMTOUCH_FLEET_USER": user.name, "PHANTOMTOUCH_FLEET_PASSWORD": user.password}
 
     @property
     def servers(self) -> str:
@@ -76,6 +98,9 @@ class NatsCluster:
 server_name: n{index}
 listen: {HOST}:{self.client_ports[index]}
 http: {HOST}:{self.monitor_ports[index]}
+"""
+        if self.jetstream:
+            text += f"""
 jetstream {{
   store_dir: "{store}"
   max_memory_store: 64MB
@@ -92,6 +117,8 @@ cluster {{
 """
         if self.user is not None:
             text += f'authorization {{ user: "{self.user}", password: "{self.password}" }}\n'
+        if self.users:
+            text += authorization(list(self.users.values()))
         config.write_text(text)
         return config
 

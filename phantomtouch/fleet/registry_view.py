@@ -1,0 +1,160 @@
+"""A gateway's view of the registry: a watch on the bucket keeps every record in memory.
+
+Listings and lookups are answered from this view and never ask NATS, so a NATS server
+that dies (and the registry stream's leader election after it) costs no failed listing:
+the view shows what it last knew until the watch delivers again.
+
+Expiry follows the registry's own clock. A record is online while its NATS time stamp
+plus its ``ttl_s`` lies ahead of the newest time stamp the view has seen (any node's
+heartbeat moves that clock on), so a node that stopped beating drops out when the others'
+heartbeats show its TTL ran out, whatever the gateway's own clock says. While nothing at
+all arrives (the registry is failing over, or every node is gone) the clock stands still
+for :data:`STALL_S`, then runs on with the gateway's monotonic clock: records are kept
+through a failover, and the last ones expire ``STALL_S`` after their TTL when all nodes
+have died.
+
+The watch is started again when it has been silent for :data:`SILENT_HEARTBEATS`
+heartbeats (its consumer may have lived on the server that died; with no record at all,
+every three seconds); the new watch replays the last value of every key.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from phantomtouch.fleet.records import ArmbandRecord
+from phantomtouch.fleet.registry import read_record
+from phantomtouch.fleet.startup import Deadline, retried
+
+logger = logging.getLogger("phantomtouch.fleet")
+
+STALL_S = 10.0
+"""How long the registry's clock stands still while no heartbeat at all arrives, s."""
+SILENT_HEARTBEATS = 3
+"""Heartbeat periods of silence after which the watch is started again."""
+FIRST_READ_S = 2.0
+"""How long the first read of the bucket waits for each record before it starts over, s."""
+REWATCH_PAUSE_S = 0.25
+"""Pause between attempts to start the watch again while NATS refuses, s."""
+
+
+@dataclass
+class _Entry:
+    record: ArmbandRecord
+    created_s: float
+    revision: int
+
+
+class RegistryView:
+    """The registry as last seen through a watch on bucket ``kv``; :meth:`start`, then
+    :meth:`close`."""
+
+    def __init__(self, kv: Any) -> None:
+        self.kv = kv
+        self._entries: dict[str, _Entry] = {}
+        self._newest_created_s = 0.0
+        self._newest_received_s = time.monotonic()
+        self._watcher: Any = None
+        self._task: asyncio.Task[None] | None = None
+        self.rewatches = 0
+
+    # -- reads ----------------------------------------------------------------------------
+
+    def _registry_time_s(self) -> float:
+        silent_s = time.monotonic() - self._newest_received_s
+        return self._newest_created_s + max(0.0, silent_s - STALL_S)
+
+    def lookup(self, armband: str) -> ArmbandRecord | None:
+        """The armband's record, or None when it is not online."""
+        entry = self._entries.get(armband)
+        if entry is None or entry.created_s + entry.record.ttl_s <= self._registry_time_s():
+            return None
+        return entry.record
+
+    def online(self) -> list[ArmbandRecord]:
+        """Every armband online, by id."""
+        now_s = self._registry_time_s()
+        return [
+            entry.record
+            for _, entry in sorted(self._entries.items())
+            if entry.created_s + entry.record.ttl_s > now_s
+        ]
+
+    # -- the watch ------------------------------------------------------------------------
+
+    async def start(self, who: str, deadline: Deadline) -> None:
+        """Watch the bucket and read every record in it before returning.
+
+        Raises
+        ------
+        FleetJoinError
+            The watch could not be started, or the bucket not read, by ``deadline``.
+        """
+        await retried(who, "read the registry", self._first_watch, deadline)
+        self._task = asyncio.create_task(self._follow())
+
+    async def _first_watch(self) -> None:
+        await self._rewatch()
+        while True:
+            entry = await self._watcher.updates(timeout=FIRST_READ_S)
+            if entry is None:
+                return
+            self._apply(entry)
+
+    async def _rewatch(self) -> None:
+        old, self._watcher = self._watcher, None
+        if old is not None:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(old.stop(), 1.0)
+        self._watcher = await self.kv.watchall()
+
+    def _silence_s(self) -> float:
+        beats_s = [entry.record.heartbeat_s for entry in self._entries.values()]
+        return SILENT_HEARTBEATS * max(beats_s, default=1.0)
+
+    async def _follow(self) -> None:
+        import nats.errors
+
+        while True:
+            try:
+                if self._watcher is None:
+                    self.rewatches += 1
+                    await self._rewatch()
+                entry = await self._watcher.updates(timeout=self._silence_s())
+            except (nats.errors.Error, TimeoutError) as exc:
+                if self._watcher is not None and self._entries:
+                    logger.info("fleet: registry watch silent (%s); watching again", exc)
+                self._watcher = None
+                await asyncio.sleep(REWATCH_PAUSE_S)
+                continue
+            if entry is not None:
+                self._apply(entry)
+
+    def _apply(self, entry: Any) -> None:
+        created_s = entry.created.timestamp() if entry.created is not None else 0.0
+        if created_s > self._newest_created_s:
+            self._newest_created_s = created_s
+            self._newest_received_s = time.monotonic()
+        known = self._entries.get(entry.key)
+        if known is not None and entry.revision < known.revision:
+            return
+        record = None if entry.operation is not None else read_record(entry.value)
+        if record is None or record.armband != entry.key:
+            self._entries.pop(entry.key, None)
+        else:
+            self._entries[entry.key] = _Entry(record, created_s, entry.revision)
+
+    async def close(self) -> None:
+        """Stop following the bucket."""
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+        if self._watcher is not None:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(self._watcher.stop(), 1.0)
