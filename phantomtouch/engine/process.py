@@ -7,8 +7,8 @@ there that does Python work; :class:`ProcessEngine` is the
 :class:`~phantomtouch.engine.front.EngineFront` over it. Everything here runs in the
 host, and nothing here ever waits for the engine process:
 
-- messages (:mod:`phantomtouch.engine.messages`: a job's start with its plan, sent once
-  per plan; releases; touchdowns) go through an
+- messages (:mod:`phantomtouch.engine.messages`: plans handed over and dropped by the
+  handle the front's plan cache minted; job starts; releases; touchdowns) go through an
   :class:`~phantomtouch.engine.link.Outbox` whose thread writes them into a pipe; the
   callback reads them at the start of each block within a time budget;
 - noise loops go through shared memory the host owns (:mod:`phantomtouch.engine.noise`);
@@ -31,8 +31,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-import weakref
-from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
@@ -44,8 +42,8 @@ from phantomtouch.engine.messages import (
     Close,
     Command,
     ContactMove,
+    HoldPlan,
     NoiseReleased,
-    StartJob,
     StartSink,
 )
 from phantomtouch.engine.noise import SharedLoops, loop_key
@@ -53,7 +51,6 @@ from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim, spawn
 from phantomtouch.errors import DeviceError, EngineBusyError
-from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger("phantomtouch.engine")
@@ -68,8 +65,6 @@ RETRY_FIRST_S = 0.5
 RETRY_MAX_S = 5.0
 """A restart that fails (the sound card is gone) is tried again after 0.5 s, then after
 twice as long each time, at most every 5 s."""
-PLAN_CACHE_BYTES = 32 << 20
-"""Plans kept by the engine process, by their size on the wire."""
 REALTIME_PRIORITY = 1
 """SCHED_FIFO priority of the engine process's threads (above every ordinary thread)."""
 
@@ -129,9 +124,6 @@ class ChildAudio:
     def _reset_records(self) -> None:
         """Forget what an engine process held (none is running, or a new one starts)."""
         self._seq = 0
-        self._plans: OrderedDict[int, tuple[int, weakref.ref[Plan], int]] = OrderedDict()
-        self._plan_bytes = 0  # id(plan): key, the plan (not kept alive here), wire bytes
-        self._forget: list[int] = []
         self._loops.clear()
 
     # -- the engine process ---------------------------------------------------------------
@@ -166,51 +158,19 @@ class ChildAudio:
 
     def post(self, message: Command) -> None:
         """Queue a message for the engine process (host, under the front's lock); a
-        job's plan crosses once, then the engine process keeps it under a key.
+        plan handed over crosses without what the engine process has (``slim``).
 
         Raises
         ------
         EngineBusyError
             The pipe is full (the engine process does not read).
         """
-        if isinstance(message, StartJob) and message.plan is not None:
-            self._post_start(message, message.plan)
-            return
+        if isinstance(message, HoldPlan):
+            message = HoldPlan(message.handle, slim(message.plan), message.prerendered)
         if not self._write(self._child, message):
             raise EngineBusyError(
                 "the engine process is not taking commands (its pipe is full); retry later"
             )
-
-    def _post_start(self, message: StartJob, plan: Plan) -> None:
-        known = self._plans.pop(id(plan), None)
-        if known is not None and known[1]() is plan:
-            self._plans[id(plan)] = known  # the most recently used
-            key, sent, prerendered = known[0], None, None  # the engine process has them
-        else:
-            if known is not None:  # a plan gone since, whose id this one has
-                self._forget.append(known[0])
-                self._plan_bytes -= known[2]
-            self._seq += 1
-            key, sent, prerendered = self._seq, slim(plan), message.prerendered
-        forget, self._forget = tuple(self._forget), []
-        shipped = StartJob(
-            message.job_id, key, sent, prerendered, message.owner, message.frame, forget
-        )
-        self._seq += 1
-        frame_bytes = encode((self._seq, shipped))
-        if not self._child.outbox.put(frame_bytes):
-            self._forget = [*forget, *self._forget]
-            raise EngineBusyError(
-                "the engine process is not taking commands (its pipe is full); retry later"
-            )
-        if sent is not None:
-            size = len(frame_bytes)
-            self._plans[id(plan)] = (key, weakref.ref(plan), size)
-            self._plan_bytes += size
-            while self._plan_bytes > PLAN_CACHE_BYTES and len(self._plans) > 1:
-                old_key, _, old_size = self._plans.popitem(last=False)[1]
-                self._forget.append(old_key)
-                self._plan_bytes -= old_size
 
     def prepare(self, carrier: object) -> None:
         """Compute a carrier's noise loop ahead (host, outside the front's lock)."""
