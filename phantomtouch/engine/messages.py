@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from phantomtouch.engine.plan_memory import SHARE_MIN_BYTES, SharedArrays, heavy_bytes
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.renderer.carriers import NoiseKey
 from phantomtouch.renderer.plan import Plan
@@ -36,6 +37,7 @@ from phantomtouch.schema.pattern import CombinedCarrier, NoiseCarrier, SineCarri
 if TYPE_CHECKING:
     from phantomtouch.engine.core import Core
     from phantomtouch.engine.noise import HeldLoops
+    from phantomtouch.engine.plan_memory import HeldArrays
     from phantomtouch.engine.shared import MoveSlots
 
 # -- commands, front -> audio side ------------------------------------------------------
@@ -45,11 +47,13 @@ if TYPE_CHECKING:
 class HoldPlan:
     """Hold a plan under ``handle`` (minted by the front's plan cache) until a
     :class:`DropPlan`; ``prerendered`` is its samples rendered whole, or None to render
-    them in the callback."""
+    them in the callback. ``shared`` (engine process): the block of shared memory that
+    holds the plan's heavy arrays (:mod:`phantomtouch.engine.plan_memory`)."""
 
     handle: int
     plan: Plan
     prerendered: Prerendered | None
+    shared: SharedArrays | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -266,6 +270,7 @@ class AudioState:
     core: Core
     slots: MoveSlots | None = None
     loops: HeldLoops | None = None
+    arrays: HeldArrays | None = None
     plans: dict[int, tuple[Plan, Prerendered | None]] = field(default_factory=dict)
     reports: list[Event] = field(default_factory=list)
     refused: int = 0
@@ -279,14 +284,30 @@ class AudioState:
 
 
 def _hold_plan(state: AudioState, message: HoldPlan, void: bool) -> None:
-    """Real time. Keep the plan (even when void: it was handed once)."""
-    state.plans[message.handle] = (state.core.widen(message.plan), message.prerendered)
+    """Real time. Keep the plan (even when void: it was handed once), its heavy arrays
+    mapped from the host's block; in the engine process, refuse heavy arrays inline."""
+    plan, prerendered, handle = message.plan, message.prerendered, message.handle
+    arrays = state.arrays
+    if message.shared is not None:
+        try:
+            if arrays is None:
+                raise LookupError("this audio side maps no shared plans")
+            plan, prerendered = arrays.hold(handle, plan, message.shared)
+        except (LookupError, OSError) as exc:
+            state.refuse("plan", handle, f"plan {handle}: {exc}")
+            return
+    elif arrays is not None and (size := heavy_bytes(plan, prerendered)) >= SHARE_MIN_BYTES:
+        state.refuse("plan", handle, f"plan {handle} carries {size} bytes inline")
+        return
+    state.plans[handle] = (state.core.widen(plan), prerendered)
 
 
 def _drop_plan(state: AudioState, message: DropPlan, void: bool) -> None:
-    """Real time. Forget the plan and say so; sounding voices keep their reference."""
+    """Real time. Forget the plan; sounding voices keep their reference, and its block
+    is released (and reported) once none reads it."""
     state.plans.pop(message.handle, None)
-    state.reports.append(PlanReleased(message.handle))
+    if state.arrays is None or not state.arrays.drop(message.handle):
+        state.reports.append(PlanReleased(message.handle))
 
 
 def _start_job(state: AudioState, message: StartJob, void: bool) -> None:

@@ -11,7 +11,8 @@ host, and nothing here ever waits for the engine process:
   handle the front's plan cache minted; job starts; releases; touchdowns) go through an
   :class:`~phantomtouch.engine.link.Outbox` whose thread writes them into a pipe; the
   callback reads them at the start of each block within a time budget;
-- noise loops go through shared memory the host owns (:mod:`phantomtouch.engine.noise`);
+- noise loops and plans' heavy arrays go through shared memory the host owns
+  (:mod:`phantomtouch.engine.noise`, :mod:`phantomtouch.engine.plan_memory`);
 - ``stop_all`` raises a sequence mark in shared memory that the callback reads first:
   every message sent before it is void, whatever the pipe holds;
 - contact moves and the sample clock go through shared memory
@@ -44,9 +45,11 @@ from phantomtouch.engine.messages import (
     ContactMove,
     HoldPlan,
     NoiseReleased,
+    PlanReleased,
     StartSink,
 )
 from phantomtouch.engine.noise import SharedLoops, loop_key
+from phantomtouch.engine.plan_memory import SharedPlans
 from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim, spawn
@@ -111,6 +114,7 @@ class ChildAudio:
         self._lock = threading.RLock()
         self._halt = threading.Event()
         self._loops = SharedLoops()
+        self._shared_plans = SharedPlans()
         self._reset_records()
         self._child = self._start_child()
         self.costs: tuple[float, float, float] | None = self._child.costs
@@ -125,6 +129,7 @@ class ChildAudio:
         """Forget what an engine process held (none is running, or a new one starts)."""
         self._seq = 0
         self._loops.clear()
+        self._shared_plans.clear()
 
     # -- the engine process ---------------------------------------------------------------
 
@@ -144,12 +149,15 @@ class ChildAudio:
         return child
 
     def _read_reports(self, child: ChildProcess) -> None:
-        """Host, the reports thread: free released loops, hand the rest to the front."""
+        """Host, the reports thread: free released loops and plans' blocks, hand the rest
+        to the front."""
         for events in read_frames(child.reports_fd):
             if child is getattr(self, "_child", None):  # not a process replaced since
                 for event in events:
                     if isinstance(event, NoiseReleased):
                         self._loops.released(event.key)
+                    elif isinstance(event, PlanReleased):
+                        self._shared_plans.released(event.handle)
             self._links.deliver(events)
 
     def _write(self, child: ChildProcess, message: Command) -> bool:
@@ -166,7 +174,10 @@ class ChildAudio:
             The pipe is full (the engine process does not read).
         """
         if isinstance(message, HoldPlan):
-            message = HoldPlan(message.handle, slim(message.plan), message.prerendered)
+            shared = self._shared_plans.share(
+                message.handle, slim(message.plan), message.prerendered
+            )
+            message = HoldPlan(message.handle, *shared)
         if not self._write(self._child, message):
             raise EngineBusyError(
                 "the engine process is not taking commands (its pipe is full); retry later"
@@ -323,6 +334,7 @@ class ChildAudio:
         self._watchdog.join()
         child.end(kill=False)
         self._loops.clear()
+        self._shared_plans.clear()
 
     # -- clock and figures ----------------------------------------------------------------
 
