@@ -19,11 +19,14 @@ import dataclasses
 import threading
 from dataclasses import dataclass
 from multiprocessing import shared_memory
+from typing import TypeVar
 
 import numpy as np
 
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.renderer.plan import Plan, Timeline
+
+K = TypeVar("K")
 
 SHARE_MIN_BYTES = 128 << 10
 """A plan whose arrays (samples and timelines) hold this many bytes or more crosses by
@@ -69,11 +72,30 @@ def _view(
     return flat.reshape(shape)
 
 
-def _unlink(block: shared_memory.SharedMemory) -> None:
+def unlink_block(block: shared_memory.SharedMemory) -> None:
+    """Close and free a block the host wrote (host)."""
     with contextlib.suppress(OSError, BufferError):
         block.close()
     with contextlib.suppress(OSError):
         block.unlink()
+
+
+def unmap_unread(
+    retiring: list[tuple[K, shared_memory.SharedMemory]],
+) -> tuple[list[tuple[K, shared_memory.SharedMemory]], list[K]]:
+    """Unmap the blocks no array reads any more: those still read, and the keys of those
+    unmapped (real time in the engine process: one failed ``close`` per block still read)."""
+    if not retiring:
+        return retiring, []
+    keep, freed = [], []
+    for key, block in retiring:
+        try:
+            block.close()
+        except BufferError:  # a voice still reads it
+            keep.append((key, block))
+            continue
+        freed.append(key)
+    return keep, freed
 
 
 def _stripped(plan: Plan, places: set[str]) -> Plan:
@@ -120,7 +142,7 @@ class SharedPlans:
             old = self._blocks.pop(handle, None)
             self._blocks[handle] = block
         if old is not None:
-            _unlink(old)
+            unlink_block(old)
         places = {place for place, _ in arrays}
         return _stripped(plan, places), None, SharedArrays(block.name, tuple(layout))
 
@@ -129,7 +151,7 @@ class SharedPlans:
         with self._lock:
             block = self._blocks.pop(handle, None)
         if block is not None:
-            _unlink(block)
+            unlink_block(block)
 
     def clear(self) -> None:
         """Free every block: the engine process that mapped them is gone (host)."""
@@ -137,7 +159,7 @@ class SharedPlans:
             blocks = list(self._blocks.values())
             self._blocks.clear()
         for block in blocks:
-            _unlink(block)
+            unlink_block(block)
 
 
 class HeldArrays:
@@ -184,15 +206,5 @@ class HeldArrays:
     def collect(self) -> list[int]:
         """Unmap the dropped blocks no voice reads any more; their handles (real time:
         one failed ``close`` per block still read)."""
-        if not self._retiring:
-            return []
-        keep, freed = [], []
-        for handle, block in self._retiring:
-            try:
-                block.close()
-            except BufferError:  # a voice still reads it
-                keep.append((handle, block))
-                continue
-            freed.append(handle)
-        self._retiring = keep
+        self._retiring, freed = unmap_unread(self._retiring)
         return freed
