@@ -44,8 +44,9 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
 from phantomtouch.engine.link import FrameReader, NonBlockingWriter, encode, widen
-from phantomtouch.engine.messages import AudioState, Close, StartSink, perform
+from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
 from phantomtouch.engine.noise import HeldLoops
+from phantomtouch.engine.plan_memory import HeldArrays
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.renderer.carriers import refuse_building
@@ -79,6 +80,7 @@ class Intake:
         self.status = status
         self.state = AudioState(core, slots=slots)
         self.state.loops = HeldLoops(self.state.reports)
+        self.state.arrays = HeldArrays()
         self.handled_mark = 0
         self.leave = threading.Event()
         period_s = core.device.block_frames / core.device.sample_rate_hz
@@ -107,9 +109,10 @@ class Intake:
         scheduler = core.scheduler
         state = self.state
         self.status.beat(time.monotonic(), scheduler.frames)
-        assert state.loops is not None
+        assert state.loops is not None and state.arrays is not None
         state.loops.collect()
         events = core.events()
+        events.extend(PlanReleased(handle) for handle in state.arrays.collect())
         if state.reports:
             events.extend(state.reports)
             state.reports.clear()

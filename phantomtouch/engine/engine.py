@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections import deque
 from typing import Any
 
 from phantomtouch.engine.checks import check_int
@@ -23,7 +24,7 @@ from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.front import MAX_VOICES as MAX_VOICES  # re-exported
 from phantomtouch.engine.front import EngineFront, Links
-from phantomtouch.engine.messages import AudioState, Command, ContactMove, perform
+from phantomtouch.engine.messages import AudioState, Command, ContactMove, Event, perform
 from phantomtouch.engine.sinks import NullSink, Sink
 from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.renderer.plan import Plan, plan
@@ -83,6 +84,7 @@ class LocalAudio:
             clock=clock,
         )
         self._state = AudioState(self.core)
+        self._reported: deque[Event] = deque()  # the appliers' own events, for the front
         self.backend = sink.backend
         self.output_device = sink.output_device
         self.costs = links.costs
@@ -137,7 +139,10 @@ class LocalAudio:
         """Hand what the callback reported to the front; log a new callback error (host:
         the housekeeping thread, or a caller that wants fresh job states)."""
         with self._events_lock:
-            self._links.deliver(self.core.events())
+            events = self.core.events()
+            while self._reported:
+                events.append(self._reported.popleft())
+            self._links.deliver(events)
         error = self.core.scheduler.last_error
         if error is not None and error is not self._reported_error:
             self._reported_error = error
@@ -162,8 +167,12 @@ class LocalAudio:
             raise DeviceError("the engine is closed")
 
     def post(self, message: Command) -> None:
-        """Perform a message at once (host, under the front's lock)."""
+        """Perform a message at once (host, under the front's lock); what it reports is
+        handed to the front with the callback's events."""
         perform(self._state, message)
+        if self._state.reports:
+            self._reported.extend(self._state.reports)
+            self._state.reports.clear()
 
     def prepare(self, carrier: object) -> None:
         """Nothing ahead: a voice's noise loop is built by the renderer's cache as the

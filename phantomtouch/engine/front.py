@@ -57,7 +57,6 @@ from phantomtouch.engine.jobs import (
     JobState,
     JobTable,
     Policy,
-    resolve_plan,
 )
 from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.messages import (
@@ -65,7 +64,10 @@ from phantomtouch.engine.messages import (
     ContactDown,
     ContactMove,
     ContactUp,
+    DropPlan,
     Event,
+    HoldPlan,
+    PlanReleased,
     ReleaseJob,
     ReleaseOwner,
     StartJob,
@@ -78,7 +80,8 @@ from phantomtouch.engine.owners import (
     Released,
     ReleasedListener,
 )
-from phantomtouch.engine.prerender import PRERENDER_MAX_S, PrerenderCache
+from phantomtouch.engine.plans import HeldPlan, PlanCache
+from phantomtouch.engine.prerender import PRERENDER_MAX_S
 from phantomtouch.engine.status import EngineStatus
 from phantomtouch.engine.touchdown import (
     Touchdowns,
@@ -187,7 +190,8 @@ class EngineFront:
         self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
         self._policy = self._check_policy(voice_policy)
         self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
-        self._prerendered = PrerenderCache(device.sample_rate_hz, max_s=prerender_max_s)
+        self.plans = PlanCache(device, prerender_max_s=prerender_max_s)
+        """The one plan cache (host, any thread): the service plans through it."""
         self._touchdowns = Touchdowns(device, self._settings)
         self._lock = threading.RLock()
         self._jobs = JobTable()
@@ -259,6 +263,7 @@ class EngineFront:
         reason ``engine <state>``."""
         with self._lock:
             self._jobs.drop_all(self.now_frames, fault=state)
+            self.plans.unhand_all()
             released = self._drop_contacts(f"engine {state}")
             self._admission.forget_starts()
         self._publish(released)
@@ -324,7 +329,8 @@ class EngineFront:
         DeviceError
             The engine is closed, or its audio side is not running.
         """
-        resolved = resolve_plan(pattern, self._device)
+        entry = self.plans.entry(pattern)
+        resolved, prerendered = entry.plan, entry.prerendered
         frame = check_frame("start_frame", start_frame)
         if owner is not None:
             check_id("owner", owner)
@@ -332,7 +338,6 @@ class EngineFront:
         if frame is not None:
             check_ahead(frame, self.now_frames, self.sample_rate_hz, MAX_SCHEDULE_AHEAD_S)
         job_id = uuid.uuid4().hex
-        prerendered = self._prerendered.get(resolved)
         carrier = None if prerendered is not None else resolved.pattern.carrier
         self._audio.prepare(carrier)
         with self._lock:
@@ -369,13 +374,28 @@ class EngineFront:
                 record.requested_start_frame = first
             record.requested_start_at_s = self.time_at(first)  # one value for every answer
             self._audio.provide(carrier)
-            self._audio.post(StartJob(job_id, 0, resolved, prerendered, owner, frame))
+            self._start(entry, StartJob(job_id, entry.handle, owner, frame))
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
                 victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames
                 self._post_release(ReleaseJob(victim.job_id, first, self._steal_fade_frames))
             self._jobs.add(record)
         return self._job(record, resolved)
+
+    def _start(self, entry: HeldPlan, start: StartJob) -> None:
+        """Hand the entry's plan over unless the audio side holds it, post the start, and
+        release what the cache dropped (host, under the front's lock)."""
+        if not entry.handed:
+            self._audio.post(HoldPlan(entry.handle, entry.plan, entry.prerendered))
+            entry.handed = True
+        self._audio.post(start)
+        dropped = self.plans.take_dropped()
+        if not entry.kept:
+            dropped.append(entry)
+        for old in dropped:
+            if old.handed:
+                self.plans.release(old)
+                self._audio.post(DropPlan(old.handle))
 
     @staticmethod
     def _job(record: JobRecord, resolved: Plan) -> Job:
@@ -736,6 +756,9 @@ class EngineFront:
         """Apply the audio side's events, then write the log records due (host: the
         housekeeping thread, or the thread reading the engine process's reports)."""
         with self._lock:
+            for event in events:
+                if isinstance(event, PlanReleased):
+                    self.plans.released(event.handle)
             self._reports.apply(events)
             records = self._reports.take_backlog()
         self._reports.flush(records)

@@ -10,7 +10,7 @@ applier and the front's public method that posts it.
 
 Events travel back the same way: the audio side reports what it did as the event classes
 below (``Started``, ``Released``, ``Ended``, ``Cancelled``, ``StoppedAll``, and, from the
-engine process, ``NoiseReleased`` and ``Refused``), which
+engine process, ``NoiseReleased``; ``PlanReleased`` and ``Refused``), which
 :class:`~phantomtouch.engine.events.Reports` turns into job states and log lines.
 
 Every applier runs in real time in the engine process (inside the audio callback), and
@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from phantomtouch.engine.plan_memory import SHARE_MIN_BYTES, SharedArrays, heavy_bytes
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.renderer.carriers import NoiseKey
 from phantomtouch.renderer.plan import Plan
@@ -36,27 +37,41 @@ from phantomtouch.schema.pattern import CombinedCarrier, NoiseCarrier, SineCarri
 if TYPE_CHECKING:
     from phantomtouch.engine.core import Core
     from phantomtouch.engine.noise import HeldLoops
+    from phantomtouch.engine.plan_memory import HeldArrays
     from phantomtouch.engine.shared import MoveSlots
 
 # -- commands, front -> audio side ------------------------------------------------------
 
 
 @dataclass(frozen=True, slots=True)
-class StartJob:
-    """Play a plan from ``frame`` (None: the next block).
+class HoldPlan:
+    """Hold a plan under ``handle`` (minted by the front's plan cache) until a
+    :class:`DropPlan`; ``prerendered`` is its samples rendered whole, or None to render
+    them in the callback. ``shared`` (engine process): the block of shared memory that
+    holds the plan's heavy arrays (:mod:`phantomtouch.engine.plan_memory`)."""
 
-    ``plan`` is None when the audio side holds it under ``plan_key`` already (the engine
-    process keeps plans it was sent; ``forget`` lists keys it may drop). ``prerendered``
-    is the plan's samples rendered whole, or None to render in the callback.
-    """
+    handle: int
+    plan: Plan
+    prerendered: Prerendered | None
+    shared: SharedArrays | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class DropPlan:
+    """Release the plan of ``handle`` (reported as :class:`PlanReleased`); voices that
+    play it keep it to their end."""
+
+    handle: int
+
+
+@dataclass(frozen=True, slots=True)
+class StartJob:
+    """Play the plan held under ``plan_key`` from ``frame`` (None: the next block)."""
 
     job_id: str
     plan_key: int
-    plan: Plan | None
-    prerendered: Prerendered | None
     owner: str | None
     frame: int | None
-    forget: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,7 +167,9 @@ class Close:
 
 
 Command = (
-    StartJob
+    HoldPlan
+    | DropPlan
+    | StartJob
     | ReleaseJob
     | ContactDown
     | ContactMove
@@ -224,6 +241,13 @@ class NoiseReleased:
 
 
 @dataclass(frozen=True, slots=True)
+class PlanReleased:
+    """The audio side no longer holds the plan of ``handle``."""
+
+    handle: int
+
+
+@dataclass(frozen=True, slots=True)
 class Refused:
     """The audio side refused a command whose data it was not handed (``what``: "plan",
     "noise loop"), or that failed; ``key`` names the job or contact."""
@@ -233,7 +257,7 @@ class Refused:
     reason: str
 
 
-Event = Started | Released | Ended | Cancelled | StoppedAll | NoiseReleased | Refused
+Event = Started | Released | Ended | Cancelled | StoppedAll | NoiseReleased | PlanReleased | Refused
 
 # -- the audio side's state, and the appliers -------------------------------------------
 
@@ -246,6 +270,7 @@ class AudioState:
     core: Core
     slots: MoveSlots | None = None
     loops: HeldLoops | None = None
+    arrays: HeldArrays | None = None
     plans: dict[int, tuple[Plan, Prerendered | None]] = field(default_factory=dict)
     reports: list[Event] = field(default_factory=list)
     refused: int = 0
@@ -258,19 +283,38 @@ class AudioState:
         self.reports.append(Refused(what, key, reason))
 
 
+def _hold_plan(state: AudioState, message: HoldPlan, void: bool) -> None:
+    """Real time. Keep the plan (even when void: it was handed once), its heavy arrays
+    mapped from the host's block; in the engine process, refuse heavy arrays inline."""
+    plan, prerendered, handle = message.plan, message.prerendered, message.handle
+    arrays = state.arrays
+    if message.shared is not None:
+        try:
+            if arrays is None:
+                raise LookupError("this audio side maps no shared plans")
+            plan, prerendered = arrays.hold(handle, plan, message.shared)
+        except (LookupError, OSError) as exc:
+            state.refuse("plan", handle, f"plan {handle}: {exc}")
+            return
+    elif arrays is not None and (size := heavy_bytes(plan, prerendered)) >= SHARE_MIN_BYTES:
+        state.refuse("plan", handle, f"plan {handle} carries {size} bytes inline")
+        return
+    state.plans[handle] = (state.core.widen(plan), prerendered)
+
+
+def _drop_plan(state: AudioState, message: DropPlan, void: bool) -> None:
+    """Real time. Forget the plan; sounding voices keep their reference, and its block
+    is released (and reported) once none reads it."""
+    state.plans.pop(message.handle, None)
+    if state.arrays is None or not state.arrays.drop(message.handle):
+        state.reports.append(PlanReleased(message.handle))
+
+
 def _start_job(state: AudioState, message: StartJob, void: bool) -> None:
-    """Real time. Keep the plan it carries (even when void: the host sends a plan
-    once), then start its voice; a void or refused start is reported cancelled."""
+    """Real time. Start a voice of a plan held; a void or refused start is reported
+    cancelled."""
     core = state.core
-    for old in message.forget:
-        state.plans.pop(old, None)
-    held = None
-    if message.plan is not None:
-        held = (core.widen(message.plan), message.prerendered)
-        if message.plan_key:
-            state.plans[message.plan_key] = held
-    elif message.plan_key in state.plans:
-        held = state.plans[message.plan_key]
+    held = state.plans.get(message.plan_key)
     if not void:
         if held is None:
             state.refuse("plan", message.job_id, f"plan {message.plan_key} was not handed over")
@@ -359,6 +403,8 @@ def _close(state: AudioState, message: Close, void: bool) -> None:
 
 
 APPLIERS: dict[type, Callable[[AudioState, Any, bool], None]] = {
+    HoldPlan: _hold_plan,
+    DropPlan: _drop_plan,
     StartJob: _start_job,
     ReleaseJob: _release_job,
     ContactDown: _contact_down,

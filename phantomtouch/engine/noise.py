@@ -16,7 +16,6 @@ whose loop was not handed over is refused, not computed in the callback.
 
 from __future__ import annotations
 
-import contextlib
 import threading
 from collections import OrderedDict, deque
 from collections.abc import Callable
@@ -25,6 +24,7 @@ from multiprocessing import shared_memory
 import numpy as np
 
 from phantomtouch.engine.messages import DropNoise, Event, HoldNoise, NoiseReleased
+from phantomtouch.engine.plan_memory import unlink_block, unmap_unread
 from phantomtouch.renderer.carriers import (
     NOISE_PERIOD_FRAMES,
     NoiseKey,
@@ -50,13 +50,6 @@ def _buffer(block: shared_memory.SharedMemory) -> memoryview:
     buffer = block.buf
     assert buffer is not None  # an open block
     return buffer
-
-
-def _unlink(block: shared_memory.SharedMemory) -> None:
-    with contextlib.suppress(OSError, BufferError):
-        block.close()
-    with contextlib.suppress(OSError):
-        block.unlink()
 
 
 class SharedLoops:
@@ -114,7 +107,7 @@ class SharedLoops:
         try:
             post(HoldNoise(key, block.name))
         except BaseException:
-            _unlink(block)
+            unlink_block(block)
             raise
         with self._lock:
             self._held[key] = block
@@ -137,7 +130,7 @@ class SharedLoops:
             block = blocks.popleft()
             if not blocks:
                 del self._dropped[key]
-        _unlink(block)
+        unlink_block(block)
 
     def clear(self) -> None:
         """Free every block: the engine process that mapped them is gone (host)."""
@@ -147,7 +140,7 @@ class SharedLoops:
             self._held.clear()
             self._dropped.clear()
         for block in blocks:
-            _unlink(block)
+            unlink_block(block)
 
 
 class HeldLoops:
@@ -188,14 +181,5 @@ class HeldLoops:
     def collect(self) -> None:
         """Unmap the dropped loops no voice reads any more and report them (real time:
         one failed ``close`` per loop still read)."""
-        if not self._retiring:
-            return
-        keep = []
-        for key, block in self._retiring:
-            try:
-                block.close()
-            except BufferError:  # a voice still reads it
-                keep.append((key, block))
-                continue
-            self._reports.append(NoiseReleased(key))
-        self._retiring = keep
+        self._retiring, freed = unmap_unread(self._retiring)
+        self._reports.extend(NoiseReleased(key) for key in freed)

@@ -10,15 +10,12 @@ voice would have rendered (the renderer's output does not depend on how it is cu
 blocks), and the callback's :class:`~phantomtouch.engine.voices.PrerenderedVoice` adds
 slices of them: whole-width frames, one contiguous add a block.
 
-:class:`PrerenderCache` keeps the samples of the plans in use: a plan made once and
-played often (a preset from the server's plan cache) is rendered once.
+The front's plan cache (:mod:`phantomtouch.engine.plans`) keeps the samples with their
+plan: a plan made once and played often is rendered once.
 """
 
 from __future__ import annotations
 
-import threading
-import weakref
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,8 +25,6 @@ from phantomtouch.renderer.plan import Plan
 
 PRERENDER_MAX_S = 1.0
 """Longest plan rendered whole before it plays, s."""
-PRERENDER_CACHE_BYTES = 32 << 20
-"""Most bytes of samples a cache keeps."""
 
 
 @dataclass(frozen=True)
@@ -54,54 +49,3 @@ def prerender(plan: Plan) -> Prerendered:
     PatternRenderer(plan).render_into(samples)
     samples.flags.writeable = False
     return Prerendered(samples=samples)
-
-
-class PrerenderCache:
-    """Prerendered short plans by plan identity, least recently used dropped first.
-
-    Samples are kept while their plan lives and the cache stays within ``max_bytes``; any
-    thread may call :meth:`get` (the render runs outside the cache's lock).
-
-    Parameters
-    ----------
-    sample_rate_hz : int
-    max_s : float
-        Longest plan rendered whole, s; 0 renders none.
-    max_bytes : int
-    """
-
-    def __init__(
-        self,
-        sample_rate_hz: int,
-        *,
-        max_s: float = PRERENDER_MAX_S,
-        max_bytes: int = PRERENDER_CACHE_BYTES,
-    ) -> None:
-        self.max_frames = round(max_s * sample_rate_hz)
-        self.max_bytes = int(max_bytes)
-        self.bytes = 0
-        self._lock = threading.Lock()
-        self._prerendered: OrderedDict[int, tuple[weakref.ref[Plan], Prerendered]] = OrderedDict()
-
-    def get(self, plan: Plan) -> Prerendered | None:
-        """The samples of ``plan``, rendered now if need be; None for a plan too long."""
-        if plan.frames > self.max_frames:
-            return None
-        with self._lock:
-            known = self._prerendered.get(id(plan))
-            if known is not None and known[0]() is plan:
-                self._prerendered.move_to_end(id(plan))
-                return known[1]
-        prerendered = prerender(plan)
-        with self._lock:
-            self._drop(id(plan))
-            self._prerendered[id(plan)] = (weakref.ref(plan), prerendered)
-            self.bytes += prerendered.samples.nbytes
-            while self.bytes > self.max_bytes and len(self._prerendered) > 1:
-                self._drop(next(iter(self._prerendered)))
-        return prerendered
-
-    def _drop(self, key: int) -> None:
-        old = self._prerendered.pop(key, None)
-        if old is not None:
-            self.bytes -= old[1].samples.nbytes

@@ -7,11 +7,12 @@ there that does Python work; :class:`ProcessEngine` is the
 :class:`~phantomtouch.engine.front.EngineFront` over it. Everything here runs in the
 host, and nothing here ever waits for the engine process:
 
-- messages (:mod:`phantomtouch.engine.messages`: a job's start with its plan, sent once
-  per plan; releases; touchdowns) go through an
+- messages (:mod:`phantomtouch.engine.messages`: plans handed over and dropped by the
+  handle the front's plan cache minted; job starts; releases; touchdowns) go through an
   :class:`~phantomtouch.engine.link.Outbox` whose thread writes them into a pipe; the
   callback reads them at the start of each block within a time budget;
-- noise loops go through shared memory the host owns (:mod:`phantomtouch.engine.noise`);
+- noise loops and plans' heavy arrays go through shared memory the host owns
+  (:mod:`phantomtouch.engine.noise`, :mod:`phantomtouch.engine.plan_memory`);
 - ``stop_all`` raises a sequence mark in shared memory that the callback reads first:
   every message sent before it is void, whatever the pipe holds;
 - contact moves and the sample clock go through shared memory
@@ -31,8 +32,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-import weakref
-from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
@@ -44,16 +43,17 @@ from phantomtouch.engine.messages import (
     Close,
     Command,
     ContactMove,
+    HoldPlan,
     NoiseReleased,
-    StartJob,
+    PlanReleased,
     StartSink,
 )
 from phantomtouch.engine.noise import SharedLoops, loop_key
+from phantomtouch.engine.plan_memory import SharedPlans
 from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim, spawn
 from phantomtouch.errors import DeviceError, EngineBusyError
-from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger("phantomtouch.engine")
@@ -68,8 +68,6 @@ RETRY_FIRST_S = 0.5
 RETRY_MAX_S = 5.0
 """A restart that fails (the sound card is gone) is tried again after 0.5 s, then after
 twice as long each time, at most every 5 s."""
-PLAN_CACHE_BYTES = 32 << 20
-"""Plans kept by the engine process, by their size on the wire."""
 REALTIME_PRIORITY = 1
 """SCHED_FIFO priority of the engine process's threads (above every ordinary thread)."""
 
@@ -116,6 +114,7 @@ class ChildAudio:
         self._lock = threading.RLock()
         self._halt = threading.Event()
         self._loops = SharedLoops()
+        self._shared_plans = SharedPlans()
         self._reset_records()
         self._child = self._start_child()
         self.costs: tuple[float, float, float] | None = self._child.costs
@@ -129,10 +128,8 @@ class ChildAudio:
     def _reset_records(self) -> None:
         """Forget what an engine process held (none is running, or a new one starts)."""
         self._seq = 0
-        self._plans: OrderedDict[int, tuple[int, weakref.ref[Plan], int]] = OrderedDict()
-        self._plan_bytes = 0  # id(plan): key, the plan (not kept alive here), wire bytes
-        self._forget: list[int] = []
         self._loops.clear()
+        self._shared_plans.clear()
 
     # -- the engine process ---------------------------------------------------------------
 
@@ -152,12 +149,15 @@ class ChildAudio:
         return child
 
     def _read_reports(self, child: ChildProcess) -> None:
-        """Host, the reports thread: free released loops, hand the rest to the front."""
+        """Host, the reports thread: free released loops and plans' blocks, hand the rest
+        to the front."""
         for events in read_frames(child.reports_fd):
             if child is getattr(self, "_child", None):  # not a process replaced since
                 for event in events:
                     if isinstance(event, NoiseReleased):
                         self._loops.released(event.key)
+                    elif isinstance(event, PlanReleased):
+                        self._shared_plans.released(event.handle)
             self._links.deliver(events)
 
     def _write(self, child: ChildProcess, message: Command) -> bool:
@@ -166,51 +166,22 @@ class ChildAudio:
 
     def post(self, message: Command) -> None:
         """Queue a message for the engine process (host, under the front's lock); a
-        job's plan crosses once, then the engine process keeps it under a key.
+        plan handed over crosses without what the engine process has (``slim``).
 
         Raises
         ------
         EngineBusyError
             The pipe is full (the engine process does not read).
         """
-        if isinstance(message, StartJob) and message.plan is not None:
-            self._post_start(message, message.plan)
-            return
+        if isinstance(message, HoldPlan):
+            shared = self._shared_plans.share(
+                message.handle, slim(message.plan), message.prerendered
+            )
+            message = HoldPlan(message.handle, *shared)
         if not self._write(self._child, message):
             raise EngineBusyError(
                 "the engine process is not taking commands (its pipe is full); retry later"
             )
-
-    def _post_start(self, message: StartJob, plan: Plan) -> None:
-        known = self._plans.pop(id(plan), None)
-        if known is not None and known[1]() is plan:
-            self._plans[id(plan)] = known  # the most recently used
-            key, sent, prerendered = known[0], None, None  # the engine process has them
-        else:
-            if known is not None:  # a plan gone since, whose id this one has
-                self._forget.append(known[0])
-                self._plan_bytes -= known[2]
-            self._seq += 1
-            key, sent, prerendered = self._seq, slim(plan), message.prerendered
-        forget, self._forget = tuple(self._forget), []
-        shipped = StartJob(
-            message.job_id, key, sent, prerendered, message.owner, message.frame, forget
-        )
-        self._seq += 1
-        frame_bytes = encode((self._seq, shipped))
-        if not self._child.outbox.put(frame_bytes):
-            self._forget = [*forget, *self._forget]
-            raise EngineBusyError(
-                "the engine process is not taking commands (its pipe is full); retry later"
-            )
-        if sent is not None:
-            size = len(frame_bytes)
-            self._plans[id(plan)] = (key, weakref.ref(plan), size)
-            self._plan_bytes += size
-            while self._plan_bytes > PLAN_CACHE_BYTES and len(self._plans) > 1:
-                old_key, _, old_size = self._plans.popitem(last=False)[1]
-                self._forget.append(old_key)
-                self._plan_bytes -= old_size
 
     def prepare(self, carrier: object) -> None:
         """Compute a carrier's noise loop ahead (host, outside the front's lock)."""
@@ -364,6 +335,7 @@ class ChildAudio:
         self._watchdog.join()
         child.end(kill=False)
         self._loops.clear()
+        self._shared_plans.clear()
 
     # -- clock and figures ----------------------------------------------------------------
 

@@ -28,6 +28,7 @@ a newer one). The host, which may wait, takes it for the few stores or loads it 
 
 from __future__ import annotations
 
+import contextlib
 import math
 import multiprocessing
 import os
@@ -240,29 +241,15 @@ class MoveSlots:
         frame: int | None,
     ) -> None:
         """Post a position (one writer thread at a time; with a lock, waits for it)."""
-        if self._lock is None:
-            self._store(slot, generation, x_cm, y_cm, intensity, frame)
-            return
-        with self._lock:
-            self._store(slot, generation, x_cm, y_cm, intensity, frame)
-
-    def _store(
-        self,
-        slot: int,
-        generation: int,
-        x_cm: float,
-        y_cm: float,
-        intensity: float | None,
-        frame: int | None,
-    ) -> None:
-        row = self._rows[slot]
-        row[0] += 1.0
-        row[1] = generation
-        row[2] = x_cm
-        row[3] = y_cm
-        row[4] = math.nan if intensity is None else intensity
-        row[5] = math.nan if frame is None else frame
-        row[0] += 1.0
+        with self._lock or contextlib.nullcontext():
+            row = self._rows[slot]
+            row[0] += 1.0
+            row[1] = generation
+            row[2] = x_cm
+            row[3] = y_cm
+            row[4] = math.nan if intensity is None else intensity
+            row[5] = math.nan if frame is None else frame
+            row[0] += 1.0
 
     # -- the engine process -----------------------------------------------------------
 

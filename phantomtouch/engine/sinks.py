@@ -123,7 +123,26 @@ class _Pacer:
             due_s += self._period_s
 
 
-class NullSink:
+class _PacedSink:
+    """What the sinks paced by a :class:`_Pacer` share: no device, no latency, the
+    pacer's underruns."""
+
+    _pacer: _Pacer
+
+    @property
+    def output_device(self) -> str | None:
+        return None
+
+    @property
+    def underruns(self) -> int:
+        return self._pacer.underruns
+
+    @property
+    def output_latency_s(self) -> float:
+        return 0.0
+
+
+class NullSink(_PacedSink):
     """Pulls blocks at real-time pace and drops them (no sound card).
 
     Parameters
@@ -141,18 +160,6 @@ class NullSink:
         self.channels = device.channels
         self._pacer = _Pacer("phantomtouch-null-sink", device, None)
 
-    @property
-    def output_device(self) -> str | None:
-        return None
-
-    @property
-    def underruns(self) -> int:
-        return self._pacer.underruns
-
-    @property
-    def output_latency_s(self) -> float:
-        return 0.0
-
     def start(self, render: RenderFn) -> None:
         self._pacer.start(render)
 
@@ -163,7 +170,7 @@ class NullSink:
         self._pacer.stop()
 
 
-class CaptureSink:
+class CaptureSink(_PacedSink):
     """Records every block the engine renders.
 
     Parameters
@@ -202,18 +209,6 @@ class CaptureSink:
         self._render: RenderFn | None = None
         self._buffer = np.zeros((device.block_frames, device.channels), dtype=np.float32)
         self._pacer = _Pacer("phantomtouch-capture-sink", device, self._record)
-
-    @property
-    def output_device(self) -> str | None:
-        return None
-
-    @property
-    def underruns(self) -> int:
-        return self._pacer.underruns
-
-    @property
-    def output_latency_s(self) -> float:
-        return 0.0
 
     @property
     def frames(self) -> int:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 from fastapi import Depends, Path
 from starlette.requests import HTTPConnection
 
-from phantomtouch.service.models import PATTERN_NAME_REGEX
+from phantomtouch.service.models import PATTERN_NAME_REGEX, name_rules
 from phantomtouch.service.running import Service
 from phantomtouch.service.store import PatternStore
 
@@ -49,13 +49,4 @@ if TYPE_CHECKING:
 else:
     EngineDep = Annotated[Any, Depends(get_engine)]
 StoreDep = Annotated[PatternStore, Depends(get_store)]
-PatternNameParam = Annotated[
-    str,
-    Path(
-        min_length=1,
-        max_length=64,
-        pattern=PATTERN_NAME_REGEX,
-        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters; not '.' or '..'.",
-        examples=["my-stroke"],
-    ),
-]
+PatternNameParam = Annotated[str, Path(**name_rules(PATTERN_NAME_REGEX, "my-stroke"))]

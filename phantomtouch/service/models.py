@@ -37,16 +37,21 @@ PATTERN_NAME_REGEX = (
 """1 to 64 letters, digits, '.', '_' and '-', except '.' and '..': clients that normalise
 URLs turn ``/patterns/..`` into ``/``, so such a name could never be reached. (Written
 without look-ahead, which pydantic's regex engine lacks.)"""
-PatternName = Annotated[
-    str,
-    Field(
-        min_length=1,
-        max_length=64,
-        pattern=PATTERN_NAME_REGEX,
-        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters; not '.' or '..'.",
-        examples=["my-stroke"],
-    ),
-]
+
+
+def name_rules(regex: str, example: str) -> dict[str, Any]:
+    """The constraints of a stored pattern's or clip's name (``regex``), as keywords of
+    pydantic's ``Field`` or FastAPI's ``Path``."""
+    return {
+        "min_length": 1,
+        "max_length": 64,
+        "pattern": regex,
+        "description": "Letters, digits, '.', '_' and '-'; 1 to 64 characters; not '.' or '..'.",
+        "examples": [example],
+    }
+
+
+PatternName = Annotated[str, Field(**name_rules(PATTERN_NAME_REGEX, "my-stroke"))]
 MAX_START_IN_MS = 60_000.0
 MAX_START_AHEAD_S = 3600.0
 """Latest start on the server clock, seconds from now."""

@@ -14,7 +14,6 @@ from phantomtouch.schema import DeviceProfile
 from phantomtouch.service.connections import ConnectionCaps
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.metrics import Metrics
-from phantomtouch.service.plans import PlanCache
 from phantomtouch.service.quotas import VoiceLedger
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
@@ -25,6 +24,7 @@ if TYPE_CHECKING:
     from contextlib import AbstractContextManager
 
     from phantomtouch.engine import EngineFront
+    from phantomtouch.engine.plans import PlanCache
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,6 @@ class Service:
     engine: EngineFront
     store: PatternStore
     metrics: Metrics
-    plans: PlanCache = field(init=False)
     voices: VoiceLedger = field(init=False)
     connections: ConnectionCaps = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
@@ -61,13 +60,17 @@ class Service:
 
     def __post_init__(self) -> None:
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
-        self.plans = PlanCache(self.device)
         self.connections = ConnectionCaps(
             self.settings.max_ws_connections, self.settings.max_ws_connections_per_address
         )
         self.voices = VoiceLedger(
             self.settings.voices_per_client, self.settings.max_voice_seconds_per_client
         )
+
+    @property
+    def plans(self) -> PlanCache:
+        """The engine's plan cache, the one place plans are kept."""
+        return self.engine.plans
 
     def new_owner(self) -> str:
         """A unique owner id for one WebSocket connection's contacts and jobs."""

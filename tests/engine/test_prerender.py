@@ -7,7 +7,8 @@ import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
 from phantomtouch.engine import CaptureSink, Engine
-from phantomtouch.engine.prerender import PrerenderCache, prerender
+from phantomtouch.engine.plans import PlanCache
+from phantomtouch.engine.prerender import prerender
 from phantomtouch.renderer import plan
 
 DEVICE = DeviceProfile.default()
@@ -84,14 +85,14 @@ def test_a_prerendered_plan_holds_the_whole_render_read_only() -> None:
 def test_the_cache_renders_a_plan_once_keeps_its_bound_and_skips_long_plans() -> None:
     short = [plan(tap(intensity=0.2 + 0.1 * k), DEVICE) for k in range(4)]  # same channels
     one = prerender(short[0]).samples.nbytes
-    cache = PrerenderCache(DEVICE.sample_rate_hz, max_s=1.0, max_bytes=2 * one)
-    first = cache.get(short[0])
-    assert first is not None and cache.get(short[0]) is first
+    cache = PlanCache(DEVICE, max_bytes=2 * one, prerender_max_s=1.0)
+    first = cache.prerendered(short[0])
+    assert first is not None and cache.prerendered(short[0]) is first
     for resolved in short[1:]:
-        cache.get(resolved)
+        cache.prerendered(resolved)
     assert cache.bytes <= 2 * one
-    assert cache.get(short[0]) is not first  # dropped as least recently used, rendered again
-    assert cache.get(plan(tap(duration_s=1.5), DEVICE)) is None
+    assert cache.prerendered(short[0]) is not first  # dropped as least recently used
+    assert cache.prerendered(plan(tap(duration_s=1.5), DEVICE)) is None
 
 
 def test_prerendered_touches_are_not_charged_for_first_frames() -> None:

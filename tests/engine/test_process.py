@@ -26,7 +26,7 @@ from phantomtouch import (
     plan,
     render,
 )
-from phantomtouch.engine import process
+from phantomtouch.engine import plans as plan_cache
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.errors import DeviceError
@@ -219,7 +219,7 @@ def test_contacts_get_slots_up_to_max_contacts() -> None:
 
 
 def test_plans_sent_once_are_kept_and_forgotten_in_turn(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(process, "PLAN_CACHE_BYTES", 1)  # one plan at a time
+    monkeypatch.setattr(plan_cache, "MAX_BYTES", 1)  # no plan kept: each handed, then dropped
     patterns = [STROKE.model_copy(update={"speed_cm_s": 10.0 + 5 * k}) for k in range(5)]
     plans = [plan(pattern, DEVICE) for pattern in patterns]
     with ProcessEngine(DEVICE, SinkSpec("null"), max_voices=100, voice_cost=1e-4) as engine:

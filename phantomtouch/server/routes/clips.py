@@ -17,21 +17,12 @@ from phantomtouch.schema.clip import CLIP_NAME_REGEX
 from phantomtouch.server.deps import StoreDep
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import NotFoundError, responses
-from phantomtouch.service.models import ClipInfo
+from phantomtouch.service.models import ClipInfo, name_rules
 
 router = APIRouter(prefix="/clips", tags=["patterns"])
 
 clip_body, CLIP_BODY_OPENAPI = strict_body(TypeAdapter(HapticClip))
-ClipNameParam = Annotated[
-    str,
-    Path(
-        min_length=1,
-        max_length=64,
-        pattern=CLIP_NAME_REGEX,
-        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters; not '.' or '..'.",
-        examples=["heartbeat"],
-    ),
-]
+ClipNameParam = Annotated[str, Path(**name_rules(CLIP_NAME_REGEX, "heartbeat"))]
 
 
 def clip_info(name: str, clip: HapticClip) -> ClipInfo:

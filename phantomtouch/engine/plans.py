@@ -1,0 +1,219 @@
+"""The one plan cache: plans by their pattern's content, each with one handle, minted once.
+
+A VR scene plays the same few touches again and again; planning one (path, eq. 1 timing,
+layout fit) costs about as much as the rest of a request, and rendering a short one whole
+(:mod:`phantomtouch.engine.prerender`) more. :class:`PlanCache` is the only place plans
+are kept in the host: the service plans through it, the front schedules through it, and
+the audio side holds a plan only under the handle the cache minted for it, from the
+``HoldPlan`` that handed it over until the ``DropPlan`` that releases it (acknowledged
+by a ``PlanReleased`` event).
+
+The key is the pattern's JSON text: the same pattern on the cache's device is the same
+plan. The cache holds at most ``max_bytes`` (plans by :func:`plan_bytes`, plus their
+prerendered samples); a plan over an eighth of that is planned every time and not kept
+(its entry is handed to the audio side for one job and released after it), so a stream
+of distinct large patterns cannot grow the host.
+
+Every method runs in the host, on any thread: planning and rendering happen outside the
+cache's lock. What was handed to the audio side is the front's to track
+(:attr:`HeldPlan.handed`, under the front's lock).
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+import weakref
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from phantomtouch.engine.jobs import resolve_plan
+from phantomtouch.engine.prerender import PRERENDER_MAX_S, Prerendered, prerender
+from phantomtouch.renderer import plan
+from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema import DeviceProfile, TouchPattern
+
+MAX_BYTES = 32 << 20
+"""Default bound of the kept plans and samples, bytes."""
+PATTERN_BYTES_PER_CHAR = 8
+"""Memory of a validated pattern per character of its JSON: a path point of about 16
+characters is a tuple of two floats, about 110 bytes (measured with ``tracemalloc``)."""
+
+
+def plan_bytes(resolved: Plan, key_chars: int) -> int:
+    """Bytes a kept plan holds: its pattern (from the JSON's length) and its timelines."""
+    arrays = 0
+    for timeline in (resolved.forward, resolved.backward):
+        if timeline is None:
+            continue
+        for array in (timeline.times_s, timeline.points_cm, timeline.intensity):
+            arrays += 0 if array is None else array.nbytes
+    return PATTERN_BYTES_PER_CHAR * key_chars + arrays
+
+
+@dataclass(eq=False)
+class HeldPlan:
+    """One plan of the cache and what goes with it.
+
+    Attributes
+    ----------
+    handle : int
+        The plan's name on the audio side, minted once with the entry (> 0).
+    plan : Plan
+    prerendered : Prerendered or None
+        Its samples rendered whole (a plan at most ``prerender_max_s`` long), rendered
+        once with the entry; None: rendered by its voice.
+    bytes : int
+        Plan and samples, bytes.
+    kept : bool
+        The cache keeps it; False once dropped (or never kept: a plan too large).
+    handed : bool
+        The audio side holds it (set by the front, under its lock).
+    """
+
+    handle: int
+    plan: Plan
+    prerendered: Prerendered | None
+    bytes: int
+    kept: bool = True
+    handed: bool = False
+
+
+class PlanCache:
+    """Plans of ``device`` by their pattern's content, least recently used dropped first.
+
+    Parameters
+    ----------
+    device : DeviceProfile
+    max_bytes : int or None
+        Bound of the kept plans and samples, bytes (None: :data:`MAX_BYTES`).
+    prerender_max_s : float
+        Longest plan rendered whole, s; 0 renders none.
+    """
+
+    def __init__(
+        self,
+        device: DeviceProfile,
+        max_bytes: int | None = None,
+        *,
+        prerender_max_s: float = PRERENDER_MAX_S,
+    ) -> None:
+        self.device = device
+        self.max_bytes = MAX_BYTES if max_bytes is None else int(max_bytes)
+        self.max_frames = round(prerender_max_s * device.sample_rate_hz)
+        self.bytes = 0
+        """Bytes of the plans and samples kept now."""
+        self._entries: OrderedDict[str, HeldPlan] = OrderedDict()
+        self._made: dict[int, tuple[weakref.ref[Plan], str]] = {}  # id(plan): its key
+        self._dropped: list[HeldPlan] = []
+        self.releasing: dict[int, HeldPlan] = {}
+        """Entries the audio side was told to drop, by handle, until it reports
+        ``PlanReleased`` (what they hold lives until then)."""
+        self._handles = itertools.count(1)
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def plan(self, pattern: TouchPattern) -> Plan:
+        """The plan of ``pattern`` on the device (refusals are ``ParameterError``)."""
+        key = pattern.model_dump_json()
+        return self._entry(key, lambda: plan(pattern, self.device), render=False).plan
+
+    def entry(self, pattern: TouchPattern | Plan) -> HeldPlan:
+        """The entry of a pattern, or of a plan made for the device, with its samples
+        rendered if it is short enough (an entry the cache does not keep when too large).
+
+        Raises
+        ------
+        ParameterError
+            The pattern cannot be planned, or the plan is for another device.
+        """
+        if isinstance(pattern, TouchPattern):
+            key = pattern.model_dump_json()
+            return self._entry(key, lambda: plan(pattern, self.device), render=True)
+        given = resolve_plan(pattern, self.device)
+        with self._lock:
+            made = self._made.get(id(given))
+        if made is not None and made[0]() is given:
+            known_key = made[1]
+        else:  # a plan made elsewhere: keyed by its pattern, like the cache's own
+            known_key = given.pattern.model_dump_json()
+        return self._entry(known_key, lambda: given, render=True)
+
+    def prerendered(self, resolved: Plan) -> Prerendered | None:
+        """The samples of a plan, rendered once; None for a plan too long."""
+        return self.entry(resolved).prerendered
+
+    def take_dropped(self) -> list[HeldPlan]:
+        """Entries the audio side held when they were dropped, since the last call (the
+        front releases them)."""
+        with self._lock:
+            dropped, self._dropped = self._dropped, []
+        return dropped
+
+    def release(self, held: HeldPlan) -> None:
+        """The front posted ``DropPlan`` for ``held`` (host, under the front's lock)."""
+        held.handed = False
+        with self._lock:
+            self.releasing[held.handle] = held
+
+    def released(self, handle: int) -> None:
+        """The audio side reported ``PlanReleased`` (host, under the front's lock)."""
+        with self._lock:
+            self.releasing.pop(handle, None)
+
+    def unhand_all(self) -> None:
+        """The audio side holds nothing any more (a new engine process; host, under the
+        front's lock)."""
+        with self._lock:
+            for held in self._entries.values():
+                held.handed = False
+            self.releasing.clear()
+            self._dropped.clear()
+
+    def _entry(self, key: str, make: Callable[[], Plan], *, render: bool) -> HeldPlan:
+        """The entry of ``key``, made by ``make()`` if need be (outside the lock)."""
+        too_large = PATTERN_BYTES_PER_CHAR * len(key) > self.max_bytes // 8
+        with self._lock:
+            known = None if too_large else self._entries.get(key)
+            if known is not None:
+                self._entries.move_to_end(key)
+                if not render or known.prerendered is not None:
+                    return known
+                if known.plan.frames > self.max_frames:
+                    return known
+        resolved = known.plan if known is not None else make()
+        prerendered = prerender(resolved) if render and resolved.frames <= self.max_frames else None
+        size = plan_bytes(resolved, len(key))
+        samples = 0 if prerendered is None else prerendered.samples.nbytes
+        with self._lock:
+            known = None if too_large else self._entries.get(key)
+            if known is not None and (prerendered is None or known.prerendered is not None):
+                return known
+            if known is not None:  # planned before, rendered now: same handle
+                known.prerendered = prerendered
+                known.bytes += samples
+                self.bytes += samples
+                self._trim()
+                return known
+            held = HeldPlan(next(self._handles), resolved, prerendered, size + samples)
+            if too_large or size > self.max_bytes // 8:
+                held.kept = False  # the front releases it after its one job
+                return held
+            self._entries[key] = held
+            self._made[id(resolved)] = (weakref.ref(resolved), key)
+            self.bytes += held.bytes
+            self._trim()
+        return held
+
+    def _trim(self) -> None:
+        """Drop the least recently used entries beyond the bound (under the lock)."""
+        while self.bytes > self.max_bytes and self._entries:
+            _, old = self._entries.popitem(last=False)
+            old.kept = False
+            self.bytes -= old.bytes
+            self._made.pop(id(old.plan), None)
+            if old.handed:  # else the front sees ``kept`` False once it has handed it
+                self._dropped.append(old)
