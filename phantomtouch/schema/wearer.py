@@ -23,10 +23,9 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, WithJsonSchema
 
 from phantomtouch.errors import ParameterError
-from phantomtouch.schema import limits
 from phantomtouch.schema.clip import CLIP_NAME_REGEX
 
 MAX_OFFSET_DB = 20.0
@@ -36,10 +35,29 @@ WEARER_NAME_REGEX = CLIP_NAME_REGEX
 Band = Literal["sine_100hz", "noise_40_500hz"]
 """The carrier bands a profile is measured in."""
 BANDS: tuple[Band, ...] = ("sine_100hz", "noise_40_500hz")
-Channel = Annotated[int, Field(ge=1, le=limits.MAX_CHANNEL)]
-"""An actuator by its output channel, 1-based."""
+CHANNEL_REGEX = r"^(?:[1-9]|[1-5][0-9]|6[0-4])$"
+"""An output channel as a JSON key: 1 to 64 (``limits.MAX_CHANNEL``), no leading zero."""
+Channel = Annotated[str, StringConstraints(pattern=CHANNEL_REGEX)]
+"""An actuator by its output channel, 1-based, as a JSON object key ("1" .. "64")."""
 OffsetDb = Annotated[float, Field(ge=-MAX_OFFSET_DB, le=MAX_OFFSET_DB, allow_inf_nan=False)]
 """An offset in dB: finite, within ±``MAX_OFFSET_DB``."""
+ChannelOffsets = Annotated[
+    dict[Channel, OffsetDb],
+    WithJsonSchema(
+        {
+            "type": "object",
+            "patternProperties": {
+                CHANNEL_REGEX: {
+                    "type": "number",
+                    "minimum": -MAX_OFFSET_DB,
+                    "maximum": MAX_OFFSET_DB,
+                }
+            },
+            "additionalProperties": False,
+        }
+    ),
+]
+"""One band's offsets by channel; the JSON Schema refuses any other key."""
 
 
 class WearerProfile(BaseModel):
@@ -47,7 +65,7 @@ class WearerProfile(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    offsets_db: dict[Band, dict[Channel, OffsetDb]] = Field(
+    offsets_db: dict[Band, ChannelOffsets] = Field(
         default_factory=dict,
         description=(
             "Per band (`sine_100hz`, `noise_40_500hz`), per output channel (1-based, "
@@ -63,7 +81,7 @@ class WearerProfile(BaseModel):
     def channel_offsets_db(self, band: Band, channels: int) -> tuple[float, ...]:
         """Offsets of ``band`` for channels 1 .. ``channels`` (0 dB where none is given)."""
         given = self.offsets_db.get(band, {})
-        return tuple(float(given.get(k, 0.0)) for k in range(1, channels + 1))
+        return tuple(float(given.get(str(k), 0.0)) for k in range(1, channels + 1))
 
 
 def check_channels(profile: WearerProfile, channels: int) -> None:
@@ -76,8 +94,8 @@ def check_channels(profile: WearerProfile, channels: int) -> None:
         ``offsets_db.sine_100hz.9=2.0:``.
     """
     for band, given in profile.offsets_db.items():
-        for channel in sorted(given):
-            if channel > channels:
+        for channel in sorted(given, key=int):
+            if int(channel) > channels:
                 raise ParameterError(
                     f"offsets_db.{band}.{channel}={given[channel]!r}: this device has no "
                     f"actuator on channel {channel}; channels are 1 to {channels}"

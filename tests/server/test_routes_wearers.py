@@ -3,6 +3,7 @@ the one named at start-up applied by the output stage and shown in /health."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -12,8 +13,8 @@ from fastapi.testclient import TestClient
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.renderer import OutputStage
-from phantomtouch.schema import DeviceProfile
-from phantomtouch.schema.wearer import WearerProfile
+from phantomtouch.schema import DeviceProfile, limits
+from phantomtouch.schema.wearer import CHANNEL_REGEX, WearerProfile
 from phantomtouch.server import create_app
 from phantomtouch.server.serve import check_library
 from phantomtouch.service.store import PatternStore
@@ -49,8 +50,12 @@ def test_put_get_list_delete(client: TestClient) -> None:
     [
         ({"offsets_db": {"sine_100hz": {"2": 20.5}}}, "offsets_db.sine_100hz.2", "20"),
         ({"offsets_db": {"noise_40_500hz": {"4": -21}}}, "offsets_db.noise_40_500hz.4", "-20"),
-        ({"offsets_db": {"sine_100hz": {"65": 1.0}}}, "offsets_db.sine_100hz.65.[key]", "64"),
-        ({"offsets_db": {"sine_100hz": {"one": 1.0}}}, "offsets_db.sine_100hz.one.[key]", "int"),
+        ({"offsets_db": {"sine_100hz": {"65": 1.0}}}, "offsets_db.sine_100hz.65.[key]", "pattern"),
+        (
+            {"offsets_db": {"sine_100hz": {"one": 1.0}}},
+            "offsets_db.sine_100hz.one.[key]",
+            "pattern",
+        ),
         ({"offsets_db": {"square_50hz": {"1": 1.0}}}, "offsets_db.square_50hz.[key]", "sine"),
         ({"offsets_db": {}, "gain": 2}, "gain", "not permitted"),
     ],
@@ -134,3 +139,12 @@ def test_the_profile_api_is_in_openapi_with_an_example(client: TestClient) -> No
     assert "get" in paths["/wearers"]
     body = paths["/wearers/{name}"]["put"]["requestBody"]["content"]["application/json"]
     WearerProfile.model_validate(body["example"])
+
+
+def test_the_channel_keys_are_exactly_the_channels_a_device_may_have() -> None:
+    accepted = {
+        key
+        for key in [str(n) for n in range(0, 200)] + ["01", "1.0", " 1", "+1"]
+        if re.fullmatch(CHANNEL_REGEX, key)
+    }
+    assert accepted == {str(n) for n in range(1, limits.MAX_CHANNEL + 1)}
