@@ -63,6 +63,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         "osc_listen": args.osc,
         "osc_map": args.osc_map,
         "wasapi_exclusive": args.exclusive or None,
+        "wearer": args.wearer,
+        "wearer_band": args.wearer_band,
     }
     if args.osc is not None:
         _require("osc", "pythonosc")
@@ -121,6 +123,15 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--db", help="pattern library, SQLite file")
     parser.add_argument("--token", help="bearer token every request must carry")
+    parser.add_argument(
+        "--wearer",
+        help="wearer profile from the library (PUT /wearers/NAME) the output stage applies",
+    )
+    parser.add_argument(
+        "--wearer-band",
+        choices=("sine_100hz", "noise_40_500hz"),
+        help="band of the wearer profile to apply (default sine_100hz)",
+    )
     fleet_cli.add_serve_options(parser)
 
 

@@ -20,7 +20,7 @@ from fastapi.staticfiles import StaticFiles
 
 from phantomtouch import __version__
 from phantomtouch.schema import DeviceProfile
-from phantomtouch.server.routes import clips, docs, info, patterns, render, touch, web, ws
+from phantomtouch.server.routes import clips, docs, info, patterns, render, touch, wearers, web, ws
 from phantomtouch.service import errors
 from phantomtouch.service.bodies import merge_components
 from phantomtouch.service.engine_access import describe_output, open_engine
@@ -36,6 +36,7 @@ from phantomtouch.service.origin import (
 from phantomtouch.service.running import Attachment, Service
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
+from phantomtouch.service.wearers import output_device
 
 logger = logging.getLogger("phantomtouch.server")
 
@@ -56,11 +57,12 @@ def _lifespan(settings: Settings, metrics: Metrics, attach: Sequence[Attachment]
         )
         store = PatternStore.open(settings.db_path)
         try:
-            engine = open_engine(settings, device)
+            played = output_device(settings, store, device)
+            engine = open_engine(settings, played)
         except BaseException:
             store.close()
             raise
-        service = Service(settings, device, engine, store, metrics)
+        service = Service(settings, played, engine, store, metrics)
         service.loop = asyncio.get_running_loop()
         app.state.service = service
         logger.info("phantomtouch: %s; patterns in %s", describe_output(engine), store.path)
@@ -120,13 +122,14 @@ def create_app(settings: Settings | None = None, *, attach: Sequence[Attachment]
         openapi_tags=[
             {"name": "touch", "description": "Play and stop touches."},
             {"name": "patterns", "description": "The pattern library (SQLite)."},
+            {"name": "wearers", "description": "Wearer profiles: felt intensity per actuator."},
             {"name": "render", "description": "Offline rendering."},
             {"name": "info", "description": "Device, presets, clock, health, metrics."},
         ],
     )
     app.state.settings = settings
     errors.install(app)
-    for module in (touch, patterns, clips, render, info, ws, web, docs):
+    for module in (touch, patterns, clips, wearers, render, info, ws, web, docs):
         app.include_router(module.router)
     app.mount(docs.ASSETS_PATH, StaticFiles(directory=docs.ASSETS_DIR), name="docs-assets")
     if web.STATIC_DIR.is_dir():

@@ -5,23 +5,37 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.schema import DeviceProfile
 from phantomtouch.server.app import create_app
 from phantomtouch.service.listen import log_config
 from phantomtouch.service.running import Attachment
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
+from phantomtouch.service.wearers import output_device
 
 
 def check_library(settings: Settings) -> None:
-    """Open and close the pattern library once, before uvicorn starts.
+    """Open and close the pattern library once, before uvicorn starts, and fit the
+    wearer profile ``settings.wearer`` (if any) to the device.
 
     Raises
     ------
     DeviceError
         The library cannot be opened (:class:`~phantomtouch.service.store.DamagedStoreError`
-        if the file is damaged); ``serve`` then stops with that one line.
+        if the file is damaged), or the wearer is not in it or does not fit the device;
+        ``serve`` then stops with that one line.
     """
-    PatternStore.open(settings.db_path).close()
+    store = PatternStore.open(settings.db_path)
+    try:
+        if settings.wearer is not None:
+            device = (
+                DeviceProfile.load(settings.device_profile)
+                if settings.device_profile
+                else DeviceProfile.default()
+            )
+            output_device(settings, store, device)
+    finally:
+        store.close()
 
 
 def check_device_profile(settings: Settings) -> None:
@@ -32,8 +46,6 @@ def check_device_profile(settings: Settings) -> None:
     ParameterError
         The file is missing or not a valid profile (bad input: ``serve`` exits 2).
     """
-    from phantomtouch.schema import DeviceProfile
-
     if settings.device_profile is None:
         return
     try:
@@ -79,8 +91,6 @@ def check_output(settings: Settings) -> None:
 
 def profile_channels(settings: Settings) -> int:
     """The channels of the settings' device profile (the paper's armband: 8)."""
-    from phantomtouch.schema import DeviceProfile
-
     path = settings.device_profile
     return (DeviceProfile.load(path) if path is not None else DeviceProfile.default()).channels
 

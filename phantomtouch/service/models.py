@@ -28,6 +28,7 @@ from pydantic.config import JsonDict
 from phantomtouch.schema import TouchPattern
 from phantomtouch.schema.device import Actuator
 from phantomtouch.schema.pattern import TIMING_RULES, not_both
+from phantomtouch.schema.wearer import WearerProfile
 
 PATTERN_NAME_REGEX = (
     r"^(?:[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}"
@@ -381,6 +382,14 @@ class ClipInfo(BaseModel):
     transients: int
 
 
+class WearerInfo(BaseModel):
+    """A wearer profile of the library, and whether the output stage applies it."""
+
+    name: str
+    active: bool = Field(description="The service was started with this wearer (--wearer).")
+    profile: WearerProfile
+
+
 class PresetInfo(BaseModel):
     name: str
     summary: PlanSummary
@@ -438,6 +447,13 @@ class Health(BaseModel):
     degraded_inputs: list[str] | None = Field(
         default=None,
         description="Inputs down, or restarted within the last minute (only when any is).",
+    )
+    wearer: str | None = Field(
+        default=None,
+        description="The wearer profile the output stage applies (only when there is one).",
+    )
+    wearer_band: str | None = Field(
+        default=None, description="The carrier band of that profile the output stage applies."
     )
 
 

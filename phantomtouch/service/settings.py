@@ -14,6 +14,8 @@ from typing import Literal, Self
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from phantomtouch.schema.wearer import WEARER_NAME_REGEX, Band
+
 CAPTURE_PREFIX = "capture:"
 """An ``output_device`` that records what plays to a WAV (``capture:FILE.wav``)."""
 
@@ -66,6 +68,18 @@ class Settings(BaseSettings):
         ),
     )
     db_path: Path = Field(default_factory=default_db_path, description="SQLite pattern store.")
+    wearer: str | None = Field(
+        default=None,
+        pattern=WEARER_NAME_REGEX,
+        description=(
+            "Wearer profile (stored in the library, PUT /wearers/{name}) whose offsets the "
+            "output stage applies after the device's calibration; None: no profile."
+        ),
+    )
+    wearer_band: Band = Field(
+        default="sine_100hz",
+        description="Carrier band of the wearer profile the output stage applies.",
+    )
     token: str | None = Field(
         default=None,
         min_length=16,

@@ -1,4 +1,4 @@
-"""The pattern library: named ``TouchPattern`` s and haptic clips in one SQLite file.
+"""The library: named ``TouchPattern`` s, haptic clips and wearer profiles in one SQLite file.
 
 WAL journal and ``synchronous=FULL``: a committed ``PUT`` survives the process being
 killed (and a power cut). One connection shared by the worker threads, guarded by a lock;
@@ -33,11 +33,12 @@ from pydantic import ValidationError
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema import HapticClip, TouchPattern
+from phantomtouch.schema.wearer import WearerProfile
 from phantomtouch.service.errors import StorageError, StoredPatternError
 from phantomtouch.service.models import PlanSummary
 
 logger = logging.getLogger("phantomtouch.server.store")
-Table = Literal["patterns", "clips"]
+Table = Literal["patterns", "clips", "wearers"]
 """The tables whose rows are written and deleted by name (never a value from a request)."""
 
 _SCHEMA = """
@@ -52,6 +53,13 @@ _CLIP_SCHEMA = """
 CREATE TABLE IF NOT EXISTS clips (
     name TEXT PRIMARY KEY,
     clip TEXT NOT NULL,
+    updated_unix_s REAL NOT NULL
+)
+"""
+_WEARER_SCHEMA = """
+CREATE TABLE IF NOT EXISTS wearers (
+    name TEXT PRIMARY KEY,
+    profile TEXT NOT NULL,
     updated_unix_s REAL NOT NULL
 )
 """
@@ -109,6 +117,7 @@ class PatternStore:
             db.execute("PRAGMA busy_timeout=5000")
             db.execute(_SCHEMA)
             db.execute(_CLIP_SCHEMA)
+            db.execute(_WEARER_SCHEMA)
         except sqlite3.DatabaseError as exc:
             if isinstance(exc, sqlite3.OperationalError):
                 raise DeviceError(
@@ -238,6 +247,41 @@ class PatternStore:
     def delete_clip(self, name: str) -> bool:
         """Remove the clip ``name``; False if it was not stored."""
         return self._delete("clips", name)
+
+    # -- wearer profiles (offsets in dB per carrier band and actuator) ----------------------
+
+    def list_wearers(self) -> builtins.list[tuple[str, WearerProfile]]:
+        """Every readable wearer profile, sorted by name (a row that no longer reads is
+        logged and left out)."""
+        with self._using(writes=False) as db:
+            rows = db.execute("SELECT name, profile FROM wearers ORDER BY name").fetchall()
+        listed = []
+        for name, text in rows:
+            try:
+                listed.append((name, WearerProfile.model_validate_json(text)))
+            except ValidationError as exc:
+                logger.warning("%s; left out of GET /wearers", unreadable(name, exc))
+        return listed
+
+    def get_wearer(self, name: str) -> WearerProfile | None:
+        """The wearer profile stored as ``name``, or None (StoredPatternError: it no longer
+        reads)."""
+        with self._using(writes=False) as db:
+            row = db.execute("SELECT profile FROM wearers WHERE name = ?", (name,)).fetchone()
+        if row is None:
+            return None
+        try:
+            return WearerProfile.model_validate_json(row[0])
+        except ValidationError as exc:
+            raise StoredPatternError(unreadable(name, exc), field="wearer", value=name) from exc
+
+    def put_wearer(self, name: str, profile: WearerProfile) -> bool:
+        """Store ``profile`` under ``name``; True if the name was new."""
+        return self._replace("wearers", name, (profile.model_dump_json(), time.time()))
+
+    def delete_wearer(self, name: str) -> bool:
+        """Remove the wearer profile ``name``; False if it was not stored."""
+        return self._delete("wearers", name)
 
 
 FULL_DISK_BYTES = 1 << 20

@@ -49,6 +49,8 @@ from phantomtouch_client import (
     Summary,
     TouchPattern,
     Unauthorized,
+    Wearer,
+    WearerSummary,
     _calls,
 )
 from pydantic import BaseModel
@@ -156,6 +158,21 @@ def test_clips_put_list_get_play_delete(client: Client) -> None:
     client.delete_clip("client-test.clip")
     with pytest.raises(NotFound):
         client.touch(stroke)
+
+
+def test_wearers_put_list_get_delete(client: Client) -> None:
+    offsets = {"sine_100hz": {2: 2.5, 5: -1.5}, "noise_40_500hz": {"2": 1.0}}
+    stored = client.put_wearer("client-test.wearer", offsets, note="left forearm")
+    assert stored.offsets_db == {"sine_100hz": {"2": 2.5, "5": -1.5}, "noise_40_500hz": {"2": 1.0}}
+    listed = {w.name: w for w in client.wearers()}
+    assert listed["client-test.wearer"].active is False
+    assert client.get_wearer("client-test.wearer").note == "left forearm"
+    with pytest.raises(InvalidRequest) as refused:
+        client.put_wearer("client-test.bad", {"sine_100hz": {3: 25.0}})
+    assert refused.value.fields[0]["field"] == "offsets_db.sine_100hz.3"
+    client.delete_wearer("client-test.wearer")
+    with pytest.raises(NotFound):
+        client.get_wearer("client-test.wearer")
 
 
 def test_stop_and_metrics(client: Client) -> None:
@@ -441,6 +458,8 @@ ANSWERS: dict[str, type[BaseModel]] = {
     "ClockInfo": Clock,
     "Health": Health,
     "DeviceInfo": DeviceInfo,
+    "WearerProfile": Wearer,
+    "WearerInfo": WearerSummary,
 }
 
 
@@ -460,6 +479,7 @@ def test_the_client_calls_every_route_of_the_openapi_document(server: LiveServer
         "name": "N",
         "pattern": STROKE,
         "clip": {"duration_s": 1.0, "amplitude": [{"t_s": 0.0, "value": 1.0}]},
+        "offsets_db": {},
     }
     calls = []
     for _, build in inspect.getmembers(_calls, inspect.isfunction):

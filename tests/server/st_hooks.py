@@ -31,6 +31,7 @@ DOCUMENTED_RULES: dict[str, str] = {
         r"too narrow for the noise loop"
     ),
     "a level within the device's max_level_db": r"max_level_db",
+    "a wearer profile's channels among the device's": r"this device has no actuator on channel",
     "a path inside the device's layout with outside='error'": r"outside the actuator layout",
     "a WAV render within max_render_duration_s": r"max_render_duration_s",
     # Comparisons between fields and sums over them, which a JSON Schema cannot make.

@@ -89,8 +89,9 @@ async def get_clock(engine: EngineDep) -> ClockInfo:
 async def get_health(service: ServiceDep) -> Health:
     """`ok` while audio flows and the pattern store works; `degraded` while the engine is
     being restarted (`engine` says its state) or naming the store's problem (`storage`:
-    its disk is full or its file damaged). Needs no token, and never waits for the engine
-    (its figures come from shared memory)."""
+    its disk is full or its file damaged). `wearer` names the wearer profile the output
+    stage applies (and `wearer_band` its band), when there is one. Needs no token, and
+    never waits for the engine (its figures come from shared memory)."""
     status = service.engine.status()
     problem = service.store.problem
     inputs = {name: health() for name, health in service.inputs.items()}
@@ -110,6 +111,8 @@ async def get_health(service: ServiceDep) -> Health:
         }
         or None,
         degraded_inputs=degraded or None,
+        wearer=service.settings.wearer,
+        wearer_band=service.settings.wearer_band if service.settings.wearer else None,
     )
 
 

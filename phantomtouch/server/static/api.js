@@ -67,6 +67,9 @@ export const api = {
   touch: (touchRequest) => json("POST", "/touch", { json: touchRequest }),
   plan: (touchRequest, signal) => json("POST", "/render", { json: touchRequest, signal }),
   stop: () => json("POST", "/stop"),
+  health: () => json("GET", "/health"),
+  putWearer: (name, profile) =>
+    json("PUT", `/wearers/${encodeURIComponent(name)}`, { json: profile }),
   async wav(touchRequest) {
     const response = await request("POST", "/render", { json: touchRequest, accept: "audio/wav" });
     return response.blob();

@@ -9,6 +9,7 @@ import { LiveTouch } from "./live.js";
 import { Session } from "./socket.js";
 import { StatusView } from "./status.js";
 import { formatNumber } from "./units.js";
+import { WearerPanel } from "./wearer.js";
 
 const $ = (id) => document.getElementById(id);
 const MAX_ALERTS = 3;
@@ -138,6 +139,7 @@ async function main() {
     return labels;
   };
   designer = new Designer({ armband, chart: new GainChart($("chart")), session, showError, channelLabels });
+  new WearerPanel({ device, showError });
   session.start();
   try {
     await designer.load();

@@ -55,6 +55,8 @@ from phantomtouch_client.models import (
     State,
     StopAnswer,
     Summary,
+    Wearer,
+    WearerSummary,
     Welcome,
     touch_request,
 )
@@ -107,6 +109,8 @@ __all__ = [
     "TouchPattern",
     "TransportError",
     "Unauthorized",
+    "Wearer",
+    "WearerSummary",
     "Welcome",
     "__version__",
     "touch_request",

@@ -27,6 +27,8 @@ from phantomtouch_client.models import (
     RenderPlan,
     StopAnswer,
     Summary,
+    Wearer,
+    WearerSummary,
     pattern_json,
     timing,
 )
@@ -191,6 +193,41 @@ def put_clip(name: str, clip: HapticClip | Mapping[str, Any]) -> Call[ClipSummar
 
 def delete_clip(name: str) -> Call[None]:
     return Call("DELETE", f"/clips/{_segment(name)}", _nothing)
+
+
+_WEARER_SUMMARIES = TypeAdapter(list[WearerSummary])
+
+
+def _wearer_summaries(response: httpx.Response) -> list[WearerSummary]:
+    try:
+        return _WEARER_SUMMARIES.validate_python(_decode(response))
+    except ValidationError as exc:
+        raise TransportError(f"{response.request.url.path}: unexpected answer: {exc}") from exc
+
+
+def wearers() -> Call[list[WearerSummary]]:
+    return Call("GET", "/wearers", _wearer_summaries)
+
+
+def get_wearer(name: str) -> Call[Wearer]:
+    return Call("GET", f"/wearers/{_segment(name)}", _model(Wearer))
+
+
+def put_wearer(
+    name: str, offsets_db: Mapping[str, Mapping[int | str, float]], note: str = ""
+) -> Call[Wearer]:
+    body = {
+        "offsets_db": {
+            band: {str(channel): float(db) for channel, db in channels.items()}
+            for band, channels in offsets_db.items()
+        },
+        "note": note,
+    }
+    return Call("PUT", f"/wearers/{_segment(name)}", _model(Wearer), body)
+
+
+def delete_wearer(name: str) -> Call[None]:
+    return Call("DELETE", f"/wearers/{_segment(name)}", _nothing)
 
 
 def device() -> Call[DeviceInfo]:

@@ -133,6 +133,25 @@ class Health(_Answer):
     underruns: int
     render_load_p99: float
     storage: str | None = None
+    wearer: str | None = None
+    """The wearer profile the output stage applies (``serve --wearer NAME``), if any."""
+    wearer_band: str | None = None
+
+
+class Wearer(_Answer):
+    """A wearer profile: per band (``sine_100hz``, ``noise_40_500hz``) and actuator
+    (output channel, 1-based, a string key) an offset in dB, within ±20 dB."""
+
+    offsets_db: dict[str, dict[str, float]] = {}
+    note: str = ""
+
+
+class WearerSummary(_Answer):
+    """One entry of ``GET /wearers``."""
+
+    name: str
+    active: bool
+    profile: Wearer
 
 
 class DeviceInfo(_Answer):

@@ -30,6 +30,8 @@ from phantomtouch_client.models import (
     RenderPlan,
     StopAnswer,
     Summary,
+    Wearer,
+    WearerSummary,
     fleet_touch_request,
     touch_request,
 )
@@ -297,6 +299,27 @@ class Client(_Base):
         """``DELETE /clips/{name}``."""
         self._run(_calls.delete_clip(name))
 
+    def wearers(self) -> list[WearerSummary]:
+        """``GET /wearers``: the stored wearer profiles; ``active`` marks the one the
+        service's output stage applies."""
+        return self._run(_calls.wearers())
+
+    def get_wearer(self, name: str) -> Wearer:
+        """``GET /wearers/{name}``."""
+        return self._run(_calls.get_wearer(name))
+
+    def put_wearer(
+        self, name: str, offsets_db: Mapping[str, Mapping[int | str, float]], note: str = ""
+    ) -> Wearer:
+        """``PUT /wearers/{name}``: per band (``sine_100hz``, ``noise_40_500hz``) and
+        actuator (output channel, 1-based) an offset in dB within ±20 dB. The service
+        applies it when started with ``serve --wearer NAME``."""
+        return self._run(_calls.put_wearer(name, offsets_db, note))
+
+    def delete_wearer(self, name: str) -> None:
+        """``DELETE /wearers/{name}``."""
+        self._run(_calls.delete_wearer(name))
+
     def device(self) -> DeviceInfo:
         """``GET /device``."""
         return self._run(_calls.device())
@@ -492,6 +515,24 @@ class AsyncClient(_Base):
     async def delete_clip(self, name: str) -> None:
         """``DELETE /clips/{name}``."""
         await self._run(_calls.delete_clip(name))
+
+    async def wearers(self) -> list[WearerSummary]:
+        """``GET /wearers``: the stored wearer profiles."""
+        return await self._run(_calls.wearers())
+
+    async def get_wearer(self, name: str) -> Wearer:
+        """``GET /wearers/{name}``."""
+        return await self._run(_calls.get_wearer(name))
+
+    async def put_wearer(
+        self, name: str, offsets_db: Mapping[str, Mapping[int | str, float]], note: str = ""
+    ) -> Wearer:
+        """``PUT /wearers/{name}``: offsets in dB per band and actuator, within ±20 dB."""
+        return await self._run(_calls.put_wearer(name, offsets_db, note))
+
+    async def delete_wearer(self, name: str) -> None:
+        """``DELETE /wearers/{name}``."""
+        await self._run(_calls.delete_wearer(name))
 
     async def device(self) -> DeviceInfo:
         """``GET /device``."""

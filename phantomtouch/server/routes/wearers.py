@@ -1,0 +1,105 @@
+"""Wearer profiles: ``GET /wearers``, ``GET|PUT|DELETE /wearers/{name}``.
+
+A profile holds, per carrier band and actuator, the offset in dB that makes each actuator
+felt as strong as the reference actuator (:mod:`phantomtouch.schema.wearer`). The output
+stage applies the one named by ``serve --wearer NAME`` when the service starts
+(:mod:`phantomtouch.service.wearers`); storing or changing a profile here does not change
+what a running service plays.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Path, Response
+from pydantic import TypeAdapter
+
+from phantomtouch.schema.wearer import WEARER_NAME_REGEX, WearerProfile, check_channels
+from phantomtouch.server.deps import ServiceDep, StoreDep
+from phantomtouch.service.bodies import strict_body
+from phantomtouch.service.errors import NotFoundError, responses
+from phantomtouch.service.models import WearerInfo
+
+router = APIRouter(prefix="/wearers", tags=["wearers"])
+
+EXAMPLE = {
+    "offsets_db": {
+        "sine_100hz": {"1": 0.0, "2": 2.5, "3": -1.5, "4": 0.5, "5": 3.0, "6": 1.0},
+        "noise_40_500hz": {"2": 1.5, "5": 2.0},
+    },
+    "note": "A. N. Other, left forearm, 2026-11-25",
+}
+wearer_body, WEARER_BODY_OPENAPI = strict_body(TypeAdapter(WearerProfile))
+WEARER_BODY_OPENAPI["requestBody"]["content"]["application/json"]["example"] = EXAMPLE
+WearerNameParam = Annotated[
+    str,
+    Path(
+        min_length=1,
+        max_length=64,
+        pattern=WEARER_NAME_REGEX,
+        description="Letters, digits, '.', '_' and '-'; 1 to 64 characters; not '.' or '..'.",
+        examples=["participant-07"],
+    ),
+]
+
+
+def _missing(name: str) -> NotFoundError:
+    return NotFoundError(
+        f"name={name!r} is not a stored wearer (GET /wearers)", field="name", value=name
+    )
+
+
+@router.get("", response_model=list[WearerInfo], responses=responses(401, 503), summary="Wearers")
+def list_wearers(service: ServiceDep) -> list[WearerInfo]:
+    """Every stored wearer profile, sorted by name; `active` marks the one the output
+    stage applies (`serve --wearer NAME`)."""
+    active = service.settings.wearer
+    return [
+        WearerInfo(name=name, active=name == active, profile=profile)
+        for name, profile in service.store.list_wearers()
+    ]
+
+
+@router.get(
+    "/{name}",
+    response_model=WearerProfile,
+    responses=responses(401, 404, 422, 500, 503),
+    summary="One wearer profile",
+)
+def get_wearer(name: WearerNameParam, store: StoreDep) -> WearerProfile:
+    """The profile as it was stored."""
+    profile = store.get_wearer(name)
+    if profile is None:
+        raise _missing(name)
+    return profile
+
+
+@router.put(
+    "/{name}",
+    response_model=WearerProfile,
+    responses=responses(401, 413, 415, 422, 503),
+    summary="Store a wearer profile",
+    openapi_extra=WEARER_BODY_OPENAPI,
+)
+def put_wearer(
+    name: WearerNameParam,
+    profile: Annotated[WearerProfile, Depends(wearer_body)],
+    service: ServiceDep,
+) -> WearerProfile:
+    """Store (or replace) a profile: per band (`sine_100hz`, `noise_40_500hz`) and
+    actuator (output channel, 1-based) an offset in dB, finite, within ±20 dB. A channel
+    the device does not have is refused (422, the field named). A running service keeps
+    the profile it started with."""
+    check_channels(profile, service.device.channels)
+    service.store.put_wearer(name, profile)
+    return profile
+
+
+@router.delete(
+    "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary="Remove a wearer"
+)
+def delete_wearer(name: WearerNameParam, store: StoreDep) -> Response:
+    """Remove a stored profile (a running service keeps the one it started with)."""
+    if not store.delete_wearer(name):
+        raise _missing(name)
+    return Response(status_code=204)
