@@ -82,7 +82,8 @@ def did_you_mean(name: str) -> str:
     """pydantic's message for an unknown field ``name``, with the closest field names."""
     names = _field_names()
     longer = [n for n in names if n.startswith(name) and n != name]  # a unit left out
-    close = (longer + difflib.get_close_matches(name, names, n=3, cutoff=0.6))[:3]
+    others = [n for n in names if n != name]  # a name known elsewhere is no hint here
+    close = (longer + difflib.get_close_matches(name, others, n=3, cutoff=0.6))[:3]
     close = list(dict.fromkeys(close))
     hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
     return f"Extra inputs are not permitted{hint}"
