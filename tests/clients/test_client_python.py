@@ -156,8 +156,9 @@ def test_clips_put_list_get_play_delete(client: Client) -> None:
     )
     assert isinstance(client.touch(stroke), Job)
     client.delete_clip("client-test.clip")
-    with pytest.raises(NotFound):
+    with pytest.raises(InvalidRequest) as refused:  # a body naming a missing thing: 422
         client.touch(stroke)
+    assert refused.value.fields[0]["field"] == "carrier.clip"
 
 
 def test_wearers_put_list_get_delete(client: Client) -> None:

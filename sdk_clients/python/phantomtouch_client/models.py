@@ -53,6 +53,9 @@ class JobStatus(_Answer):
     duration_s: float
     late: bool
     """Whether the job started after the time it was asked for."""
+    reason: str | None = None
+    """Why a ``stopped`` job stopped when no one asked it to (``stolen``, or the engine's
+    fault, e.g. ``engine gone before it played``); None otherwise."""
 
 
 class StopAnswer(_Answer):
@@ -123,9 +126,18 @@ class Clock(_Answer):
     unix_time_s: float
 
 
+class InputState(_Answer):
+    """One supervised input of ``GET /health`` (``osc``)."""
+
+    state: str
+    """``running``, or ``restarting`` after its thread died."""
+    restarts: int
+    last_failure: str | None = None
+
+
 class Health(_Answer):
-    """``GET /health``: ``degraded`` while the service's engine is being restarted, or with
-    ``storage`` saying why the pattern store fails."""
+    """``GET /health``: ``degraded`` while the service's engine is being restarted, with
+    ``storage`` saying why the pattern store fails, or naming ``degraded_inputs``."""
 
     status: Literal["ok", "degraded"] = "ok"
     backend: str
@@ -133,6 +145,10 @@ class Health(_Answer):
     underruns: int
     render_load_p99: float
     storage: str | None = None
+    inputs: dict[str, InputState] | None = None
+    """Supervised inputs (the OSC bridge), when any runs."""
+    degraded_inputs: list[str] | None = None
+    """Inputs down, or restarted within the last minute."""
     wearer: str | None = None
     """The wearer profile the output stage applies (``serve --wearer NAME``), if any."""
     wearer_band: str | None = None

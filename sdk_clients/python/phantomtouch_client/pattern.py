@@ -221,13 +221,28 @@ class HapticClip(_ClipPart):
         return self
 
 
+def _clip_carrier_schema(schema: dict[str, Any]) -> None:
+    """``kind`` required on the wire, and ``clip``, ``data`` or both."""
+    _kind_required(schema)
+    schema["anyOf"] = [given(name) for name in ("clip", "data")]
+
+
 class ClipCarrier(_Model):
-    """A haptic clip of the service's library as the carrier (``GET /clips``)."""
+    """A haptic clip as the carrier: the library's clip named ``clip`` (``GET /clips``),
+    or the clip itself in ``data``; at least one of the two."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", json_schema_extra=_clip_carrier_schema)
 
     kind: Literal["clip"] = "clip"
-    clip: str = Field(min_length=1, max_length=64, pattern=_CLIP_NAME_REGEX)
+    clip: str | None = Field(default=None, min_length=1, max_length=64, pattern=_CLIP_NAME_REGEX)
     loop: bool = Field(default=False)
     data: HapticClip | None = Field(default=None)
+
+    @model_validator(mode="after")
+    def _named_or_given(self) -> Self:
+        if self.clip is None and self.data is None:
+            raise ValueError("a clip carrier needs clip (a clip of the library) or data")
+        return self
 
 
 PatternCarrier = Annotated[
