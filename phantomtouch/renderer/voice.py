@@ -33,7 +33,8 @@ def gain_block(
     The gain of frame ``j * step + r`` is ``(1 - r/step) * grid[j] + (r/step) * grid[j+1]``
     with ``ramp``, else ``grid[j]``. One batched matrix product per grid cell,
     ``[c (1 - f), c f] @ [grid[j]; grid[j+1]]``, computes carrier times gain for all
-    channels at once, the same way for every cell whatever the block size.
+    channels at once, the same way for every cell whatever the block size (callers give
+    every channel: the product's rounding depends on its width).
 
     Parameters
     ----------
@@ -170,7 +171,9 @@ class PatternRenderer:
         channels = out.shape[1]
         if overwrite or 2 * (hi - lo) > channels:
             lo, hi = 0, channels  # a contiguous add beats a strided one
-        grid32 = np.ascontiguousarray(grid[:, lo:hi], dtype=np.float32)
+        # Every channel's product, whatever the span: a matrix product rounds as the
+        # kernel its width selects, and an add must give what render_into writes.
+        grid32 = np.ascontiguousarray(grid, dtype=np.float32)
         offset = first - j0 * step
         if overwrite:
             dest = out[:frames]
@@ -179,7 +182,9 @@ class PatternRenderer:
             if block is not direct:
                 dest[...] = block
         else:
-            out[:frames, lo:hi] += gain_block(carrier, grid32, step, offset, ramp=self._ramp)
+            out[:frames, lo:hi] += gain_block(carrier, grid32, step, offset, ramp=self._ramp)[
+                :, lo:hi
+            ]
 
     def _modulation(self, first: int, frames: int) -> np.ndarray:
         """Eq. 2's factor at frames ``first ..``, shape (frames,), float32."""
