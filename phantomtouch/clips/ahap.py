@@ -18,128 +18,25 @@ the sounding continuous events plus ``HapticSharpnessControl`` (default 0), with
 each transient event a transient with its intensity times the intensity control and its
 sharpness plus the sharpness control. Attack and release ramps are straight lines here
 (Core Haptics shapes them itself); the envelopes are sampled at every corner of the
-events and curves and four times between, where two ramps multiply. The conversion takes
+events and curves and four times between, where two ramps multiply. The document is
+checked by :mod:`~phantomtouch.clips.ahap_schema` (plain dicts); the conversion takes
 time linear in the file (:mod:`~phantomtouch.clips.ahap_envelope`; benchmarks/bench_clips.py).
 """
 
 from __future__ import annotations
 
-from typing import Literal, Self
-
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from phantomtouch.clips.ahap_envelope import SOUNDING, Control, kept_points, summed_envelope
+from phantomtouch.clips.ahap_schema import AhapEvent, AhapFile
 from phantomtouch.errors import ParameterError
-from phantomtouch.schema.clip import MAX_CLIP_POINTS, ClipTime, HapticClip
+from phantomtouch.schema.clip import MAX_CLIP_POINTS, HapticClip
 
-EventParameterId = Literal[
-    "HapticIntensity",
-    "HapticSharpness",
-    "AttackTime",
-    "DecayTime",
-    "ReleaseTime",
-    "Sustained",
-    "AudioVolume",
-    "AudioPan",
-    "AudioPitch",
-    "AudioBrightness",
-]
-DynamicParameterId = Literal[
-    "HapticIntensityControl",
-    "HapticSharpnessControl",
-    "HapticAttackTimeControl",
-    "HapticDecayTimeControl",
-    "HapticReleaseTimeControl",
-    "AudioVolumeControl",
-    "AudioPanControl",
-    "AudioPitchControl",
-    "AudioBrightnessControl",
-]
 _SUBDIVISIONS = 4
 DIGITS = 12
 """Decimals kept of each envelope value (the audio path is float32, 7 digits)."""
 _EMPTY_S = 0.1
 """Length of a clip with nothing but transients at time 0, s."""
-
-
-class _Lenient(BaseModel):
-    model_config = ConfigDict(extra="ignore", frozen=True)
-
-
-class EventParameter(_Lenient):
-    ParameterID: EventParameterId
-    ParameterValue: float = Field(ge=-1.0, le=30.0, allow_inf_nan=False)
-
-
-class AhapEvent(_Lenient):
-    Time: ClipTime
-    EventType: Literal["HapticTransient", "HapticContinuous", "AudioContinuous", "AudioCustom"]
-    EventDuration: float | None = Field(default=None, gt=0.0, le=600.0, allow_inf_nan=False)
-    EventParameters: list[EventParameter] = Field(default_factory=list, max_length=16)
-
-    @model_validator(mode="after")
-    def _duration(self) -> Self:
-        if self.EventType == "HapticContinuous" and self.EventDuration is None:
-            raise ValueError("EventDuration is required for a HapticContinuous event")
-        return self
-
-    def value(self, parameter: str, default: float) -> float:
-        for p in self.EventParameters:
-            if p.ParameterID == parameter:
-                return p.ParameterValue
-        return default
-
-
-class AhapParameter(_Lenient):
-    ParameterID: DynamicParameterId
-    Time: ClipTime
-    ParameterValue: float = Field(ge=-1.0, le=1.0, allow_inf_nan=False)
-
-
-class ControlPoint(_Lenient):
-    Time: ClipTime
-    ParameterValue: float = Field(ge=-1.0, le=1.0, allow_inf_nan=False)
-
-
-class AhapCurve(_Lenient):
-    ParameterID: DynamicParameterId
-    Time: ClipTime
-    ParameterCurveControlPoints: list[ControlPoint] = Field(min_length=1, max_length=16_384)
-
-    @model_validator(mode="after")
-    def _increasing(self) -> Self:
-        points = self.ParameterCurveControlPoints
-        for i in range(1, len(points)):
-            if points[i].Time < points[i - 1].Time:
-                raise ValueError(
-                    f"ParameterCurveControlPoints[{i}].Time={points[i].Time!r} is before the "
-                    "point ahead of it; times never decrease"
-                )
-        return self
-
-
-class Entry(_Lenient):
-    Event: AhapEvent | None = None
-    Parameter: AhapParameter | None = None
-    ParameterCurve: AhapCurve | None = None
-
-    @model_validator(mode="after")
-    def _one(self) -> Self:
-        given = [n for n in ("Event", "Parameter", "ParameterCurve") if getattr(self, n)]
-        if len(given) != 1:
-            raise ValueError(
-                "each Pattern entry holds exactly one of Event, Parameter or ParameterCurve; "
-                f"got {given or 'none'}"
-            )
-        return self
-
-
-class AhapFile(_Lenient):
-    """The parts of an ``.ahap`` document a clip is made of."""
-
-    Version: float | None = None
-    Pattern: list[Entry] = Field(min_length=1, max_length=MAX_CLIP_POINTS)
 
 
 def clip_of_ahap(document: AhapFile) -> HapticClip:
@@ -152,37 +49,60 @@ def clip_of_ahap(document: AhapFile) -> HapticClip:
     """
     intensity = Control(1.0)
     sharpness = Control(0.0)
-    continuous: list[AhapEvent] = []
-    transients: list[AhapEvent] = []
-    for entry in document.Pattern:
-        if entry.Event is not None:
-            if entry.Event.EventType == "HapticContinuous":
-                continuous.append(entry.Event)
-            elif entry.Event.EventType == "HapticTransient":
-                transients.append(entry.Event)
-        elif entry.Parameter is not None:
-            control = _control(entry.Parameter.ParameterID, intensity, sharpness)
-            if control is not None:
-                control.add(
-                    np.array([entry.Parameter.Time]), np.array([entry.Parameter.ParameterValue])
+    continuous: list[tuple[float, float, float, float, float, float]] = []
+    transients: list[tuple[float, float, float]] = []
+    for entry in document["Pattern"]:
+        event = entry.get("Event")
+        if event is not None:
+            kind = event["EventType"]
+            if kind == "HapticContinuous":
+                given = _parameters(event)
+                continuous.append(
+                    (
+                        event["Time"],
+                        event.get("EventDuration") or 0.0,
+                        given.get("AttackTime", 0.0),
+                        given.get("ReleaseTime", 0.0),
+                        given.get("HapticIntensity", 1.0),
+                        given.get("HapticSharpness", 0.5),
+                    )
                 )
-        elif entry.ParameterCurve is not None:
-            control = _control(entry.ParameterCurve.ParameterID, intensity, sharpness)
+            elif kind == "HapticTransient":
+                given = _parameters(event)
+                transients.append(
+                    (
+                        event["Time"],
+                        given.get("HapticIntensity", 1.0),
+                        given.get("HapticSharpness", 0.5),
+                    )
+                )
+            continue
+        parameter = entry.get("Parameter")
+        if parameter is not None:
+            control = _control(parameter["ParameterID"], intensity, sharpness)
             if control is not None:
-                curve = entry.ParameterCurve
-                points = curve.ParameterCurveControlPoints
+                control.add(np.array([parameter["Time"]]), np.array([parameter["ParameterValue"]]))
+            continue
+        curve = entry.get("ParameterCurve")
+        if curve is not None:
+            control = _control(curve["ParameterID"], intensity, sharpness)
+            if control is not None:
+                points = curve["ParameterCurveControlPoints"]
                 control.add(
-                    curve.Time + np.array([p.Time for p in points]),
-                    np.array([p.ParameterValue for p in points]),
+                    curve["Time"] + np.array([p["Time"] for p in points]),
+                    np.array([p["ParameterValue"] for p in points]),
                 )
 
-    starts = np.array([e.Time for e in continuous], dtype=np.float64)
-    ends = starts + np.array([float(e.EventDuration or 0.0) for e in continuous])
-    ramps = np.array([_ramps(e) for e in continuous], dtype=np.float64).reshape(-1, 2)
-    attacks, releases = ramps[:, 0], ramps[:, 1]
-    levels = np.array([_unit(e.value("HapticIntensity", 1.0)) for e in continuous])
-    weights = levels * np.array([_unit(e.value("HapticSharpness", 0.5)) for e in continuous])
-    clicks_s = np.array(sorted(e.Time for e in transients), dtype=np.float64)
+    events = np.array(continuous, dtype=np.float64).reshape(-1, 6)
+    starts, durations = events[:, 0], events[:, 1]
+    ends = starts + durations
+    attacks = np.minimum(np.maximum(0.0, events[:, 2]), durations)
+    releases = np.minimum(np.maximum(0.0, events[:, 3]), durations - attacks)
+    levels = np.clip(events[:, 4], 0.0, 1.0)
+    weights = levels * np.clip(events[:, 5], 0.0, 1.0)
+    clicks = np.array(transients, dtype=np.float64).reshape(-1, 3)
+    clicks = clicks[np.argsort(clicks[:, 0], kind="stable")]
+    clicks_s = clicks[:, 0]
     grid = np.unique(
         np.concatenate(
             (
@@ -222,17 +142,14 @@ def clip_of_ahap(document: AhapFile) -> HapticClip:
         1.0,
     )
     # Plain dicts, validated at once by the clip's model (one pass in pydantic-core).
-    clicks = [
-        {
-            "t_s": float(e.Time),
-            "amplitude": _unit(e.value("HapticIntensity", 1.0)) * _unit(float(control_i)),
-            "frequency": _unit(e.value("HapticSharpness", 0.5) + float(control_s)),
-        }
-        for e, control_i, control_s in zip(
-            sorted(transients, key=lambda e: e.Time),
-            intensity.at(clicks_s, left=False),
-            sharpness.at(clicks_s, left=False),
-            strict=True,
+    click_amplitudes = np.clip(clicks[:, 1], 0.0, 1.0) * np.clip(
+        intensity.at(clicks_s, left=False), 0.0, 1.0
+    )
+    click_frequencies = np.clip(clicks[:, 2] + sharpness.at(clicks_s, left=False), 0.0, 1.0)
+    click_dicts = [
+        {"t_s": t_s, "amplitude": amplitude, "frequency": frequency}
+        for t_s, amplitude, frequency in zip(
+            clicks_s.tolist(), click_amplitudes.tolist(), click_frequencies.tolist(), strict=True
         )
     ]
     return HapticClip.model_validate(
@@ -240,13 +157,9 @@ def clip_of_ahap(document: AhapFile) -> HapticClip:
             "duration_s": end_s if end_s > 0.0 else _EMPTY_S,
             "amplitude": _breakpoints(times, value_a, "amplitude"),
             "frequency": _breakpoints(times, value_f, "frequency"),
-            "transients": clicks,
+            "transients": click_dicts,
         }
     )
-
-
-def _unit(value: float) -> float:
-    return min(1.0, max(0.0, value))
 
 
 def _sides(left: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -278,8 +191,8 @@ def _control(parameter: str, intensity: Control, sharpness: Control) -> Control 
     return None  # the others shape what a clip does not have (audio, ramp times)
 
 
-def _ramps(event: AhapEvent) -> tuple[float, float]:
-    duration = float(event.EventDuration or 0.0)
-    attack = min(max(0.0, event.value("AttackTime", 0.0)), duration)
-    release = min(max(0.0, event.value("ReleaseTime", 0.0)), duration - attack)
-    return attack, release
+def _parameters(event: AhapEvent) -> dict[str, float]:
+    """The event's parameters by name; of a name given twice, the first."""
+    return {
+        p["ParameterID"]: p["ParameterValue"] for p in reversed(event.get("EventParameters", []))
+    }

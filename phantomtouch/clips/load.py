@@ -23,9 +23,9 @@ read up to the interpreter's recursion limit and refused beyond, in one line."""
 
 def detect_format(document: Any, suffix: str = "") -> ClipFormat:
     """``haptic`` or ``ahap``, from the file's suffix, else from its top-level keys."""
-    suffix = suffix.lower().lstrip(".")
-    if suffix in ("haptic", "ahap"):
-        return suffix  # type: ignore[return-value]
+    known = _suffix_format(suffix)
+    if known is not None:
+        return known
     if isinstance(document, dict):
         if "Pattern" in document:
             return "ahap"
@@ -56,11 +56,42 @@ def parse_clip(text: str | bytes, *, suffix: str = "", source: str = "clip") -> 
         field outside its range; the message names the field by its path in the file
         (``signals.continuous.envelopes.amplitude[2].time``).
     """
-    from phantomtouch.clips.ahap import AhapFile, clip_of_ahap
+    from phantomtouch.clips.ahap import clip_of_ahap
+    from phantomtouch.clips.ahap_schema import AHAP_FILE
     from phantomtouch.clips.haptic_file import HapticFile, clip_of_haptic
 
+    kind = _suffix_format(suffix)
     try:
-        document = json.loads(text)
+        if kind is not None:
+            # The bytes straight into pydantic-core: one pass, no Python object per event.
+            try:
+                if kind == "haptic":
+                    return clip_of_haptic(HapticFile.model_validate_json(text))
+                return clip_of_ahap(AHAP_FILE.validate_json(text))
+            except ValidationError as exc:
+                if exc.errors()[0]["type"] != "json_invalid":
+                    raise
+                # What pydantic-core's reader does not take (deeper than its 200 levels,
+                # UTF-16, lone surrogates) is read as ``json.loads`` reads it, below.
+        document = _loaded(text, source)
+        kind = detect_format(document, suffix)
+        if kind == "haptic":
+            return clip_of_haptic(HapticFile.model_validate(document))
+        return clip_of_ahap(AHAP_FILE.validate_python(document))
+    except ValidationError as exc:
+        raise ParameterError(f"{source} (.{kind}): {describe_validation_error(exc)}") from exc
+
+
+def _suffix_format(suffix: str) -> ClipFormat | None:
+    suffix = suffix.lower().lstrip(".")
+    if suffix in ("haptic", "ahap"):
+        return suffix  # type: ignore[return-value]
+    return None
+
+
+def _loaded(text: str | bytes, source: str) -> Any:
+    try:
+        return json.loads(text)
     except ValueError as exc:
         raise ParameterError(f"{source}: not JSON ({exc})") from exc
     except RecursionError:
@@ -68,13 +99,6 @@ def parse_clip(text: str | bytes, *, suffix: str = "", source: str = "clip") -> 
             f"{source}: JSON nested deeper than {sys.getrecursionlimit()} levels (max_depth; "
             f"a clip file nests {CLIP_DEPTH})"
         ) from None
-    kind = detect_format(document, suffix)
-    try:
-        if kind == "haptic":
-            return clip_of_haptic(HapticFile.model_validate(document))
-        return clip_of_ahap(AhapFile.model_validate(document))
-    except ValidationError as exc:
-        raise ParameterError(f"{source} (.{kind}): {describe_validation_error(exc)}") from exc
 
 
 def load_clip(path: str | Path) -> HapticClip:
