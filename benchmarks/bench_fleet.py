@@ -18,6 +18,9 @@ time, and everything stays on 127.0.0.1. Measured:
   applied says how many reached the engine (published moves are never queued for a
   client: a move the node never saw is lost, the next one carries the position).
 
+- fan-out (:mod:`benchmarks.fleet_fanout`): during the ``wrk`` run, the gateway's and
+  the NATS servers' CPU and each node's accepted touches/s, and the model that takes
+  them to 1,000 armbands;
 - start-up, listings across a server loss and refusal latency
   (:mod:`benchmarks.fleet_failures`), each beside its yardstick.
 
@@ -43,6 +46,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import fleet_failures
+import fleet_fanout
 
 from tests.support.fleet import ArmbandNode, Gateway, wait_until
 from tests.support.nats_cluster import NatsCluster
@@ -254,19 +258,31 @@ def touch_outcomes(nodes: list[ArmbandNode]) -> dict[str, float]:
     return outcomes
 
 
+STARTED_S = time.monotonic()
+
+
+def progress(what: str) -> None:
+    """One line on stderr: the seconds since the benchmark started, and what comes next."""
+    print(f"[{time.monotonic() - STARTED_S:5.1f} s] {what}", file=sys.stderr, flush=True)
+
+
 def run(quick: bool, concurrency: int) -> dict[str, Any]:
     sizes = [1, 2] if quick else [1, 2, 4, 8]
     touches = 300 if quick else 1500
     seconds = 2.0 if quick else 5.0
+    rounds, listings = (3, 20) if quick else (20, 50)
     folder = Path(tempfile.mkdtemp(prefix="bench-fleet-"))
     results: dict[str, Any] = {"concurrency": concurrency, "fleets": {}}
+    with NatsCluster(folder / "nats-startup") as cluster:
+        progress("measuring simultaneous start-ups ...")
+        results["startup"] = fleet_failures.startup(cluster, rounds)
+    # The rest on a cluster of its own: a server restarted after the start-up rounds'
+    # many deletions of the bucket could stay unready ("duplicate assignment for stream").
     with NatsCluster(folder / "nats") as cluster:
-        print("measuring simultaneous start-ups ...", file=sys.stderr, flush=True)
-        results["startup"] = fleet_failures.startup(cluster, 5 if quick else 20)
         nodes: list[ArmbandNode] = []
         gateway = Gateway(folder, cluster, env=GATEWAY_ENV).start()
         try:
-            print("measuring the NATS yardstick ...", file=sys.stderr, flush=True)
+            progress("measuring the NATS yardstick ...")
             results["yardstick_nats"] = asyncio.run(
                 nats_yardstick(cluster.urls[0], touches // 3, concurrency)
             )
@@ -278,25 +294,30 @@ def run(quick: bool, concurrency: int) -> dict[str, Any]:
                     nodes.append(node)
                 armbands = [n.armband for n in nodes]
                 wait_until(lambda: all(n.played() is not None for n in nodes), 5.0, "nodes running")
-                print(f"measuring {size} armband(s) ...", file=sys.stderr, flush=True)
-                figures: dict[str, Any] = gateway_touches(
-                    gateway, armbands, seconds, concurrency, folder
-                )
+                progress(f"measuring {size} armband(s) ...")
+                assert gateway.process is not None
+                nats_pids = [p.pid for p in cluster.processes if p is not None]
+                with fleet_fanout.Meter(gateway.process.pid, nats_pids, nodes) as meter:
+                    figures: dict[str, Any] = gateway_touches(
+                        gateway, armbands, seconds, concurrency, folder
+                    )
+                figures["fanout"] = meter.figures(seconds)
                 figures["outcomes"] = touch_outcomes(nodes)
                 figures["gateway_to_engine"] = asyncio.run(
                     gateway_to_engine(cluster.urls[1], armbands, touches, concurrency)
                 )
                 results["fleets"][size] = figures
-            print("measuring live-contact moves ...", file=sys.stderr, flush=True)
+            results["model"] = fleet_fanout.model(results)
+            progress("measuring live-contact moves ...")
             results["contact_moves"] = asyncio.run(
                 contact_moves(gateway, nodes[0], 2000 if quick else 10000)
             )
-            print("measuring listings across a server loss ...", file=sys.stderr, flush=True)
+            progress("measuring listings across a server loss ...")
             armbands = {n.armband for n in nodes}
             results["listings"] = fleet_failures.listings_across_loss(
-                cluster, gateway, armbands, 50
+                cluster, gateway, armbands, listings
             )
-            print("measuring refusal latency ...", file=sys.stderr, flush=True)
+            progress("measuring refusal latency ...")
             results["refusals"] = fleet_failures.refusals(cluster, gateway, nodes[-1], nodes[0])
         finally:
             gateway.stop()
@@ -330,12 +351,17 @@ def report(results: dict[str, Any]) -> None:
         f"live contact: {moves['moves_per_s']:.0f} moves/s through the gateway; "
         f"{moves['applied_by_node']:.0f} of {moves['sent']} applied by the node"
     )
+    fleet_fanout.report(results)
     fleet_failures.report(results)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="1 and 2 armbands, fewer touches")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="1 and 2 armbands, fewer touches, start-up rounds and listings",
+    )
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     parser.add_argument("--concurrency", type=int, default=16, help="requests in flight")
     args = parser.parse_args()
