@@ -1,0 +1,80 @@
+"""The wearer's per-channel gains at the output stage: set at a block boundary, ramped
+across that block, bit for bit absent while every gain is 1."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phantomtouch import DeviceProfile
+from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine.messages import AudioState, SetWearerGains, perform
+from phantomtouch.engine.mixer import Mixer
+from phantomtouch.errors import ParameterError
+
+DEVICE = DeviceProfile.default()
+BLOCK = DEVICE.block_frames
+CHANNELS = DEVICE.channels
+
+
+def quiet_block(rng: np.random.Generator) -> np.ndarray:
+    """A block well within the limiter's threshold (its gain stays 1)."""
+    return rng.uniform(-0.1, 0.1, (BLOCK, CHANNELS)).astype(np.float32)
+
+
+def test_unity_gains_change_no_sample(rng: np.random.Generator) -> None:
+    plain, fitted = Mixer(DEVICE), Mixer(DEVICE)
+    fitted.wearer.set(np.ones(CHANNELS, dtype=np.float32))
+    for _ in range(3):
+        block = quiet_block(rng)
+        a, b = block.copy(), block.copy()
+        plain.finish(a)
+        fitted.finish(b)
+        assert np.array_equal(a, b)
+
+
+def test_a_change_ramps_across_one_block_then_holds(rng: np.random.Generator) -> None:
+    gains = np.linspace(0.5, 2.0, CHANNELS).astype(np.float32)
+    plain, fitted = Mixer(DEVICE), Mixer(DEVICE)
+    fitted.wearer.set(gains)
+    ratios = []
+    for _ in range(3):
+        block = quiet_block(rng)
+        a, b = block.copy(), block.copy()
+        plain.finish(a)
+        fitted.finish(b)
+        ratios.append(b.astype(np.float64) / a)
+    frames = np.arange(1, BLOCK + 1)[:, None]
+    expected = 1.0 + (gains.astype(np.float64) - 1.0) * frames / BLOCK
+    np.testing.assert_allclose(ratios[0], expected, rtol=1e-5)
+    np.testing.assert_allclose(ratios[1], np.broadcast_to(gains, ratios[1].shape), rtol=1e-6)
+    np.testing.assert_allclose(ratios[2], np.broadcast_to(gains, ratios[2].shape), rtol=1e-6)
+    largest_step = np.max(np.abs(np.diff(ratios[0], axis=0)), axis=0)
+    np.testing.assert_allclose(largest_step, np.abs(gains - 1.0) / BLOCK, rtol=1e-3)
+
+
+def test_the_applier_sets_the_gains_even_after_a_stop() -> None:
+    with Engine(DEVICE, sink=CaptureSink(DEVICE)) as engine:
+        state = AudioState(core=engine._audio.core)  # type: ignore[union-attr]
+        gains = np.full(CHANNELS, 2.0, dtype=np.float32)
+        perform(state, SetWearerGains(gains), void=True)
+        mixer = engine._audio.core.scheduler.mixer  # type: ignore[union-attr]
+        block = np.full((BLOCK, CHANNELS), 0.1, dtype=np.float32)
+        mixer.wearer.apply(block)
+        assert np.array_equal(mixer.wearer.gains, gains)
+
+
+@pytest.mark.parametrize(
+    ("gains", "field"),
+    [
+        ([1.0] * (CHANNELS - 1), "shape"),
+        ([1.0] * (CHANNELS - 1) + [float("nan")], f"gains[{CHANNELS - 1}]"),
+        ([0.0] + [1.0] * (CHANNELS - 1), "gains[0]"),
+        ([-1.0] + [1.0] * (CHANNELS - 1), "gains[0]"),
+        ("loud", "gains"),
+    ],
+)
+def test_bad_gains_are_refused_naming_the_channel(gains: object, field: str) -> None:
+    with Engine(DEVICE, sink=CaptureSink(DEVICE)) as engine, pytest.raises(ParameterError) as err:
+        engine.set_wearer_gains(gains)
+    assert field in str(err.value)
