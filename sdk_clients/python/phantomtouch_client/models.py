@@ -134,8 +134,18 @@ class Health(_Answer):
     render_load_p99: float
     storage: str | None = None
     wearer: str | None = None
-    """The wearer profile the output stage applies (``serve --wearer NAME``), if any."""
+    """The wearer profile the output stage applies now, if any."""
     wearer_band: str | None = None
+
+
+class ActiveWearer(_Answer):
+    """``GET|PUT /wearer``: the wearer the output stage is fitted to (``name`` and
+    ``band`` None: none) and the offset it applies per output channel, dB (index 0 is
+    channel 1)."""
+
+    name: str | None = None
+    band: str | None = None
+    offsets_db: list[float] = []
 
 
 class Wearer(_Answer):
