@@ -3,6 +3,10 @@ across that block, bit for bit absent while every gain is 1."""
 
 from __future__ import annotations
 
+import os
+import signal
+import time
+
 import numpy as np
 import pytest
 
@@ -10,6 +14,7 @@ from phantomtouch import DeviceProfile
 from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.engine.messages import AudioState, SetWearerGains, perform
 from phantomtouch.engine.mixer import Mixer
+from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.errors import ParameterError
 
 DEVICE = DeviceProfile.default()
@@ -78,3 +83,35 @@ def test_bad_gains_are_refused_naming_the_channel(gains: object, field: str) -> 
     with Engine(DEVICE, sink=CaptureSink(DEVICE)) as engine, pytest.raises(ParameterError) as err:
         engine.set_wearer_gains(gains)
     assert field in str(err.value)
+
+
+def _level_ratio(engine: ProcessEngine) -> float:
+    """Channel 1's output peak over channel 2's, with equal contacts on both actuators."""
+    first, second = DEVICE.actuators[0], DEVICE.actuators[1]
+    engine.contact_down("w", "1", first.x_cm, first.y_cm)
+    engine.contact_down("w", "2", second.x_cm, second.y_cm)
+    time.sleep(0.3)  # past the attack: steady sines
+    levels = engine.status().levels
+    engine.release_owner("w")
+    return levels[0] / levels[1]
+
+
+def test_the_engine_process_keeps_the_wearer_gains_across_a_restart() -> None:
+    gains = np.ones(CHANNELS)
+    gains[0] = 2.0
+    engine = ProcessEngine(DEVICE, SinkSpec("null"))
+    try:
+        engine.start()
+        assert _level_ratio(engine) == pytest.approx(1.0, rel=1e-3)
+        engine.set_wearer_gains(gains)
+        assert _level_ratio(engine) == pytest.approx(2.0, rel=1e-3)
+        old_pid = engine.pid
+        assert old_pid is not None
+        os.kill(old_pid, signal.SIGKILL)
+        deadline = time.monotonic() + 30.0
+        while not (engine.pid != old_pid and engine.state == "running"):
+            assert time.monotonic() < deadline, "the engine process was not restarted"
+            time.sleep(0.01)
+        assert _level_ratio(engine) == pytest.approx(2.0, rel=1e-3)
+    finally:
+        engine.close()
