@@ -197,6 +197,11 @@ def test_the_client_chooses_the_wearer_while_the_service_runs(server: LiveServer
     asyncio.run(off())
     with Client(server.url) as pt:
         assert pt.wearer().offsets_db == [0.0] * 8
+        with pt.session(wearer="client-test.chosen") as ws:
+            assert ws.welcome is not None
+            assert ws.welcome.wearer == {"name": "client-test.chosen", "band": "sine_100hz"}
+        assert pt.wearer().name == "client-test.chosen", "it stays when the session closes"
+        pt.no_wearer()
         pt.delete_wearer("client-test.chosen")
 
 

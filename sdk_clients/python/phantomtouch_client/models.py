@@ -185,6 +185,8 @@ class Welcome(_Answer):
     server_time_s: float
     watchdog_s: float
     device: dict[str, Any] = Field(default_factory=dict)
+    wearer: dict[str, str] | None = None
+    """The wearer the armband's output stage is fitted to (``{name, band}``), if any."""
 
 
 class ContactState(_Answer):
