@@ -66,3 +66,18 @@ def check_ahead(frame: int, now_frames: int, sample_rate_hz: int, max_ahead_s: f
             f"at most {max_ahead_s:g} s"
         )
     return frame
+
+
+def check_channel_gains(name: str, value: object, channels: int) -> np.ndarray:
+    """Per-channel linear gains: shape (channels,), finite and > 0, as a new float32 array."""
+    try:
+        gains = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{name}={value!r} must be {channels} numbers") from exc
+    if gains.shape != (channels,):
+        raise ParameterError(f"{name} has shape {gains.shape}; it must be ({channels},)")
+    bad = np.flatnonzero(~(np.isfinite(gains) & (gains > 0.0)))
+    if bad.size:
+        k = int(bad[0])
+        raise ParameterError(f"{name}[{k}]={gains[k]!r} must be finite and > 0")
+    return gains.astype(np.float32)

@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Self
 from phantomtouch.engine.admission import RENDER_BUDGET, Admission
 from phantomtouch.engine.checks import (
     check_ahead,
+    check_channel_gains,
     check_frame,
     check_id,
     check_int,
@@ -70,6 +71,7 @@ from phantomtouch.engine.messages import (
     PlanReleased,
     ReleaseJob,
     ReleaseOwner,
+    SetWearerGains,
     StartJob,
 )
 from phantomtouch.engine.owners import (
@@ -803,6 +805,31 @@ class EngineFront:
             restarts=int(figures.get("restarts", 0)),
             refused_commands=int(figures["refused_commands"]),
         )
+
+    # -- the wearer's gains at the output stage -----------------------------------------
+
+    def set_wearer_gains(self, gains: object) -> None:
+        """Scale each output channel by ``gains`` from the next block on, ramped across
+        that block; host, any thread. Applied after the device's calibration and before
+        the limiter and the ceiling; all ones: no wearer (the output is then bit for bit
+        what it is without this call). Kept across a stop and an engine restart.
+
+        Parameters
+        ----------
+        gains : array_like, shape (channels,)
+            Linear gains, finite and > 0 (a wearer's offset of ``d`` dB is
+            ``10 ** (d / 20)``).
+
+        Raises
+        ------
+        ParameterError
+            ``gains`` has the wrong shape or a value not finite or not > 0.
+        EngineBusyError
+            The engine process is not taking commands.
+        """
+        checked = check_channel_gains("gains", gains, self._device.channels)
+        with self._lock:
+            self._audio.post(SetWearerGains(checked))
 
     # -- the device's figures, and use as a context manager ---------------------------
 

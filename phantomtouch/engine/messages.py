@@ -157,6 +157,15 @@ class DropNoise:
 
 
 @dataclass(frozen=True, slots=True)
+class SetWearerGains:
+    """The wearer's per-channel gains at the output stage from the next block on, ramped
+    across it (:class:`~phantomtouch.engine.mixer.WearerGains`); ``gains`` (shape
+    (channels,), float32, finite, > 0) checked by the front; all ones: no wearer."""
+
+    gains: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
 class StartSink:
     """Start playing (engine process, before its first block)."""
 
@@ -177,6 +186,7 @@ Command = (
     | ReleaseOwner
     | HoldNoise
     | DropNoise
+    | SetWearerGains
     | StartSink
     | Close
 )
@@ -392,6 +402,12 @@ def _drop_noise(state: AudioState, message: DropNoise, void: bool) -> None:
         state.loops.drop(message.key)
 
 
+def _set_wearer_gains(state: AudioState, message: SetWearerGains, void: bool) -> None:
+    """Real time: leave the gains for the next block (kept even when void: a stop does not
+    take the wearer off)."""
+    state.core.scheduler.mixer.wearer.set(message.gains)
+
+
 def _start_sink(state: AudioState, message: StartSink, void: bool) -> None:
     """Non real time (before the first block)."""
     state.start_sink = True
@@ -413,6 +429,7 @@ APPLIERS: dict[type, Callable[[AudioState, Any, bool], None]] = {
     ReleaseOwner: _release_owner,
     HoldNoise: _hold_noise,
     DropNoise: _drop_noise,
+    SetWearerGains: _set_wearer_gains,
     StartSink: _start_sink,
     Close: _close,
 }

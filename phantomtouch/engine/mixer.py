@@ -1,6 +1,10 @@
-"""After the voices: safety limiter, calibration, NaN guard, ceiling, level meters.
+"""After the voices: wearer gains, safety limiter, calibration, NaN guard, ceiling, meters.
 
-The voices add into one float32 block. :class:`Limiter` then scales the whole block (all
+The voices add into one float32 block. :class:`WearerGains` scales each channel by the
+wearer's gain (1 on every channel unless a :class:`~phantomtouch.engine.messages.SetWearerGains`
+set another), ramping a change across one block. Per-channel gains commute with the
+calibration's, so this is the wearer's offset applied after the calibration: the limiter
+then sees the fitted, calibrated peaks. :class:`Limiter` then scales the whole block (all
 channels alike, so the phantom's balance between actuators is kept) when its calibrated
 peak exceeds ``threshold_ratio`` times the ceiling, and is exactly transparent otherwise.
 The renderer's :class:`~phantomtouch.renderer.OutputStage` follows: calibration, optional
@@ -94,6 +98,53 @@ class Limiter:
         self.limited_blocks += 1
 
 
+class WearerGains:
+    """The wearer's per-channel gains, changed at a block boundary and ramped across it.
+
+    :meth:`set` (real time, from an applier, any thread of the audio side) leaves the new
+    gains for the next block; :meth:`apply` (real time, in the callback) scales a block:
+    not at all while every gain is 1, by the gains while they hold, and in the block where
+    they change by a line from the old gains to the new, reached on the block's last
+    frame (sample ``n`` of ``frames`` gets ``old + (new - old) * (n + 1) / frames``).
+
+    Parameters
+    ----------
+    device : DeviceProfile
+
+    Attributes
+    ----------
+    gains : ndarray, shape (channels,), float32
+        The gains in force at the end of the last block.
+    """
+
+    def __init__(self, device: DeviceProfile) -> None:
+        self.gains = np.ones(device.channels, dtype=np.float32)
+        self._pending: np.ndarray | None = None
+        self._unity = True
+        self._step = np.arange(1, device.block_frames + 1, dtype=np.float32)[:, None]
+        self._curve = np.empty((device.block_frames, device.channels), dtype=np.float32)
+
+    def set(self, gains: np.ndarray) -> None:
+        """Take ``gains`` (shape (channels,), float32, finite, > 0, checked by the host)
+        from the next block on."""
+        self._pending = gains
+
+    def apply(self, block: np.ndarray) -> None:
+        """Scale ``block`` (frames, channels), float32, in place."""
+        new, self._pending = self._pending, None
+        if new is not None and not np.array_equal(new, self.gains):
+            frames = block.shape[0]
+            curve = self._curve[:frames]
+            np.multiply(self._step[:frames], (new - self.gains) / np.float32(frames), out=curve)
+            curve += self.gains
+            curve[-1] = new
+            block *= curve
+            self.gains = new.astype(np.float32, copy=True)
+            self._unity = bool(np.all(self.gains == 1.0))
+        elif not self._unity:
+            block *= self.gains
+
+
 class Mixer:
     """The chain after the voices, and the level meters.
 
@@ -110,6 +161,7 @@ class Mixer:
     """
 
     def __init__(self, device: DeviceProfile) -> None:
+        self.wearer = WearerGains(device)
         self.limiter = Limiter(device)
         self.stage = OutputStage(device)
         self.levels = np.zeros(device.channels, dtype=np.float32)
@@ -129,7 +181,8 @@ class Mixer:
         return self.limiter.limited_blocks
 
     def finish(self, block: np.ndarray) -> None:
-        """Limit, calibrate and clip the mixed ``block`` in place, then meter it.
+        """Fit to the wearer, limit, calibrate and clip the mixed ``block`` in place,
+        then meter it.
 
         Most blocks are finite with calibrated peaks within the limiter's threshold while
         its gain is 1: the limiter, the NaN guard and the clip leave them as they are. On a
@@ -137,6 +190,7 @@ class Mixer:
         calibrated peaks, found once. Every other block takes the whole chain, whose
         limiter uses the largest of those peaks. Both ways give the same samples and levels.
         """
+        self.wearer.apply(block)
         levels = self._channel_peaks(block)
         levels *= self._calibration  # calibrated peaks: rounding keeps the order of |x|
         loudest = float(levels.max())  # NaN when any sample is NaN: the whole chain

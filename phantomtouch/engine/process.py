@@ -46,6 +46,7 @@ from phantomtouch.engine.messages import (
     HoldPlan,
     NoiseReleased,
     PlanReleased,
+    SetWearerGains,
     StartSink,
 )
 from phantomtouch.engine.noise import SharedLoops, loop_key
@@ -111,6 +112,7 @@ class ChildAudio:
         self.state = "starting"
         self._started = False
         self.restarts = 0
+        self._wearer: SetWearerGains | None = None
         self._lock = threading.RLock()
         self._halt = threading.Event()
         self._loops = SharedLoops()
@@ -178,6 +180,8 @@ class ChildAudio:
                 message.handle, slim(message.plan), message.prerendered
             )
             message = HoldPlan(message.handle, *shared)
+        if isinstance(message, SetWearerGains):
+            self._wearer = message  # a restarted engine process gets it again
         if not self._write(self._child, message):
             raise EngineBusyError(
                 "the engine process is not taking commands (its pipe is full); retry later"
@@ -262,6 +266,8 @@ class ChildAudio:
             try:
                 child = self._start_child(RESTART_TIMEOUT_S)
                 child.outbox.put(encode((0, StartSink())))
+                if self._wearer is not None:
+                    child.outbox.put(encode((0, self._wearer)))
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
                 self._set_state("gone")

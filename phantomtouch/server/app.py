@@ -20,7 +20,18 @@ from fastapi.staticfiles import StaticFiles
 
 from phantomtouch import __version__
 from phantomtouch.schema import DeviceProfile
-from phantomtouch.server.routes import clips, docs, info, patterns, render, touch, wearers, web, ws
+from phantomtouch.server.routes import (
+    clips,
+    docs,
+    info,
+    patterns,
+    render,
+    touch,
+    wearer,
+    wearers,
+    web,
+    ws,
+)
 from phantomtouch.service import errors
 from phantomtouch.service.bodies import merge_components
 from phantomtouch.service.engine_access import describe_output, open_engine
@@ -36,7 +47,7 @@ from phantomtouch.service.origin import (
 from phantomtouch.service.running import Attachment, Service
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
-from phantomtouch.service.wearers import output_device
+from phantomtouch.service.wearers import check_start_wearer
 
 logger = logging.getLogger("phantomtouch.server")
 
@@ -57,12 +68,14 @@ def _lifespan(settings: Settings, metrics: Metrics, attach: Sequence[Attachment]
         )
         store = PatternStore.open(settings.db_path)
         try:
-            played = output_device(settings, store, device)
-            engine = open_engine(settings, played)
+            check_start_wearer(settings.wearer, settings.wearer_band, store, device)
+            engine = open_engine(settings, device)
         except BaseException:
             store.close()
             raise
-        service = Service(settings, played, engine, store, metrics)
+        service = Service(settings, device, engine, store, metrics)
+        if settings.wearer is not None:
+            service.wearer.choose(settings.wearer, settings.wearer_band, field="wearer")
         service.loop = asyncio.get_running_loop()
         app.state.service = service
         logger.info("phantomtouch: %s; patterns in %s", describe_output(engine), store.path)
@@ -129,7 +142,7 @@ def create_app(settings: Settings | None = None, *, attach: Sequence[Attachment]
     )
     app.state.settings = settings
     errors.install(app)
-    for module in (touch, patterns, clips, wearers, render, info, ws, web, docs):
+    for module in (touch, patterns, clips, wearers, wearer, render, info, ws, web, docs):
         app.include_router(module.router)
     app.mount(docs.ASSETS_PATH, StaticFiles(directory=docs.ASSETS_DIR), name="docs-assets")
     if web.STATIC_DIR.is_dir():

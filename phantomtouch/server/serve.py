@@ -11,12 +11,12 @@ from phantomtouch.service.listen import log_config
 from phantomtouch.service.running import Attachment
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
-from phantomtouch.service.wearers import output_device
+from phantomtouch.service.wearers import check_start_wearer
 
 
 def check_library(settings: Settings) -> None:
-    """Open and close the pattern library once, before uvicorn starts, and fit the
-    wearer profile ``settings.wearer`` (if any) to the device.
+    """Open and close the pattern library once, before uvicorn starts, and check that
+    the wearer profile ``settings.wearer`` (if any) is in it and fits the device.
 
     Raises
     ------
@@ -33,7 +33,7 @@ def check_library(settings: Settings) -> None:
                 if settings.device_profile
                 else DeviceProfile.default()
             )
-            output_device(settings, store, device)
+            check_start_wearer(settings.wearer, settings.wearer_band, store, device)
     finally:
         store.close()
 

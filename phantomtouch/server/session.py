@@ -256,6 +256,10 @@ class Session:
                 {"type": "pong", "server_time_s": self.engine.server_time_s(), "id": message.id}
             )
         elif isinstance(message, Hello):
+            if message.wearer is not None:
+                await asyncio.to_thread(
+                    self.service.wearer.choose, message.wearer, message.wearer_band, field="wearer"
+                )
             await self._send(self._welcome(message))
         elif isinstance(message, Play):
             job = await scheduling.schedule(
@@ -331,6 +335,9 @@ class Session:
                 "actuators": [a.model_dump() for a in device.actuators],
             },
         }
+        choice = self.service.wearer.choice
+        if choice is not None:
+            welcome["wearer"] = {"name": choice.name, "band": choice.band}
         if message.id is not None:
             welcome["id"] = message.id
         return welcome

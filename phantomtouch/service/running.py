@@ -17,6 +17,7 @@ from phantomtouch.service.metrics import Metrics
 from phantomtouch.service.quotas import VoiceLedger
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
+from phantomtouch.service.wearers import ActiveWearer
 
 if TYPE_CHECKING:
     import asyncio
@@ -51,6 +52,8 @@ class Service:
     store: PatternStore
     metrics: Metrics
     voices: VoiceLedger = field(init=False)
+    wearer: ActiveWearer = field(init=False)
+    """The wearer the output stage is fitted to (``/wearer``, ``hello``)."""
     connections: ConnectionCaps = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
@@ -59,6 +62,7 @@ class Service:
     loop: asyncio.AbstractEventLoop | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
+        self.wearer = ActiveWearer(self.engine, self.store)
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
         self.connections = ConnectionCaps(
             self.settings.max_ws_connections, self.settings.max_ws_connections_per_address

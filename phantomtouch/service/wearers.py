@@ -1,74 +1,154 @@
-"""A wearer's profile at the output stage: folded into the device's calibration gains.
+"""The wearer the output stage is fitted to, chosen while the service runs.
 
-The output stage scales channel ``k`` by ``10 ** ((reference_level_db -
-channel_level_db[k]) / 20)`` after the mix (:class:`~phantomtouch.renderer.OutputStage`),
-and the engine's limiter and hard clip act on those calibrated samples. A wearer's offset
-of ``d`` dB on channel ``k`` lowers ``channel_level_db[k]`` by ``d``: the channel's gain
-becomes the calibration gain times ``10 ** (d / 20)``, and the limiter and the ceiling act
-after it as they do on the calibration alone. The engine is opened with that fitted
-device; nothing of the engine changes. Plans use the reference level only, so every plan,
-voice and live contact is fitted alike.
+A wearer's offset of ``d`` dB on channel ``k`` is a gain of ``10 ** (d / 20)`` on that
+channel, which the engine applies after the device's calibration and before its limiter
+and hard clip (:meth:`~phantomtouch.engine.front.EngineFront.set_wearer_gains`), ramped
+across one block when it changes. The device, its calibration and every plan stay those
+of the un-fitted device; only the output stage's per-channel gains change.
 
-One mix feeds the output stage, so one band of the profile applies to the whole service
-(``Settings.wearer_band``, ``sine_100hz`` unless chosen).
+One mix feeds the output stage, so one wearer and one band of their profile apply to the
+whole service at a time: :class:`ActiveWearer` holds which, set at start by ``serve
+--wearer NAME`` and changed at run time by ``PUT|DELETE /wearer`` and by a WebSocket
+``hello`` that names a wearer (the latest choice wins, from whichever route it came).
 """
 
 from __future__ import annotations
 
-from pydantic import ValidationError
+import threading
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from phantomtouch.errors import DeviceError, ParameterError
-from phantomtouch.schema import Calibration, DeviceProfile, describe_validation_error
+from phantomtouch.schema import DeviceProfile
 from phantomtouch.schema.wearer import Band, WearerProfile, check_channels
-from phantomtouch.service.settings import Settings
+from phantomtouch.service.errors import MissingReferenceError
 from phantomtouch.service.store import PatternStore
 
+if TYPE_CHECKING:
+    from phantomtouch.engine.front import EngineFront
 
-def fitted_device(device: DeviceProfile, profile: WearerProfile, band: Band) -> DeviceProfile:
-    """``device`` with the offsets of ``band`` folded into its calibration levels.
+
+def wearer_gains(device: DeviceProfile, profile: WearerProfile, band: Band) -> np.ndarray:
+    """The output stage's per-channel gains for ``profile``'s offsets in ``band``.
+
+    Returns
+    -------
+    ndarray, shape (device.channels,), float64
+        ``10 ** (offset_db / 20)`` per channel (1 where the band names none).
 
     Raises
     ------
     ParameterError
-        The profile names a channel the device does not have, or a fitted level falls
-        outside the calibration's allowed levels.
+        The profile names a channel the device does not have.
     """
     check_channels(profile, device.channels)
-    cal = device.calibration
-    levels = cal.channel_level_db or (cal.reference_level_db,) * device.channels
-    offsets = profile.channel_offsets_db(band, device.channels)
-    fitted = tuple(level - offset for level, offset in zip(levels, offsets, strict=True))
-    try:
-        calibration = Calibration(
-            reference_level_db=cal.reference_level_db,
-            channel_level_db=fitted,
-            fir_taps=cal.fir_taps,
-        )
-    except ValidationError as exc:
-        raise ParameterError(
-            f"wearer={band}: the fitted calibration is out of range "
-            f"({describe_validation_error(exc)})"
-        ) from exc
-    return device.model_copy(update={"calibration": calibration})
+    offsets = np.array(profile.channel_offsets_db(band, device.channels), dtype=np.float64)
+    return np.asarray(10.0 ** (offsets / 20.0), dtype=np.float64)
 
 
-def output_device(settings: Settings, store: PatternStore, device: DeviceProfile) -> DeviceProfile:
-    """The device the engine plays through: ``device`` fitted to ``settings.wearer``.
+@dataclass(frozen=True)
+class Choice:
+    """The wearer in force: the profile's ``name`` and the ``band`` applied."""
+
+    name: str
+    band: Band
+
+
+class ActiveWearer:
+    """Which wearer the output stage is fitted to (host, any thread).
+
+    Parameters
+    ----------
+    engine : EngineFront
+    store : PatternStore
+        Where the profiles are read from.
+    """
+
+    def __init__(self, engine: EngineFront, store: PatternStore) -> None:
+        self._engine = engine
+        self._store = store
+        self._lock = threading.Lock()
+        self.choice: Choice | None = None
+        """The wearer in force, or None (the device's calibration alone)."""
+        self.gains = np.ones(engine.channels, dtype=np.float64)
+        """The per-channel gains in force (all 1 without a wearer)."""
+
+    def choose(self, name: str, band: Band, *, field: str = "name") -> Choice:
+        """Fit the output stage to the stored profile ``name`` (its ``band``) from the next
+        block on.
+
+        Raises
+        ------
+        MissingReferenceError
+            ``name`` is not in the library, or names a channel the device lacks (422,
+            naming ``field``).
+        """
+        with self._lock:
+            profile = self._store.get_wearer(name)
+            if profile is None:
+                raise MissingReferenceError(
+                    f"{field}={name!r} is not a stored wearer (GET /wearers)",
+                    field=field,
+                    value=name,
+                )
+            self._apply(name, profile, band, field)
+            self.choice = Choice(name, band)
+            return self.choice
+
+    def clear(self) -> None:
+        """Take the wearer off: the device's calibration alone from the next block on."""
+        with self._lock:
+            self._set(np.ones(self._engine.channels))
+            self.choice = None
+
+    def stored(self, name: str, profile: WearerProfile) -> None:
+        """``profile`` was stored as ``name``: re-apply it if it is the wearer in force."""
+        with self._lock:
+            if self.choice is not None and self.choice.name == name:
+                self._apply(name, profile, self.choice.band, "name")
+
+    def removed(self, name: str) -> None:
+        """The profile ``name`` left the library: take it off if it is in force."""
+        with self._lock:
+            if self.choice is not None and self.choice.name == name:
+                self._set(np.ones(self._engine.channels))
+                self.choice = None
+
+    def _apply(self, name: str, profile: WearerProfile, band: Band, field: str) -> None:
+        try:
+            gains = wearer_gains(self._engine.device, profile, band)
+        except ParameterError as exc:
+            raise MissingReferenceError(
+                f"{field}={name!r} does not fit the device: {exc}", field=field, value=name
+            ) from exc
+        self._set(gains)
+
+    def _set(self, gains: np.ndarray) -> None:
+        self._engine.set_wearer_gains(gains)
+        self.gains = gains
+
+
+def check_start_wearer(
+    name: str | None, band: Band, store: PatternStore, device: DeviceProfile
+) -> None:
+    """Check that ``serve --wearer NAME`` can be applied, before the service listens.
 
     Raises
     ------
     DeviceError
         The named wearer is not in the library, or does not fit the device.
     """
-    if settings.wearer is None:
-        return device
-    profile = store.get_wearer(settings.wearer)
+    if name is None:
+        return
+    profile = store.get_wearer(name)
     if profile is None:
         raise DeviceError(
-            f"wearer={settings.wearer!r} is not in the library {str(store.path)!r}; "
+            f"wearer={name!r} is not in the library {str(store.path)!r}; "
             "store it first (PUT /wearers/{name}) or start without --wearer"
         )
     try:
-        return fitted_device(device, profile, settings.wearer_band)
+        wearer_gains(device, profile, band)
     except ParameterError as exc:
-        raise DeviceError(f"wearer={settings.wearer!r} does not fit the device: {exc}") from exc
+        raise DeviceError(f"wearer={name!r} does not fit the device: {exc}") from exc

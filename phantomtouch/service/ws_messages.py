@@ -9,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictInt, StrictStr, Validat
 
 from phantomtouch.schema import limits
 from phantomtouch.schema.pattern import Carrier, Law
+from phantomtouch.schema.wearer import WEARER_NAME_REGEX, Band
 from phantomtouch.service.errors import (
     ErrorCode,
     Problem,
@@ -38,6 +39,12 @@ class Hello(_Message):
     type: Literal["hello"]
     client: Annotated[str, Field(max_length=100)] | None = None
     protocol: Literal[1] = 1
+    wearer: Annotated[str, Field(min_length=1, max_length=64, pattern=WEARER_NAME_REGEX)] | None = (
+        None
+    )
+    """A stored wearer profile the armband's output stage applies from now on (the latest
+    choice wins; it stays when the connection closes)."""
+    wearer_band: Band = "sine_100hz"
 
 
 class Down(_Message):

@@ -176,6 +176,36 @@ def test_wearers_put_list_get_delete(client: Client) -> None:
         client.get_wearer("client-test.wearer")
 
 
+def test_the_client_chooses_the_wearer_while_the_service_runs(server: LiveServer) -> None:
+    with Client(server.url) as pt:
+        pt.put_wearer("client-test.chosen", {"sine_100hz": {2: 6.0, 8: -3.0}})
+        chosen = pt.use_wearer("client-test.chosen", band="sine_100hz")
+        assert (chosen.name, chosen.band) == ("client-test.chosen", "sine_100hz")
+        assert chosen.offsets_db == pytest.approx([0.0, 6.0, 0, 0, 0, 0, 0, -3.0], abs=1e-5)
+        assert pt.health().wearer == "client-test.chosen"
+        with pytest.raises(InvalidRequest) as refused:
+            pt.use_wearer("client-test.nobody")
+        assert refused.value.fields[0]["field"] == "name"
+        assert pt.wearer().name == "client-test.chosen"
+
+    async def off() -> None:
+        async with AsyncClient(server.url) as pt:
+            assert (await pt.use_wearer("client-test.chosen")).name == "client-test.chosen"
+            await pt.no_wearer()
+            assert (await pt.wearer()).name is None
+            assert (await pt.health()).wearer is None
+
+    asyncio.run(off())
+    with Client(server.url) as pt:
+        assert pt.wearer().offsets_db == [0.0] * 8
+        with pt.session(wearer="client-test.chosen") as ws:
+            assert ws.welcome is not None
+            assert ws.welcome.wearer == {"name": "client-test.chosen", "band": "sine_100hz"}
+        assert pt.wearer().name == "client-test.chosen", "it stays when the session closes"
+        pt.no_wearer()
+        pt.delete_wearer("client-test.chosen")
+
+
 def test_stop_and_metrics(client: Client) -> None:
     job = client.touch(preset="exp2/curved")
     client.stop()

@@ -18,7 +18,7 @@ from phantomtouch.schema.wearer import CHANNEL_REGEX, WearerProfile
 from phantomtouch.server import create_app
 from phantomtouch.server.serve import check_library
 from phantomtouch.service.store import PatternStore
-from phantomtouch.service.wearers import fitted_device
+from phantomtouch.service.wearers import wearer_gains
 from tests.support.service import make_settings
 
 PROFILE: dict[str, Any] = {
@@ -103,14 +103,13 @@ def test_the_fitted_output_stage_gains_are_the_calibration_times_the_offsets() -
     )
     profile = WearerProfile.model_validate(PROFILE)
     for band in ("sine_100hz", "noise_40_500hz"):
-        fitted = fitted_device(device, profile, band)  # type: ignore[arg-type]
+        fitted = OutputStage.channel_gains(device) * wearer_gains(device, profile, band)  # type: ignore[arg-type]
         offsets = np.array(profile.channel_offsets_db(band, 8))  # type: ignore[arg-type]
         np.testing.assert_allclose(
-            OutputStage.channel_gains(fitted),
+            fitted,
             OutputStage.channel_gains(device) * 10.0 ** (offsets / 20.0),
             rtol=1e-12,
         )
-        assert fitted.safety == device.safety
 
 
 def test_health_names_the_wearer_the_service_started_with(tmp_path: Path) -> None:
@@ -148,3 +147,40 @@ def test_the_channel_keys_are_exactly_the_channels_a_device_may_have() -> None:
         if re.fullmatch(CHANNEL_REGEX, key)
     }
     assert accepted == {str(n) for n in range(1, limits.MAX_CHANNEL + 1)}
+
+
+def test_the_wearer_in_force_follows_its_profile_and_the_hello(client: TestClient) -> None:
+    assert client.get("/wearer").json() == {"name": None, "band": None, "offsets_db": [0.0] * 8}
+    assert client.put("/wearers/ann", json=PROFILE).status_code == 200
+    chosen = client.put("/wearer", json={"name": "ann", "band": "noise_40_500hz"})
+    assert chosen.status_code == 200, chosen.text
+    assert chosen.json()["offsets_db"] == pytest.approx([0, 1.0, 0, 0, 0, 0, 0, 0], abs=1e-6)
+    assert [w["active"] for w in client.get("/wearers").json()] == [True]
+    # storing the profile in force re-applies it
+    changed = {"offsets_db": {"noise_40_500hz": {"3": -4.0}}}
+    assert client.put("/wearers/ann", json=changed).status_code == 200
+    now = client.get("/wearer").json()
+    assert now["offsets_db"] == pytest.approx([0, 0, -4.0, 0, 0, 0, 0, 0], abs=1e-6)
+    # a refused choice names the field and keeps the wearer in force
+    for body, field in (({"name": "nobody"}, "name"), ({"name": "ann", "band": "x"}, "band")):
+        refused = client.put("/wearer", json=body)
+        assert refused.status_code == 422, refused.text
+        assert refused.json()["error"]["fields"][0]["field"] == field
+    assert client.get("/health").json()["wearer"] == "ann"
+    # a hello naming a wearer chooses it (or is refused naming the field)
+    assert client.put("/wearers/bob", json=PROFILE).status_code == 200
+    with client.websocket_connect("/ws") as ws:
+        ws.send_json({"type": "hello", "wearer": "nobody", "id": 1})
+        error = ws.receive_json()
+        assert error["type"] == "error" and "wearer='nobody'" in error["message"]
+        ws.send_json({"type": "hello", "wearer": "bob", "id": 2})
+        assert ws.receive_json()["wearer"] == {"name": "bob", "band": "sine_100hz"}
+    health = client.get("/health").json()
+    assert (health["wearer"], health["wearer_band"]) == ("bob", "sine_100hz")
+    # removing the profile in force takes it off
+    assert client.delete("/wearers/bob").status_code == 204
+    assert "wearer" not in client.get("/health").json()
+    assert client.get("/wearer").json()["offsets_db"] == [0.0] * 8
+    assert client.put("/wearer", json={"name": "ann"}).status_code == 200
+    assert client.delete("/wearer").status_code == 204
+    assert "wearer" not in client.get("/health").json()

@@ -90,10 +90,12 @@ async def get_health(service: ServiceDep) -> Health:
     """`ok` while audio flows and the pattern store works; `degraded` while the engine is
     being restarted (`engine` says its state) or naming the store's problem (`storage`:
     its disk is full or its file damaged). `wearer` names the wearer profile the output
-    stage applies (and `wearer_band` its band), when there is one. Needs no token, and
+    stage applies now (and `wearer_band` its band), when there is one (`GET /wearer`
+    adds its offsets). Needs no token, and
     never waits for the engine (its figures come from shared memory)."""
     status = service.engine.status()
     problem = service.store.problem
+    wearer = service.wearer.choice
     inputs = {name: health() for name, health in service.inputs.items()}
     degraded = sorted(name for name, state in inputs.items() if state.degraded)
     return Health(
@@ -111,8 +113,8 @@ async def get_health(service: ServiceDep) -> Health:
         }
         or None,
         degraded_inputs=degraded or None,
-        wearer=service.settings.wearer,
-        wearer_band=service.settings.wearer_band if service.settings.wearer else None,
+        wearer=None if wearer is None else wearer.name,
+        wearer_band=None if wearer is None else wearer.band,
     )
 
 

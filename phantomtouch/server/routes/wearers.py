@@ -2,9 +2,9 @@
 
 A profile holds, per carrier band and actuator, the offset in dB that makes each actuator
 felt as strong as the reference actuator (:mod:`phantomtouch.schema.wearer`). The output
-stage applies the one named by ``serve --wearer NAME`` when the service starts
-(:mod:`phantomtouch.service.wearers`); storing or changing a profile here does not change
-what a running service plays.
+stage applies the one chosen (``serve --wearer NAME``, ``PUT /wearer``, a ``hello``
+naming a wearer; :mod:`phantomtouch.service.wearers`): storing the profile in force
+re-applies it at once, removing it takes it off.
 """
 
 from __future__ import annotations
@@ -52,8 +52,9 @@ def _missing(name: str) -> NotFoundError:
 @router.get("", response_model=list[WearerInfo], responses=responses(401, 503), summary="Wearers")
 def list_wearers(service: ServiceDep) -> list[WearerInfo]:
     """Every stored wearer profile, sorted by name; `active` marks the one the output
-    stage applies (`serve --wearer NAME`)."""
-    active = service.settings.wearer
+    stage applies now (`GET /wearer`)."""
+    choice = service.wearer.choice
+    active = None if choice is None else choice.name
     return [
         WearerInfo(name=name, active=name == active, profile=profile)
         for name, profile in service.store.list_wearers()
@@ -88,18 +89,22 @@ def put_wearer(
 ) -> WearerProfile:
     """Store (or replace) a profile: per band (`sine_100hz`, `noise_40_500hz`) and
     actuator (output channel, 1-based) an offset in dB, finite, within ±20 dB. A channel
-    the device does not have is refused (422, the field named). A running service keeps
-    the profile it started with."""
+    the device does not have is refused (422, the field named). When `name` is the wearer
+    in force (`GET /wearer`) the output stage applies the new offsets from the next block
+    on."""
     check_channels(profile, service.device.channels)
     service.store.put_wearer(name, profile)
+    service.wearer.stored(name, profile)
     return profile
 
 
 @router.delete(
     "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary="Remove a wearer"
 )
-def delete_wearer(name: WearerNameParam, store: StoreDep) -> Response:
-    """Remove a stored profile (a running service keeps the one it started with)."""
-    if not store.delete_wearer(name):
+def delete_wearer(name: WearerNameParam, service: ServiceDep) -> Response:
+    """Remove a stored profile; when it is the wearer in force, the output stage takes it
+    off (the device's calibration alone) from the next block on."""
+    if not service.store.delete_wearer(name):
         raise _missing(name)
+    service.wearer.removed(name)
     return Response(status_code=204)

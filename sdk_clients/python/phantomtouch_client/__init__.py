@@ -41,6 +41,7 @@ from phantomtouch_client.errors import (
     Unauthorized,
 )
 from phantomtouch_client.models import (
+    ActiveWearer,
     ClipSummary,
     Clock,
     ContactState,
@@ -69,6 +70,7 @@ from phantomtouch_client.sync_session import Session, SyncContact
 __version__ = "0.1.0"
 
 __all__ = [
+    "ActiveWearer",
     "ApiError",
     "AsyncClient",
     "AsyncSession",

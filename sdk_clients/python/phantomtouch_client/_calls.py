@@ -17,6 +17,7 @@ from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from phantomtouch_client.errors import TransportError, error_from_response
 from phantomtouch_client.models import (
+    ActiveWearer,
     ClipSummary,
     Clock,
     DeviceInfo,
@@ -228,6 +229,18 @@ def put_wearer(
 
 def delete_wearer(name: str) -> Call[None]:
     return Call("DELETE", f"/wearers/{_segment(name)}", _nothing)
+
+
+def active_wearer() -> Call[ActiveWearer]:
+    return Call("GET", "/wearer", _model(ActiveWearer))
+
+
+def use_wearer(name: str, band: str = "sine_100hz") -> Call[ActiveWearer]:
+    return Call("PUT", "/wearer", _model(ActiveWearer), {"name": name, "band": band})
+
+
+def no_wearer() -> Call[None]:
+    return Call("DELETE", "/wearer", _nothing)
 
 
 def device() -> Call[DeviceInfo]:

@@ -78,9 +78,17 @@ def error_from_message(message: Mapping[str, Any]) -> ApiError:
 
 
 async def open_connection(
-    url: str, *, token: str | None, client_name: str, timeout_s: float
+    url: str,
+    *,
+    token: str | None,
+    client_name: str,
+    timeout_s: float,
+    wearer: str | None = None,
+    wearer_band: str = "sine_100hz",
 ) -> tuple[ClientConnection, Welcome]:
-    """Connect, send ``hello`` and read the ``welcome``.
+    """Connect, send ``hello`` (naming ``wearer`` in ``wearer_band`` when given: the
+    armband's output stage is then fitted to that stored profile) and read the
+    ``welcome``.
 
     Raises
     ------
@@ -111,7 +119,9 @@ async def open_connection(
     except (OSError, WebSocketException, TimeoutError) as exc:
         raise TransportError(f"cannot connect to {url}: {exc}") from exc
     try:
-        hello = {"type": "hello", "client": client_name, "protocol": PROTOCOL}
+        hello: dict[str, object] = {"type": "hello", "client": client_name, "protocol": PROTOCOL}
+        if wearer is not None:
+            hello.update(wearer=wearer, wearer_band=wearer_band)
         await ws.send(json.dumps(hello))
         async with asyncio.timeout(timeout_s):
             while True:

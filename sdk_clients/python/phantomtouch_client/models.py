@@ -150,8 +150,18 @@ class Health(_Answer):
     degraded_inputs: list[str] | None = None
     """Inputs down, or restarted within the last minute."""
     wearer: str | None = None
-    """The wearer profile the output stage applies (``serve --wearer NAME``), if any."""
+    """The wearer profile the output stage applies now, if any."""
     wearer_band: str | None = None
+
+
+class ActiveWearer(_Answer):
+    """``GET|PUT /wearer``: the wearer the output stage is fitted to (``name`` and
+    ``band`` None: none) and the offset it applies per output channel, dB (index 0 is
+    channel 1)."""
+
+    name: str | None = None
+    band: str | None = None
+    offsets_db: list[float] = []
 
 
 class Wearer(_Answer):
@@ -191,6 +201,8 @@ class Welcome(_Answer):
     server_time_s: float
     watchdog_s: float
     device: dict[str, Any] = Field(default_factory=dict)
+    wearer: dict[str, str] | None = None
+    """The wearer the armband's output stage is fitted to (``{name, band}``), if any."""
 
 
 class ContactState(_Answer):

@@ -19,6 +19,7 @@ import httpx
 from phantomtouch_client import _calls
 from phantomtouch_client.errors import ParameterError, ReplyTimeout, TransportError
 from phantomtouch_client.models import (
+    ActiveWearer,
     ClipSummary,
     Clock,
     DeviceInfo,
@@ -313,12 +314,26 @@ class Client(_Base):
     ) -> Wearer:
         """``PUT /wearers/{name}``: per band (``sine_100hz``, ``noise_40_500hz``) and
         actuator (output channel, 1-based) an offset in dB within ±20 dB. The service
-        applies it when started with ``serve --wearer NAME``."""
+        applies it once chosen (:meth:`use_wearer`, ``serve --wearer NAME``)."""
         return self._run(_calls.put_wearer(name, offsets_db, note))
 
     def delete_wearer(self, name: str) -> None:
         """``DELETE /wearers/{name}``."""
         self._run(_calls.delete_wearer(name))
+
+    def wearer(self) -> ActiveWearer:
+        """``GET /wearer``: the wearer the output stage is fitted to now."""
+        return self._run(_calls.active_wearer())
+
+    def use_wearer(self, name: str, band: str = "sine_100hz") -> ActiveWearer:
+        """``PUT /wearer``: fit the output stage to the stored profile ``name`` (its
+        ``band``: ``sine_100hz`` or ``noise_40_500hz``) from the next block on, for
+        everything the service plays, until another is chosen."""
+        return self._run(_calls.use_wearer(name, band))
+
+    def no_wearer(self) -> None:
+        """``DELETE /wearer``: the device's calibration alone from the next block on."""
+        self._run(_calls.no_wearer())
 
     def device(self) -> DeviceInfo:
         """``GET /device``."""
@@ -533,6 +548,19 @@ class AsyncClient(_Base):
     async def delete_wearer(self, name: str) -> None:
         """``DELETE /wearers/{name}``."""
         await self._run(_calls.delete_wearer(name))
+
+    async def wearer(self) -> ActiveWearer:
+        """``GET /wearer``: the wearer the output stage is fitted to now."""
+        return await self._run(_calls.active_wearer())
+
+    async def use_wearer(self, name: str, band: str = "sine_100hz") -> ActiveWearer:
+        """``PUT /wearer``: fit the output stage to the stored profile ``name`` (its
+        ``band``) from the next block on, until another is chosen."""
+        return await self._run(_calls.use_wearer(name, band))
+
+    async def no_wearer(self) -> None:
+        """``DELETE /wearer``: the device's calibration alone from the next block on."""
+        await self._run(_calls.no_wearer())
 
     async def device(self) -> DeviceInfo:
         """``GET /device``."""

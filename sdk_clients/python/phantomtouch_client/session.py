@@ -77,6 +77,12 @@ class AsyncSession:
         The service token (required when the service listens off loopback).
     client_name : str
         Sent in ``hello``; the server shows it in its logs and state.
+    wearer : str, optional
+        A stored wearer profile the first ``hello`` names: the armband's output stage is
+        fitted to it (its band ``wearer_band``, ``sine_100hz`` by default) for every
+        client, until another is chosen; a reconnection does not name it again, so a
+        later choice by another client stands. A name not stored fails the connection.
+    wearer_band : str
     reconnect : bool
         Reconnect with ``backoff`` when the socket is lost (default); else the session
         closes and later calls raise :class:`ConnectionLost`.
@@ -96,6 +102,8 @@ class AsyncSession:
         *,
         token: str | None = None,
         client_name: str = "phantomtouch_client",
+        wearer: str | None = None,
+        wearer_band: str = "sine_100hz",
         reconnect: bool = True,
         backoff: Backoff | None = None,
         ping_interval_s: float | None = None,
@@ -111,6 +119,8 @@ class AsyncSession:
         self.url = url
         self.token = token
         self.client_name = client_name
+        self.wearer = wearer
+        self.wearer_band = wearer_band
         self.reconnect = reconnect
         self.backoff = backoff or Backoff()
         self.ping_interval_s = ping_interval_s
@@ -370,7 +380,10 @@ class AsyncSession:
             token=self.token,
             client_name=self.client_name,
             timeout_s=self.reply_timeout_s,
+            wearer=self.wearer,
+            wearer_band=self.wearer_band,
         )
+        self.wearer = None  # named once: a reconnection leaves the armband's choice be
         self._last_send = time.monotonic()
         return self.welcome
 
