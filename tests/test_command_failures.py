@@ -124,7 +124,7 @@ def full_folder(tmp_path: Path) -> Iterator[Path]:
 def test_serve_on_a_full_disk_fails_in_one_line(full_folder: Path) -> None:
     flags = ["serve", "--port", str(free_port()), "--output", "null"]
     served = phantomtouch(*flags, "--db", str(full_folder / "p.db"))
-    assert_one_line(served, 1, "database or disk is full")
+    assert_one_line(served, 1, "the disk is full")
 
 
 def test_an_unreachable_fleet_fails_in_one_line(tmp_path: Path) -> None:

@@ -76,7 +76,7 @@ def test_a_body_of_99000_bad_points_is_refused_in_a_small_answer(live: LiveServe
                 time.sleep(0.05)
     assert answer.json()["error"]["fields"] == [
         {
-            "field": "path.polyline.points_cm[98999][0]",
+            "field": "path.points_cm[98999][0]",
             "value": "x",
             "message": "Input should be a valid number",
         }
