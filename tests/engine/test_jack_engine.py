@@ -115,7 +115,9 @@ def test_scheduled_patterns_arrive_bit_exact_at_their_requested_frames(
     noise = stroke(carrier={"kind": "noise", "seed": 7}, intensity="high")
     with over_jack(jack_server, prerender_max_s=prerender_max_s) as session:
         engine = session.engine
-        aligned_at = (engine.now_frames // BLOCK + 40) * BLOCK
+        # 0.8 s ahead: room for prerendering both strokes in this thread on a busy machine
+        # before the first must be in the engine (a late start would shift its samples).
+        aligned_at = (engine.now_frames // BLOCK + 150) * BLOCK
         aligned = engine.schedule(noise, start_frame=aligned_at)
         inside = engine.schedule(sine, start_frame=aligned_at + aligned.frames + 12345)
         assert inside.start_frame % BLOCK != 0
