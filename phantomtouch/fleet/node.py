@@ -84,6 +84,7 @@ class ArmbandNode:
             watchdog_s=service.settings.watchdog_s,
             max_contacts=service.settings.max_contacts_per_connection,
             max_bytes=service.settings.max_ws_message_bytes,
+            on_silent=self._count_silent,
         )
         self.clock_offset_s: float | None = None
         self._in_flight = 0
@@ -206,12 +207,15 @@ class ArmbandNode:
                 sent = ArmbandRecord.model_validate_json(entry.value)
                 self.clock_offset_s = sent.unix_time_s - entry.created.timestamp()
 
+    def _count_silent(self, owner_id: str) -> None:
+        """Count an owner released for silence, as the front releases it (any thread)."""
+        self.messages.labels("contact", "watchdog_release").inc()
+
     async def _watchdog(self) -> None:
         period_s = self.service.settings.watchdog_s / 4
         while True:
             await asyncio.sleep(period_s)
             for owner in self.contacts.release_silent():
-                self.messages.labels("contact", "watchdog_release").inc()
                 logger.info("fleet: %r silent; its contacts on %r released", owner, self.armband)
 
     # -- touch --------------------------------------------------------------------------

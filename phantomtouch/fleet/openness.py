@@ -26,34 +26,45 @@ async def anonymous_can_publish(servers: list[str], timeout_s: float = 2.0) -> b
     """Whether a client without credentials may publish on an armband's subjects.
 
     False when the servers refuse the anonymous connection, refuse the publish, or cannot
-    be reached at all (joining then reports that on its own).
+    be reached at all (joining then reports that on its own). Each server is tried at most
+    twice, ``timeout_s`` (s, > 0) per step, and the whole probe never takes longer than
+    those connections, the flush and the verdict wait together.
     """
-    import nats
-
     refused: list[Exception] = []
+    budget_s = timeout_s * (2 * len(servers) + 1) + VERDICT_WAIT_S
+    try:
+        await asyncio.wait_for(_probe(servers, timeout_s, refused), budget_s)
+    except Exception:
+        return False
+    return not any("permissions violation" in str(exc).lower() for exc in refused)
+
+
+async def _probe(servers: list[str], timeout_s: float, refused: list[Exception]) -> None:
+    """Connect without credentials, publish once, and wait for the server's verdict."""
+    import nats
 
     async def error(exc: Exception) -> None:
         refused.append(exc)
 
     client: Any = None
     try:
+        # nats-py reads max_reconnect_attempts <= 0 as "retry for ever", even before the
+        # first connection: 1 lets the pool drop each server after its second failure.
         client = await nats.connect(
             servers=servers,
             connect_timeout=timeout_s,
-            max_reconnect_attempts=0,
+            max_reconnect_attempts=1,
+            reconnect_time_wait=0,
             allow_reconnect=False,
             error_cb=error,
         )
         await client.publish(PROBE_SUBJECT, b"")
         await client.flush(timeout=timeout_s)
         await asyncio.sleep(VERDICT_WAIT_S)
-    except Exception:
-        return False
     finally:
         if client is not None:
             with contextlib.suppress(Exception):
                 await client.close()
-    return not any("permissions violation" in str(exc).lower() for exc in refused)
 
 
 def require_closed(servers: list[str], flag: str) -> None:

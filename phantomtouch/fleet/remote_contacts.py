@@ -19,6 +19,7 @@ from __future__ import annotations
 import collections
 import json
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
@@ -39,12 +40,23 @@ class RemoteContacts:
     """The remote owners of one node: their messages, applied to the engine's front.
 
     Call :meth:`close` when the node stops listening (it unsubscribes from the front).
+
+    ``on_silent(owner_id)`` is called as the front lets go of an owner for silence, in
+    the thread that released it (the front's deadline thread, or :meth:`release_silent`'s
+    caller), before its contacts are seen gone: it must return at once.
     """
 
     def __init__(
-        self, engine: EngineFront, *, watchdog_s: float, max_contacts: int, max_bytes: int
+        self,
+        engine: EngineFront,
+        *,
+        watchdog_s: float,
+        max_contacts: int,
+        max_bytes: int,
+        on_silent: Callable[[str], None] | None = None,
     ) -> None:
         self.engine = engine
+        self.on_silent = on_silent
         self.watchdog_s = watchdog_s
         self.max_contacts = max_contacts
         self.max_bytes = max_bytes
@@ -54,7 +66,10 @@ class RemoteContacts:
     def _released(self, owner: str, contacts: tuple[str, ...], reason: str) -> None:
         """The front's deadline thread let go of a silent owner (any thread)."""
         if reason == "watchdog" and owner.startswith(OWNER_PREFIX):
-            self._silent.append(owner.removeprefix(OWNER_PREFIX))
+            owner_id = owner.removeprefix(OWNER_PREFIX)
+            self._silent.append(owner_id)
+            if self.on_silent is not None:
+                self.on_silent(owner_id)
 
     def close(self) -> None:
         self._unsubscribe()
