@@ -19,7 +19,12 @@ Scenarios (run in the order given by ``--scenarios``; default ``d,a,b,c``):
 - ``s`` soak (not in the default order): ``POST /touch`` of patterns no request repeats,
   each a 12,000-point path of about 1.5 s with noise of its own seed (a noise loop the
   engine process is handed for it alone), 5 per second (60 s); it also reports the
-  resident memory of the service and of its engine process at its start and end.
+  resident memory of the service and of its engine process at its start and end;
+- ``n`` new noise bands (not in the default order): eight 1.5 s noise touches in eight
+  bands, then seven in bands the engine process does not hold yet, 0.3 s apart: each new
+  band's loop is built by the host and handed over, never built in the audio callback;
+- ``o`` the disagreeing order (not in the default order): eight bands, the first again, a
+  ninth, the first (``docs/engine.md``, noise loops).
 
 Each reports the engine's underruns (the delta of ``phantomtouch_underruns`` in
 ``/metrics``), JACK's xruns, the engine's render load (``phantomtouch_render_load``: the
@@ -288,6 +293,15 @@ def soak(port: int, server_pid: int, args: argparse.Namespace) -> Load:
     return run
 
 
+def bands(port: int, order: str, seed: int, args: argparse.Namespace) -> Load:
+    async def run(deadline: float) -> dict[str, Any]:
+        touched = await load.band_touches(port, order, seed, args.band_gap_seconds)
+        await asyncio.sleep(max(0.0, deadline - time.monotonic()))
+        return {"bands": {"order": order, **touched}}
+
+    return run
+
+
 def with_hogs(inner: Load, hogs: list[Any], count: int) -> Load:
     async def run(deadline: float) -> dict[str, Any]:
         hogs.extend(load.start_hogs(count, deadline - time.monotonic() + 5.0))
@@ -313,6 +327,12 @@ def wrk_flood(wrk: str, port: int, folder: Path, args: argparse.Namespace) -> Lo
 
 
 # -- main ------------------------------------------------------------------------------
+
+
+def band_seconds(order: str, args: argparse.Namespace) -> float:
+    """A band scenario's length: its touches ``--band-gap-seconds`` apart, then the last
+    one's 1.5 s and a second more."""
+    return len(load.BAND_ORDERS[order]) * args.band_gap_seconds + 2.5
 
 
 def within(kind: Callable[[str], float], low: float, high: float) -> Callable[[str], Any]:
@@ -356,6 +376,12 @@ def parse_args() -> argparse.Namespace:
     )
     parser.add_argument("--soak-rate", type=within(float, 0.1, 50), default=5.0)
     parser.add_argument("--soak-points", type=within(int, 2, 100_000), default=12_000)
+    parser.add_argument(
+        "--band-gap-seconds",
+        type=within(float, 0.05, 5),
+        default=0.3,
+        help="time between the touches of scenarios n and o (default 0.3)",
+    )
     parser.add_argument("--hands", type=within(int, 1, 16), default=4)
     parser.add_argument("--move-hz", type=within(float, 1, 1000), default=90.0)
     parser.add_argument(
@@ -417,6 +443,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
                 "health_hz",
                 "soak_rate",
                 "soak_points",
+                "band_gap_seconds",
             )
         },
         "scenarios": {},
@@ -458,6 +485,8 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
             "b": (args.seconds, with_hogs(hands_and_touches(port, args), hogs, args.hogs)),
             "c": (args.flood_seconds, wrk_flood(wrk or "wrk", port, folder, args)),
             "s": (args.seconds, soak(port, service.process.pid, args)),
+            "n": (band_seconds("new", args), bands(port, "new", 1_001, args)),
+            "o": (band_seconds("disagreeing", args), bands(port, "disagreeing", 1_002, args)),
         }
         for key in args.scenarios:
             seconds, make_load = loads[key]

@@ -219,6 +219,50 @@ def soak_body(index: int, points: int) -> bytes:
     return json.dumps(pattern).encode()
 
 
+def band_body(low_hz: float, seed: int) -> bytes:
+    """A 1.5 s noise touch (15 cm at 10 cm/s) in the band ``low_hz`` .. ``2 low_hz``: each
+    (band, seed) is a noise loop of its own, which the engine process holds only once the
+    host has handed it over."""
+    pattern = {
+        "path": {"kind": "polyline", "points_cm": [[1.9, 0.6], [1.9, 15.6]]},
+        "speed_cm_s": 10.0,
+        "fade_in_s": 0.05,
+        "fade_out_s": 0.05,
+        "carrier": {"kind": "noise", "low_hz": low_hz, "high_hz": 2 * low_hz, "seed": seed},
+        "intensity": "low",
+    }
+    return json.dumps(pattern).encode()
+
+
+BAND_ORDERS = {
+    # eight bands, then seven the engine process does not hold yet
+    "new": [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14],
+    # eight bands, the first again, a ninth, the first: the order in which a least
+    # recently used record on the host and the oldest-adopted rule in the engine process
+    # would disagree about the first band
+    "disagreeing": [0, 1, 2, 3, 4, 5, 6, 7, 0, 8, 0],
+}
+
+
+async def band_touches(port: int, order: str, seed: int, gap_s: float) -> dict[str, Any]:
+    """``POST /touch`` one noise touch per band of ``BAND_ORDERS[order]``, ``gap_s`` apart.
+
+    Band ``k`` is ``40 + 10 k`` .. twice that, all with noise ``seed`` (a seed no other
+    call uses, so no loop is held from before)."""
+    connection = HttpConnection(port)
+    statuses: dict[str, int] = {}
+    try:
+        for band in BAND_ORDERS[order]:
+            status, _, _ = await timed_request(
+                connection, "POST", "/touch", band_body(40.0 + 10.0 * band, seed)
+            )
+            count(statuses, status)
+            await asyncio.sleep(gap_s)
+    finally:
+        connection.close()
+    return {"statuses": statuses, "touches": len(BAND_ORDERS[order])}
+
+
 async def paced_touches(
     port: int,
     rate_per_s: float,

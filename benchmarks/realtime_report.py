@@ -11,6 +11,8 @@ TITLES = {
     "b": "same + CPU hog on every core",
     "c": "wrk flood of POST /touch",
     "s": "soak: distinct long noise touches",
+    "n": "noise bands the engine does not hold yet",
+    "o": "noise bands in the disagreeing order",
 }
 
 
@@ -45,6 +47,11 @@ def load_text(result: dict[str, Any]) -> str:
         parts.append(f"{h['moves_per_s_per_hand']:.0f} moves/s/hand, {t['per_s']:.0f} touches/s")
         if h["errors"]:
             parts.append(f"{h['errors']} WS errors")
+    if "bands" in result:
+        b = result["bands"]
+        parts.append(
+            f"{b['touches']} noise touches, {b['order']} order: {statuses_text(b['statuses'])}"
+        )
     if "cpu_hogs" in result:
         parts.append(f"{result['cpu_hogs']} hogs")
     if "wrk" in result:
