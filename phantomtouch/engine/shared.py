@@ -1,29 +1,12 @@
-"""What the host and the engine process share without a message: the clock and moves.
+"""What the host and the engine process share without a message.
 
-:class:`~phantomtouch.engine.process.ProcessEngine` talks to its engine process through a
-pipe, and a message costs both processes a system call, a wake-up and pickling. Two
-things are asked for too often for that:
-
-- the sample clock (``time_at``, ``frames_at``: every ``POST /touch`` answers its start
-  time): :class:`SharedClock` publishes the engine's clock anchor, so the host computes
-  the mapping itself, with the same arithmetic as
-  :class:`~phantomtouch.engine.clock.SampleClock`;
-- contact moves (a VR hand streams them at 90 Hz or more): :class:`MoveSlots` gives every
-  contact that is down a slot in shared memory; the host writes the newest position into
-  it, and the audio callback reads every slot that changed at the start of each block.
-  Latest wins, as in the engine's own mailbox; nothing is queued or pickled.
-
-On x86 both use a sequence lock: the writer makes the sequence number odd, writes, and
-makes it even again; a reader that sees an odd number, or a different one after reading,
-reads again (the clock) or leaves the slot for the next block (moves). Each value has a
-single writer thread. This relies on one thread's stores becoming visible to other
-processes in the order they were made, which x86 guarantees and ARM64 (Apple silicon,
-Raspberry Pi, Jetson) does not: there a store of the sequence number may be seen before
-the values it guards. Elsewhere, or with ``PHANTOMTOUCH_SHARED_LOCKS=1``, a
-multiprocessing lock guards each buffer instead, and the audio callback never waits for
-it: it only tries to take it, and when the host holds it, the callback keeps what it had
-(moves wait for the next block; a clock anchor is dropped, and the next block publishes
-a newer one). The host, which may wait, takes it for the few stores or loads it makes.
+:class:`SharedClock` (the sample clock's anchor), :class:`MoveSlots` (the newest position
+of every contact that is down) and :class:`StatusBlock` (figures and heartbeat) are
+float64 arrays inherited by the engine process; :class:`HostBlocks` and
+:class:`MappedBlocks` are blocks of shared memory the host writes (noise loops, plans'
+heavy arrays) and the engine process maps. docs/engine.md (Transports) says why each
+crosses this way, and how the clock and slots are guarded: a sequence lock on x86, a
+lock elsewhere or with ``PHANTOMTOUCH_SHARED_LOCKS=1`` that the audio callback only tries.
 """
 
 from __future__ import annotations
@@ -33,11 +16,16 @@ import math
 import multiprocessing
 import os
 import platform
-from collections.abc import Callable
+import threading
+from collections import OrderedDict, deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from multiprocessing import shared_memory
+from typing import Any, Generic, TypeVar
 
 import numpy as np
+
+K = TypeVar("K")
 
 _CLOCK_FIELDS = 4  # seq, anchor frame, anchor time s, output latency s
 _SLOT_FIELDS = 6  # seq, generation, x_cm, y_cm, intensity (NaN: unchanged), frame (NaN: next)
@@ -362,3 +350,159 @@ class StatusBlock:
         figures["levels"] = [float(v) for v in values[len(STATUS_FIELDS) :]]
         figures["running"] = figures["running"] > 0.0
         return figures
+
+
+_ALIGN = 64
+"""Alignment of each array in a block, bytes."""
+
+
+def write_block(arrays: Sequence[np.ndarray]) -> tuple[shared_memory.SharedMemory, list[int]]:
+    """A new block of shared memory holding ``arrays``, each at an offset (bytes, aligned
+    to 64) of the list returned (host, non real time)."""
+    offsets, size = [], 0
+    for array in arrays:
+        offsets.append(size)
+        size += -(-array.nbytes // _ALIGN) * _ALIGN
+    block = shared_memory.SharedMemory(create=True, size=max(size, 1))
+    for array, offset in zip(arrays, offsets, strict=True):
+        view(block, array.dtype.str, array.shape, offset)[...] = array
+    return block, offsets
+
+
+def view(
+    block: shared_memory.SharedMemory, dtype: str, shape: tuple[int, ...], offset: int
+) -> np.ndarray:
+    """An array over part of a block, without a copy; while it lives the block cannot be
+    unmapped (``close`` raises ``BufferError``)."""
+    count = int(np.prod(shape, dtype=np.int64))
+    flat = np.frombuffer(block.buf, dtype=dtype, count=count, offset=offset)  # type: ignore[arg-type]
+    return flat.reshape(shape)
+
+
+def unlink_block(block: shared_memory.SharedMemory) -> None:
+    """Close and free a block the host wrote (host)."""
+    with contextlib.suppress(OSError, BufferError):
+        block.close()
+    with contextlib.suppress(OSError):
+        block.unlink()
+
+
+class HostBlocks(Generic[K]):
+    """The blocks the host wrote for the engine process, by key; each is freed only once
+    the engine process reports it released it, or is gone (any host thread; a lock
+    guards the records).
+
+    A key has at most one live block, kept in least recently used order; a live block
+    the engine process was told to drop is retired until it reports the release.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._live: OrderedDict[K, shared_memory.SharedMemory] = OrderedDict()
+        self._retired: dict[K, deque[shared_memory.SharedMemory]] = {}
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._live)
+
+    def held(self) -> list[K]:
+        """The keys of the live blocks, least recently used first (host)."""
+        with self._lock:
+            return list(self._live)
+
+    def waiting(self) -> int:
+        """Retired blocks whose release the engine process has not reported yet (host)."""
+        with self._lock:
+            return sum(len(blocks) for blocks in self._retired.values())
+
+    def _use(self, key: K) -> bool:
+        """Mark the live block of ``key`` used now; False: there is none."""
+        with self._lock:
+            if key not in self._live:
+                return False
+            self._live.move_to_end(key)
+            return True
+
+    def _keep(self, key: K, block: shared_memory.SharedMemory) -> None:
+        """Record ``block`` as the live block of ``key``; one it replaces is freed now."""
+        with self._lock:
+            old = self._live.pop(key, None)
+            self._live[key] = block
+        if old is not None:
+            unlink_block(old)
+
+    def _retire(self, key: K) -> None:
+        """The engine process was told to drop the live block of ``key``."""
+        with self._lock:
+            self._retired.setdefault(key, deque()).append(self._live.pop(key))
+
+    def released(self, key: K) -> None:
+        """The engine process reported it released a block of ``key``: free the oldest
+        block retired for it, or else its live block (host, the reports thread)."""
+        with self._lock:
+            blocks = self._retired.get(key)
+            if blocks:
+                block: shared_memory.SharedMemory | None = blocks.popleft()
+                if not blocks:
+                    del self._retired[key]
+            else:
+                block = self._live.pop(key, None)
+        if block is not None:
+            unlink_block(block)
+
+    def clear(self) -> None:
+        """Free every block: the engine process that mapped them is gone (host)."""
+        with self._lock:
+            blocks = list(self._live.values())
+            blocks += [block for queue in self._retired.values() for block in queue]
+            self._live.clear()
+            self._retired.clear()
+        for block in blocks:
+            unlink_block(block)
+
+
+class MappedBlocks(Generic[K]):
+    """The host's blocks the engine process maps, by key (engine process, real time)."""
+
+    def __init__(self) -> None:
+        self._held: dict[K, shared_memory.SharedMemory] = {}
+        self._retiring: list[tuple[K, shared_memory.SharedMemory]] = []
+
+    def __len__(self) -> int:
+        return len(self._held)
+
+    def map(self, key: K, name: str) -> shared_memory.SharedMemory:
+        """Map the host's block ``name`` for ``key``, retiring the block it replaces
+        (real time: no copy). Raises ``FileNotFoundError`` for a block the host did not
+        write."""
+        block = shared_memory.SharedMemory(name=name)
+        old = self._held.pop(key, None)
+        if old is not None:
+            self._retiring.append((key, old))
+        self._held[key] = block
+        return block
+
+    def drop(self, key: K) -> bool:
+        """Retire the block of ``key``, to be unmapped once nothing reads it; False: no
+        block was mapped for ``key`` (real time)."""
+        block = self._held.pop(key, None)
+        if block is None:
+            return False
+        self._retiring.append((key, block))
+        return True
+
+    def collect(self) -> list[K]:
+        """Unmap the retired blocks no array reads any more; their keys (real time: one
+        failed ``close`` per block still read)."""
+        if not self._retiring:
+            return []
+        keep, freed = [], []
+        for key, block in self._retiring:
+            try:
+                block.close()
+            except BufferError:  # a voice still reads it
+                keep.append((key, block))
+                continue
+            freed.append(key)
+        self._retiring = keep
+        return freed
