@@ -1,11 +1,8 @@
 """The sample clock: how frames handed to the sink map to the server clock.
 
-The engine counts frames; the server speaks seconds on ``time.monotonic()``. The audio
-callback tells :class:`SampleClock` when it computes the block that starts at a frame;
-callbacks arrive with jitter but are never early, so the clock follows the earliest
-arrivals at once and later ones only slowly (which also tracks a sound card whose
-crystal runs a little slower than the system clock). A callback far later than the model
-(a stalled stream) re-anchors the clock.
+Callbacks arrive with jitter but are never early, so :class:`SampleClock` follows the
+earliest arrivals at once and later ones only slowly; a callback far later than the
+model (a stalled stream) re-anchors it.
 """
 
 from __future__ import annotations

@@ -72,21 +72,45 @@ class SharedBuffer:
         return cls(context.RawArray("d", count), context.Lock() if _locked(locked) else None)
 
 
-def _raw(count: int) -> Any:
-    return multiprocessing.get_context("spawn").RawArray("d", count)
+class _Rows:
+    """Rows of float64 values in a :class:`SharedBuffer`, each led by its sequence number.
+
+    Parameters
+    ----------
+    rows, fields : int, >= 1
+    raw : SharedBuffer, or None
+        The shared memory (as passed to the child); None: allocate it.
+    locked : bool or None
+        When allocating: guard it with a lock (True) or sequence locks (False); None: a
+        lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
+    """
+
+    def __init__(self, rows: int, fields: int, raw: SharedBuffer | None, locked: bool | None):
+        self.raw = raw if raw is not None else SharedBuffer.allocate(rows * fields, locked)
+        self._rows = np.frombuffer(self.raw.values, dtype=np.float64).reshape(rows, fields)
+        self._lock = self.raw.lock
+
+    @property
+    def locked(self) -> bool:
+        """A lock guards the values, not sequence locks."""
+        return self._lock is not None
+
+    def _store(self, row: int, *values: float) -> None:
+        """Write a row between two steps of its sequence number (under the lock, if any)."""
+        target = self._rows[row]
+        target[0] += 1.0
+        target[1:] = values
+        target[0] += 1.0
 
 
-class SharedClock:
+class SharedClock(_Rows):
     """The engine clock's anchor, published by the engine process, read by the host.
 
     Parameters
     ----------
     sample_rate_hz : int, > 0
-    raw : SharedBuffer, or None
-        The shared memory (as passed to the child); None: allocate it.
-    locked : bool or None
-        When allocating: guard it with a lock (True) or a sequence lock (False); None:
-        a lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
+    raw, locked
+        As for the move slots (:class:`MoveSlots`).
 
     Attributes
     ----------
@@ -97,16 +121,9 @@ class SharedClock:
     def __init__(
         self, sample_rate_hz: int, raw: SharedBuffer | None = None, *, locked: bool | None = None
     ) -> None:
+        super().__init__(1, _CLOCK_FIELDS, raw, locked)
         self.sample_rate_hz = int(sample_rate_hz)
-        self.raw = raw if raw is not None else SharedBuffer.allocate(_CLOCK_FIELDS, locked)
-        self._values = np.frombuffer(self.raw.values, dtype=np.float64)
-        self._lock = self.raw.lock
         self.dropped_anchors = 0
-
-    @property
-    def locked(self) -> bool:
-        """A lock guards the anchor, not a sequence lock."""
-        return self._lock is not None
 
     def publish(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
         """Write a new anchor (one writer thread at a time: the engine's); a ``publish``
@@ -117,26 +134,18 @@ class SharedClock:
         """
         lock = self._lock
         if lock is None:
-            self._store(anchor_frame, anchor_s, output_latency_s)
+            self._store(0, anchor_frame, anchor_s, output_latency_s)
         elif lock.acquire(False):
             try:
-                self._store(anchor_frame, anchor_s, output_latency_s)
+                self._store(0, anchor_frame, anchor_s, output_latency_s)
             finally:
                 lock.release()
         else:
             self.dropped_anchors += 1
 
-    def _store(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
-        values = self._values
-        values[0] += 1.0
-        values[1] = anchor_frame
-        values[2] = anchor_s
-        values[3] = output_latency_s
-        values[0] += 1.0
-
     def anchor(self) -> tuple[int, float, float]:
-        """``(anchor_frame, anchor_s, output_latency_s)``, consistent."""
-        values = self._values
+        """``(anchor_frame, anchor_s, output_latency_s)``, consistent (host)."""
+        values = self._rows[0]
         if self._lock is not None:
             with self._lock:
                 frame, anchor_s, latency_s = float(values[1]), float(values[2]), float(values[3])
@@ -159,7 +168,7 @@ class SharedClock:
         return anchor_frame + math.floor(offset_s * self.sample_rate_hz + 0.5)
 
 
-class MoveSlots:
+class MoveSlots(_Rows):
     """One slot per contact that is down: the newest position, written by the host.
 
     The host binds a slot to a contact when it touches down (with a new generation
@@ -175,31 +184,21 @@ class MoveSlots:
     raw : SharedBuffer, or None
         The shared memory (as passed to the child); None: allocate it.
     locked : bool or None
-        As for :class:`SharedClock`.
+        When allocating: guard it with a lock (True) or sequence locks (False); None: a
+        lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
     """
 
     def __init__(
         self, capacity: int, raw: SharedBuffer | None = None, *, locked: bool | None = None
     ) -> None:
+        super().__init__(int(capacity), _SLOT_FIELDS, raw, locked)
         self.capacity = int(capacity)
-        self.raw = (
-            raw if raw is not None else SharedBuffer.allocate(self.capacity * _SLOT_FIELDS, locked)
-        )
-        self._rows = np.frombuffer(self.raw.values, dtype=np.float64).reshape(
-            self.capacity, _SLOT_FIELDS
-        )
-        self._lock = self.raw.lock
         # the host's side
         self._free = list(range(self.capacity - 1, -1, -1))
         self._generation = 0
         # the engine process's side
         self._seen = np.zeros(self.capacity)
         self._bound: list[tuple[str, str, float] | None] = [None] * self.capacity
-
-    @property
-    def locked(self) -> bool:
-        """A lock guards the slots, not sequence locks."""
-        return self._lock is not None
 
     # -- the host ---------------------------------------------------------------------
 
@@ -230,14 +229,14 @@ class MoveSlots:
     ) -> None:
         """Post a position (one writer thread at a time; with a lock, waits for it)."""
         with self._lock or contextlib.nullcontext():
-            row = self._rows[slot]
-            row[0] += 1.0
-            row[1] = generation
-            row[2] = x_cm
-            row[3] = y_cm
-            row[4] = math.nan if intensity is None else intensity
-            row[5] = math.nan if frame is None else frame
-            row[0] += 1.0
+            self._store(
+                slot,
+                generation,
+                x_cm,
+                y_cm,
+                math.nan if intensity is None else intensity,
+                math.nan if frame is None else frame,
+            )
 
     # -- the engine process -----------------------------------------------------------
 
@@ -323,7 +322,7 @@ class StatusBlock:
     def __init__(self, channels: int, raw: Any = None) -> None:
         self.channels = int(channels)
         size = len(STATUS_FIELDS) + self.channels
-        self.raw = raw if raw is not None else _raw(size)
+        self.raw = raw if raw is not None else SharedBuffer.allocate(size, False).values
         self._values = np.frombuffer(self.raw, dtype=np.float64)
         self._index = {name: i for i, name in enumerate(STATUS_FIELDS)}
 
