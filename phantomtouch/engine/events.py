@@ -88,7 +88,7 @@ class Reports:
             if job.state != "stopped":
                 job.state = "finished"
             self._jobs.retire(job)
-        else:
+        else:  # cancelled
             job.state = "stopped"
             job.end_frame = job.requested_start_frame
             self._jobs.retire(job)
@@ -115,5 +115,6 @@ class Reports:
             self._log.write(records)
 
     def close(self) -> None:
+        """Close the log (host)."""
         if self._log is not None:
             self._log.close()
