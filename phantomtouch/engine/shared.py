@@ -25,6 +25,8 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
+from phantomtouch.engine.clock import FrameMapping
+
 K = TypeVar("K")
 
 _CLOCK_FIELDS = 4  # seq, anchor frame, anchor time s, output latency s
@@ -103,7 +105,7 @@ class _Rows:
         target[0] += 1.0
 
 
-class SharedClock(_Rows):
+class SharedClock(_Rows, FrameMapping):
     """The engine clock's anchor, published by the engine process, read by the host.
 
     Parameters
@@ -155,17 +157,6 @@ class SharedClock(_Rows):
             frame, anchor_s, latency_s = float(values[1]), float(values[2]), float(values[3])
             if seq % 2.0 == 0.0 and values[0] == seq:
                 return int(frame), anchor_s, latency_s
-
-    def time_at(self, frame: int) -> float:
-        """As :meth:`~phantomtouch.engine.clock.SampleClock.time_at`."""
-        anchor_frame, anchor_s, latency_s = self.anchor()
-        return anchor_s + (frame - anchor_frame) / self.sample_rate_hz + latency_s
-
-    def frames_at(self, server_time_s: float) -> int:
-        """As :meth:`~phantomtouch.engine.clock.SampleClock.frames_at`."""
-        anchor_frame, anchor_s, latency_s = self.anchor()
-        offset_s = server_time_s - latency_s - anchor_s
-        return anchor_frame + math.floor(offset_s * self.sample_rate_hz + 0.5)
 
 
 class MoveSlots(_Rows):
