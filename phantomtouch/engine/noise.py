@@ -73,8 +73,7 @@ class SharedLoops(HostBlocks[NoiseKey]):
             unlink_block(block)
             raise
         self._keep(key, block)
-        while len(self) > self.capacity:
-            old_key = self.held()[0]
+        while (old_key := self._oldest(self.capacity)) is not None:
             try:
                 post(DropNoise(old_key))
             except Exception:  # a full pipe: the engine process keeps it a while longer

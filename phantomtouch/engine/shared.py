@@ -242,6 +242,7 @@ class MoveSlots(_Rows):
                 self._bound[slot] = None
 
     def unbind_all(self) -> None:
+        """Stop applying every slot (the engine process)."""
         self._bound = [None] * self.capacity
 
     def drain(
@@ -421,10 +422,17 @@ class HostBlocks(Generic[K]):
         if old is not None:
             unlink_block(old)
 
+    def _oldest(self, beyond: int) -> K | None:
+        """The least recently used key while more than ``beyond`` blocks live, else None."""
+        with self._lock:
+            return next(iter(self._live)) if len(self._live) > beyond else None
+
     def _retire(self, key: K) -> None:
         """The engine process was told to drop the live block of ``key``."""
         with self._lock:
-            self._retired.setdefault(key, deque()).append(self._live.pop(key))
+            block = self._live.pop(key, None)
+            if block is not None:
+                self._retired.setdefault(key, deque()).append(block)
 
     def released(self, key: K) -> None:
         """The engine process reported it released a block of ``key``: free the oldest
