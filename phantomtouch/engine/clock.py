@@ -1,15 +1,13 @@
 """The sample clock: how frames handed to the sink map to the server clock.
 
-The engine counts frames; the server speaks seconds on ``time.monotonic()``. The audio
-callback tells :class:`SampleClock` when it computes the block that starts at a frame;
-callbacks arrive with jitter but are never early, so the clock follows the earliest
-arrivals at once and later ones only slowly (which also tracks a sound card whose
-crystal runs a little slower than the system clock). A callback far later than the model
-(a stalled stream) re-anchors the clock.
+Callbacks arrive with jitter but are never early, so :class:`SampleClock` follows the
+earliest arrivals at once and later ones only slowly; a callback far later than the
+model (a stalled stream) re-anchors it.
 """
 
 from __future__ import annotations
 
+import abc
 import math
 import time
 from collections.abc import Callable
@@ -22,12 +20,35 @@ LATENCY_FOLLOW = 1.0 / 16.0
 """Fraction of a new output-latency reading the latency moves towards per block."""
 
 
-class SampleClock:
+class FrameMapping(abc.ABC):
     """Maps frames of the engine's output to seconds on the server clock and back.
 
     ``time_at(frame)`` is when that frame is expected to leave the sound card: the time its
     block was computed, plus ``(frame - block start) / sample_rate_hz``, plus the sink's
     output latency.
+    """
+
+    sample_rate_hz: int
+
+    @abc.abstractmethod
+    def anchor(self) -> tuple[int, float, float]:
+        """``(anchor_frame, anchor_s, output_latency_s)``: the block from ``anchor_frame``
+        was computed at server time ``anchor_s``."""
+
+    def time_at(self, frame: int) -> float:
+        """Server time, s, at which ``frame`` leaves the sound card (host)."""
+        anchor_frame, anchor_s, latency_s = self.anchor()
+        return anchor_s + (frame - anchor_frame) / self.sample_rate_hz + latency_s
+
+    def frames_at(self, server_time_s: float) -> int:
+        """The frame that leaves the sound card at ``server_time_s``, nearest (host)."""
+        anchor_frame, anchor_s, latency_s = self.anchor()
+        offset_s = server_time_s - latency_s - anchor_s
+        return anchor_frame + math.floor(offset_s * self.sample_rate_hz + 0.5)
+
+
+class SampleClock(FrameMapping):
+    """The audio side's clock, following the times its blocks are computed at.
 
     Parameters
     ----------
@@ -92,16 +113,8 @@ class SampleClock:
             self._anchor = (frame, now_s)
         else:
             self._anchor = (frame, predicted_s + late_s * FOLLOW)
-        if self._publish is not None:
-            self._publish(frame, self._anchor[1], self._latency_s)
+        self._changed()
 
-    def time_at(self, frame: int) -> float:
-        """Server time, s, at which ``frame`` leaves the sound card."""
-        anchor_frame, anchor_s = self._anchor
-        return anchor_s + (frame - anchor_frame) / self.sample_rate_hz + self._latency_s
-
-    def frames_at(self, server_time_s: float) -> int:
-        """The frame that leaves the sound card at ``server_time_s`` (nearest frame)."""
-        anchor_frame, anchor_s = self._anchor
-        offset_s = server_time_s - self._latency_s - anchor_s
-        return anchor_frame + math.floor(offset_s * self.sample_rate_hz + 0.5)
+    def anchor(self) -> tuple[int, float, float]:
+        """As :meth:`FrameMapping.anchor` (any thread)."""
+        return self._anchor[0], self._anchor[1], self._latency_s

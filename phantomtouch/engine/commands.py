@@ -1,28 +1,18 @@
 """Voice commands for the scheduler, and their bounded queue (the audio side).
 
-The appliers of :mod:`phantomtouch.engine.messages` push small immutable commands (a
-voice to start, a voice to release); the audio callback pops them at the start of each
-block and applies each at the sample its frame asks for. The queue is bounded: a full
-queue refuses a new voice with
-:class:`~phantomtouch.errors.EngineBusyError`, never a silent drop. Releases (stop, lift-off,
-a client gone) are never refused: each ends a voice that was itself admitted, so they
-cannot grow without bound. ``stop_all`` does not queue at all: it raises a sequence mark
-that the callback reads first, so it gets through even when the queue is full.
-
-Only producers take the lock, and only for a few list operations; popping never takes it
-(``deque.popleft`` is atomic). In the engine process the one producer is the audio
-callback itself (it performs the host's messages), so the lock is never contended there;
-in the in-process engine the producers are the front's threads, and the callback only
-pops. Every method says whether it runs in real time.
+The appliers of :mod:`phantomtouch.engine.messages` push commands; the audio callback
+pops them at the start of each block. A full queue refuses a new voice
+(:class:`~phantomtouch.errors.EngineBusyError`); releases are never refused (each ends a
+voice that was admitted), and ``stop_all`` does not queue at all: it raises a sequence
+mark the callback reads first. Only producers take the lock; popping never does.
 """
 
 from __future__ import annotations
 
 import threading
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING
 
 from phantomtouch.errors import EngineBusyError
 
@@ -57,7 +47,6 @@ class ReleaseCommand:
 
 
 Command = StartCommand | ReleaseCommand
-C = TypeVar("C", StartCommand, ReleaseCommand)
 
 
 class CommandQueue:
@@ -93,43 +82,27 @@ class CommandQueue:
         """
         return self._admitted - max(self._retired, self._admitted_before_stop)
 
-    def push(self, make: Callable[[int], C], *, bounded: bool) -> C:
-        """Build a command with the next sequence number and append it (real time in
-        the engine process; the front's threads in the in-process engine).
-
-        Parameters
-        ----------
-        make : callable
-            ``make(seq)`` returns the command.
-        bounded : bool
-            True for a start: counted against ``capacity`` and refused when full.
+    def push_start(self, voice: Voice, frame: int, asap: bool) -> StartCommand:
+        """Queue the start of ``voice`` and set ``voice.seq`` (real time in the engine
+        process; the front's threads in the in-process engine).
 
         Raises
         ------
         EngineBusyError
-            ``bounded`` and ``capacity`` voices are already waiting.
+            ``capacity`` voices are already waiting.
         """
         with self._lock:
-            if bounded and self.depth >= self.capacity:
+            if self.depth >= self.capacity:
                 raise EngineBusyError(
                     f"the engine's command queue is full ({self.capacity} voices waiting to "
                     "start); retry later"
                 )
             self._seq += 1
-            command = make(self._seq)
+            self._admitted += 1
+            voice.seq = self._seq
+            command = StartCommand(self._seq, voice, frame, asap)
             self._items.append(command)
-            if bounded:
-                self._admitted += 1
             return command
-
-    def push_start(self, voice: Voice, frame: int, asap: bool) -> StartCommand:
-        """Queue the start of ``voice`` (bounded; sets ``voice.seq``); as :meth:`push`."""
-
-        def make(seq: int) -> StartCommand:
-            voice.seq = seq
-            return StartCommand(seq, voice, frame, asap)
-
-        return self.push(make, bounded=True)
 
     def push_release(
         self,
@@ -139,10 +112,12 @@ class CommandQueue:
         *,
         fade_frames: int | None = None,
     ) -> ReleaseCommand:
-        """Queue the release of ``voice``; never refused; as :meth:`push`."""
-        return self.push(
-            lambda seq: ReleaseCommand(seq, voice, frame, transient, fade_frames), bounded=False
-        )
+        """Queue the release of ``voice``; never refused (threads as :meth:`push_start`)."""
+        with self._lock:
+            self._seq += 1
+            command = ReleaseCommand(self._seq, voice, frame, transient, fade_frames)
+            self._items.append(command)
+            return command
 
     def mark_stop_all(self) -> int:
         """Void every command pushed so far and everything playing; never refused (real

@@ -1,9 +1,7 @@
 """What the audio side reports, turned into job states and stimulus-log records.
 
-The audio side reports typed events (:mod:`phantomtouch.engine.messages`); the front
-hands them to :meth:`Reports.apply` under its lock: from the in-process engine's
-housekeeping thread, or from the host thread that reads the engine process's reports.
-The log is written outside the lock (:meth:`Reports.flush`), never by the audio callback.
+The front hands events to :meth:`Reports.apply` under its lock; the log is written
+outside it (:meth:`Reports.flush`), never by the audio callback.
 """
 
 from __future__ import annotations
@@ -14,7 +12,15 @@ from typing import Any
 
 from phantomtouch.engine.jobs import JobTable
 from phantomtouch.engine.log import StimulusLog
-from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
+from phantomtouch.engine.messages import (
+    Cancelled,
+    Ended,
+    Event,
+    Released,
+    Started,
+    StoppedAll,
+    VoiceEvent,
+)
 
 LOG_PATTERN_MAX_POINTS = 1000
 """Patterns with longer paths are logged by their summary alone."""
@@ -47,33 +53,20 @@ class Reports:
         for event in events:
             if isinstance(event, StoppedAll):
                 self._note({"event": "stop_all"}, event.frame)
-            elif isinstance(event, Started | Released | Ended | Cancelled):
-                if event.kind == "job":
-                    self._job_event(event)
-                else:
-                    self._contact_event(event)
+            elif isinstance(event, VoiceEvent):
+                self._voice_event(event)
 
-    def _contact_event(self, event: Started | Released | Ended | Cancelled) -> None:
-        owner, contact = event.key
-        record: dict[str, Any] = {
-            "event": _NAMES[type(event)],
-            "kind": "contact",
-            "owner": owner,
-            "contact": contact,
-        }
-        if isinstance(event, Started):
-            record.update(x_cm=event.x_cm, y_cm=event.y_cm, amplitude=event.amplitude)
-        self._note(record, event.frame)
-
-    def _job_event(self, event: Started | Released | Ended | Cancelled) -> None:
+    def _voice_event(self, event: VoiceEvent) -> None:
+        record: dict[str, Any] = {"event": _NAMES[type(event)], "kind": event.kind}
+        if event.kind != "job":
+            record["owner"], record["contact"] = event.key
+            if isinstance(event, Started):
+                record.update(x_cm=event.x_cm, y_cm=event.y_cm, amplitude=event.amplitude)
+            self._note(record, event.frame)
+            return
         job_id, frame = event.key, event.frame
         job = self._jobs.get(job_id)
-        record: dict[str, Any] = {
-            "event": _NAMES[type(event)],
-            "kind": "job",
-            "job_id": job_id,
-            "owner": None if job is None else job.owner,
-        }
+        record.update(job_id=job_id, owner=None if job is None else job.owner)
         if isinstance(event, Started) and self._log is not None and job is not None and job.plan:
             record.update(late=event.late, summary=job.plan.summary())
             pattern = job.plan.pattern
@@ -95,7 +88,7 @@ class Reports:
             if job.state != "stopped":
                 job.state = "finished"
             self._jobs.retire(job)
-        else:
+        else:  # cancelled
             job.state = "stopped"
             job.end_frame = job.requested_start_frame
             self._jobs.retire(job)
@@ -122,5 +115,6 @@ class Reports:
             self._log.write(records)
 
     def close(self) -> None:
+        """Close the log (host)."""
         if self._log is not None:
             self._log.close()

@@ -1,23 +1,10 @@
 """Every command the audio side takes and every event it reports, each one typed.
 
-A command is one frozen, slotted dataclass here and one applier (its perform function,
-as scsynth has them) in :data:`APPLIERS`; the front builds it, the audio side's
-:func:`perform` looks its applier up by class and runs it. The same messages and the
-same appliers serve both audio sides: in this process the front's thread performs them
-at once (they only push into the core's queue), in the engine process the audio callback
-performs what it reads from the pipe. Adding a command means adding its class, its
-applier and the front's public method that posts it.
-
-Events travel back the same way: the audio side reports what it did as the event classes
-below (``Started``, ``Released``, ``Ended``, ``Cancelled``, ``StoppedAll``, and, from the
-engine process, ``NoiseReleased``; ``PlanReleased`` and ``Refused``), which
-:class:`~phantomtouch.engine.events.Reports` turns into job states and log lines.
-
-Every applier runs in real time in the engine process (inside the audio callback), and
-in the front's calling thread in the in-process engine; none of them computes anything
-heavy: what they need (a plan, a noise loop, a touchdown's gains, a transient's samples)
-arrives with the message or was handed over before, and what was not handed over is
-refused (:class:`Refused`), never built.
+A command is a frozen, slotted dataclass and one applier in :data:`APPLIERS`, which
+:func:`perform` looks up by class; events come back as the classes below. Appliers run
+in real time in the engine process (inside the audio callback) and in the front's
+calling thread in the in-process engine; none computes anything heavy, and what was not
+handed over is refused (:class:`Refused`), never built (docs/engine.md, Messages).
 """
 
 from __future__ import annotations
@@ -195,13 +182,20 @@ Command = (
 
 
 @dataclass(frozen=True, slots=True)
-class Started:
-    """A voice began at ``frame`` (``late``: its frame had passed). A contact's carries
-    its touchdown position and amplitude."""
+class VoiceEvent:
+    """What a voice did at ``frame``: ``kind`` "job" (``key`` its job id) or "contact"
+    (``key`` its ``(owner, contact)``)."""
 
     kind: str
     key: Any
     frame: int
+
+
+@dataclass(frozen=True, slots=True)
+class Started(VoiceEvent):
+    """A voice began at ``frame`` (``late``: its frame had passed). A contact's carries
+    its touchdown position and amplitude."""
+
     late: bool
     x_cm: float | None = None
     y_cm: float | None = None
@@ -209,31 +203,20 @@ class Started:
 
 
 @dataclass(frozen=True, slots=True)
-class Released:
+class Released(VoiceEvent):
     """A voice's fade-out begins at ``frame``; it is silent from ``silent_from``."""
 
-    kind: str
-    key: Any
-    frame: int
     silent_from: int | None
 
 
 @dataclass(frozen=True, slots=True)
-class Ended:
+class Ended(VoiceEvent):
     """A voice is silent from ``frame``."""
-
-    kind: str
-    key: Any
-    frame: int
 
 
 @dataclass(frozen=True, slots=True)
-class Cancelled:
+class Cancelled(VoiceEvent):
     """A voice was voided before it started."""
-
-    kind: str
-    key: Any
-    frame: int
 
 
 @dataclass(frozen=True, slots=True)

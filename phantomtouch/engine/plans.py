@@ -1,22 +1,9 @@
 """The one plan cache: plans by their pattern's content, each with one handle, minted once.
 
-A VR scene plays the same few touches again and again; planning one (path, eq. 1 timing,
-layout fit) costs about as much as the rest of a request, and rendering a short one whole
-(:mod:`phantomtouch.engine.prerender`) more. :class:`PlanCache` is the only place plans
-are kept in the host: the service plans through it, the front schedules through it, and
-the audio side holds a plan only under the handle the cache minted for it, from the
-``HoldPlan`` that handed it over until the ``DropPlan`` that releases it (acknowledged
-by a ``PlanReleased`` event).
-
-The key is the pattern's JSON text: the same pattern on the cache's device is the same
-plan. The cache holds at most ``max_bytes`` (plans by :func:`plan_bytes`, plus their
-prerendered samples); a plan over an eighth of that is planned every time and not kept
-(its entry is handed to the audio side for one job and released after it), so a stream
-of distinct large patterns cannot grow the host.
-
-Every method runs in the host, on any thread: planning and rendering happen outside the
-cache's lock. What was handed to the audio side is the front's to track
-(:attr:`HeldPlan.handed`, under the front's lock).
+The audio side holds a plan only under the handle minted here, from the ``HoldPlan``
+that hands it over until the ``DropPlan`` that releases it (acknowledged by
+``PlanReleased``); docs/engine.md (One plan cache) tells the rest. Every method runs in
+the host, on any thread; planning and rendering happen outside the cache's lock.
 """
 
 from __future__ import annotations
@@ -29,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from phantomtouch.engine.jobs import resolve_plan
+from phantomtouch.engine.plan_memory import heavy_bytes
 from phantomtouch.engine.prerender import PRERENDER_MAX_S, Prerendered, prerender
 from phantomtouch.renderer import plan
 from phantomtouch.renderer.plan import Plan
@@ -43,13 +31,7 @@ characters is a tuple of two floats, about 110 bytes (measured with ``tracemallo
 
 def plan_bytes(resolved: Plan, key_chars: int) -> int:
     """Bytes a kept plan holds: its pattern (from the JSON's length) and its timelines."""
-    arrays = 0
-    for timeline in (resolved.forward, resolved.backward):
-        if timeline is None:
-            continue
-        for array in (timeline.times_s, timeline.points_cm, timeline.intensity):
-            arrays += 0 if array is None else array.nbytes
-    return PATTERN_BYTES_PER_CHAR * key_chars + arrays
+    return PATTERN_BYTES_PER_CHAR * key_chars + heavy_bytes(resolved, None)
 
 
 @dataclass(eq=False)

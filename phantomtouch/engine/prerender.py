@@ -1,17 +1,7 @@
 """Short plans rendered whole before they play, so the audio callback only adds samples.
 
-A pattern voice that renders in the audio callback pays for its first frames in the
-block it begins in, and for every later chunk while it sounds
-(:mod:`phantomtouch.engine.voices`). For a short touch — a tap on a collision, at most
-``PRERENDER_MAX_S`` long — that work is done once, when the touch is scheduled, in the
-requesting thread: :func:`prerender` renders the plan with the same
-:class:`~phantomtouch.renderer.PatternRenderer`, so its samples are exactly those the
-voice would have rendered (the renderer's output does not depend on how it is cut into
-blocks), and the callback's :class:`~phantomtouch.engine.voices.PrerenderedVoice` adds
-slices of them: whole-width frames, one contiguous add a block.
-
-The front's plan cache (:mod:`phantomtouch.engine.plans`) keeps the samples with their
-plan: a plan made once and played often is rendered once.
+:func:`prerender` runs in the requesting thread with the renderer the voice would use,
+so the samples are the voice's, bit for bit (docs/engine.md, What a voice costs).
 """
 
 from __future__ import annotations
@@ -37,10 +27,6 @@ class Prerendered:
     """
 
     samples: np.ndarray
-
-    @property
-    def frames(self) -> int:
-        return int(self.samples.shape[0])
 
 
 def prerender(plan: Plan) -> Prerendered:

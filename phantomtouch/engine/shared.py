@@ -1,29 +1,12 @@
-"""What the host and the engine process share without a message: the clock and moves.
+"""What the host and the engine process share without a message.
 
-:class:`~phantomtouch.engine.process.ProcessEngine` talks to its engine process through a
-pipe, and a message costs both processes a system call, a wake-up and pickling. Two
-things are asked for too often for that:
-
-- the sample clock (``time_at``, ``frames_at``: every ``POST /touch`` answers its start
-  time): :class:`SharedClock` publishes the engine's clock anchor, so the host computes
-  the mapping itself, with the same arithmetic as
-  :class:`~phantomtouch.engine.clock.SampleClock`;
-- contact moves (a VR hand streams them at 90 Hz or more): :class:`MoveSlots` gives every
-  contact that is down a slot in shared memory; the host writes the newest position into
-  it, and the audio callback reads every slot that changed at the start of each block.
-  Latest wins, as in the engine's own mailbox; nothing is queued or pickled.
-
-On x86 both use a sequence lock: the writer makes the sequence number odd, writes, and
-makes it even again; a reader that sees an odd number, or a different one after reading,
-reads again (the clock) or leaves the slot for the next block (moves). Each value has a
-single writer thread. This relies on one thread's stores becoming visible to other
-processes in the order they were made, which x86 guarantees and ARM64 (Apple silicon,
-Raspberry Pi, Jetson) does not: there a store of the sequence number may be seen before
-the values it guards. Elsewhere, or with ``PHANTOMTOUCH_SHARED_LOCKS=1``, a
-multiprocessing lock guards each buffer instead, and the audio callback never waits for
-it: it only tries to take it, and when the host holds it, the callback keeps what it had
-(moves wait for the next block; a clock anchor is dropped, and the next block publishes
-a newer one). The host, which may wait, takes it for the few stores or loads it makes.
+:class:`SharedClock` (the sample clock's anchor), :class:`MoveSlots` (the newest position
+of every contact that is down) and :class:`StatusBlock` (figures and heartbeat) are
+float64 arrays inherited by the engine process; :class:`HostBlocks` and
+:class:`MappedBlocks` are blocks of shared memory the host writes (noise loops, plans'
+heavy arrays) and the engine process maps. docs/engine.md (Transports) says why each
+crosses this way, and how the clock and slots are guarded: a sequence lock on x86, a
+lock elsewhere or with ``PHANTOMTOUCH_SHARED_LOCKS=1`` that the audio callback only tries.
 """
 
 from __future__ import annotations
@@ -33,11 +16,18 @@ import math
 import multiprocessing
 import os
 import platform
-from collections.abc import Callable
+import threading
+from collections import OrderedDict, deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from multiprocessing import shared_memory
+from typing import Any, Generic, TypeVar
 
 import numpy as np
+
+from phantomtouch.engine.clock import FrameMapping
+
+K = TypeVar("K")
 
 _CLOCK_FIELDS = 4  # seq, anchor frame, anchor time s, output latency s
 _SLOT_FIELDS = 6  # seq, generation, x_cm, y_cm, intensity (NaN: unchanged), frame (NaN: next)
@@ -84,21 +74,45 @@ class SharedBuffer:
         return cls(context.RawArray("d", count), context.Lock() if _locked(locked) else None)
 
 
-def _raw(count: int) -> Any:
-    return multiprocessing.get_context("spawn").RawArray("d", count)
+class _Rows:
+    """Rows of float64 values in a :class:`SharedBuffer`, each led by its sequence number.
+
+    Parameters
+    ----------
+    rows, fields : int, >= 1
+    raw : SharedBuffer, or None
+        The shared memory (as passed to the child); None: allocate it.
+    locked : bool or None
+        When allocating: guard it with a lock (True) or sequence locks (False); None: a
+        lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
+    """
+
+    def __init__(self, rows: int, fields: int, raw: SharedBuffer | None, locked: bool | None):
+        self.raw = raw if raw is not None else SharedBuffer.allocate(rows * fields, locked)
+        self._rows = np.frombuffer(self.raw.values, dtype=np.float64).reshape(rows, fields)
+        self._lock = self.raw.lock
+
+    @property
+    def locked(self) -> bool:
+        """A lock guards the values, not sequence locks."""
+        return self._lock is not None
+
+    def _store(self, row: int, *values: float) -> None:
+        """Write a row between two steps of its sequence number (under the lock, if any)."""
+        target = self._rows[row]
+        target[0] += 1.0
+        target[1:] = values
+        target[0] += 1.0
 
 
-class SharedClock:
+class SharedClock(_Rows, FrameMapping):
     """The engine clock's anchor, published by the engine process, read by the host.
 
     Parameters
     ----------
     sample_rate_hz : int, > 0
-    raw : SharedBuffer, or None
-        The shared memory (as passed to the child); None: allocate it.
-    locked : bool or None
-        When allocating: guard it with a lock (True) or a sequence lock (False); None:
-        a lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
+    raw, locked
+        As for the move slots (:class:`MoveSlots`).
 
     Attributes
     ----------
@@ -109,16 +123,9 @@ class SharedClock:
     def __init__(
         self, sample_rate_hz: int, raw: SharedBuffer | None = None, *, locked: bool | None = None
     ) -> None:
+        super().__init__(1, _CLOCK_FIELDS, raw, locked)
         self.sample_rate_hz = int(sample_rate_hz)
-        self.raw = raw if raw is not None else SharedBuffer.allocate(_CLOCK_FIELDS, locked)
-        self._values = np.frombuffer(self.raw.values, dtype=np.float64)
-        self._lock = self.raw.lock
         self.dropped_anchors = 0
-
-    @property
-    def locked(self) -> bool:
-        """A lock guards the anchor, not a sequence lock."""
-        return self._lock is not None
 
     def publish(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
         """Write a new anchor (one writer thread at a time: the engine's); a ``publish``
@@ -129,26 +136,18 @@ class SharedClock:
         """
         lock = self._lock
         if lock is None:
-            self._store(anchor_frame, anchor_s, output_latency_s)
+            self._store(0, anchor_frame, anchor_s, output_latency_s)
         elif lock.acquire(False):
             try:
-                self._store(anchor_frame, anchor_s, output_latency_s)
+                self._store(0, anchor_frame, anchor_s, output_latency_s)
             finally:
                 lock.release()
         else:
             self.dropped_anchors += 1
 
-    def _store(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
-        values = self._values
-        values[0] += 1.0
-        values[1] = anchor_frame
-        values[2] = anchor_s
-        values[3] = output_latency_s
-        values[0] += 1.0
-
     def anchor(self) -> tuple[int, float, float]:
-        """``(anchor_frame, anchor_s, output_latency_s)``, consistent."""
-        values = self._values
+        """``(anchor_frame, anchor_s, output_latency_s)``, consistent (host)."""
+        values = self._rows[0]
         if self._lock is not None:
             with self._lock:
                 frame, anchor_s, latency_s = float(values[1]), float(values[2]), float(values[3])
@@ -159,19 +158,8 @@ class SharedClock:
             if seq % 2.0 == 0.0 and values[0] == seq:
                 return int(frame), anchor_s, latency_s
 
-    def time_at(self, frame: int) -> float:
-        """As :meth:`~phantomtouch.engine.clock.SampleClock.time_at`."""
-        anchor_frame, anchor_s, latency_s = self.anchor()
-        return anchor_s + (frame - anchor_frame) / self.sample_rate_hz + latency_s
 
-    def frames_at(self, server_time_s: float) -> int:
-        """As :meth:`~phantomtouch.engine.clock.SampleClock.frames_at`."""
-        anchor_frame, anchor_s, latency_s = self.anchor()
-        offset_s = server_time_s - latency_s - anchor_s
-        return anchor_frame + math.floor(offset_s * self.sample_rate_hz + 0.5)
-
-
-class MoveSlots:
+class MoveSlots(_Rows):
     """One slot per contact that is down: the newest position, written by the host.
 
     The host binds a slot to a contact when it touches down (with a new generation
@@ -187,31 +175,21 @@ class MoveSlots:
     raw : SharedBuffer, or None
         The shared memory (as passed to the child); None: allocate it.
     locked : bool or None
-        As for :class:`SharedClock`.
+        When allocating: guard it with a lock (True) or sequence locks (False); None: a
+        lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
     """
 
     def __init__(
         self, capacity: int, raw: SharedBuffer | None = None, *, locked: bool | None = None
     ) -> None:
+        super().__init__(int(capacity), _SLOT_FIELDS, raw, locked)
         self.capacity = int(capacity)
-        self.raw = (
-            raw if raw is not None else SharedBuffer.allocate(self.capacity * _SLOT_FIELDS, locked)
-        )
-        self._rows = np.frombuffer(self.raw.values, dtype=np.float64).reshape(
-            self.capacity, _SLOT_FIELDS
-        )
-        self._lock = self.raw.lock
         # the host's side
         self._free = list(range(self.capacity - 1, -1, -1))
         self._generation = 0
         # the engine process's side
         self._seen = np.zeros(self.capacity)
         self._bound: list[tuple[str, str, float] | None] = [None] * self.capacity
-
-    @property
-    def locked(self) -> bool:
-        """A lock guards the slots, not sequence locks."""
-        return self._lock is not None
 
     # -- the host ---------------------------------------------------------------------
 
@@ -242,14 +220,14 @@ class MoveSlots:
     ) -> None:
         """Post a position (one writer thread at a time; with a lock, waits for it)."""
         with self._lock or contextlib.nullcontext():
-            row = self._rows[slot]
-            row[0] += 1.0
-            row[1] = generation
-            row[2] = x_cm
-            row[3] = y_cm
-            row[4] = math.nan if intensity is None else intensity
-            row[5] = math.nan if frame is None else frame
-            row[0] += 1.0
+            self._store(
+                slot,
+                generation,
+                x_cm,
+                y_cm,
+                math.nan if intensity is None else intensity,
+                math.nan if frame is None else frame,
+            )
 
     # -- the engine process -----------------------------------------------------------
 
@@ -264,6 +242,7 @@ class MoveSlots:
                 self._bound[slot] = None
 
     def unbind_all(self) -> None:
+        """Stop applying every slot (the engine process)."""
         self._bound = [None] * self.capacity
 
     def drain(
@@ -335,7 +314,7 @@ class StatusBlock:
     def __init__(self, channels: int, raw: Any = None) -> None:
         self.channels = int(channels)
         size = len(STATUS_FIELDS) + self.channels
-        self.raw = raw if raw is not None else _raw(size)
+        self.raw = raw if raw is not None else SharedBuffer.allocate(size, False).values
         self._values = np.frombuffer(self.raw, dtype=np.float64)
         self._index = {name: i for i, name in enumerate(STATUS_FIELDS)}
 
@@ -362,3 +341,166 @@ class StatusBlock:
         figures["levels"] = [float(v) for v in values[len(STATUS_FIELDS) :]]
         figures["running"] = figures["running"] > 0.0
         return figures
+
+
+_ALIGN = 64
+"""Alignment of each array in a block, bytes."""
+
+
+def write_block(arrays: Sequence[np.ndarray]) -> tuple[shared_memory.SharedMemory, list[int]]:
+    """A new block of shared memory holding ``arrays``, each at an offset (bytes, aligned
+    to 64) of the list returned (host, non real time)."""
+    offsets, size = [], 0
+    for array in arrays:
+        offsets.append(size)
+        size += -(-array.nbytes // _ALIGN) * _ALIGN
+    block = shared_memory.SharedMemory(create=True, size=max(size, 1))
+    for array, offset in zip(arrays, offsets, strict=True):
+        view(block, array.dtype.str, array.shape, offset)[...] = array
+    return block, offsets
+
+
+def view(
+    block: shared_memory.SharedMemory, dtype: str, shape: tuple[int, ...], offset: int
+) -> np.ndarray:
+    """An array over part of a block, without a copy; while it lives the block cannot be
+    unmapped (``close`` raises ``BufferError``)."""
+    count = int(np.prod(shape, dtype=np.int64))
+    flat = np.frombuffer(block.buf, dtype=dtype, count=count, offset=offset)  # type: ignore[arg-type]
+    return flat.reshape(shape)
+
+
+def unlink_block(block: shared_memory.SharedMemory) -> None:
+    """Close and free a block the host wrote (host)."""
+    with contextlib.suppress(OSError, BufferError):
+        block.close()
+    with contextlib.suppress(OSError):
+        block.unlink()
+
+
+class HostBlocks(Generic[K]):
+    """The blocks the host wrote for the engine process, by key; each is freed only once
+    the engine process reports it released it, or is gone (any host thread; a lock
+    guards the records).
+
+    A key has at most one live block, kept in least recently used order; a live block
+    the engine process was told to drop is retired until it reports the release.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._live: OrderedDict[K, shared_memory.SharedMemory] = OrderedDict()
+        self._retired: dict[K, deque[shared_memory.SharedMemory]] = {}
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._live)
+
+    def held(self) -> list[K]:
+        """The keys of the live blocks, least recently used first (host)."""
+        with self._lock:
+            return list(self._live)
+
+    def waiting(self) -> int:
+        """Retired blocks whose release the engine process has not reported yet (host)."""
+        with self._lock:
+            return sum(len(blocks) for blocks in self._retired.values())
+
+    def _use(self, key: K) -> bool:
+        """Mark the live block of ``key`` used now; False: there is none."""
+        with self._lock:
+            if key not in self._live:
+                return False
+            self._live.move_to_end(key)
+            return True
+
+    def _keep(self, key: K, block: shared_memory.SharedMemory) -> None:
+        """Record ``block`` as the live block of ``key``; one it replaces is freed now."""
+        with self._lock:
+            old = self._live.pop(key, None)
+            self._live[key] = block
+        if old is not None:
+            unlink_block(old)
+
+    def _oldest(self, beyond: int) -> K | None:
+        """The least recently used key while more than ``beyond`` blocks live, else None."""
+        with self._lock:
+            return next(iter(self._live)) if len(self._live) > beyond else None
+
+    def _retire(self, key: K) -> None:
+        """The engine process was told to drop the live block of ``key``."""
+        with self._lock:
+            block = self._live.pop(key, None)
+            if block is not None:
+                self._retired.setdefault(key, deque()).append(block)
+
+    def released(self, key: K) -> None:
+        """The engine process reported it released a block of ``key``: free the oldest
+        block retired for it, or else its live block (host, the reports thread)."""
+        with self._lock:
+            blocks = self._retired.get(key)
+            if blocks:
+                block: shared_memory.SharedMemory | None = blocks.popleft()
+                if not blocks:
+                    del self._retired[key]
+            else:
+                block = self._live.pop(key, None)
+        if block is not None:
+            unlink_block(block)
+
+    def clear(self) -> None:
+        """Free every block: the engine process that mapped them is gone (host)."""
+        with self._lock:
+            blocks = list(self._live.values())
+            blocks += [block for queue in self._retired.values() for block in queue]
+            self._live.clear()
+            self._retired.clear()
+        for block in blocks:
+            unlink_block(block)
+
+
+class MappedBlocks(Generic[K]):
+    """The host's blocks the engine process maps, by key (engine process, real time)."""
+
+    def __init__(self) -> None:
+        self._held: dict[K, shared_memory.SharedMemory] = {}
+        self._retiring: list[tuple[K, shared_memory.SharedMemory]] = []
+
+    def __len__(self) -> int:
+        return len(self._held)
+
+    def map(self, key: K, name: str) -> shared_memory.SharedMemory:
+        """Map the host's block ``name`` for ``key``, retiring the block it replaces
+        (real time: no copy). Raises ``FileNotFoundError`` for a block the host did not
+        write."""
+        block = shared_memory.SharedMemory(name=name)
+        old = self._held.pop(key, None)
+        if old is not None:
+            self._retiring.append((key, old))
+        self._held[key] = block
+        return block
+
+    def drop(self, key: K) -> bool:
+        """Retire the block of ``key``, to be unmapped once nothing reads it; False: no
+        block was mapped for ``key`` (real time)."""
+        block = self._held.pop(key, None)
+        if block is None:
+            return False
+        self._retiring.append((key, block))
+        return True
+
+    def collect(self) -> list[K]:
+        """Unmap the retired blocks no array reads any more; their keys (real time: one
+        failed ``close`` per block still read)."""
+        if not self._retiring:
+            return []
+        keep, freed = [], []
+        for key, block in self._retiring:
+            try:
+                block.close()
+            except BufferError:  # a voice still reads it
+                keep.append((key, block))
+                continue
+            freed.append(key)
+        self._retiring = keep
+        return freed
