@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -206,18 +206,14 @@ def _max(values: np.ndarray) -> float:
     return float(np.max(values)) if values.size else 0.0
 
 
-@dataclass
-class Measurement:
-    """One stroke at one setting. Errors in cm, gain errors as fractions of the
-    pattern's amplitude (worst channel per frame), levels in dB, CPU in ms per s;
+@dataclass(kw_only=True)
+class Errors:
+    """How far one setting's render is from the per-frame one. Gain errors as fractions
+    of the pattern's amplitude (worst channel per frame), positions in cm, levels in dB;
     ``silent_windows_twin`` counts windows the render left silent where the pattern
-    should be felt (they have no position, so the twin errors leave them out)."""
+    should be felt (they have no position, so the twin errors leave them out). Over
+    several strokes every one of them is the worst stroke's."""
 
-    stroke: str
-    setting: str
-    gain_update_frames: int
-    gain_ramp: bool
-    duration_s: float
     gain_error_max: float
     gain_error_rms: float
     position_error_gains_max_cm: float
@@ -226,8 +222,20 @@ class Measurement:
     position_error_twin_max_cm: float
     position_error_twin_rms_cm: float
     level_variation_twin_db: float
-    level_offset_twin_db: float
     silent_windows_twin: int
+
+
+@dataclass
+class Measurement(Errors):
+    """One stroke at one setting: its :class:`Errors`, the mean level offset through the
+    twin, dB, and CPU in ms per s."""
+
+    stroke: str
+    setting: str
+    gain_update_frames: int
+    gain_ramp: bool
+    duration_s: float
+    level_offset_twin_db: float
     cpu_ms_per_s: float
     cpu_blocks_ms_per_s: float
 
@@ -320,23 +328,14 @@ def measure(
 
 
 @dataclass
-class Row:
-    """One setting over all strokes: every error is the worst stroke's; CPU is the total
+class Row(Errors):
+    """One setting over all strokes: the worst stroke's :class:`Errors`; CPU is the total
     CPU time over the total audio time (whole renders, and renders in the engine's
     block size), and relative to the per-frame setting's."""
 
     setting: str
     gain_update_frames: int
     gain_ramp: bool
-    gain_error_max: float
-    gain_error_rms: float
-    position_error_gains_max_cm: float
-    position_error_gains_rms_cm: float
-    level_error_gains_max_db: float
-    position_error_twin_max_cm: float
-    position_error_twin_rms_cm: float
-    level_variation_twin_db: float
-    silent_windows_twin: int
     cpu_ms_per_s: float
     cpu_blocks_ms_per_s: float
     cpu_relative: float = 1.0
@@ -361,21 +360,8 @@ class AccuracyReport:
         return asdict(self)
 
 
-_WORST = (
-    "gain_error_max",
-    "gain_error_rms",
-    "position_error_gains_max_cm",
-    "position_error_gains_rms_cm",
-    "level_error_gains_max_db",
-    "position_error_twin_max_cm",
-    "position_error_twin_rms_cm",
-    "level_variation_twin_db",
-    "silent_windows_twin",
-)
-
-
 def _row(setting: Setting, measured: list[Measurement]) -> Row:
-    worst = {name: max(getattr(m, name) for m in measured) for name in _WORST}
+    worst = {f.name: max(getattr(m, f.name) for m in measured) for f in fields(Errors)}
     seconds = sum(m.duration_s for m in measured)
     return Row(
         setting=setting.label,

@@ -20,16 +20,15 @@ Without a file, :func:`default_map` puts one receiver on each actuator of the de
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import Self
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema import DeviceProfile, limits
 from phantomtouch.schema.pattern import Carrier, SineCarrier
-from phantomtouch.schema.validation import describe_validation_error
+from phantomtouch.schema.validation import read_model_file
 
 MAX_RECEIVERS = 256
 """Receivers one map may place."""
@@ -85,17 +84,9 @@ class ReceiverMap(BaseModel):
             The file cannot be read, is not TOML, or a field is out of range (the
             message names the file and the field).
         """
-        path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise ParameterError(f"cannot read OSC map {str(path)!r}: {exc}") from exc
-        try:
-            return cls.model_validate(data)
-        except ValidationError as exc:
-            raise ParameterError(
-                f"OSC map {str(path)!r}: {describe_validation_error(exc)}"
-            ) from exc
+        return read_model_file(
+            cls, Path(path), what="OSC map", error=ParameterError, json_unless_toml=False
+        )
 
 
 def default_map(device: DeviceProfile) -> ReceiverMap:

@@ -78,7 +78,24 @@ _CURVED = {
 }
 
 
-def _vr(pattern: dict[str, Any]) -> Callable[[], TouchPattern]:
+def _vr(
+    path: dict[str, Any],
+    *,
+    fades_s: tuple[float, float],
+    freq_hz: float,
+    intensity: str,
+    **timing: float,
+) -> Callable[[], TouchPattern]:
+    """A VR touch: ``path`` with its ``timing`` (``speed_cm_s`` or ``duration_s``), fade-in
+    and fade-out ``fades_s``, a sine carrier at ``freq_hz`` and a Table I ``intensity``."""
+    pattern = {
+        "path": path,
+        **timing,
+        "fade_in_s": fades_s[0],
+        "fade_out_s": fades_s[1],
+        "carrier": {"kind": "sine", "freq_hz": freq_hz},
+        "intensity": intensity,
+    }
     return lambda: TouchPattern.model_validate(pattern)
 
 
@@ -94,40 +111,25 @@ _PRESETS["exp2/right"] = lambda: _exp2(_straight(0.0, 0.0))
 _PRESETS["exp2/diagonal"] = lambda: _exp2(_straight(BAND_WIDTH_CM, 0.0))
 _PRESETS["exp2/curved"] = lambda: _exp2(_CURVED)
 _PRESETS["vr/tap"] = _vr(
-    {
-        "path": {"kind": "polyline", "points_cm": [[BAND_WIDTH_CM / 2, 7.2]]},
-        "duration_s": 0.15,
-        "fade_in_s": 0.01,
-        "fade_out_s": 0.08,
-        "carrier": {"kind": "sine", "freq_hz": 150.0},
-        "intensity": "high",
-    }
+    {"kind": "polyline", "points_cm": [[BAND_WIDTH_CM / 2, 7.2]]},
+    duration_s=0.15,
+    fades_s=(0.01, 0.08),
+    freq_hz=150.0,
+    intensity="high",
 )
 _PRESETS["vr/stroke"] = _vr(
-    {
-        "path": {
-            "kind": "polyline",
-            "points_cm": [[BAND_WIDTH_CM / 2, 10.0], [BAND_WIDTH_CM / 2, 4.0]],
-        },
-        "speed_cm_s": 10.0,
-        "fade_in_s": 0.1,
-        "fade_out_s": 0.1,
-        "carrier": {"kind": "sine", "freq_hz": 100.0},
-        "intensity": "low",
-    }
+    {"kind": "polyline", "points_cm": [[BAND_WIDTH_CM / 2, 10.0], [BAND_WIDTH_CM / 2, 4.0]]},
+    speed_cm_s=10.0,
+    fades_s=(0.1, 0.1),
+    freq_hz=100.0,
+    intensity="low",
 )
 _PRESETS["vr/caress"] = _vr(
-    {
-        "path": {
-            "kind": "spline",
-            "points_cm": [[0.8, 13.0], [3.0, 9.5], [0.8, 6.0], [3.0, 2.5]],
-        },
-        "speed_cm_s": 3.0,
-        "fade_in_s": 0.3,
-        "fade_out_s": 0.3,
-        "carrier": {"kind": "sine", "freq_hz": 100.0},
-        "intensity": "low",
-    }
+    {"kind": "spline", "points_cm": [[0.8, 13.0], [3.0, 9.5], [0.8, 6.0], [3.0, 2.5]]},
+    speed_cm_s=3.0,
+    fades_s=(0.3, 0.3),
+    freq_hz=100.0,
+    intensity="low",
 )
 
 

@@ -10,7 +10,6 @@ actuators 5-8 the column at x = 3.8 cm; actuators 1 and 5 face the hand (y = 0 c
 from __future__ import annotations
 
 import functools
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Self
 
@@ -18,12 +17,17 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema import limits
+from phantomtouch.schema.validation import read_model_file
 
 if TYPE_CHECKING:
     import numpy as np
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Coordinate = Annotated[float, Field(ge=-limits.MAX_COORD_CM, le=limits.MAX_COORD_CM)]
+LevelDb = Annotated[
+    float, Field(ge=limits.MIN_LEVEL_DB, le=limits.MAX_LEVEL_DB, allow_inf_nan=False)
+]
+"""An acceleration level, dB re 1 µm/s² (RMS), within the limits any profile allows."""
 
 _ROWS_Y_CM = (0.0, 4.8, 9.6, 14.4)
 """Rows along the forearm, 4.8 cm apart (written out so 14.4 is exact, not 3 x 4.8)."""
@@ -57,10 +61,8 @@ class Calibration(_Frozen):
     actuator gets more drive, and applies the optional FIR correction.
     """
 
-    reference_level_db: float = Field(
+    reference_level_db: LevelDb = Field(
         default=155.0,
-        ge=limits.MIN_LEVEL_DB,
-        le=limits.MAX_LEVEL_DB,
         description=(
             "RMS acceleration level, dB re 1 µm/s², of a full-scale sine (amplitude 1.0) "
             "on a nominal channel. The default is an assumption for a Lofelt L5 on skin."
@@ -97,10 +99,8 @@ class Calibration(_Frozen):
 class SafetyLimits(_Frozen):
     """Limits that protect the wearer and the actuators."""
 
-    max_level_db: float = Field(
+    max_level_db: LevelDb = Field(
         default=150.0,
-        ge=limits.MIN_LEVEL_DB,
-        le=limits.MAX_LEVEL_DB,
         description=(
             "Strongest acceleration level, dB re 1 µm/s², a pattern may ask for; "
             "relative intensity 1.0 means this level."
@@ -220,24 +220,9 @@ class DeviceProfile(_Frozen):
         DeviceError
             The file cannot be read or parsed, or its layout is degenerate.
         """
-        import tomllib  # here: most callers never read a profile file
-
-        path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-            data = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
-        except (OSError, ValueError) as exc:
-            raise DeviceError(f"cannot read device profile {str(path)!r}: {exc}") from exc
-        from pydantic import ValidationError
-
-        from phantomtouch.schema.validation import describe_validation_error
-
-        try:
-            return cls.model_validate(data)
-        except ValidationError as exc:
-            raise DeviceError(
-                f"device profile {str(path)!r}: {describe_validation_error(exc)}"
-            ) from exc
+        return read_model_file(
+            cls, Path(path), what="device profile", error=DeviceError, json_unless_toml=True
+        )
 
     @property
     def channels(self) -> int:

@@ -14,6 +14,7 @@ from pydantic.config import JsonValue
 
 from phantomtouch.schema import limits
 from phantomtouch.schema.clip import ClipCarrier
+from phantomtouch.schema.device import LevelDb
 
 Coordinate = Annotated[
     float, Field(ge=-limits.MAX_COORD_CM, le=limits.MAX_COORD_CM, allow_inf_nan=False)
@@ -270,11 +271,8 @@ class TouchPattern(_Model):
             "the paper's Table I level for the carrier."
         ),
     )
-    level_db: float | None = Field(
+    level_db: LevelDb | None = Field(
         default=None,
-        ge=limits.MIN_LEVEL_DB,
-        le=limits.MAX_LEVEL_DB,
-        allow_inf_nan=False,
         description="Acceleration level, dB re 1 µm/s² (RMS); replaces `intensity`.",
     )
     modulation: AmplitudeModulation | None = None

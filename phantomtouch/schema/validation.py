@@ -5,15 +5,18 @@ pydantic's locations carry the names of union branches (``constrained-float``,
 union's tag such as ``sine``); they are no field a user wrote and are left out. An unknown
 field is answered with the closest field names (did you mean ...?). An error of a whole
 model whose message starts with ``name=value`` (the project's own checks) names that
-field rather than the model.
+field rather than the model. :func:`read_model_file` reads a model from a file with
+the same messages.
 """
 
 from __future__ import annotations
 
 import difflib
+import json
 import re
 from collections.abc import Iterable, Sequence
-from typing import Any
+from pathlib import Path
+from typing import Any, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
@@ -171,3 +174,40 @@ def describe_validation_error(exc: ValidationError) -> str:
         else problem_line(item["field"], _short(item["value"]), item["message"])
         for item in error_items(exc)
     )
+
+
+ModelT = TypeVar("ModelT", bound=BaseModel)
+
+
+def read_model_file(
+    model: type[ModelT], path: Path, *, what: str, error: type[Exception], json_unless_toml: bool
+) -> ModelT:
+    """Read a TOML (or JSON) file into ``model``; every failure is one ``error`` naming the file.
+
+    Parameters
+    ----------
+    model : type of pydantic model
+        What the file holds.
+    path : Path
+        The file, UTF-8.
+    what : str
+        The file's kind for the messages, e.g. ``"device profile"``.
+    error : type of Exception
+        Raised (with the cause chained) when the file cannot be read or parsed, or a
+        field is invalid; the message names the file and, for a field, the field.
+    json_unless_toml : bool
+        True: a file whose name does not end in ``.toml`` is read as JSON. False: every
+        file is read as TOML.
+    """
+    import tomllib  # here: most callers never read a file
+
+    try:
+        text = path.read_text(encoding="utf-8")
+        as_toml = not json_unless_toml or path.suffix.lower() == ".toml"
+        data = tomllib.loads(text) if as_toml else json.loads(text)
+    except (OSError, ValueError) as exc:
+        raise error(f"cannot read {what} {str(path)!r}: {exc}") from exc
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise error(f"{what} {str(path)!r}: {describe_validation_error(exc)}") from exc
