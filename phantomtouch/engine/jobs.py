@@ -163,7 +163,7 @@ class JobRecord:
 
 @dataclass(frozen=True)
 class OwnerQuota:
-    """The most one owner's jobs that are not over may hold (:meth:`JobTable.admit`).
+    """The most one owner's jobs that are not over may hold (:meth:`JobTable.check_quota`).
 
     Attributes
     ----------
@@ -185,8 +185,11 @@ class QuotaRefused(PhantomTouchError):
 
     def __init__(self, quota: OwnerQuota, limit: str, jobs: int, held_s: float, ahead_s: float):
         super().__init__(f"past the owner's {quota} by {limit}: {jobs} jobs hold {held_s:g} s")
-        self.quota, self.limit, self.jobs = quota, limit, jobs
-        self.held_s, self.ahead_s = held_s, ahead_s
+        self.quota = quota
+        self.limit = limit
+        self.jobs = jobs
+        self.held_s = held_s
+        self.ahead_s = ahead_s
 
 
 class JobTable:
