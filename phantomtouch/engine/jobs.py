@@ -37,8 +37,6 @@ oldest or the quietest sounding job fades out to make room (as game audio engine
 voices)."""
 HISTORY_JOBS = 1000
 """Jobs that are over and still answered by :meth:`Engine.job_state`."""
-MAX_SCHEDULE_AHEAD_S = 3600.0
-"""Latest start a job may ask for, s after the current frame."""
 
 
 @dataclass(frozen=True)
@@ -412,6 +410,10 @@ def _quiet(record: JobRecord) -> tuple[float, int]:
 def _fits(load: float, count: int, budget: float, voices: int) -> bool:
     """Within ``voices``, and within the ``budget`` (one voice alone always fits it)."""
     return count <= voices and (count <= 1 or load <= budget * (1.0 + 1e-9))
+
+
+MAX_SCHEDULE_AHEAD_S = 3600.0
+"""Latest start a job may ask for, s after the current frame."""
 
 
 class JobCalls:
