@@ -1,13 +1,8 @@
 """Admission by budget: how many pattern voices may sound, and begin, at once.
 
-The engine measures what a voice costs the audio callback (a share of a block's playing
-time, :func:`~phantomtouch.engine.core.measure_costs`): a sounding voice, and a voice in
-the block it begins in. :class:`Admission` turns those into the limits the control side
-(:class:`~phantomtouch.engine.front.EngineFront`) applies: voices that may sound at once
-(``render_budget`` over the voice cost, at most ``max_voices``), voices that may begin in
-one block, and how fast voices may begin (what a voice renders when it begins comes on
-top of what it costs while it sounds). Unmeasured costs (0) leave the limits at
-``max_voices`` and unbounded.
+:class:`Admission` turns the voice costs the audio side measured
+(:func:`~phantomtouch.engine.core.measure_costs`) into the front's limits; unmeasured
+costs (0) leave them at ``max_voices`` and unbounded (``docs/engine.md``).
 """
 
 from __future__ import annotations

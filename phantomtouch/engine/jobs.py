@@ -1,21 +1,33 @@
-"""Jobs: scheduled patterns as the control side sees them.
+"""Jobs: the one table of what is playing on the host (``docs/engine.md``).
 
 A job is ``scheduled`` until its first frame is played, ``playing`` until its last, then
 ``finished`` — or ``stopped`` once a stop was asked for (it then fades out over the
-release). The table keeps every job that is not over and the most recent ones that are.
+release). The table keeps every job that is not over and the most recent ones that are;
+it admits a job within the voice budget, its owner's quota and the fair shares.
 """
 
 from __future__ import annotations
 
+import threading
+import uuid
 from collections import Counter, OrderedDict
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field
-from typing import Any, Literal
+from dataclasses import asdict, dataclass, field, fields
+from typing import TYPE_CHECKING, Any, Literal
 
-from phantomtouch.errors import EngineBusyError, ParameterError
+from phantomtouch.engine.admission import Admission
+from phantomtouch.engine.checks import check_ahead, check_frame, check_id
+from phantomtouch.engine.messages import DropPlan, HoldPlan, ReleaseJob, StartJob
+from phantomtouch.engine.owners import post_release
+from phantomtouch.errors import EngineBusyError, ParameterError, PhantomTouchError
 from phantomtouch.renderer.plan import Plan, plan
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
+
+if TYPE_CHECKING:
+    from phantomtouch.engine.engine import LocalAudio
+    from phantomtouch.engine.plans import HeldPlan, PlanCache
+    from phantomtouch.engine.process import ChildAudio
 
 JobStateName = Literal["scheduled", "playing", "finished", "stopped"]
 Policy = Literal["refuse", "steal-oldest", "steal-quietest"]
@@ -125,26 +137,57 @@ class JobRecord:
     requested_start_at_s: float | None = None
     reason: str | None = None
 
+    @classmethod
+    def planned(cls, plan: Plan, job_id: str, owner: str | None, first_frame: int) -> JobRecord:
+        """A new job of ``owner`` playing ``plan`` from ``first_frame``."""
+        return cls(plan, job_id, owner, first_frame, plan.frames, plan.duration_s, plan.amplitude)
+
     @property
     def first_frame(self) -> int:
         return self.requested_start_frame if self.start_frame is None else self.start_frame
 
+    @property
+    def last_frame(self) -> int:
+        """The frame from which it is silent (:attr:`JobState.end_frame`)."""
+        return self.first_frame + self.frames if self.end_frame is None else self.end_frame
+
     def snapshot(self) -> JobState:
-        start = self.requested_start_frame if self.start_frame is None else self.start_frame
-        end = start + self.frames if self.end_frame is None else self.end_frame
-        return JobState(
-            job_id=self.job_id,
-            state=self.state,
-            owner=self.owner,
-            start_frame=start,
-            end_frame=end,
-            frames=self.frames,
-            duration_s=self.duration_s,
-            requested_start_frame=self.requested_start_frame,
-            late=self.late,
-            requested_start_at_s=self.requested_start_at_s,
-            reason="stolen" if self.stolen and self.reason is None else self.reason,
-        )
+        values = {name.name: getattr(self, name.name) for name in fields(JobState)}
+        values.update(start_frame=self.first_frame, end_frame=self.last_frame)
+        if self.stolen and self.reason is None:
+            values["reason"] = "stolen"
+        return JobState(**values)
+
+
+@dataclass(frozen=True)
+class OwnerQuota:
+    """The most one owner's jobs that are not over may hold (:meth:`JobTable.check_quota`).
+
+    Attributes
+    ----------
+    voices : int, >= 1
+        Jobs scheduled or playing at once.
+    seconds : float, > 0
+        Seconds still to play, summed over those jobs: a long job counts by the time it
+        holds, not only as one.
+    """
+
+    voices: int
+    seconds: float
+
+
+class QuotaRefused(PhantomTouchError):
+    """A job would take its owner past its ``quota`` (an :class:`OwnerQuota`), by its
+    ``limit`` (``voices`` or ``seconds``): the owner's ``jobs`` not over hold ``held_s``
+    s still to play, and the job would add ``ahead_s`` s."""
+
+    def __init__(self, quota: OwnerQuota, limit: str, jobs: int, held_s: float, ahead_s: float):
+        super().__init__(f"past the owner's {quota} by {limit}: {jobs} jobs hold {held_s:g} s")
+        self.quota = quota
+        self.limit = limit
+        self.jobs = jobs
+        self.held_s = held_s
+        self.ahead_s = ahead_s
 
 
 class JobTable:
@@ -170,18 +213,47 @@ class JobTable:
 
     def _sounding(self, start_frame: int, end_frame: int) -> list[JobRecord]:
         """Jobs not over and not stolen that sound within [start, end) frames."""
-        found = []
-        for table in (self._live, self._stopping):
-            for record in table.values():
-                first = record.first_frame
-                last = first + record.frames if record.end_frame is None else record.end_frame
-                if not record.stolen and first < end_frame and last > start_frame:
-                    found.append(record)
-        return found
+        return [
+            record
+            for table in (self._live, self._stopping)
+            for record in table.values()
+            if not record.stolen
+            and record.first_frame < end_frame
+            and record.last_frame > start_frame
+        ]
 
-    def overlapping(self, start_frame: int, end_frame: int) -> int:
-        """Jobs not over (stopping ones included, stolen ones not) within [start, end)."""
-        return len(self._sounding(start_frame, end_frame))
+    def check_quota(
+        self,
+        owner: str,
+        quota: OwnerQuota,
+        start_frame: int,
+        frames: int,
+        *,
+        next_frame: int,
+        rate_hz: int,
+    ) -> None:
+        """Refuse a job of ``owner`` of ``frames`` from ``start_frame`` that would take it
+        past ``quota``.
+
+        Counted are the owner's jobs scheduled or playing (not stopped) that sound after
+        ``next_frame`` (the first frame of the next block, where a job asked for as soon
+        as possible begins), each by its frames from then to its end; the new job by its
+        frames from then (or from ``start_frame``, if later) to its end. ``rate_hz``
+        converts frames to seconds.
+
+        Raises
+        ------
+        QuotaRefused
+            Naming the bound (``voices`` or ``seconds``) and what the owner holds.
+        """
+        ends = [r.last_frame for r in self._live.values() if r.owner == owner]
+        ahead = [end - next_frame for end in ends if end > next_frame]
+        held_s = sum(ahead) / rate_hz
+        ahead_s = (max(start_frame, next_frame) + frames - next_frame) / rate_hz
+        if len(ahead) + 1 > quota.voices:
+            raise QuotaRefused(quota, "voices", len(ahead), held_s, ahead_s)
+        if held_s + ahead_s > quota.seconds:
+            raise QuotaRefused(quota, "seconds", len(ahead), held_s, ahead_s)
 
     def admit(
         self,
@@ -338,3 +410,205 @@ def _quiet(record: JobRecord) -> tuple[float, int]:
 def _fits(load: float, count: int, budget: float, voices: int) -> bool:
     """Within ``voices``, and within the ``budget`` (one voice alone always fits it)."""
     return count <= voices and (count <= 1 or load <= budget * (1.0 + 1e-9))
+
+
+MAX_SCHEDULE_AHEAD_S = 3600.0
+"""Latest start a job may ask for, s after the current frame."""
+
+
+class JobCalls:
+    """The job methods of :class:`~phantomtouch.engine.front.EngineFront`, which makes
+    the state below; every method runs in the host, on any thread."""
+
+    plans: PlanCache
+    _device: DeviceProfile
+    _lock: threading.RLock
+    _audio: LocalAudio | ChildAudio
+    _jobs: JobTable
+    _admission: Admission
+    _policy: Policy
+    _queue_capacity: int
+    _steal_fade_frames: int
+    _stop_count: int
+
+    @staticmethod
+    def _check_policy(policy: object) -> Policy:
+        for known in POLICIES:
+            if policy == known:
+                return known
+        raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
+
+    @property
+    def voice_capacity(self) -> int:
+        """Pattern voices that may sound at once (see :class:`Admission`); host, any thread."""
+        return self._admission.voice_capacity
+
+    @property
+    def starts_per_block(self) -> int:
+        """Pattern voices that may begin in one block (see :class:`Admission`); host, any
+        thread."""
+        return self._admission.starts_per_block
+
+    @property
+    def stop_count(self) -> int:
+        """How many times ``stop_all`` was called (host, any thread)."""
+        return self._stop_count
+
+    def schedule(
+        self,
+        pattern: TouchPattern | Plan,
+        *,
+        start_frame: int | None = None,
+        owner: str | None = None,
+        policy: Policy | None = None,
+        stop_count: int | None = None,
+        quota: OwnerQuota | None = None,
+    ) -> Job:
+        """Play a pattern from ``start_frame`` on, sample-exact (host, any thread).
+
+        Parameters
+        ----------
+        pattern : TouchPattern or Plan
+            A plan must be made for this engine's device.
+        start_frame : int or None
+            Frame of the pattern's first sample, at most ``MAX_SCHEDULE_AHEAD_S`` ahead;
+            a frame that has passed when the command arrives starts at once (counted in
+            ``late_commands``). None: as soon as possible, at the next block.
+        owner : str or None
+            The client it belongs to (1-64 characters), for the log, job states, fair
+            shares and ``quota``.
+        policy : {"refuse", "steal-oldest", "steal-quietest"} or None
+            Beyond the voice budget (None: the engine's ``voice_policy``).
+        stop_count : int or None
+            :attr:`stop_count` when the request arrived: if ``stop_all`` was called
+            since, the job is void (accepted as ``stopped``; it never plays).
+        quota : OwnerQuota or None
+            The most ``owner``'s jobs not over may hold, this one included
+            (:meth:`~phantomtouch.engine.jobs.JobTable.check_quota`); None: no bound.
+
+        Returns
+        -------
+        Job
+
+        Raises
+        ------
+        ParameterError
+            The pattern cannot be planned, or an argument is out of range (a ``quota``
+            without an ``owner``).
+        QuotaRefused
+            The job would take ``owner`` past ``quota``.
+        EngineBusyError
+            ``queue_capacity`` jobs are scheduled or playing, or the voice budget is
+            full and the policy refuses (or nothing can be stolen).
+        DeviceError
+            The engine is closed, or its audio side is not running.
+        """
+        entry = self.plans.entry(pattern)
+        resolved, prerendered = entry.plan, entry.prerendered
+        frame = check_frame("start_frame", start_frame)
+        if owner is not None:
+            check_id("owner", owner)
+        elif quota is not None:
+            raise ParameterError("quota counts the jobs of an owner: give owner")
+        chosen = self._policy if policy is None else self._check_policy(policy)
+        rate_hz = self._device.sample_rate_hz
+        if frame is not None:
+            check_ahead(frame, self._audio.now_frames, rate_hz, MAX_SCHEDULE_AHEAD_S)
+        job_id = uuid.uuid4().hex
+        carrier = None if prerendered is not None else resolved.pattern.carrier
+        self._audio.prepare(carrier)
+        with self._lock:
+            self._audio.check_ready()
+            next_frame = self._audio.next_block_frame()
+            first = next_frame if frame is None else frame
+            record = JobRecord.planned(resolved, job_id, owner, first)
+            if owner is not None and quota is not None:
+                self._jobs.check_quota(
+                    owner, quota, first, record.frames, next_frame=next_frame, rate_hz=rate_hz
+                )
+            if stop_count is not None and stop_count != self._stop_count:
+                record.state, record.end_frame = "stopped", first
+                self._jobs.retire(record)
+                return self._job(record, resolved)
+            record.cost = self._admission.cost(prerendered is not None)
+            victims = self._jobs.admit(
+                first,
+                resolved.frames,
+                jobs=self._queue_capacity,
+                cost=record.cost,
+                budget=self._admission.render_budget,
+                voices=self._admission.max_voices,
+                policy=chosen,
+                owner=owner,
+            )
+            if prerendered is None:  # nothing to render in the callback
+                now_frames = self._audio.now_frames
+                self._admission.charge_churn(now_frames)
+                first, frame = self._admission.place_start(first, frame, now_frames)
+                record.requested_start_frame = first
+            record.requested_start_at_s = self._audio.time_at(first)  # one value for all
+            self._audio.provide(carrier)
+            self._start(entry, StartJob(job_id, entry.handle, owner, frame))
+            for victim in victims:
+                self._jobs.mark_stopped(victim, stolen=True)
+                victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames
+                fade = ReleaseJob(victim.job_id, first, self._steal_fade_frames)
+                post_release(self._audio, fade)
+            self._jobs.add(record)
+        return self._job(record, resolved)
+
+    def _start(self, entry: HeldPlan, start: StartJob) -> None:
+        """Hand the entry's plan over unless the audio side holds it, post the start, and
+        release what the cache dropped (host, under the front's lock)."""
+        if not entry.handed:
+            self._audio.post(HoldPlan(entry.handle, entry.plan, entry.prerendered))
+            entry.handed = True
+        self._audio.post(start)
+        dropped = self.plans.take_dropped()
+        if not entry.kept:
+            dropped.append(entry)
+        for old in dropped:
+            if old.handed:
+                self.plans.release(old)
+                self._audio.post(DropPlan(old.handle))
+
+    @staticmethod
+    def _job(record: JobRecord, resolved: Plan) -> Job:
+        return Job(
+            job_id=record.job_id,
+            start_frame=record.requested_start_frame,
+            frames=resolved.frames,
+            duration_s=resolved.duration_s,
+            summary=resolved.summary(),
+            start_at_s=record.requested_start_at_s,
+        )
+
+    async def schedule_async(self, pattern: TouchPattern | Plan, **options: Any) -> Job:
+        """:meth:`schedule` for a coroutine, with its keywords (host, the event loop; it
+        never waits for the audio side)."""
+        return self.schedule(pattern, **options)
+
+    def job_state(self, job_id: str) -> JobState | None:
+        """The state of a job, or None if unknown (or too old: the last 1000 are kept);
+        host, any thread."""
+        self._audio.sync()
+        with self._lock:
+            record = self._jobs.get(job_id) if isinstance(job_id, str) else None
+            return None if record is None else record.snapshot()
+
+    def stop(self, job_id: str) -> bool:
+        """Stop a job: it fades out over ``contact.release_s`` (or never starts); host,
+        any thread.
+
+        Returns
+        -------
+        bool
+            False if the job is unknown or already over (finished or stopped).
+        """
+        with self._lock:
+            record = self._jobs.get(job_id) if isinstance(job_id, str) else None
+            if record is None or record.plan is None or record.state in ("finished", "stopped"):
+                return False
+            post_release(self._audio, ReleaseJob(job_id, None, None))
+            self._jobs.mark_stopped(record)
+            return True

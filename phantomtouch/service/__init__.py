@@ -2,8 +2,8 @@
 
 Settings, errors and their HTTP and WebSocket codes (:mod:`~phantomtouch.service.errors`),
 wire models (:mod:`~phantomtouch.service.models`, :mod:`~phantomtouch.service.ws_messages`),
-flood and quota accounting (:mod:`~phantomtouch.service.flood`,
-:mod:`~phantomtouch.service.quotas`, :mod:`~phantomtouch.service.limits`), the middlewares
+flood accounting (:mod:`~phantomtouch.service.flood`,
+:mod:`~phantomtouch.service.limits`), the middlewares
 (:mod:`~phantomtouch.service.origin`, :mod:`~phantomtouch.service.bodies`), metrics,
 the pattern store, the plan cache, the engine's opening, scheduling a touch
 (:mod:`~phantomtouch.service.scheduling`) and the running parts

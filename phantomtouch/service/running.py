@@ -6,7 +6,7 @@ import itertools
 import secrets
 import threading
 from collections.abc import Callable
-from contextlib import AbstractAsyncContextManager
+from contextlib import AbstractAsyncContextManager, contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -14,7 +14,6 @@ from phantomtouch.schema import DeviceProfile
 from phantomtouch.service.connections import ConnectionCaps
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.metrics import Metrics
-from phantomtouch.service.quotas import VoiceLedger
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
 from phantomtouch.service.wearers import ActiveWearer
@@ -22,7 +21,6 @@ from phantomtouch.service.wearers import ActiveWearer
 if TYPE_CHECKING:
     import asyncio
     from collections.abc import Callable, Iterator
-    from contextlib import AbstractContextManager
 
     from phantomtouch.engine import EngineFront
     from phantomtouch.engine.plans import PlanCache
@@ -51,7 +49,6 @@ class Service:
     engine: EngineFront
     store: PatternStore
     metrics: Metrics
-    voices: VoiceLedger = field(init=False)
     wearer: ActiveWearer = field(init=False)
     """The wearer the output stage is fitted to (``/wearer``, ``hello``)."""
     connections: ConnectionCaps = field(init=False)
@@ -66,9 +63,6 @@ class Service:
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
         self.connections = ConnectionCaps(
             self.settings.max_ws_connections, self.settings.max_ws_connections_per_address
-        )
-        self.voices = VoiceLedger(
-            self.settings.voices_per_client, self.settings.max_voice_seconds_per_client
         )
 
     @property
@@ -88,26 +82,20 @@ class Service:
         """
         self.engine.stop_all()
 
-    def render_slot(self) -> AbstractContextManager[None]:
+    @contextmanager
+    def render_slot(self) -> Iterator[None]:
         """Hold one of the ``max_concurrent_renders`` slots, or refuse with 429."""
-        return _Slot(self._renders, self.settings.max_concurrent_renders)
-
-
-class _Slot:
-    def __init__(self, semaphore: threading.BoundedSemaphore, capacity: int) -> None:
-        self._semaphore = semaphore
-        self._capacity = capacity
-
-    def __enter__(self) -> None:
-        if not self._semaphore.acquire(blocking=False):
+        capacity = self.settings.max_concurrent_renders
+        if not self._renders.acquire(blocking=False):
             raise RateLimitedError(
-                f"{self._capacity} renders are running (max_concurrent_renders="
-                f"{self._capacity}); retry when one has finished",
+                f"{capacity} renders are running (max_concurrent_renders={capacity}); retry "
+                "when one has finished",
                 field="body",
             )
-
-    def __exit__(self, *exc: object) -> None:
-        self._semaphore.release()
+        try:
+            yield
+        finally:
+            self._renders.release()
 
 
 Attachment = Callable[[Service], AbstractAsyncContextManager[None]]

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from phantomtouch.engine.jobs import OwnerQuota, QuotaRefused
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer import plan, preset
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import ClipCarrier, DeviceProfile, TouchPattern
-from phantomtouch.service.errors import MissingReferenceError, NotFoundError
+from phantomtouch.service.errors import MissingReferenceError, NotFoundError, QuotaError
 from phantomtouch.service.models import (
     MAX_START_AHEAD_S,
     AnyTouch,
@@ -19,6 +19,7 @@ from phantomtouch.service.models import (
     PresetTouch,
     Timing,
 )
+from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
 
 if TYPE_CHECKING:
@@ -127,12 +128,27 @@ def accepted(engine: EngineFront, job: Job, plan: Plan) -> JobAccepted:
     )
 
 
-def _still_playing(engine: EngineFront) -> Callable[[str], bool]:
-    def still_playing(job_id: str) -> bool:
-        state = engine.job_state(job_id)
-        return state is not None and state.state in ("scheduled", "playing")
+def client_quota(settings: Settings) -> OwnerQuota:
+    """The quota of every client, from the settings."""
+    return OwnerQuota(settings.voices_per_client, settings.max_voice_seconds_per_client)
 
-    return still_playing
+
+def quota_error(refused: QuotaRefused, duration_s: float) -> QuotaError:
+    """The answer to a touch of ``duration_s`` s the engine refused by its client's quota."""
+    if refused.limit == "voices":
+        return QuotaError(
+            f"quota max_voices_per_client={refused.quota.voices} is used up: this client has "
+            f"{refused.jobs} touches scheduled or playing; retry when one ends, or stop one",
+            field="voices",
+            value=refused.jobs,
+        )
+    return QuotaError(
+        f"quota max_voice_seconds_per_client={refused.quota.seconds:g} s: this client's "
+        f"touches hold {refused.held_s:.1f} s still to play and this one would add "
+        f"{refused.ahead_s:.1f} s; long touches count by the time they hold",
+        field="duration_s",
+        value=round(duration_s, 6),
+    )
 
 
 async def schedule(
@@ -144,34 +160,32 @@ async def schedule(
 ) -> JobAccepted:
     """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
 
-    ``client`` is whose quotas it counts against (:mod:`phantomtouch.service.quotas`) and,
-    unless ``owner`` is given, whose share of the voices it is when voices are stolen
-    (:meth:`~phantomtouch.engine.jobs.JobTable.admit`).
+    ``client`` is whose touch it is (``owner``, if given, names the same client as the
+    engine's owner): its quotas count the client's jobs not over in the engine's job
+    table (``docs/owners.md``), and it is the client's share of the
+    voices when voices are stolen (:meth:`~phantomtouch.engine.jobs.JobTable.admit`).
     Reading the store, planning and scheduling (which may build a noise loop) run in a
     worker thread: the event loop never waits for them.
+
+    Raises
+    ------
+    QuotaError
+        The touch would take the client past one of its quotas (the message names it).
     """
     engine = service.engine
     owner = client if owner is None else owner
+    quota = client_quota(service.settings)
     stops = engine.stop_count  # a stop that comes while this one is planned voids it
 
     def plan_and_schedule() -> JobAccepted:
         planned = service.plans.plan(resolve(request, service.store))
         first = start_frame(engine, request.timing())
-        now_s = engine.server_time_s()
-        hold = service.voices.reserve(
-            client,
-            now_s=now_s,
-            start_s=now_s if first is None else engine.time_at(first),
-            duration_s=planned.duration_s,
-            still_playing=_still_playing(engine),
-        )
         try:
-            job = engine.schedule(planned, start_frame=first, owner=owner, stop_count=stops)
-        except BaseException:
-            service.voices.cancel(hold)
-            raise
-        end_s = engine.time_at(job.start_frame) + job.duration_s
-        service.voices.confirm(hold, str(job.job_id), end_s)
+            job = engine.schedule(
+                planned, start_frame=first, owner=owner, stop_count=stops, quota=quota
+            )
+        except QuotaRefused as refused:
+            raise quota_error(refused, planned.duration_s) from refused
         return accepted(engine, job, planned)
 
     return await asyncio.to_thread(plan_and_schedule)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, TouchPattern
-from phantomtouch.engine.jobs import JobRecord, JobTable, resolve_plan
+from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine.jobs import JobRecord, JobTable, OwnerQuota, QuotaRefused, resolve_plan
 from phantomtouch.renderer import plan
 
 
@@ -84,3 +85,30 @@ def test_admission_sums_what_the_sounding_jobs_cost_against_the_budget() -> None
     # the voice count bounds too, whatever the costs
     with pytest.raises(EngineBusyError, match="at most 7"):
         table.admit(10, 100, cost=0.0, policy="refuse", jobs=100, budget=0.5, voices=7)
+
+
+def test_the_front_counts_an_owners_quota_in_its_job_table() -> None:
+    """Two 1 s touches fill an owner's 2 s; a third waits until one is stopped, and
+    another owner is not counted against it."""
+    device = DeviceProfile.default()
+    one_second = TouchPattern.model_validate(
+        {
+            "path": {"kind": "polyline", "points_cm": [[1, 1]]},
+            "duration_s": 1.0,
+            "fade_in_s": 0,
+            "fade_out_s": 0,
+        }
+    )
+    quota = OwnerQuota(voices=10, seconds=2.0)
+    with Engine(device, CaptureSink(device), voice_cost=1e-4) as engine:
+        first = engine.schedule(one_second, owner="a", quota=quota)
+        engine.schedule(one_second, owner="a", quota=quota)
+        with pytest.raises(QuotaRefused) as refused:
+            engine.schedule(one_second, owner="a", quota=quota)
+        assert (refused.value.limit, refused.value.jobs) == ("seconds", 2)
+        assert refused.value.held_s == pytest.approx(2.0)
+        engine.schedule(one_second, owner="b", quota=quota)
+        assert engine.stop(first.job_id)
+        engine.schedule(one_second, owner="a", quota=quota)
+        with pytest.raises(ParameterError, match="owner"):
+            engine.schedule(one_second, quota=quota)
