@@ -13,9 +13,8 @@ import contextlib
 import dataclasses
 import multiprocessing
 import os
-import select
 import threading
-import time
+from multiprocessing.connection import wait
 from typing import Any
 
 import numpy as np
@@ -127,18 +126,18 @@ def spawn(
     process.start()
     commands_in.close()
     reports_out.close()
-    reports_fd = os.dup(reports_in.fileno())
-    reports_in.close()
     commands_fd = os.dup(commands_out.fileno())
     commands_out.close()
     try:
-        ready = _first_report(reports_fd, process, timeout_s)
+        ready = _first_report(reports_in, process, timeout_s)
     except BaseException:
-        os.close(reports_fd)
+        reports_in.close()
         os.close(commands_fd)
         process.kill()
         process.join(CLOSE_TIMEOUT_S)
         raise
+    reports_fd = os.dup(reports_in.fileno())
+    reports_in.close()
     return ChildProcess(
         process=process,
         outbox=Outbox(commands_fd),
@@ -154,18 +153,12 @@ def spawn(
     )
 
 
-def _first_report(fd: int, process: Any, timeout_s: float) -> Any:
-    deadline = time.monotonic() + timeout_s
-    frames = read_frames(fd)
-    while True:
-        readable, _, _ = select.select([fd], [], [], 0.2)
-        if readable:
-            break
-        if not process.is_alive():
-            raise DeviceError("the engine process ended while starting")
-        if time.monotonic() > deadline:
-            raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
-    message = next(frames, None)
+def _first_report(reports: Any, process: Any, timeout_s: float) -> Any:
+    """Wait for the pipe or the process's end (``multiprocessing.connection.wait``: Windows'
+    ``select`` takes sockets only), then read the first report."""
+    if not wait([reports, process.sentinel], timeout_s):
+        raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
+    message = next(read_frames(reports.fileno()), None)
     if message is None:
         raise DeviceError("the engine process ended while starting")
     if message[0] == "failed":
