@@ -1,32 +1,10 @@
-"""The engine process: one audio callback that does all of its Python work.
-
-:func:`serve` runs in the engine process of a
-:class:`~phantomtouch.engine.process.ChildAudio`. It opens the sink a
-:class:`~phantomtouch.engine.soundcard.SinkSpec` names, builds a
-:class:`~phantomtouch.engine.core.Core`, measures what a voice costs and reports ready
-(non real time); from then on it refuses to build a noise loop it was not handed
-(:func:`~phantomtouch.renderer.carriers.refuse_building`). Once told to start, it starts
-the sink, and its main thread only waits (in a call that holds no interpreter lock) for
-the host to leave. Everything else happens in the audio callback, in real time, at the
-start of each block (:meth:`Intake.run`):
-
-1. report what the last block did (events to the host, figures and a heartbeat into
-   shared memory), and unmap the noise loops no voice reads any more;
-2. apply a ``stop_all`` the host raised in shared memory: every message sent before it
-   is void;
-3. read the host's messages (``(seq, message)``) from a non-blocking pipe and perform
-   them (:func:`~phantomtouch.engine.messages.perform`), while the time spent stays
-   within ``INTAKE_SHARE`` of the block's playing time (at least one message a block;
-   the rest wait for the next block);
-4. take the newest contact positions from shared memory.
-
-So the callback never waits for the interpreter lock: no other thread of this process
-runs Python code while audio plays. When the host's pipe closes (the host is gone), the
-engine fades out and the process ends.
+"""The engine process (:func:`serve`): one audio callback that does all of its Python
+work, at the start of each block (:meth:`Intake.run`; ``docs/engine.md``, Threads).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import logging
 import os
@@ -60,32 +38,27 @@ READ_BYTES = 1 << 18
 """Most bytes read from the host's pipe per block."""
 
 
+@dataclasses.dataclass
 class Intake:
     """The engine process's state, used by its audio callback at each block's start."""
 
-    def __init__(
-        self,
-        core: Core,
-        reader: FrameReader,
-        writer: NonBlockingWriter,
-        mark: Any,
-        slots: MoveSlots,
-        status: StatusBlock,
-    ) -> None:
-        self.core = core
-        self.reader = reader
-        self.writer = writer
-        self.mark = mark
-        self.slots = slots
-        self.status = status
-        self.state = AudioState(core, slots=slots)
+    core: Core
+    reader: FrameReader
+    writer: NonBlockingWriter
+    mark: Any
+    """Sequence number of the host's last ``stop_all`` (shared memory)."""
+    slots: MoveSlots
+    status: StatusBlock
+
+    def __post_init__(self) -> None:
+        self.state = AudioState(self.core, slots=self.slots)
         self.state.loops = HeldLoops(self.state.reports)
         self.state.arrays = HeldArrays()
         self.handled_mark = 0
         self.leave = threading.Event()
-        period_s = core.device.block_frames / core.device.sample_rate_hz
-        self.budget_s = INTAKE_SHARE * period_s
-        self.figures: dict[str, Any] = core.figures()
+        device = self.core.device
+        self.budget_s = INTAKE_SHARE * (device.block_frames / device.sample_rate_hz)
+        self.figures: dict[str, Any] = self.core.figures()
 
     def run(self) -> None:
         """At the start of each block (real time; see the module docstring)."""

@@ -1,15 +1,6 @@
-"""The audio side in this process, and :class:`Engine`, the front over it.
-
-:class:`LocalAudio` holds a :class:`~phantomtouch.engine.core.Core` (sink, scheduler,
-voices) in the host: the front's messages are performed at once, in the caller's thread
-under the front's lock, by the same appliers the engine process runs
-(:func:`~phantomtouch.engine.messages.perform`); they only push into the core's bounded
-queue, which the audio callback drains at the start of each block. A housekeeping thread
-hands what the callback reports (job states, the stimulus log) to the front every 50 ms.
-
-In a process that does other Python work (a web server), the callback waits for the
-interpreter lock that work holds; :class:`~phantomtouch.engine.process.ProcessEngine`
-puts the audio side in a process of its own.
+"""The audio side in this process (:class:`LocalAudio`), and :class:`Engine`, the front
+over it: messages are performed at once in the caller's thread; a housekeeping thread
+hands the callback's events to the front.
 """
 
 from __future__ import annotations
@@ -252,25 +243,26 @@ class Engine(EngineFront):
             )
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
 
-        def audio(links: Links) -> LocalAudio:
-            return LocalAudio(
+        super().__init__(
+            device,
+            lambda links: LocalAudio(
                 device,
                 sink if sink is not None else NullSink(device),
                 links,
                 render_ahead_frames=render_ahead_frames,
                 clock=clock if clock is not None else SampleClock(device.sample_rate_hz),
-            )
+            ),
+            **options,
+        )
 
-        super().__init__(device, audio, **options)
-        assert isinstance(self._audio, LocalAudio)
-        self._local = self._audio
+    _audio: LocalAudio
 
     @property
     def core(self) -> Core:
         """The audio side's core (sink, scheduler, voices)."""
-        return self._local.core
+        return self._audio.core
 
     @property
     def sink(self) -> Sink:
         """The sink the engine plays into (owned by the engine)."""
-        return self._local.core.sink
+        return self._audio.core.sink

@@ -1,14 +1,6 @@
-"""Framed messages over the pipes between the host and the engine process.
-
-A message is a pickled object behind its length (4 bytes, little-endian). Neither side
-ever waits for the other:
-
-- the host hands messages to an :class:`Outbox`, whose thread writes them into the
-  pipe; when the engine process does not read (it hangs, or it is gone), the outbox
-  fills to its bound and refuses more, and the caller sees a busy engine;
-- the engine process reads what has arrived from a non-blocking pipe
-  (:class:`FrameReader`, inside its audio callback) and writes its reports through a
-  :class:`NonBlockingWriter`, which keeps what the pipe cannot take for the next block.
+"""Framed messages over the pipes between the host and the engine process: a pickle
+behind its length (4 bytes, little-endian). Neither side waits for the other
+(``docs/engine.md``, Transports).
 """
 
 from __future__ import annotations
@@ -56,12 +48,14 @@ class FrameReader:
     Parameters
     ----------
     fd : int
-        The read end; made non-blocking here.
+        The read end; made non-blocking here unless ``blocking``.
+    blocking : bool
     """
 
-    def __init__(self, fd: int) -> None:
+    def __init__(self, fd: int, *, blocking: bool = False) -> None:
         self.fd = fd
-        os.set_blocking(fd, False)
+        if not blocking:
+            os.set_blocking(fd, False)
         self._buffer = bytearray()
         self.closed = False
 
@@ -205,20 +199,8 @@ class Outbox:
 
 def read_frames(fd: int) -> Any:
     """Yield the messages of a blocking pipe until EOF (the host's reader thread)."""
-    buffer = bytearray()
-    while True:
-        try:
-            data = os.read(fd, 1 << 16)
-        except OSError:
-            return
-        if not data:
-            return
-        buffer += data
-        while len(buffer) >= _HEADER.size:
-            (size,) = _HEADER.unpack_from(buffer)
-            end = _HEADER.size + size
-            if len(buffer) < end:
-                break
-            payload = bytes(buffer[_HEADER.size : end])
-            del buffer[:end]
-            yield pickle.loads(payload)
+    reader = FrameReader(fd, blocking=True)
+    while not reader.closed:
+        reader.fill(1 << 16)
+        while (message := reader.next()) is not None:
+            yield message

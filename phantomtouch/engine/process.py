@@ -1,30 +1,7 @@
-"""The audio side in a process of its own, for hosts whose other Python work holds the GIL.
-
-The audio callback needs the interpreter lock for every block; in a process that also
-serves web requests it waits for it. :class:`ChildAudio` is the audio side in an engine
-process (``spawn``, :mod:`phantomtouch.engine.child`), whose callback is the only thread
-there that does Python work; :class:`ProcessEngine` is the
-:class:`~phantomtouch.engine.front.EngineFront` over it. Everything here runs in the
-host, and nothing here ever waits for the engine process:
-
-- messages (:mod:`phantomtouch.engine.messages`: plans handed over and dropped by the
-  handle the front's plan cache minted; job starts; releases; touchdowns) go through an
-  :class:`~phantomtouch.engine.link.Outbox` whose thread writes them into a pipe; the
-  callback reads them at the start of each block within a time budget;
-- noise loops and plans' heavy arrays go through shared memory the host owns
-  (:mod:`phantomtouch.engine.noise`, :mod:`phantomtouch.engine.plan_memory`);
-- ``stop_all`` raises a sequence mark in shared memory that the callback reads first:
-  every message sent before it is void, whatever the pipe holds;
-- contact moves and the sample clock go through shared memory
-  (:mod:`phantomtouch.engine.shared`), and so do the engine's figures and a heartbeat
-  (:class:`~phantomtouch.engine.shared.StatusBlock`): ``status()`` reads them;
-- a thread reads the child's reports (job starts and ends) into the job table.
-
-A watchdog notices within ``STALL_S`` when the child dies or stops calling back
-(killed, stopped, hung, its sound card gone): the engine's ``state`` says so, new work
-is refused with DeviceError, every job and contact is dropped (``on_fault`` is told),
-and a new child is started, again and again (``RETRY_MAX_S``) until its sound card
-opens. When this process dies, the pipe closes and the child fades out and ends.
+"""The audio side in an engine process of its own (:class:`ChildAudio`, host only) and
+:class:`ProcessEngine`, the front over it: for hosts whose other Python work holds the
+interpreter lock the audio callback needs. Nothing here waits for the engine process;
+``docs/engine.md`` (Transports, Faults) says what crosses how, and what the watchdog does.
 """
 
 from __future__ import annotations
@@ -420,45 +397,37 @@ class ProcessEngine(EngineFront):
         device: DeviceProfile,
         sink: SinkSpec | None = None,
         *,
-        render_ahead_frames: int = RENDER_AHEAD_FRAMES,
         realtime_priority: int | None = REALTIME_PRIORITY,
         on_fault: Callable[[str], None] | None = None,
+        render_ahead_frames: int = RENDER_AHEAD_FRAMES,
         **options: Any,
     ) -> None:
         if realtime_priority is not None:
             check_int("realtime_priority", realtime_priority, 1, 99)
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
 
-        def audio(links: Links) -> ChildAudio:
-            return ChildAudio(
+        super().__init__(
+            device,
+            lambda links: ChildAudio(
                 device,
                 sink if sink is not None else SinkSpec(),
                 links,
                 render_ahead_frames,
                 realtime_priority,
                 on_fault,
-            )
+            ),
+            **options,
+        )
 
-        super().__init__(device, audio, **options)
-        assert isinstance(self._audio, ChildAudio)
-        self._child_audio = self._audio
+    _audio: ChildAudio
 
     @property
     def state(self) -> str:
         """``starting``, ``running``, ``stalled``, ``gone``, ``restarting`` or ``closed``
         (host, any thread)."""
-        return self._child_audio.state
+        return self._audio.state
 
     @property
     def pid(self) -> int | None:
         """Process id of the engine process (host, any thread)."""
-        return self._child_audio.pid
-
-    @property
-    def on_fault(self) -> Callable[[str], None] | None:
-        """Called from the watchdog thread when the engine process died or stalled."""
-        return self._child_audio.on_fault
-
-    @on_fault.setter
-    def on_fault(self, on_fault: Callable[[str], None] | None) -> None:
-        self._child_audio.on_fault = on_fault
+        return self._audio.pid

@@ -1,10 +1,5 @@
-"""Starting an engine process, and what the host shares with it.
-
-:func:`spawn` starts the engine process of a :class:`~phantomtouch.engine.process.ChildAudio`
-(``spawn``: a fresh interpreter running :func:`~phantomtouch.engine.child.serve`) with its
-pipes and shared memory, and waits for its first report. :class:`ChildProcess` holds
-what belongs to one such process: the process, its outbox, the shared clock, contact
-slots and figures, the stop mark. All of it runs in the host, non real time.
+"""Starting an engine process (:func:`spawn`), and what the host shares with it
+(:class:`ChildProcess`). Host, non real time.
 """
 
 from __future__ import annotations
