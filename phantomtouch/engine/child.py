@@ -21,7 +21,7 @@ from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
-from phantomtouch.engine.link import FrameReader, NonBlockingWriter, encode, widen
+from phantomtouch.engine.link import FrameReader, NonBlockingWriter, widen
 from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
 from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.plan_memory import HeldArrays
@@ -216,7 +216,6 @@ def serve(
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise_priority(priority)
-    report_fd = reports.fileno()
     try:
         device = DeviceProfile.model_validate_json(device_json)
         clock = SampleClock(
@@ -246,17 +245,20 @@ def serve(
                 else (0.0, 0.0, 0.0)
             )
     except Exception as exc:
-        os.write(report_fd, encode(("failed", exc)))
+        reports.send(("failed", exc))
         return
+    refuse_building()  # from now on a noise loop is only what the host hands over
+    reports.send(("ready", costs, sink.backend, sink.output_device))
     widen(commands.fileno())
     intake = Intake(
-        core, FrameReader(commands.fileno()), NonBlockingWriter(report_fd), mark, slots, status
+        core,
+        FrameReader(commands.fileno()),
+        NonBlockingWriter(reports.fileno()),
+        mark,
+        slots,
+        status,
     )
     core.on_block(intake.run)
-    refuse_building()  # from now on a noise loop is only what the host hands over
-    os.set_blocking(report_fd, True)
-    os.write(report_fd, encode(("ready", costs, sink.backend, sink.output_device)))
-    os.set_blocking(report_fd, False)
     gc.freeze()  # what start-up made is never scanned again: collections stay short
     if not _wait_for_start(intake):
         core.close(fade=False)

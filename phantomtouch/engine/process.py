@@ -15,7 +15,6 @@ from typing import Any
 from phantomtouch.engine.checks import check_int
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import EngineFront, Links
-from phantomtouch.engine.link import encode, read_frames
 from phantomtouch.engine.messages import (
     Close,
     Command,
@@ -130,7 +129,11 @@ class ChildAudio:
     def _read_reports(self, child: ChildProcess) -> None:
         """Host, the reports thread: free released loops and plans' blocks, hand the rest
         to the front."""
-        for events in read_frames(child.reports_fd):
+        while True:
+            try:
+                events = child.reports.recv()
+            except (EOFError, OSError):
+                return
             if child is getattr(self, "_child", None):  # not a process replaced since
                 for event in events:
                     if isinstance(event, NoiseReleased):
@@ -141,7 +144,7 @@ class ChildAudio:
 
     def _write(self, child: ChildProcess, message: Command) -> bool:
         self._seq += 1
-        return child.outbox.put(encode((self._seq, message)))
+        return child.outbox.put((self._seq, message))
 
     def post(self, message: Command) -> None:
         """Queue a message for the engine process (host, under the front's lock); a
@@ -242,9 +245,9 @@ class ChildAudio:
                 return
             try:
                 child = self._start_child(RESTART_TIMEOUT_S)
-                child.outbox.put(encode((0, StartSink())))
+                child.outbox.put((0, StartSink()))
                 if self._wearer is not None:
-                    child.outbox.put(encode((0, self._wearer)))
+                    child.outbox.put((0, self._wearer))
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
                 self._set_state("gone")

@@ -7,7 +7,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import multiprocessing
-import os
 import threading
 from multiprocessing.connection import wait
 from typing import Any
@@ -15,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from phantomtouch.engine.child import serve
-from phantomtouch.engine.link import Outbox, read_frames
+from phantomtouch.engine.link import Outbox
 from phantomtouch.engine.scheduler import RENDER_TIMES
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.soundcard import SinkSpec
@@ -44,7 +43,8 @@ class ChildProcess:
 
     process: Any
     outbox: Outbox
-    reports_fd: int
+    reports: Any
+    """The read end of the reports' pipe (a ``multiprocessing.connection.Connection``)."""
     clock: SharedClock
     slots: MoveSlots
     status: StatusBlock
@@ -68,8 +68,7 @@ class ChildProcess:
         self.outbox.close(0.1)
         if self.reader is not None:
             self.reader.join(1.0)
-        with contextlib.suppress(OSError):
-            os.close(self.reports_fd)
+        self.reports.close()
 
 
 def spawn(
@@ -121,22 +120,18 @@ def spawn(
     process.start()
     commands_in.close()
     reports_out.close()
-    commands_fd = os.dup(commands_out.fileno())
-    commands_out.close()
     try:
         ready = _first_report(reports_in, process, timeout_s)
     except BaseException:
         reports_in.close()
-        os.close(commands_fd)
+        commands_out.close()
         process.kill()
         process.join(CLOSE_TIMEOUT_S)
         raise
-    reports_fd = os.dup(reports_in.fileno())
-    reports_in.close()
     return ChildProcess(
         process=process,
-        outbox=Outbox(commands_fd),
-        reports_fd=reports_fd,
+        outbox=Outbox(commands_out),
+        reports=reports_in,
         clock=clock,
         slots=slots,
         status=status,
@@ -153,9 +148,10 @@ def _first_report(reports: Any, process: Any, timeout_s: float) -> Any:
     ``select`` takes sockets only), then read the first report."""
     if not wait([reports, process.sentinel], timeout_s):
         raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
-    message = next(read_frames(reports.fileno()), None)
-    if message is None:
-        raise DeviceError("the engine process ended while starting")
+    try:
+        message = reports.recv()
+    except (EOFError, OSError):
+        raise DeviceError("the engine process ended while starting") from None
     if message[0] == "failed":
         raise message[1]
     return message
