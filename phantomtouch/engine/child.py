@@ -18,9 +18,8 @@ from typing import Any
 import numpy as np
 
 from phantomtouch.engine.clock import SampleClock
-from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.core import Core, measure_costs
-from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
+from phantomtouch.engine.core import Core
+from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, voice_costs
 from phantomtouch.engine.link import FrameReader, NonBlockingWriter, widen
 from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
 from phantomtouch.engine.noise import HeldLoops
@@ -207,7 +206,7 @@ def serve(
     priority : int or None
         SCHED_FIFO priority for this process's threads.
     shared : dict
-        The shared memory: ``clock``, ``slots`` and ``slot_count``, ``status``, ``loads``
+        The shared memory: ``clock``, ``slots``, ``status``, ``loads``
         (the scheduler's render loads).
     """
     # Ctrl+C and a SIGTERM to the group (`timeout`, a service manager) reach this process
@@ -222,13 +221,13 @@ def serve(
             device.sample_rate_hz,
             publish=SharedClock(device.sample_rate_hz, shared["clock"]).publish,
         )
-        slots = MoveSlots(shared["slot_count"], shared["slots"])
+        slots = MoveSlots(options["contact_slots"], shared["slots"])
         status = StatusBlock(device.channels, shared["status"])
         sink = spec.open(device)
         core = Core(
             device,
             sink,
-            settings=options["contact"] or ContactSettings(),
+            settings=options["contact"],
             # admission is the host's: the queue only bounds what it let through
             queue_capacity=options["queue_capacity"] + 2 * options["contact_slots"] + 1,
             rings=min(options["max_voices"], RENDER_AHEAD_RINGS),
@@ -238,12 +237,7 @@ def serve(
         )
         costs = options["costs"]
         if costs is None:
-            chunk = options["render_ahead_frames"]
-            costs = (
-                measure_costs(device, cost_plan(device), chunk_frames=chunk)
-                if sink.realtime
-                else (0.0, 0.0, 0.0)
-            )
+            costs = voice_costs(core) if sink.realtime else (0.0, 0.0, 0.0)
     except Exception as exc:
         reports.send(("failed", exc))
         return

@@ -18,7 +18,7 @@ from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import AudioState, Command, ContactMove, Event, perform
 from phantomtouch.engine.sinks import NullSink, Sink
 from phantomtouch.errors import DeviceError, ParameterError
-from phantomtouch.renderer.plan import Plan, plan
+from phantomtouch.renderer.plan import plan
 from phantomtouch.renderer.presets import preset
 from phantomtouch.schema.device import DeviceProfile
 
@@ -36,9 +36,12 @@ COST_PRESET = "exp1/noise-high-v3"
 """The pattern whose voices measure what a voice costs: noise, the dearest carrier."""
 
 
-def cost_plan(device: DeviceProfile) -> Plan:
-    """A plan of the pattern that measures a voice's cost, for ``device``."""
-    return plan(preset(COST_PRESET), device)
+def voice_costs(core: Core) -> tuple[float, float, float]:
+    """What a voice costs ``core``'s callback (:func:`~phantomtouch.engine.core.measure_costs`
+    with the :data:`COST_PRESET`, at its chunk size). Non real time: before the sink starts."""
+    device = core.device
+    chunk_frames = core.scheduler.pool.chunk_frames
+    return measure_costs(device, plan(preset(COST_PRESET), device), chunk_frames=chunk_frames)
 
 
 class LocalAudio:
@@ -95,11 +98,7 @@ class LocalAudio:
             if self.core.running:
                 return
             if self.costs is None and self.core.sink.realtime:
-                self.costs = measure_costs(
-                    self._device,
-                    cost_plan(self._device),
-                    chunk_frames=self.core.scheduler.pool.chunk_frames,
-                )
+                self.costs = voice_costs(self.core)
             self.core.start()
             self._halt.clear()
             self._housekeeper = threading.Thread(

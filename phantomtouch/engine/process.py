@@ -112,14 +112,7 @@ class ChildAudio:
     # -- the engine process ---------------------------------------------------------------
 
     def _start_child(self, timeout_s: float = START_TIMEOUT_S) -> ChildProcess:
-        child = spawn(
-            self._device,
-            self._spec,
-            self._options,
-            self._priority,
-            self._links.settings.max_contacts,
-            timeout_s=timeout_s,
-        )
+        child = spawn(self._device, self._spec, self._options, self._priority, timeout_s)
         child.reader = threading.Thread(
             target=self._read_reports, args=(child,), name="phantomtouch-reports", daemon=True
         )
@@ -240,33 +233,27 @@ class ChildAudio:
         self._child.end(kill=True)
         self._options["costs"] = self.costs
         delay_s = RETRY_FIRST_S
-        while True:
-            if not self._set_state("restarting"):
-                return
+        while self._set_state("restarting"):
             try:
                 child = self._start_child(RESTART_TIMEOUT_S)
-                child.outbox.put((0, StartSink()))
-                if self._wearer is not None:
-                    child.outbox.put((0, self._wearer))
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
                 self._set_state("gone")
-                self._halt.wait(delay_s)
-                delay_s = min(RETRY_MAX_S, 2 * delay_s)
-                continue
-            with self._lock:
-                closing = self._halt.is_set()
+            else:
+                child.outbox.put((0, StartSink()))
+                if self._wearer is not None:
+                    child.outbox.put((0, self._wearer))
+                with self._lock:
+                    closing = self._halt.is_set()  # closed while this one started
+                    if not closing:
+                        self._reset_records()
+                        self._child = child
+                        self.restarts += 1
                 if not closing:
-                    self._reset_records()
-                    self._child = child
-                    self.restarts += 1
-            if closing:  # closed while this one started
+                    self._wait_running(child, RESTART_TIMEOUT_S)
+                    if self.state == "running":
+                        return
                 child.end(kill=True)
-                return
-            self._wait_running(child, RESTART_TIMEOUT_S)
-            if self.state == "running":
-                return
-            child.end(kill=True)
             self._halt.wait(delay_s)
             delay_s = min(RETRY_MAX_S, 2 * delay_s)
 

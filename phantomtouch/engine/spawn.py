@@ -76,8 +76,6 @@ def spawn(
     spec: SinkSpec,
     options: dict[str, Any],
     priority: int | None,
-    slot_count: int,
-    *,
     timeout_s: float = START_TIMEOUT_S,
 ) -> ChildProcess:
     """Start an engine process and wait for its first report (ready, or the error).
@@ -90,7 +88,7 @@ def spawn(
     """
     context = multiprocessing.get_context("spawn")
     clock = SharedClock(device.sample_rate_hz)
-    slots = MoveSlots(slot_count)
+    slots = MoveSlots(options["contact_slots"])
     status = StatusBlock(device.channels)
     mark = context.Value("q", 0, lock=False)
     loads = context.RawArray("d", RENDER_TIMES)
@@ -109,7 +107,6 @@ def spawn(
             {
                 "clock": clock.raw,
                 "slots": slots.raw,
-                "slot_count": slots.capacity,
                 "status": status.raw,
                 "loads": loads,
             },
