@@ -134,10 +134,6 @@ class Intake:
         if self.state.leave:
             self.leave.set()
 
-    def close(self) -> None:
-        """Non real time: fade out and close (a capture sink writes its WAV as it closes)."""
-        self.core.close(fade=True)
-
 
 def raise_priority(priority: int | None) -> None:
     """Run this thread, and the threads it starts, with SCHED_FIFO ``priority``.
@@ -260,4 +256,4 @@ def serve(
     sys.setswitchinterval(0.001)
     core.start()
     intake.leave.wait()
-    intake.close()
+    core.close(fade=True)  # a capture sink writes its WAV as it closes

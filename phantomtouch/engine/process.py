@@ -93,7 +93,7 @@ class ChildAudio:
         self._halt = threading.Event()
         self._loops = SharedLoops()
         self._shared_plans = SharedPlans()
-        self._reset_records()
+        self._seq = 0
         self._child = self._start_child()
         self.costs: tuple[float, float, float] | None = self._child.costs
         self.backend = self._child.backend
@@ -307,8 +307,7 @@ class ChildAudio:
         child.outbox.close(CLOSE_TIMEOUT_S)
         self._watchdog.join()
         child.end(kill=False)
-        self._loops.clear()
-        self._shared_plans.clear()
+        self._reset_records()
 
     # -- clock and figures ----------------------------------------------------------------
 
