@@ -1,32 +1,10 @@
-"""The engine process: one audio callback that does all of its Python work.
-
-:func:`serve` runs in the engine process of a
-:class:`~phantomtouch.engine.process.ChildAudio`. It opens the sink a
-:class:`~phantomtouch.engine.soundcard.SinkSpec` names, builds a
-:class:`~phantomtouch.engine.core.Core`, measures what a voice costs and reports ready
-(non real time); from then on it refuses to build a noise loop it was not handed
-(:func:`~phantomtouch.renderer.carriers.refuse_building`). Once told to start, it starts
-the sink, and its main thread only waits (in a call that holds no interpreter lock) for
-the host to leave. Everything else happens in the audio callback, in real time, at the
-start of each block (:meth:`Intake.run`):
-
-1. report what the last block did (events to the host, figures and a heartbeat into
-   shared memory), and unmap the noise loops no voice reads any more;
-2. apply a ``stop_all`` the host raised in shared memory: every message sent before it
-   is void;
-3. read the host's messages (``(seq, message)``) from a non-blocking pipe and perform
-   them (:func:`~phantomtouch.engine.messages.perform`), while the time spent stays
-   within ``INTAKE_SHARE`` of the block's playing time (at least one message a block;
-   the rest wait for the next block);
-4. take the newest contact positions from shared memory.
-
-So the callback never waits for the interpreter lock: no other thread of this process
-runs Python code while audio plays. When the host's pipe closes (the host is gone), the
-engine fades out and the process ends.
+"""The engine process (:func:`serve`): one audio callback that does all of its Python
+work, at the start of each block (:meth:`Intake.run`; ``docs/engine.md``, Threads).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import logging
 import os
@@ -40,10 +18,9 @@ from typing import Any
 import numpy as np
 
 from phantomtouch.engine.clock import SampleClock
-from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.core import Core, measure_costs
-from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, cost_plan
-from phantomtouch.engine.link import FrameReader, NonBlockingWriter, encode, widen
+from phantomtouch.engine.core import Core
+from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, voice_costs
+from phantomtouch.engine.link import FrameReader, NonBlockingWriter, widen
 from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
 from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.plan_memory import HeldArrays
@@ -60,32 +37,27 @@ READ_BYTES = 1 << 18
 """Most bytes read from the host's pipe per block."""
 
 
+@dataclasses.dataclass
 class Intake:
     """The engine process's state, used by its audio callback at each block's start."""
 
-    def __init__(
-        self,
-        core: Core,
-        reader: FrameReader,
-        writer: NonBlockingWriter,
-        mark: Any,
-        slots: MoveSlots,
-        status: StatusBlock,
-    ) -> None:
-        self.core = core
-        self.reader = reader
-        self.writer = writer
-        self.mark = mark
-        self.slots = slots
-        self.status = status
-        self.state = AudioState(core, slots=slots)
+    core: Core
+    reader: FrameReader
+    writer: NonBlockingWriter
+    mark: Any
+    """Sequence number of the host's last ``stop_all`` (shared memory)."""
+    slots: MoveSlots
+    status: StatusBlock
+
+    def __post_init__(self) -> None:
+        self.state = AudioState(self.core, slots=self.slots)
         self.state.loops = HeldLoops(self.state.reports)
         self.state.arrays = HeldArrays()
         self.handled_mark = 0
         self.leave = threading.Event()
-        period_s = core.device.block_frames / core.device.sample_rate_hz
-        self.budget_s = INTAKE_SHARE * period_s
-        self.figures: dict[str, Any] = core.figures()
+        device = self.core.device
+        self.budget_s = INTAKE_SHARE * (device.block_frames / device.sample_rate_hz)
+        self.figures: dict[str, Any] = self.core.figures()
 
     def run(self) -> None:
         """At the start of each block (real time; see the module docstring)."""
@@ -162,10 +134,6 @@ class Intake:
         if self.state.leave:
             self.leave.set()
 
-    def close(self) -> None:
-        """Non real time: fade out and close (a capture sink writes its WAV as it closes)."""
-        self.core.close(fade=True)
-
 
 def raise_priority(priority: int | None) -> None:
     """Run this thread, and the threads it starts, with SCHED_FIFO ``priority``.
@@ -234,7 +202,7 @@ def serve(
     priority : int or None
         SCHED_FIFO priority for this process's threads.
     shared : dict
-        The shared memory: ``clock``, ``slots`` and ``slot_count``, ``status``, ``loads``
+        The shared memory: ``clock``, ``slots``, ``status``, ``loads``
         (the scheduler's render loads).
     """
     # Ctrl+C and a SIGTERM to the group (`timeout`, a service manager) reach this process
@@ -243,20 +211,19 @@ def serve(
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise_priority(priority)
-    report_fd = reports.fileno()
     try:
         device = DeviceProfile.model_validate_json(device_json)
         clock = SampleClock(
             device.sample_rate_hz,
             publish=SharedClock(device.sample_rate_hz, shared["clock"]).publish,
         )
-        slots = MoveSlots(shared["slot_count"], shared["slots"])
+        slots = MoveSlots(options["contact_slots"], shared["slots"])
         status = StatusBlock(device.channels, shared["status"])
         sink = spec.open(device)
         core = Core(
             device,
             sink,
-            settings=options["contact"] or ContactSettings(),
+            settings=options["contact"],
             # admission is the host's: the queue only bounds what it let through
             queue_capacity=options["queue_capacity"] + 2 * options["contact_slots"] + 1,
             rings=min(options["max_voices"], RENDER_AHEAD_RINGS),
@@ -266,24 +233,22 @@ def serve(
         )
         costs = options["costs"]
         if costs is None:
-            chunk = options["render_ahead_frames"]
-            costs = (
-                measure_costs(device, cost_plan(device), chunk_frames=chunk)
-                if sink.realtime
-                else (0.0, 0.0, 0.0)
-            )
+            costs = voice_costs(core) if sink.realtime else (0.0, 0.0, 0.0)
     except Exception as exc:
-        os.write(report_fd, encode(("failed", exc)))
+        reports.send(("failed", exc))
         return
+    refuse_building()  # from now on a noise loop is only what the host hands over
+    reports.send(("ready", costs, sink.backend, sink.output_device))
     widen(commands.fileno())
     intake = Intake(
-        core, FrameReader(commands.fileno()), NonBlockingWriter(report_fd), mark, slots, status
+        core,
+        FrameReader(commands.fileno()),
+        NonBlockingWriter(reports.fileno()),
+        mark,
+        slots,
+        status,
     )
     core.on_block(intake.run)
-    refuse_building()  # from now on a noise loop is only what the host hands over
-    os.set_blocking(report_fd, True)
-    os.write(report_fd, encode(("ready", costs, sink.backend, sink.output_device)))
-    os.set_blocking(report_fd, False)
     gc.freeze()  # what start-up made is never scanned again: collections stay short
     if not _wait_for_start(intake):
         core.close(fade=False)
@@ -291,4 +256,4 @@ def serve(
     sys.setswitchinterval(0.001)
     core.start()
     intake.leave.wait()
-    intake.close()
+    core.close(fade=True)  # a capture sink writes its WAV as it closes

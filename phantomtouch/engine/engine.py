@@ -1,15 +1,6 @@
-"""The audio side in this process, and :class:`Engine`, the front over it.
-
-:class:`LocalAudio` holds a :class:`~phantomtouch.engine.core.Core` (sink, scheduler,
-voices) in the host: the front's messages are performed at once, in the caller's thread
-under the front's lock, by the same appliers the engine process runs
-(:func:`~phantomtouch.engine.messages.perform`); they only push into the core's bounded
-queue, which the audio callback drains at the start of each block. A housekeeping thread
-hands what the callback reports (job states, the stimulus log) to the front every 50 ms.
-
-In a process that does other Python work (a web server), the callback waits for the
-interpreter lock that work holds; :class:`~phantomtouch.engine.process.ProcessEngine`
-puts the audio side in a process of its own.
+"""The audio side in this process (:class:`LocalAudio`), and :class:`Engine`, the front
+over it: messages are performed at once in the caller's thread; a housekeeping thread
+hands the callback's events to the front.
 """
 
 from __future__ import annotations
@@ -27,7 +18,7 @@ from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import AudioState, Command, ContactMove, Event, perform
 from phantomtouch.engine.sinks import NullSink, Sink
 from phantomtouch.errors import DeviceError, ParameterError
-from phantomtouch.renderer.plan import Plan, plan
+from phantomtouch.renderer.plan import plan
 from phantomtouch.renderer.presets import preset
 from phantomtouch.schema.device import DeviceProfile
 
@@ -45,9 +36,12 @@ COST_PRESET = "exp1/noise-high-v3"
 """The pattern whose voices measure what a voice costs: noise, the dearest carrier."""
 
 
-def cost_plan(device: DeviceProfile) -> Plan:
-    """A plan of the pattern that measures a voice's cost, for ``device``."""
-    return plan(preset(COST_PRESET), device)
+def voice_costs(core: Core) -> tuple[float, float, float]:
+    """What a voice costs ``core``'s callback (:func:`~phantomtouch.engine.core.measure_costs`
+    with the :data:`COST_PRESET`, at its chunk size). Non real time: before the sink starts."""
+    device = core.device
+    chunk_frames = core.scheduler.pool.chunk_frames
+    return measure_costs(device, plan(preset(COST_PRESET), device), chunk_frames=chunk_frames)
 
 
 class LocalAudio:
@@ -104,11 +98,7 @@ class LocalAudio:
             if self.core.running:
                 return
             if self.costs is None and self.core.sink.realtime:
-                self.costs = measure_costs(
-                    self._device,
-                    cost_plan(self._device),
-                    chunk_frames=self.core.scheduler.pool.chunk_frames,
-                )
+                self.costs = voice_costs(self.core)
             self.core.start()
             self._halt.clear()
             self._housekeeper = threading.Thread(
@@ -252,25 +242,26 @@ class Engine(EngineFront):
             )
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
 
-        def audio(links: Links) -> LocalAudio:
-            return LocalAudio(
+        super().__init__(
+            device,
+            lambda links: LocalAudio(
                 device,
                 sink if sink is not None else NullSink(device),
                 links,
                 render_ahead_frames=render_ahead_frames,
                 clock=clock if clock is not None else SampleClock(device.sample_rate_hz),
-            )
+            ),
+            **options,
+        )
 
-        super().__init__(device, audio, **options)
-        assert isinstance(self._audio, LocalAudio)
-        self._local = self._audio
+    _audio: LocalAudio
 
     @property
     def core(self) -> Core:
         """The audio side's core (sink, scheduler, voices)."""
-        return self._local.core
+        return self._audio.core
 
     @property
     def sink(self) -> Sink:
         """The sink the engine plays into (owned by the engine)."""
-        return self._local.core.sink
+        return self._audio.core.sink

@@ -1,14 +1,7 @@
-"""Framed messages over the pipes between the host and the engine process.
-
-A message is a pickled object behind its length (4 bytes, little-endian). Neither side
-ever waits for the other:
-
-- the host hands messages to an :class:`Outbox`, whose thread writes them into the
-  pipe; when the engine process does not read (it hangs, or it is gone), the outbox
-  fills to its bound and refuses more, and the caller sees a busy engine;
-- the engine process reads what has arrived from a non-blocking pipe
-  (:class:`FrameReader`, inside its audio callback) and writes its reports through a
-  :class:`NonBlockingWriter`, which keeps what the pipe cannot take for the next block.
+"""Framed messages over the pipes between the host and the engine process: a pickle
+behind its length (4 bytes, big-endian, as :mod:`multiprocessing.connection` frames it,
+so the host sends and receives through its ``Connection``). Neither side waits for the
+other (``docs/engine.md``, Transports).
 """
 
 from __future__ import annotations
@@ -22,7 +15,7 @@ import threading
 from collections import deque
 from typing import Any
 
-_HEADER = struct.Struct("<I")
+_HEADER = struct.Struct("!i")
 PIPE_BYTES = 1 << 20
 """Pipe buffer asked for (Linux ``F_SETPIPE_SZ``; the system's ``pipe-max-size``, 1 MB by
 default, caps it): a plan crosses in a few reads."""
@@ -141,14 +134,14 @@ class Outbox:
 
     Parameters
     ----------
-    fd : int
+    connection : multiprocessing.connection.Connection
         The write end of the pipe (blocking).
     max_bytes : int
         Most bytes waiting; :meth:`put` refuses more.
     """
 
-    def __init__(self, fd: int, max_bytes: int = 64 << 20) -> None:
-        self._fd = fd
+    def __init__(self, connection: Any, max_bytes: int = 64 << 20) -> None:
+        self._connection = connection
         self._max = max_bytes
         self._frames: deque[bytes] = deque()
         self._bytes = 0
@@ -158,8 +151,10 @@ class Outbox:
         self._thread = threading.Thread(target=self._run, name="phantomtouch-outbox", daemon=True)
         self._thread.start()
 
-    def put(self, frame: bytes) -> bool:
-        """Queue a frame (see :func:`encode`); False when the outbox is full or closed."""
+    def put(self, message: Any) -> bool:
+        """Queue a message, pickled here (host, the caller's thread); False when the outbox
+        is full or closed."""
+        frame = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
         with self._ready:
             if self._closed or self.broken or self._bytes + len(frame) > self._max:
                 return False
@@ -177,10 +172,7 @@ class Outbox:
                     return
                 frame = self._frames.popleft()
             try:
-                view = memoryview(frame)
-                while view:
-                    written = os.write(self._fd, view)
-                    view = view[written:]
+                self._connection.send_bytes(frame)
             except OSError:
                 with self._ready:
                     self.broken = True
@@ -197,28 +189,5 @@ class Outbox:
             self._closed = True
             self._ready.notify()
         self._thread.join(timeout_s)
-        if not self._thread.is_alive() and self._fd >= 0:
-            with contextlib.suppress(OSError):
-                os.close(self._fd)
-            self._fd = -1
-
-
-def read_frames(fd: int) -> Any:
-    """Yield the messages of a blocking pipe until EOF (the host's reader thread)."""
-    buffer = bytearray()
-    while True:
-        try:
-            data = os.read(fd, 1 << 16)
-        except OSError:
-            return
-        if not data:
-            return
-        buffer += data
-        while len(buffer) >= _HEADER.size:
-            (size,) = _HEADER.unpack_from(buffer)
-            end = _HEADER.size + size
-            if len(buffer) < end:
-                break
-            payload = bytes(buffer[_HEADER.size : end])
-            del buffer[:end]
-            yield pickle.loads(payload)
+        if not self._thread.is_alive():
+            self._connection.close()

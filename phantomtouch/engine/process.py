@@ -1,30 +1,7 @@
-"""The audio side in a process of its own, for hosts whose other Python work holds the GIL.
-
-The audio callback needs the interpreter lock for every block; in a process that also
-serves web requests it waits for it. :class:`ChildAudio` is the audio side in an engine
-process (``spawn``, :mod:`phantomtouch.engine.child`), whose callback is the only thread
-there that does Python work; :class:`ProcessEngine` is the
-:class:`~phantomtouch.engine.front.EngineFront` over it. Everything here runs in the
-host, and nothing here ever waits for the engine process:
-
-- messages (:mod:`phantomtouch.engine.messages`: plans handed over and dropped by the
-  handle the front's plan cache minted; job starts; releases; touchdowns) go through an
-  :class:`~phantomtouch.engine.link.Outbox` whose thread writes them into a pipe; the
-  callback reads them at the start of each block within a time budget;
-- noise loops and plans' heavy arrays go through shared memory the host owns
-  (:mod:`phantomtouch.engine.noise`, :mod:`phantomtouch.engine.plan_memory`);
-- ``stop_all`` raises a sequence mark in shared memory that the callback reads first:
-  every message sent before it is void, whatever the pipe holds;
-- contact moves and the sample clock go through shared memory
-  (:mod:`phantomtouch.engine.shared`), and so do the engine's figures and a heartbeat
-  (:class:`~phantomtouch.engine.shared.StatusBlock`): ``status()`` reads them;
-- a thread reads the child's reports (job starts and ends) into the job table.
-
-A watchdog notices within ``STALL_S`` when the child dies or stops calling back
-(killed, stopped, hung, its sound card gone): the engine's ``state`` says so, new work
-is refused with DeviceError, every job and contact is dropped (``on_fault`` is told),
-and a new child is started, again and again (``RETRY_MAX_S``) until its sound card
-opens. When this process dies, the pipe closes and the child fades out and ends.
+"""The audio side in an engine process of its own (:class:`ChildAudio`, host only) and
+:class:`ProcessEngine`, the front over it: for hosts whose other Python work holds the
+interpreter lock the audio callback needs. Nothing here waits for the engine process;
+``docs/engine.md`` (Transports, Faults) says what crosses how, and what the watchdog does.
 """
 
 from __future__ import annotations
@@ -38,7 +15,6 @@ from typing import Any
 from phantomtouch.engine.checks import check_int
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import EngineFront, Links
-from phantomtouch.engine.link import encode, read_frames
 from phantomtouch.engine.messages import (
     Close,
     Command,
@@ -117,7 +93,7 @@ class ChildAudio:
         self._halt = threading.Event()
         self._loops = SharedLoops()
         self._shared_plans = SharedPlans()
-        self._reset_records()
+        self._seq = 0
         self._child = self._start_child()
         self.costs: tuple[float, float, float] | None = self._child.costs
         self.backend = self._child.backend
@@ -136,14 +112,7 @@ class ChildAudio:
     # -- the engine process ---------------------------------------------------------------
 
     def _start_child(self, timeout_s: float = START_TIMEOUT_S) -> ChildProcess:
-        child = spawn(
-            self._device,
-            self._spec,
-            self._options,
-            self._priority,
-            self._links.settings.max_contacts,
-            timeout_s=timeout_s,
-        )
+        child = spawn(self._device, self._spec, self._options, self._priority, timeout_s)
         child.reader = threading.Thread(
             target=self._read_reports, args=(child,), name="phantomtouch-reports", daemon=True
         )
@@ -153,7 +122,11 @@ class ChildAudio:
     def _read_reports(self, child: ChildProcess) -> None:
         """Host, the reports thread: free released loops and plans' blocks, hand the rest
         to the front."""
-        for events in read_frames(child.reports_fd):
+        while True:
+            try:
+                events = child.reports.recv()
+            except (EOFError, OSError):
+                return
             if child is getattr(self, "_child", None):  # not a process replaced since
                 for event in events:
                     if isinstance(event, NoiseReleased):
@@ -164,7 +137,7 @@ class ChildAudio:
 
     def _write(self, child: ChildProcess, message: Command) -> bool:
         self._seq += 1
-        return child.outbox.put(encode((self._seq, message)))
+        return child.outbox.put((self._seq, message))
 
     def post(self, message: Command) -> None:
         """Queue a message for the engine process (host, under the front's lock); a
@@ -260,33 +233,27 @@ class ChildAudio:
         self._child.end(kill=True)
         self._options["costs"] = self.costs
         delay_s = RETRY_FIRST_S
-        while True:
-            if not self._set_state("restarting"):
-                return
+        while self._set_state("restarting"):
             try:
                 child = self._start_child(RESTART_TIMEOUT_S)
-                child.outbox.put(encode((0, StartSink())))
-                if self._wearer is not None:
-                    child.outbox.put(encode((0, self._wearer)))
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
                 self._set_state("gone")
-                self._halt.wait(delay_s)
-                delay_s = min(RETRY_MAX_S, 2 * delay_s)
-                continue
-            with self._lock:
-                closing = self._halt.is_set()
+            else:
+                child.outbox.put((0, StartSink()))
+                if self._wearer is not None:
+                    child.outbox.put((0, self._wearer))
+                with self._lock:
+                    closing = self._halt.is_set()  # closed while this one started
+                    if not closing:
+                        self._reset_records()
+                        self._child = child
+                        self.restarts += 1
                 if not closing:
-                    self._reset_records()
-                    self._child = child
-                    self.restarts += 1
-            if closing:  # closed while this one started
+                    self._wait_running(child, RESTART_TIMEOUT_S)
+                    if self.state == "running":
+                        return
                 child.end(kill=True)
-                return
-            self._wait_running(child, RESTART_TIMEOUT_S)
-            if self.state == "running":
-                return
-            child.end(kill=True)
             self._halt.wait(delay_s)
             delay_s = min(RETRY_MAX_S, 2 * delay_s)
 
@@ -340,8 +307,7 @@ class ChildAudio:
         child.outbox.close(CLOSE_TIMEOUT_S)
         self._watchdog.join()
         child.end(kill=False)
-        self._loops.clear()
-        self._shared_plans.clear()
+        self._reset_records()
 
     # -- clock and figures ----------------------------------------------------------------
 
@@ -420,45 +386,37 @@ class ProcessEngine(EngineFront):
         device: DeviceProfile,
         sink: SinkSpec | None = None,
         *,
-        render_ahead_frames: int = RENDER_AHEAD_FRAMES,
         realtime_priority: int | None = REALTIME_PRIORITY,
         on_fault: Callable[[str], None] | None = None,
+        render_ahead_frames: int = RENDER_AHEAD_FRAMES,
         **options: Any,
     ) -> None:
         if realtime_priority is not None:
             check_int("realtime_priority", realtime_priority, 1, 99)
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
 
-        def audio(links: Links) -> ChildAudio:
-            return ChildAudio(
+        super().__init__(
+            device,
+            lambda links: ChildAudio(
                 device,
                 sink if sink is not None else SinkSpec(),
                 links,
                 render_ahead_frames,
                 realtime_priority,
                 on_fault,
-            )
+            ),
+            **options,
+        )
 
-        super().__init__(device, audio, **options)
-        assert isinstance(self._audio, ChildAudio)
-        self._child_audio = self._audio
+    _audio: ChildAudio
 
     @property
     def state(self) -> str:
         """``starting``, ``running``, ``stalled``, ``gone``, ``restarting`` or ``closed``
         (host, any thread)."""
-        return self._child_audio.state
+        return self._audio.state
 
     @property
     def pid(self) -> int | None:
         """Process id of the engine process (host, any thread)."""
-        return self._child_audio.pid
-
-    @property
-    def on_fault(self) -> Callable[[str], None] | None:
-        """Called from the watchdog thread when the engine process died or stalled."""
-        return self._child_audio.on_fault
-
-    @on_fault.setter
-    def on_fault(self, on_fault: Callable[[str], None] | None) -> None:
-        self._child_audio.on_fault = on_fault
+        return self._audio.pid

@@ -1,10 +1,5 @@
-"""Starting an engine process, and what the host shares with it.
-
-:func:`spawn` starts the engine process of a :class:`~phantomtouch.engine.process.ChildAudio`
-(``spawn``: a fresh interpreter running :func:`~phantomtouch.engine.child.serve`) with its
-pipes and shared memory, and waits for its first report. :class:`ChildProcess` holds
-what belongs to one such process: the process, its outbox, the shared clock, contact
-slots and figures, the stop mark. All of it runs in the host, non real time.
+"""Starting an engine process (:func:`spawn`), and what the host shares with it
+(:class:`ChildProcess`). Host, non real time.
 """
 
 from __future__ import annotations
@@ -12,16 +7,14 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import multiprocessing
-import os
-import select
 import threading
-import time
+from multiprocessing.connection import wait
 from typing import Any
 
 import numpy as np
 
 from phantomtouch.engine.child import serve
-from phantomtouch.engine.link import Outbox, read_frames
+from phantomtouch.engine.link import Outbox
 from phantomtouch.engine.scheduler import RENDER_TIMES
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.soundcard import SinkSpec
@@ -50,7 +43,8 @@ class ChildProcess:
 
     process: Any
     outbox: Outbox
-    reports_fd: int
+    reports: Any
+    """The read end of the reports' pipe (a ``multiprocessing.connection.Connection``)."""
     clock: SharedClock
     slots: MoveSlots
     status: StatusBlock
@@ -74,8 +68,7 @@ class ChildProcess:
         self.outbox.close(0.1)
         if self.reader is not None:
             self.reader.join(1.0)
-        with contextlib.suppress(OSError):
-            os.close(self.reports_fd)
+        self.reports.close()
 
 
 def spawn(
@@ -83,8 +76,6 @@ def spawn(
     spec: SinkSpec,
     options: dict[str, Any],
     priority: int | None,
-    slot_count: int,
-    *,
     timeout_s: float = START_TIMEOUT_S,
 ) -> ChildProcess:
     """Start an engine process and wait for its first report (ready, or the error).
@@ -97,7 +88,7 @@ def spawn(
     """
     context = multiprocessing.get_context("spawn")
     clock = SharedClock(device.sample_rate_hz)
-    slots = MoveSlots(slot_count)
+    slots = MoveSlots(options["contact_slots"])
     status = StatusBlock(device.channels)
     mark = context.Value("q", 0, lock=False)
     loads = context.RawArray("d", RENDER_TIMES)
@@ -116,7 +107,6 @@ def spawn(
             {
                 "clock": clock.raw,
                 "slots": slots.raw,
-                "slot_count": slots.capacity,
                 "status": status.raw,
                 "loads": loads,
             },
@@ -127,22 +117,18 @@ def spawn(
     process.start()
     commands_in.close()
     reports_out.close()
-    reports_fd = os.dup(reports_in.fileno())
-    reports_in.close()
-    commands_fd = os.dup(commands_out.fileno())
-    commands_out.close()
     try:
-        ready = _first_report(reports_fd, process, timeout_s)
+        ready = _first_report(reports_in, process, timeout_s)
     except BaseException:
-        os.close(reports_fd)
-        os.close(commands_fd)
+        reports_in.close()
+        commands_out.close()
         process.kill()
         process.join(CLOSE_TIMEOUT_S)
         raise
     return ChildProcess(
         process=process,
-        outbox=Outbox(commands_fd),
-        reports_fd=reports_fd,
+        outbox=Outbox(commands_out),
+        reports=reports_in,
         clock=clock,
         slots=slots,
         status=status,
@@ -154,20 +140,15 @@ def spawn(
     )
 
 
-def _first_report(fd: int, process: Any, timeout_s: float) -> Any:
-    deadline = time.monotonic() + timeout_s
-    frames = read_frames(fd)
-    while True:
-        readable, _, _ = select.select([fd], [], [], 0.2)
-        if readable:
-            break
-        if not process.is_alive():
-            raise DeviceError("the engine process ended while starting")
-        if time.monotonic() > deadline:
-            raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
-    message = next(frames, None)
-    if message is None:
-        raise DeviceError("the engine process ended while starting")
+def _first_report(reports: Any, process: Any, timeout_s: float) -> Any:
+    """Wait for the pipe or the process's end (``multiprocessing.connection.wait``: Windows'
+    ``select`` takes sockets only), then read the first report."""
+    if not wait([reports, process.sentinel], timeout_s):
+        raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
+    try:
+        message = reports.recv()
+    except (EOFError, OSError):
+        raise DeviceError("the engine process ended while starting") from None
     if message[0] == "failed":
         raise message[1]
     return message

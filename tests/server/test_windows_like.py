@@ -3,9 +3,9 @@
 ``tests/support/windows_like/sitecustomize.py`` makes ``fcntl``, ``termios``, ``resource``,
 ``pwd``, ``grp`` and the like unimportable and removes POSIX-only ``os`` functions
 (``sched_setscheduler``, ``getuid``, ``killpg`` ...) in every interpreter started with it
-on ``PYTHONPATH``: the server and its engine process. The service then starts, plays a
-touch on a ``capture:`` output and stops, and the recording is the offline render sample
-for sample.
+on ``PYTHONPATH``: the server and its engine process; there ``select.select`` takes sockets
+only, as Windows' does. The service then starts, plays a touch on a ``capture:`` output
+and stops, and the recording is the offline render sample for sample.
 """
 
 from __future__ import annotations

@@ -5,18 +5,22 @@ An import of one of :data:`POSIX_ONLY_MODULES` raises ``ModuleNotFoundError``; t
 functions in :data:`POSIX_ONLY_OS_FUNCTIONS` are removed from ``os``. Functions the
 standard library itself calls on Linux to start a process or a thread (``os.fork``,
 ``os.waitpid``, ``os.pipe`` ...) stay, since they have Windows counterparts behind the
-same standard-library calls. When ``PHANTOMTOUCH_WINDOWS_LIKE_MARKS`` names a folder, each
-interpreter writes a file named by its process id there, so a test can tell that the
-server and its engine process both ran this way.
+same standard-library calls. ``select.select`` raises ``OSError`` for anything but a
+socket, as Windows' does (WinError 10038). When ``PHANTOMTOUCH_WINDOWS_LIKE_MARKS`` names
+a folder, each interpreter writes a file named by its process id there, so a test can
+tell that the server and its engine process both ran this way.
 """
 
 from __future__ import annotations
 
 import importlib.abc
 import os
+import select
+import stat
 import sys
 from collections.abc import Sequence
 from types import ModuleType
+from typing import Any
 
 POSIX_ONLY_MODULES = frozenset(
     {"fcntl", "termios", "tty", "pty", "resource", "pwd", "grp", "syslog", "posix_ipc"}
@@ -66,6 +70,27 @@ class _Refuse(importlib.abc.MetaPathFinder):
         return None
 
 
+WSAENOTSOCK = 10038
+_select = select.select
+
+
+def _fd(item: Any) -> int:
+    return item if isinstance(item, int) else int(item.fileno())
+
+
+def _select_sockets_only(
+    rlist: Any, wlist: Any, xlist: Any, timeout: float | None = None
+) -> tuple[list[Any], list[Any], list[Any]]:
+    """``select.select`` as on Windows: it takes sockets only."""
+    for item in (*rlist, *wlist, *xlist):
+        if not stat.S_ISSOCK(os.fstat(_fd(item)).st_mode):
+            raise OSError(
+                WSAENOTSOCK, "An operation was attempted on something that is not a socket"
+            )
+    return _select(rlist, wlist, xlist, timeout)
+
+
+select.select = _select_sockets_only
 for _name in POSIX_ONLY_MODULES:
     sys.modules.pop(_name, None)
 sys.meta_path.insert(0, _Refuse())
