@@ -1,18 +1,7 @@
-"""After the voices: wearer gains, safety limiter, calibration, NaN guard, ceiling, meters.
+"""The chain after the voices: wearer gains, safety limiter, output stage, meters.
 
-The voices add into one float32 block. :class:`WearerGains` scales each channel by the
-wearer's gain (1 on every channel unless a :class:`~phantomtouch.engine.messages.SetWearerGains`
-set another), ramping a change across one block. Per-channel gains commute with the
-calibration's, so this is the wearer's offset applied after the calibration: the limiter
-then sees the fitted, calibrated peaks. :class:`Limiter` then scales the whole block (all
-channels alike, so the phantom's balance between actuators is kept) when its calibrated
-peak exceeds ``threshold_ratio`` times the ceiling, and is exactly transparent otherwise.
-The renderer's :class:`~phantomtouch.renderer.OutputStage` follows: calibration, optional
-FIR, NaN/Inf muting and the hard clip at the ceiling as the last line — the same stage an
-offline render goes through, so a pattern played alone arrives with the offline samples.
-
-Where it runs: construction is non real time; every other method runs in real time,
-inside the audio callback.
+Construction is non real time; every other method runs in real time, inside the audio
+callback, unless its docstring says otherwise.
 """
 
 from __future__ import annotations
@@ -101,8 +90,7 @@ class Limiter:
 class WearerGains:
     """The wearer's per-channel gains, changed at a block boundary and ramped across it.
 
-    :meth:`set` (real time, from an applier, any thread of the audio side) leaves the new
-    gains for the next block; :meth:`apply` (real time, in the callback) scales a block:
+    :meth:`set` leaves the new gains for the next block; :meth:`apply` scales a block:
     not at all while every gain is 1, by the gains while they hold, and in the block where
     they change by a line from the old gains to the new, reached on the block's last
     frame (sample ``n`` of ``frames`` gets ``old + (new - old) * (n + 1) / frames``).
@@ -126,7 +114,7 @@ class WearerGains:
 
     def set(self, gains: np.ndarray) -> None:
         """Take ``gains`` (shape (channels,), float32, finite, > 0, checked by the host)
-        from the next block on."""
+        from the next block on (real time, from an applier: any thread of the audio side)."""
         self._pending = gains
 
     def apply(self, block: np.ndarray) -> None:
@@ -148,9 +136,16 @@ class WearerGains:
 class Mixer:
     """The chain after the voices, and the level meters.
 
+    The voices' sum goes through :class:`WearerGains`, the :class:`Limiter` (all channels
+    alike, keeping the phantom's balance) and the renderer's
+    :class:`~phantomtouch.renderer.OutputStage` (calibration, optional FIR, NaN/Inf muting,
+    the hard clip at the ceiling): the stage of an offline render, so a pattern played
+    alone arrives with the offline samples.
+
     Parameters
     ----------
     device : DeviceProfile
+        Its safety ceiling, calibration, channels and block size.
 
     Attributes
     ----------
@@ -178,6 +173,7 @@ class Mixer:
 
     @property
     def limited_blocks(self) -> int:
+        """Blocks the limiter turned down."""
         return self.limiter.limited_blocks
 
     def finish(self, block: np.ndarray) -> None:

@@ -7,7 +7,7 @@ block it begins in, and for every later chunk while it sounds
 requesting thread: :func:`prerender` renders the plan with the same
 :class:`~phantomtouch.renderer.PatternRenderer`, so its samples are exactly those the
 voice would have rendered (the renderer's output does not depend on how it is cut into
-blocks), and the callback's :class:`~phantomtouch.engine.voices.PrerenderedVoice` adds
+blocks), and the callback's :class:`~phantomtouch.engine.voices.PatternVoice` adds
 slices of them: whole-width frames, one contiguous add a block.
 
 The front's plan cache (:mod:`phantomtouch.engine.plans`) keeps the samples with their
