@@ -279,7 +279,7 @@ def serve(
     intake = Intake(
         core, FrameReader(commands.fileno()), NonBlockingWriter(report_fd), mark, slots, status
     )
-    core.on_block(intake.run)
+    core.scheduler.intake = intake.run
     refuse_building()  # from now on a noise loop is only what the host hands over
     os.set_blocking(report_fd, True)
     os.write(report_fd, encode(("ready", costs, sink.backend, sink.output_device)))

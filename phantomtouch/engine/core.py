@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -94,8 +93,6 @@ class Core:
         self.running = False
         self._jobs: dict[str, PatternVoice] = {}
 
-    # -- life cycle (non real time) ---------------------------------------------------
-
     def start(self) -> None:
         """Anchor the clock and start the sink (the callback runs from now on); non real
         time."""
@@ -116,8 +113,6 @@ class Core:
                 time.sleep(block_s)
             time.sleep(2 * block_s)  # let the last (silent) block reach the output
         self.sink.close()
-
-    # -- commands (checked by the front; real time) -------------------------------------
 
     def widen(self, plan: Plan) -> Plan:
         """A plan sent without device and geometry (``slim``), given this core's."""
@@ -169,13 +164,6 @@ class Core:
         """Void every command so far; everything that sounds fades out (real time)."""
         self.queue.mark_stop_all()
         self.board.clear()
-
-    def on_block(self, before: Callable[[], None] | None) -> None:
-        """Call ``before()`` at the start of every block, before its commands apply (non
-        real time, before the sink starts)."""
-        self.scheduler.intake = before
-
-    # -- what happened --------------------------------------------------------------------
 
     def events(self) -> list[Event]:
         """What the callback did since the last call (real time in the engine process; the
@@ -243,10 +231,9 @@ def measure_costs(
     -------
     tuple of float
         ``(voice_cost, start_cost, prerendered_cost)``: the render load one sounding voice
-        adds (against none, over at least 64 blocks and two chunks' worth, once every
-        voice has refilled its ring), what one voice adds to the block it begins in
-        (against an idle block), and what one sounding prerendered voice adds. Each is
-        the median of three tries, at least 1e-4 (prerendered voices 1e-5).
+        adds (over at least 64 blocks and two chunks' worth, rings refilled), what one
+        adds to the block it begins in, and what one sounding prerendered voice adds;
+        each the median of three tries, at least 1e-4 (prerendered voices 1e-5).
     """
     block = np.zeros((device.block_frames, device.channels), dtype=np.float32)
     period_s = device.block_frames / device.sample_rate_hz

@@ -55,8 +55,6 @@ class Scheduler:
     ----------
     frames : int
         Frames rendered so far: the first frame of the next block (``now_frames``).
-    drained_frame : int
-        First frame of the last block whose commands were taken (-1 before the first).
     active_voices : int
     callback_errors : int
         Blocks replaced by silence because rendering raised (the voices are dropped).
@@ -72,7 +70,8 @@ class Scheduler:
         (:func:`load_percentiles`) and the callback never does.
     intake : callable or None
         Called at the start of every block, before its commands apply: the engine
-        process takes its messages and contact positions here.
+        process takes its messages and contact positions here (set before the sink
+        starts).
     dac_delay : callable or None
         Returns the time from now until the block being rendered reaches the sound
         card's converter, s, when the sink knows it (None otherwise).
@@ -99,7 +98,7 @@ class Scheduler:
         chunk = max(chunk_frames, device.block_frames) if chunk_frames > 0 else 0
         self.pool = RingPool(rings, chunk, device.channels)
         self.frames = 0
-        self.drained_frame = -1
+        self._drained_frame = -1
         self.active_voices = 0
         self.callback_errors = 0
         self.last_error: BaseException | None = None
@@ -126,7 +125,7 @@ class Scheduler:
     def next_block_frame(self) -> int:
         """First frame of the next block whose commands are not taken yet (any thread)."""
         frames = self.frames
-        return frames + self.block_frames if self.drained_frame == frames else frames
+        return frames + self.block_frames if self._drained_frame == frames else frames
 
     def render(self, out: np.ndarray) -> None:
         """Fill ``out`` (frames, channels), float32, with the next frames (the callback)."""
@@ -155,7 +154,7 @@ class Scheduler:
         if self.intake is not None:
             self.intake()
         self._apply_commands(start, end)
-        self.drained_frame = start
+        self._drained_frame = start
         waiting = self._waiting
         while waiting and waiting[0][0] < end:
             frame, _, voice = heapq.heappop(waiting)

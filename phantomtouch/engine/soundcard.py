@@ -116,24 +116,21 @@ def find_output_device(output: int | str | None, channels: int) -> dict[str, Any
         No such device, several match the name, or it has fewer than ``channels`` outputs.
     """
     devices = list_output_devices()
-    asked = output
+    asked, host_api = output, None
     if isinstance(output, str):
-        host_api, name = split_host_api(output, sorted({d["hostapi"] for d in devices}))
+        host_api, output = split_host_api(output, sorted({d["hostapi"] for d in devices}))
         if host_api is not None:
             devices = [d for d in devices if d["hostapi"] == host_api]
-            if not name:
-                suitable = [d for d in devices if d["max_output_channels"] >= channels]
-                if not suitable:
-                    raise DeviceError(
-                        f"output={output!r}: no {host_api} device has {channels} or more outputs"
-                    )
-                return suitable[0]
-            output = name
+            output = output or None
     if output is None:
         suitable = [d for d in devices if d["max_output_channels"] >= channels]
         if not suitable:
-            raise DeviceError(f"no output device has {channels} or more outputs")
-        return next((d for d in suitable if d["default"]), suitable[0])
+            within = "output" if host_api is None else host_api
+            raise DeviceError(
+                f"output={asked!r}: no {within} device has {channels} or more outputs"
+            )
+        # a host API alone: its first device; None: the default output first
+        return next((d for d in suitable if d["default"] and host_api is None), suitable[0])
     if isinstance(output, bool) or not isinstance(output, int | str):
         raise ParameterError(f"output={output!r} must be a device index, a name or None")
     if isinstance(output, int):
@@ -330,12 +327,11 @@ def open_default_sink(
     exclusive : bool
         WASAPI exclusive mode (see :class:`SoundDeviceSink`).
     """
-    if output is not None:
-        return SoundDeviceSink(device, output, exclusive=exclusive)
     try:
-        found = find_output_device(None, device.channels)
-        return SoundDeviceSink(device, found["index"], exclusive=exclusive)
+        return SoundDeviceSink(device, output, exclusive=exclusive)
     except DeviceError as exc:
+        if output is not None:
+            raise
         logger.info("no usable sound card (%s); using the null sink", exc)
         return NullSink(device)
 
