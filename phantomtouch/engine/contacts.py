@@ -1,10 +1,7 @@
-"""Live contacts: a hand touching the forearm, moved by the newest position, with an
-impact transient on touchdown and lift-off (how they move, fade and strike:
-``docs/engine.md``, "Live contacts").
-
-:class:`ContactSettings` is checked by the front (non real time); a
-:class:`ContactVoice`'s methods run in real time, inside the audio callback, except its
-mailbox, which the side that posts moves writes.
+"""Live contacts: a hand touching the forearm, moved by the newest position, struck by
+an impact transient (how: ``docs/engine.md``, "Live contacts"). :class:`ContactSettings`
+is checked by the front; a :class:`ContactVoice` runs in real time, inside the audio
+callback, except its mailbox, which the side that posts moves writes.
 """
 
 from __future__ import annotations
@@ -121,8 +118,6 @@ class ContactVoice(Voice):
         release_frames: int,
     ) -> None:
         super().__init__(release_frames)
-        self.owner = down.owner
-        self.contact = down.contact
         self.key = (down.owner, down.contact)
         self.place = (down.x_cm, down.y_cm, down.amplitude)
         self.law = down.law
@@ -160,7 +155,7 @@ class ContactVoice(Voice):
     def begin(self, frame: int, pool: RingPool) -> None:
         super().begin(frame, pool)
         if self._down_burst is not None:
-            self._add_burst(self._down_burst, self._unit, frame)
+            self._add_burst(self._down_burst, frame)
             self._down_burst = None
 
     def release(
@@ -168,11 +163,12 @@ class ContactVoice(Voice):
     ) -> None:
         super().release(frame, None, fade_frames)
         if isinstance(transient, np.ndarray):
-            self._add_burst(transient, self._unit, frame)
+            self._add_burst(transient, frame)
 
-    def _add_burst(self, burst: np.ndarray, unit: np.ndarray, frame: int) -> None:
-        channels = np.flatnonzero(unit)
-        self._bursts.append((burst, unit[channels], channels, frame))
+    def _add_burst(self, burst: np.ndarray, frame: int) -> None:
+        """Play ``burst`` from ``frame`` at the position's unit gains."""
+        channels = np.flatnonzero(self._unit)
+        self._bursts.append((burst, self._unit[channels], channels, frame))
 
     def pending(self, block_end: int) -> Position | None:
         """The newest position, when it is not applied yet and due before ``block_end``."""

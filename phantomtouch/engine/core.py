@@ -40,15 +40,11 @@ class Core:
         Owned from now on (closed by :meth:`close`); its sample rate, block size and
         channels must be the device's.
     settings : ContactSettings
+        How live contacts start, end and strike.
     queue_capacity : int, >= 1
         Voices that may wait to start at once (see :class:`CommandQueue`).
-    rings : int, >= 0
-        Render-ahead rings for pattern voices.
-    chunk_frames : int, >= 0
-        Frames a pattern voice renders ahead at a time; 0 renders every block directly.
-    clock : SampleClock
-    render_loads : ndarray, shape (RENDER_TIMES,), float64, optional
-        Where the scheduler keeps its render loads (see :class:`Scheduler`).
+    rings, chunk_frames, clock, render_loads
+        As for :class:`Scheduler`.
 
     Raises
     ------
@@ -277,10 +273,11 @@ def measure_costs(
         core.stop_all()
         block_s(64)
         frames = 80 * device.block_frames  # the prerendered outlasts the blocks timed
-        prerendered = Prerendered(samples=np.zeros((frames, device.channels), dtype=np.float32))
-        short = dataclasses.replace(plan, frames=frames)
+        samples = Prerendered(np.zeros((frames, device.channels), dtype=np.float32))
         for k in range(voices):
-            core.start_job(f"prerendered-{k}", short, None, None, prerendered)
+            core.start_job(
+                f"pre-{k}", dataclasses.replace(plan, frames=frames), None, None, samples
+            )
         block_s(8)
         prerendered_voices.append((block_s(64) - silent_s) / voices / period_s)
     return (

@@ -40,11 +40,13 @@ class Limiter:
         Gain at the end of the last block.
     limited_blocks : int
         Blocks whose gain was below 1 anywhere.
+    calibration : ndarray, shape (channels,), float32
+        The calibration's gain per channel.
     """
 
     def __init__(self, device: DeviceProfile) -> None:
         self.threshold = THRESHOLD_RATIO * device.safety.ceiling
-        self._calibration = OutputStage.channel_gains(device).astype(np.float32)
+        self.calibration = OutputStage.channel_gains(device).astype(np.float32)
         self._attack_frames = max(1, round(ATTACK_S * device.sample_rate_hz))
         self._release_per_frame = 1.0 / (RELEASE_S * device.sample_rate_hz)
         self._curve = np.empty(device.block_frames, dtype=np.float32)
@@ -52,20 +54,17 @@ class Limiter:
         self.gain = 1.0
         self.limited_blocks = 0
 
-    def peak(self, block: np.ndarray) -> float:
-        """Largest absolute sample of ``block`` after calibration (NaN if any is NaN)."""
-        highest = block.max(axis=0)
-        np.maximum(highest, -block.min(axis=0), out=highest)
-        highest *= self._calibration
-        return float(highest.max())
-
     def process(self, block: np.ndarray, peak: float | None = None) -> None:
         """Limit ``block`` (frames, channels), float32, in place.
 
-        ``peak`` is the block's :meth:`peak` when the caller has it already.
+        ``peak`` is the block's largest calibrated absolute sample (NaN if any sample is
+        NaN) when the caller has it already.
         """
         if peak is None:
-            peak = self.peak(block)
+            highest = block.max(axis=0)
+            np.maximum(highest, -block.min(axis=0), out=highest)
+            highest *= self.calibration
+            peak = float(highest.max())
         if not math.isfinite(peak):
             return  # the output stage mutes the block
         if peak <= self.threshold and self.gain >= 1.0:
@@ -74,14 +73,10 @@ class Limiter:
         target = 1.0 if peak <= self.threshold else self.threshold / peak
         new = min(target, self.gain + frames * self._release_per_frame, 1.0)
         curve = self._curve[:frames]
-        if new < self.gain:
-            ramp = min(self._attack_frames, frames)
-            curve[:] = new
-            np.multiply(self._index[:ramp], np.float32((new - self.gain) / ramp), out=curve[:ramp])
-            curve[:ramp] += np.float32(self.gain)
-        else:
-            np.multiply(self._index[:frames], np.float32((new - self.gain) / frames), out=curve)
-            curve += np.float32(self.gain)
+        ramp = min(self._attack_frames, frames) if new < self.gain else frames
+        curve[ramp:] = new
+        np.multiply(self._index[:ramp], np.float32((new - self.gain) / ramp), out=curve[:ramp])
+        curve[:ramp] += np.float32(self.gain)
         block *= curve[:, None]
         self.gain = new
         self.limited_blocks += 1
@@ -161,7 +156,6 @@ class Mixer:
         self.stage = OutputStage(device)
         self.levels = np.zeros(device.channels, dtype=np.float32)
         self.peak = 0.0
-        self._calibration = OutputStage.channel_gains(device).astype(np.float32)
         self._untouched_peak = min(self.limiter.threshold, float(self.stage.ceiling))
         # channels first: a max along each row is far cheaper than one down the columns
         self._magnitude = np.empty((device.channels, device.block_frames), dtype=np.float32)
@@ -188,7 +182,7 @@ class Mixer:
         """
         self.wearer.apply(block)
         levels = self._channel_peaks(block)
-        levels *= self._calibration  # calibrated peaks: rounding keeps the order of |x|
+        levels *= self.limiter.calibration  # calibrated peaks: rounding keeps the order of |x|
         loudest = float(levels.max())  # NaN when any sample is NaN: the whole chain
         if loudest <= self._untouched_peak and self.limiter.gain >= 1.0 and not self.stage.has_fir:
             self.stage.calibrate(block)

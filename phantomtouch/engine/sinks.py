@@ -144,6 +144,11 @@ class CaptureSink(_PacedSink):
         Stop recording (but keep pulling) after this many frames; None: no limit.
     wav_path : str, Path or None
         Write the recording to this float32 WAV when the sink closes.
+
+    Attributes
+    ----------
+    frames : int
+        Frames recorded so far.
     """
 
     backend = "capture"
@@ -163,14 +168,9 @@ class CaptureSink(_PacedSink):
         self.realtime = bool(realtime)
         self.max_frames = max_frames
         self._blocks: list[np.ndarray] = []
-        self._recorded = 0
+        self.frames = 0
         self._lock = threading.Lock()  # the pacer's thread records, any thread reads
         self._render: RenderFn | None = None
-
-    @property
-    def frames(self) -> int:
-        """Frames recorded so far."""
-        return self._recorded
 
     def start(self, render: RenderFn) -> None:
         self._render = render
@@ -210,11 +210,11 @@ class CaptureSink(_PacedSink):
     def _record(self, block: np.ndarray) -> None:
         keep = block.shape[0]
         if self.max_frames is not None:
-            keep = max(0, min(keep, self.max_frames - self._recorded))
+            keep = max(0, min(keep, self.max_frames - self.frames))
         if keep:
             with self._lock:
                 self._blocks.append(block[:keep].copy())
-                self._recorded += keep
+                self.frames += keep
 
     def recording(self) -> np.ndarray:
         """Everything recorded, shape (frames, channels), float32 (frame 0 = engine frame 0)."""

@@ -1,10 +1,8 @@
-"""Voices: what the audio callback renders, one block at a time (a job's voice here; a
-contact's in :mod:`phantomtouch.engine.contacts`).
-
-How they fade and render ahead: ``docs/engine.md`` ("What a voice costs the callback").
-A voice is made where its message is performed (real time in the engine process, the
-front's thread in the in-process engine); every other method runs in real time, inside
-the audio callback, except :class:`RingPool` and :class:`Workspace`, made at start-up.
+"""Voices: what the audio callback renders, one block at a time (a job's here, a
+contact's in :mod:`phantomtouch.engine.contacts`; how they render ahead and fade:
+``docs/engine.md``). A voice is made where its message is performed; every method runs
+in real time, inside the audio callback, except the constructors of :class:`RingPool`
+and :class:`Workspace` (start-up).
 """
 
 from __future__ import annotations
