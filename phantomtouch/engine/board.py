@@ -1,13 +1,5 @@
-"""The audio side of live contacts: the contacts that sound, keyed by ``(owner, contact)``.
-
-:class:`ContactBoard` builds a contact voice from a touchdown the front checked and
-computed (:class:`~phantomtouch.engine.messages.ContactDown`: gains, amplitude, transient),
-posts moves as positions (the callback computes their gains, see
-:mod:`phantomtouch.engine.contacts`), and queues releases. It checks nothing and computes
-no gains of a touchdown: that was done once, by the front. It runs where the messages are
-performed: in the engine process's audio callback (real time), or in the calling thread
-of the in-process engine, under the front's lock.
-"""
+"""The contacts that sound, keyed by ``(owner, contact)``: started from touchdowns the front
+checked and computed, moved by posted positions, released. It checks nothing."""
 
 from __future__ import annotations
 
@@ -17,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from phantomtouch.engine.commands import CommandQueue
-from phantomtouch.engine.contacts import ContactSettings, ContactVoice, Position, Target
+from phantomtouch.engine.contacts import ContactSettings, ContactVoice, Position
 from phantomtouch.engine.touchdown import contact_amplitude
 from phantomtouch.renderer.carriers import make_source
 from phantomtouch.schema.device import DeviceProfile
@@ -29,64 +21,48 @@ if TYPE_CHECKING:
 class ContactBoard:
     """Contacts that sound, and how to start, move and release them.
 
+    Every method runs where the messages are performed: real time in the engine process's
+    audio callback, or the calling thread of the in-process engine (under the front's lock).
+
     Parameters
     ----------
     device : DeviceProfile
     settings : ContactSettings
     queue : CommandQueue
         Where touchdowns and releases go.
+
+    Attributes
+    ----------
+    attack_frames, release_frames : int
+        ``settings.attack_s`` and ``settings.release_s`` in frames (the latter >= 1).
     """
 
     def __init__(self, device: DeviceProfile, settings: ContactSettings, queue: CommandQueue):
         self.device = device
-        self.settings = settings
         self._queue = queue
         self._contacts: dict[tuple[str, str], ContactVoice] = {}
         self._serials = itertools.count(1)
-        sample_rate_hz = device.sample_rate_hz
-        self.attack_frames = round(settings.attack_s * sample_rate_hz)
-        self.release_frames = max(1, round(settings.release_s * sample_rate_hz))
+        self.attack_frames = round(settings.attack_s * device.sample_rate_hz)
+        self.release_frames = max(1, round(settings.release_s * device.sample_rate_hz))
 
-    def __len__(self) -> int:
-        return len(self._contacts)
-
-    def voice(self, down: ContactDown) -> ContactVoice:
-        """The voice of a touchdown (real time: a sine source, or a noise loop handed over
-        before; LookupError for a loop that was not).
+    def down(self, down: ContactDown, first_frame: int) -> None:
+        """Start a touchdown's voice at ``first_frame`` (``down.frame``, or the next block's
+        when that is None); a contact already sounding under its id is released.
 
         Raises
         ------
         LookupError
             The carrier's noise loop was not handed to this process.
         """
-        unit = down.unit_gains
-        target = Target(
-            serial=next(self._serials),
-            x_cm=down.x_cm,
-            y_cm=down.y_cm,
-            gains=unit * np.float32(down.amplitude),
-            unit_gains=unit,
-            amplitude=down.amplitude,
-            frame=down.frame,
+        source = make_source(down.carrier, self.device.sample_rate_hz)
+        voice = ContactVoice(
+            down, next(self._serials), source, self.attack_frames, self.release_frames
         )
-        return ContactVoice(
-            owner=down.owner,
-            contact=down.contact,
-            source=make_source(down.carrier, self.device.sample_rate_hz),
-            target=target,
-            attack_frames=self.attack_frames,
-            release_frames=self.release_frames,
-            law=down.law,
-            down_burst=down.burst,
-        )
-
-    def down(self, voice: ContactVoice, first_frame: int, asap: bool) -> None:
-        """Start a voice; a contact already sounding under its id is released."""
-        key = (voice.owner, voice.contact)
+        key = (down.owner, down.contact)
         old = self._contacts.get(key)
-        self._queue.push_start(voice, first_frame, asap)
+        self._queue.push_start(voice, first_frame, down.frame is None)
         if old is not None:
-            self._queue.push_release(old, voice.down_target.frame)
+            self._queue.push_release(old, down.frame)
         self._contacts[key] = voice
 
     def post_checked(

@@ -248,7 +248,7 @@ def serve(
         slots,
         status,
     )
-    core.on_block(intake.run)
+    core.scheduler.intake = intake.run
     gc.freeze()  # what start-up made is never scanned again: collections stay short
     if not _wait_for_start(intake):
         core.close(fade=False)

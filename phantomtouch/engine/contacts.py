@@ -1,51 +1,25 @@
-"""Live contacts: a hand touching the forearm, moved by the newest position.
-
-Each contact (a client's id for one finger or hand) is a :class:`ContactVoice`. The control
-side (:mod:`phantomtouch.engine.board`) checks a position and posts it, as a
-:class:`Position`, in the voice's one-slot mailbox: the newest position replaces the
-target, latest wins, nothing queues up. At the start of a block the callback takes the
-newest position of every contact that moved and turns them all into channel gains (the
-renderer's phantom gains, power law by default, projected onto the layout) with one
-vectorised call, :class:`ContactGains`: a stream of moves costs the sender only the post,
-and the gains are computed once per block however many moves arrived. Every block the
-callback ramps the gains linearly from where the last block ended to the newest target,
-
-    g(i) = g_prev + (g_target - g_prev) (i + 1) / block_frames,
-
-so a move never steps by more than one block's ramp (no zipper noise).
-
-Touchdown fades in over ``attack_s``; lift-off fades out linearly over ``release_s`` from
-the level reached, so the contact is silent at most ``release_s`` after ``up``.
-
-Impact transients
------------------
-With a normal velocity, touchdown (and lift-off) adds a decaying sinusoid at the contact's
-position, the impact model of Okamura, Cutkosky and Dennerlein (IEEE/ASME Trans.
-Mechatronics 2001): ``A(v) exp(-t / transient_decay_s) sin(2 pi transient_freq_hz t)``,
-cut after 7 time constants (0.1 % left). ``A(v)`` grows linearly with ``|v|`` up to
-``transient_full_velocity_m_s`` and is then held at the amplitude of a sine of relative
-intensity ``transient_intensity`` (1 = the device's ``safety.max_level_db``). Without a
-velocity there is no transient and it costs nothing.
-
-Where it runs: :class:`ContactSettings` is checked by the front (non real time); a
-:class:`ContactVoice`'s methods run in real time, inside the audio callback, except its
-mailbox, which the side that posts moves writes.
+"""Live contacts: a hand touching the forearm, moved by the newest position, struck by
+an impact transient (how: ``docs/engine.md``, "Live contacts"). :class:`ContactSettings`
+is checked by the front; a :class:`ContactVoice` runs in real time, inside the audio
+callback, except its mailbox, which the side that posts moves writes.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from phantomtouch.engine.checks import check_range
+from phantomtouch.engine.checks import check_int, check_range
 from phantomtouch.engine.voices import RingPool, Voice, Workspace
-from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.carriers import CarrierSource
 from phantomtouch.renderer.gains import gains_for_points
 from phantomtouch.renderer.geometry import Geometry
-from phantomtouch.schema.device import DeviceProfile
+
+if TYPE_CHECKING:
+    from phantomtouch.engine.messages import ContactDown
 
 
 @dataclass(frozen=True)
@@ -87,9 +61,7 @@ class ContactSettings:
             "transient_full_velocity_m_s", self.transient_full_velocity_m_s, 0.01, 10.0, "m/s"
         )
         check_range("transient_intensity", self.transient_intensity, 0.0, 1.0, "")
-        if isinstance(self.max_contacts, bool) or not isinstance(self.max_contacts, int):
-            raise ParameterError(f"max_contacts={self.max_contacts!r} must be an integer")
-        check_range("max_contacts", self.max_contacts, 1, 4096, "")
+        check_int("max_contacts", self.max_contacts, 1, 4096)
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,59 +87,49 @@ class Position:
     frame: int | None
 
 
-@dataclass(frozen=True, slots=True)
-class Target(Position):
-    """A position with its channel gains: a touchdown's.
-
-    Attributes
-    ----------
-    gains : ndarray, shape (channels,), float32
-        Phantom gains of the position times the contact's amplitude.
-    unit_gains : ndarray, shape (channels,), float32
-        Phantom gains of the position alone (for transients).
-    """
-
-    gains: np.ndarray
-    unit_gains: np.ndarray
-
-
 class ContactVoice(Voice):
     """One live contact: a carrier at a moving phantom position.
 
-    Built on the control side by :class:`~phantomtouch.engine.board.ContactBoard`; after
-    that the control side only writes :attr:`mailbox`, a :class:`Position`, and the
-    callback applies it through :meth:`pending` and :meth:`retarget`.
+    Built by :class:`~phantomtouch.engine.board.ContactBoard`; after that the side that
+    posts moves only writes :attr:`mailbox`, a :class:`Position`, and the callback applies
+    it (:func:`retarget_contacts`). Its gains ramp linearly across each block from where
+    the last block ended to the newest target.
+
+    Parameters
+    ----------
+    down : ContactDown
+        The touchdown, checked and computed by the front.
+    serial : int
+        Serial of its first position (see :class:`Position`).
+    source : CarrierSource
+        The carrier's samples.
+    attack_frames, release_frames : int, >= 0 and >= 1
+        Lengths of the fade-in on touchdown and of the fade-out on lift-off.
     """
 
     kind = "contact"
 
     def __init__(
         self,
-        *,
-        owner: str,
-        contact: str,
+        down: ContactDown,
+        serial: int,
         source: CarrierSource,
-        target: Target,
         attack_frames: int,
         release_frames: int,
-        law: str,
-        down_burst: np.ndarray | None,
     ) -> None:
         super().__init__(release_frames)
-        self.owner = owner
-        self.contact = contact
-        self.law = law
-        self.mailbox: Position = target
-        self.down_target = target
+        self.key = (down.owner, down.contact)
+        self.place = (down.x_cm, down.y_cm, down.amplitude)
+        self.law = down.law
+        self.mailbox = Position(serial, down.x_cm, down.y_cm, down.amplitude, down.frame)
         self._source = source
         self._attack_frames = int(attack_frames)
-        self._applied = target.serial
-        self._gains = target.gains
-        self._target = target.gains
-        self._unit = target.unit_gains
-        self._set_channels(np.flatnonzero(target.gains))
+        self._applied = serial
+        self._unit = down.unit_gains
+        self._gains = self._target = down.unit_gains * np.float32(down.amplitude)
+        self._set_channels(np.flatnonzero(self._gains))
         self._carrier_frames = 0
-        self._down_burst = down_burst
+        self._down_burst = down.burst
         self._bursts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
 
     def _set_channels(self, channels: np.ndarray) -> None:
@@ -193,7 +155,7 @@ class ContactVoice(Voice):
     def begin(self, frame: int, pool: RingPool) -> None:
         super().begin(frame, pool)
         if self._down_burst is not None:
-            self._add_burst(self._down_burst, self._unit, frame)
+            self._add_burst(self._down_burst, frame)
             self._down_burst = None
 
     def release(
@@ -201,11 +163,12 @@ class ContactVoice(Voice):
     ) -> None:
         super().release(frame, None, fade_frames)
         if isinstance(transient, np.ndarray):
-            self._add_burst(transient, self._unit, frame)
+            self._add_burst(transient, frame)
 
-    def _add_burst(self, burst: np.ndarray, unit: np.ndarray, frame: int) -> None:
-        channels = np.flatnonzero(unit)
-        self._bursts.append((burst, unit[channels], channels, frame))
+    def _add_burst(self, burst: np.ndarray, frame: int) -> None:
+        """Play ``burst`` from ``frame`` at the position's unit gains."""
+        channels = np.flatnonzero(self._unit)
+        self._bursts.append((burst, self._unit[channels], channels, frame))
 
     def pending(self, block_end: int) -> Position | None:
         """The newest position, when it is not applied yet and due before ``block_end``."""
@@ -217,7 +180,7 @@ class ContactVoice(Voice):
     def retarget(
         self, position: Position, unit_gains: np.ndarray, block_start: int, work: Workspace
     ) -> None:
-        """Ramp towards ``position`` in the block from ``block_start`` (audio callback).
+        """Ramp towards ``position`` in the block from ``block_start``.
 
         ``unit_gains``, shape (channels,), float32, are the phantom gains of the position.
         """
@@ -314,26 +277,18 @@ class ContactVoice(Voice):
         self._bursts = keep
 
 
-class ContactGains:
-    """Applies the newest positions of all moved contacts with one vectorised call.
-
-    Parameters
-    ----------
-    device : DeviceProfile
-    """
-
-    def __init__(self, device: DeviceProfile) -> None:
-        self._geometry = Geometry.for_device(device)
-
-    def apply(self, voices: list[Voice], block_start: int, block_end: int, work: Workspace) -> None:
-        """Retarget every contact among ``voices`` with a position due before ``block_end``."""
-        due: dict[str, list[tuple[ContactVoice, Position]]] = {}
-        for voice in voices:
-            if isinstance(voice, ContactVoice) and (position := voice.pending(block_end)):
-                due.setdefault(voice.law, []).append((voice, position))
-        for law, moved in due.items():
-            points = np.array([(p.x_cm, p.y_cm) for _, p in moved], dtype=np.float64)
-            unit, _ = gains_for_points(self._geometry, points, law=law, mode="2d")
-            unit32 = unit.astype(np.float32)
-            for row, (voice, position) in enumerate(moved):
-                voice.retarget(position, unit32[row], block_start, work)
+def retarget_contacts(
+    geometry: Geometry, voices: list[Voice], block_start: int, block_end: int, work: Workspace
+) -> None:
+    """Retarget every contact among ``voices`` with a position due before ``block_end``,
+    the gains of all of them computed in one vectorised call per law (real time)."""
+    due: dict[str, list[tuple[ContactVoice, Position]]] = {}
+    for voice in voices:
+        if isinstance(voice, ContactVoice) and (position := voice.pending(block_end)):
+            due.setdefault(voice.law, []).append((voice, position))
+    for law, moved in due.items():
+        points = np.array([(p.x_cm, p.y_cm) for _, p in moved], dtype=np.float64)
+        unit, _ = gains_for_points(geometry, points, law=law, mode="2d")
+        unit32 = unit.astype(np.float32)
+        for row, (voice, position) in enumerate(moved):
+            voice.retarget(position, unit32[row], block_start, work)

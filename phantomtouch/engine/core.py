@@ -1,16 +1,5 @@
-"""The audio side of the engine: sink, scheduler, voices, and the commands that reach them.
-
-:class:`Core` is what plays: it owns the sink, the sample clock, the bounded command
-queue, the scheduler that the audio callback runs and the voices it renders. It keeps no
-job table and makes no admission decisions: those belong to the control side
-(:mod:`phantomtouch.engine.front`), which checks every argument before a command gets
-here. The in-thread :class:`~phantomtouch.engine.Engine` calls a core directly; the
-engine process (:mod:`phantomtouch.engine.child`) calls its core from inside the audio
-callback, so that there nothing but the callback does Python work.
-
-What the callback did comes back as typed events (:meth:`Core.events`,
-:mod:`phantomtouch.engine.messages`: ``Started``, ``Released``, ``Ended``, ``Cancelled``,
-``StoppedAll``), which cross a process boundary as they are.
+"""The audio side's core: the sink, sample clock, command queue, scheduler and voices of
+one engine (its place among the engine's parts: ``docs/engine.md``).
 
 Every method says where it runs: "real time" (inside the audio callback in the engine
 process; in the calling thread of the in-process engine) or "non real time".
@@ -20,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,14 +16,13 @@ import numpy as np
 from phantomtouch.engine.board import ContactBoard
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue
-from phantomtouch.engine.contacts import ContactSettings, ContactVoice
+from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
 from phantomtouch.engine.prerender import Prerendered
-from phantomtouch.engine.scheduler import Scheduler
-from phantomtouch.engine.sinks import Sink
-from phantomtouch.engine.voices import DONE, JobVoice, PatternVoice, PrerenderedVoice
+from phantomtouch.engine.scheduler import Scheduler, load_percentiles
+from phantomtouch.engine.sinks import NullSink, Sink
+from phantomtouch.engine.voices import DONE, PatternVoice
 from phantomtouch.errors import DeviceError
-from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 
@@ -53,15 +40,11 @@ class Core:
         Owned from now on (closed by :meth:`close`); its sample rate, block size and
         channels must be the device's.
     settings : ContactSettings
+        How live contacts start, end and strike.
     queue_capacity : int, >= 1
         Voices that may wait to start at once (see :class:`CommandQueue`).
-    rings : int, >= 0
-        Render-ahead rings for pattern voices.
-    chunk_frames : int, >= 0
-        Frames a pattern voice renders ahead at a time; 0 renders every block directly.
-    clock : SampleClock
-    render_loads : ndarray, shape (RENDER_TIMES,), float64, optional
-        Where the scheduler keeps its render loads (see :class:`Scheduler`).
+    rings, chunk_frames, clock, render_loads
+        As for :class:`Scheduler`.
 
     Raises
     ------
@@ -104,10 +87,7 @@ class Core:
         )
         self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
         self.running = False
-        self.geometry = Geometry.for_device(device)
-        self._jobs: dict[str, JobVoice] = {}
-
-    # -- life cycle (non real time) ---------------------------------------------------
+        self._jobs: dict[str, PatternVoice] = {}
 
     def start(self) -> None:
         """Anchor the clock and start the sink (the callback runs from now on); non real
@@ -130,13 +110,11 @@ class Core:
             time.sleep(2 * block_s)  # let the last (silent) block reach the output
         self.sink.close()
 
-    # -- commands (checked by the front; real time) -------------------------------------
-
     def widen(self, plan: Plan) -> Plan:
         """A plan sent without device and geometry (``slim``), given this core's."""
         if plan.device is not None:
             return plan
-        return dataclasses.replace(plan, device=self.device, geometry=self.geometry)
+        return dataclasses.replace(plan, device=self.device, geometry=self.scheduler.geometry)
 
     def start_job(
         self,
@@ -154,16 +132,8 @@ class Core:
         LookupError
             The plan's noise loop was not handed to this process (engine process).
         """
-        release_frames = self.board.release_frames
-        voice: JobVoice
-        if prerendered is None:
-            voice = PatternVoice(plan, job_id=job_id, owner=owner, release_frames=release_frames)
-        else:
-            voice = PrerenderedVoice(
-                plan, prerendered, job_id=job_id, owner=owner, release_frames=release_frames
-            )
-        first = self.scheduler.next_block_frame() if frame is None else frame
-        self.queue.push_start(voice, first, frame is None)
+        voice = PatternVoice(plan, job_id, owner, self.board.release_frames, prerendered)
+        self.queue.push_start(voice, self._first_frame(frame), frame is None)
         self._jobs[job_id] = voice
 
     def release_job(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
@@ -173,24 +143,23 @@ class Core:
             self.queue.push_release(voice, frame, fade_frames=fade_frames)
 
     def contact_down(self, down: ContactDown) -> None:
-        """Build and start a touchdown's voice (real time; LookupError for a noise loop
-        that was not handed over)."""
-        voice = self.board.voice(down)
-        frame = voice.down_target.frame
-        first = self.scheduler.next_block_frame() if frame is None else frame
-        self.board.down(voice, first, frame is None)
+        """Build and start a touchdown's voice; real time.
+
+        Raises
+        ------
+        LookupError
+            The carrier's noise loop was not handed to this process (engine process).
+        """
+        self.board.down(down, self._first_frame(down.frame))
+
+    def _first_frame(self, frame: int | None) -> int:
+        """``frame``, or for None the first frame of the next block."""
+        return self.scheduler.next_block_frame() if frame is None else frame
 
     def stop_all(self) -> None:
         """Void every command so far; everything that sounds fades out (real time)."""
         self.queue.mark_stop_all()
         self.board.clear()
-
-    def on_block(self, before: Callable[[], None] | None) -> None:
-        """Call ``before()`` at the start of every block, before its commands apply (non
-        real time, before the sink starts)."""
-        self.scheduler.intake = before
-
-    # -- what happened --------------------------------------------------------------------
 
     def events(self) -> list[Event]:
         """What the callback did since the last call (real time in the engine process; the
@@ -198,42 +167,19 @@ class Core:
         raw = self.scheduler.events
         out: list[Event] = []
         while raw:
-            event = raw.popleft()
-            kind = event[0]
+            kind, *rest = raw.popleft()
             if kind == "stop_all":
-                out.append(StoppedAll(event[1]))
+                out.append(StoppedAll(rest[0]))
                 continue
-            voice, frame = event[1], event[2]
-            if isinstance(voice, JobVoice):
-                key: Any = voice.job_id
-                what = "job"
-                if kind in ("end", "cancel"):
-                    self._jobs.pop(voice.job_id, None)
-            else:
-                key = (voice.owner, voice.contact)
-                what = "contact"
+            voice, frame = rest[0], rest[1]
             if kind == "start":
-                if isinstance(voice, ContactVoice):
-                    target = voice.down_target
-                    out.append(
-                        Started(
-                            what,
-                            key,
-                            frame,
-                            bool(event[3]),
-                            target.x_cm,
-                            target.y_cm,
-                            target.amplitude,
-                        )
-                    )
-                else:
-                    out.append(Started(what, key, frame, bool(event[3])))
+                out.append(Started(voice.kind, voice.key, frame, bool(rest[2]), *voice.place))
             elif kind == "release":
-                out.append(Released(what, key, frame, voice.silent_from))
-            elif kind == "end":
-                out.append(Ended(what, key, frame))
+                out.append(Released(voice.kind, voice.key, frame, voice.silent_from))
             else:
-                out.append(Cancelled(what, key, frame))
+                if isinstance(voice, PatternVoice):
+                    self._jobs.pop(voice.job_id, None)
+                out.append((Ended if kind == "end" else Cancelled)(voice.kind, voice.key, frame))
         return out
 
     def figures(self) -> dict[str, Any]:
@@ -241,7 +187,7 @@ class Core:
         consistent-enough look)."""
         scheduler = self.scheduler
         mixer = scheduler.mixer
-        load_p99, load_max = scheduler.render_load()
+        load_p99, load_max = load_percentiles(scheduler.render_loads)
         return {
             "now_frames": scheduler.frames,
             "active_voices": scheduler.active_voices,
@@ -265,16 +211,26 @@ def measure_costs(
 ) -> tuple[float, float, float]:
     """What a pattern voice costs the audio callback, as fractions of a block's playing time.
 
-    Returns ``(voice_cost, start_cost, prerendered_cost)``: the render load one sounding
-    voice adds (``voices`` copies of ``plan`` against none, over at least 64 blocks and two
-    chunks' worth, once every voice has refilled its ring), what one
-    voice adds to the block it begins in (``voices`` begin in one block, against an idle
-    block), and what one sounding prerendered voice adds (as the first). Each is the
-    median of three tries, at least 1e-4 (prerendered voices 1e-5). Non real time: run
-    before the sink starts.
-    """
-    from phantomtouch.engine.sinks import NullSink
+    Non real time: run before the sink starts.
 
+    Parameters
+    ----------
+    device : DeviceProfile
+    plan : Plan
+        The pattern timed (on ``device``).
+    chunk_frames : int, >= 0
+        Frames a voice renders ahead at a time, as the engine will play.
+    voices : int, >= 1
+        Voices sounding or beginning at once in each measurement.
+
+    Returns
+    -------
+    tuple of float
+        ``(voice_cost, start_cost, prerendered_cost)``: the render load one sounding voice
+        adds (over at least 64 blocks and two chunks' worth, rings refilled), what one
+        adds to the block it begins in, and what one sounding prerendered voice adds;
+        each the median of three tries, at least 1e-4 (prerendered voices 1e-5).
+    """
     block = np.zeros((device.block_frames, device.channels), dtype=np.float32)
     period_s = device.block_frames / device.sample_rate_hz
     # steady state: every voice has refilled after its first frames, and the blocks timed
@@ -294,48 +250,36 @@ def measure_costs(
         )
         core.scheduler.clocked = False
         render = core.scheduler.render
-        for _ in range(8):
-            render(block)
-        began = time.perf_counter()
-        render(block)
-        idle_s = time.perf_counter() - began
+
+        def block_s(blocks: int) -> float:
+            """Seconds each of the next ``blocks`` blocks takes to render."""
+            began = time.perf_counter()
+            for _ in range(blocks):
+                render(block)  # noqa: B023 (called before the loop moves on)
+            return (time.perf_counter() - began) / blocks
+
+        block_s(8)
+        idle_s = block_s(1)
         for k in range(voices):
             core.start_job(f"start-{k}", plan, None, None)
-        began = time.perf_counter()
-        render(block)
-        starting.append((time.perf_counter() - began - idle_s) / voices / period_s)
-        timings = []
-        for count in (0, voices):
-            if count:
-                for k in range(count):
-                    core.start_job(f"cost-{k}", plan, None, None)
-                for _ in range(warm):
-                    render(block)
-            else:
-                core.stop_all()
-                for _ in range(64):
-                    render(block)
-            began = time.perf_counter()
-            for _ in range(timed):
-                render(block)
-            timings.append((time.perf_counter() - began) / timed)
-        sounding.append((timings[1] - timings[0]) / voices / period_s)
+        starting.append((block_s(1) - idle_s) / voices / period_s)
         core.stop_all()
-        for _ in range(64):
-            render(block)
-        frames = 80 * device.block_frames  # the prerendered outlasts the blocks timed
-        prerendered = Prerendered(samples=np.zeros((frames, device.channels), dtype=np.float32))
-        short = dataclasses.replace(plan, frames=frames)
+        block_s(64)
+        silent_s = block_s(timed)
         for k in range(voices):
-            core.start_job(f"prerendered-{k}", short, None, None, prerendered)
-        for _ in range(8):
-            render(block)
-        began = time.perf_counter()
-        for _ in range(64):
-            render(block)
-        prerendered_voices.append(
-            ((time.perf_counter() - began) / 64 - timings[0]) / voices / period_s
-        )
+            core.start_job(f"cost-{k}", plan, None, None)
+        block_s(warm)
+        sounding.append((block_s(timed) - silent_s) / voices / period_s)
+        core.stop_all()
+        block_s(64)
+        frames = 80 * device.block_frames  # the prerendered outlasts the blocks timed
+        samples = Prerendered(np.zeros((frames, device.channels), dtype=np.float32))
+        for k in range(voices):
+            core.start_job(
+                f"pre-{k}", dataclasses.replace(plan, frames=frames), None, None, samples
+            )
+        block_s(8)
+        prerendered_voices.append((block_s(64) - silent_s) / voices / period_s)
     return (
         max(1e-4, float(np.median(sounding))),
         max(1e-4, float(np.median(starting))),

@@ -1,18 +1,7 @@
-"""After the voices: wearer gains, safety limiter, calibration, NaN guard, ceiling, meters.
+"""The chain after the voices: wearer gains, safety limiter, output stage, meters.
 
-The voices add into one float32 block. :class:`WearerGains` scales each channel by the
-wearer's gain (1 on every channel unless a :class:`~phantomtouch.engine.messages.SetWearerGains`
-set another), ramping a change across one block. Per-channel gains commute with the
-calibration's, so this is the wearer's offset applied after the calibration: the limiter
-then sees the fitted, calibrated peaks. :class:`Limiter` then scales the whole block (all
-channels alike, so the phantom's balance between actuators is kept) when its calibrated
-peak exceeds ``threshold_ratio`` times the ceiling, and is exactly transparent otherwise.
-The renderer's :class:`~phantomtouch.renderer.OutputStage` follows: calibration, optional
-FIR, NaN/Inf muting and the hard clip at the ceiling as the last line — the same stage an
-offline render goes through, so a pattern played alone arrives with the offline samples.
-
-Where it runs: construction is non real time; every other method runs in real time,
-inside the audio callback.
+Construction is non real time; every other method runs in real time, inside the audio
+callback, unless its docstring says otherwise.
 """
 
 from __future__ import annotations
@@ -51,11 +40,13 @@ class Limiter:
         Gain at the end of the last block.
     limited_blocks : int
         Blocks whose gain was below 1 anywhere.
+    calibration : ndarray, shape (channels,), float32
+        The calibration's gain per channel.
     """
 
     def __init__(self, device: DeviceProfile) -> None:
         self.threshold = THRESHOLD_RATIO * device.safety.ceiling
-        self._calibration = OutputStage.channel_gains(device).astype(np.float32)
+        self.calibration = OutputStage.channel_gains(device).astype(np.float32)
         self._attack_frames = max(1, round(ATTACK_S * device.sample_rate_hz))
         self._release_per_frame = 1.0 / (RELEASE_S * device.sample_rate_hz)
         self._curve = np.empty(device.block_frames, dtype=np.float32)
@@ -63,20 +54,17 @@ class Limiter:
         self.gain = 1.0
         self.limited_blocks = 0
 
-    def peak(self, block: np.ndarray) -> float:
-        """Largest absolute sample of ``block`` after calibration (NaN if any is NaN)."""
-        highest = block.max(axis=0)
-        np.maximum(highest, -block.min(axis=0), out=highest)
-        highest *= self._calibration
-        return float(highest.max())
-
     def process(self, block: np.ndarray, peak: float | None = None) -> None:
         """Limit ``block`` (frames, channels), float32, in place.
 
-        ``peak`` is the block's :meth:`peak` when the caller has it already.
+        ``peak`` is the block's largest calibrated absolute sample (NaN if any sample is
+        NaN) when the caller has it already.
         """
         if peak is None:
-            peak = self.peak(block)
+            highest = block.max(axis=0)
+            np.maximum(highest, -block.min(axis=0), out=highest)
+            highest *= self.calibration
+            peak = float(highest.max())
         if not math.isfinite(peak):
             return  # the output stage mutes the block
         if peak <= self.threshold and self.gain >= 1.0:
@@ -85,14 +73,10 @@ class Limiter:
         target = 1.0 if peak <= self.threshold else self.threshold / peak
         new = min(target, self.gain + frames * self._release_per_frame, 1.0)
         curve = self._curve[:frames]
-        if new < self.gain:
-            ramp = min(self._attack_frames, frames)
-            curve[:] = new
-            np.multiply(self._index[:ramp], np.float32((new - self.gain) / ramp), out=curve[:ramp])
-            curve[:ramp] += np.float32(self.gain)
-        else:
-            np.multiply(self._index[:frames], np.float32((new - self.gain) / frames), out=curve)
-            curve += np.float32(self.gain)
+        ramp = min(self._attack_frames, frames) if new < self.gain else frames
+        curve[ramp:] = new
+        np.multiply(self._index[:ramp], np.float32((new - self.gain) / ramp), out=curve[:ramp])
+        curve[:ramp] += np.float32(self.gain)
         block *= curve[:, None]
         self.gain = new
         self.limited_blocks += 1
@@ -101,8 +85,7 @@ class Limiter:
 class WearerGains:
     """The wearer's per-channel gains, changed at a block boundary and ramped across it.
 
-    :meth:`set` (real time, from an applier, any thread of the audio side) leaves the new
-    gains for the next block; :meth:`apply` (real time, in the callback) scales a block:
+    :meth:`set` leaves the new gains for the next block; :meth:`apply` scales a block:
     not at all while every gain is 1, by the gains while they hold, and in the block where
     they change by a line from the old gains to the new, reached on the block's last
     frame (sample ``n`` of ``frames`` gets ``old + (new - old) * (n + 1) / frames``).
@@ -126,7 +109,7 @@ class WearerGains:
 
     def set(self, gains: np.ndarray) -> None:
         """Take ``gains`` (shape (channels,), float32, finite, > 0, checked by the host)
-        from the next block on."""
+        from the next block on (real time, from an applier: any thread of the audio side)."""
         self._pending = gains
 
     def apply(self, block: np.ndarray) -> None:
@@ -148,9 +131,16 @@ class WearerGains:
 class Mixer:
     """The chain after the voices, and the level meters.
 
+    The voices' sum goes through :class:`WearerGains`, the :class:`Limiter` (all channels
+    alike, keeping the phantom's balance) and the renderer's
+    :class:`~phantomtouch.renderer.OutputStage` (calibration, optional FIR, NaN/Inf muting,
+    the hard clip at the ceiling): the stage of an offline render, so a pattern played
+    alone arrives with the offline samples.
+
     Parameters
     ----------
     device : DeviceProfile
+        Its safety ceiling, calibration, channels and block size.
 
     Attributes
     ----------
@@ -166,7 +156,6 @@ class Mixer:
         self.stage = OutputStage(device)
         self.levels = np.zeros(device.channels, dtype=np.float32)
         self.peak = 0.0
-        self._calibration = OutputStage.channel_gains(device).astype(np.float32)
         self._untouched_peak = min(self.limiter.threshold, float(self.stage.ceiling))
         # channels first: a max along each row is far cheaper than one down the columns
         self._magnitude = np.empty((device.channels, device.block_frames), dtype=np.float32)
@@ -178,6 +167,7 @@ class Mixer:
 
     @property
     def limited_blocks(self) -> int:
+        """Blocks the limiter turned down."""
         return self.limiter.limited_blocks
 
     def finish(self, block: np.ndarray) -> None:
@@ -192,7 +182,7 @@ class Mixer:
         """
         self.wearer.apply(block)
         levels = self._channel_peaks(block)
-        levels *= self._calibration  # calibrated peaks: rounding keeps the order of |x|
+        levels *= self.limiter.calibration  # calibrated peaks: rounding keeps the order of |x|
         loudest = float(levels.max())  # NaN when any sample is NaN: the whole chain
         if loudest <= self._untouched_peak and self.limiter.gain >= 1.0 and not self.stage.has_fir:
             self.stage.calibrate(block)

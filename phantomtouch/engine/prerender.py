@@ -1,7 +1,8 @@
 """Short plans rendered whole before they play, so the audio callback only adds samples.
 
 :func:`prerender` runs in the requesting thread with the renderer the voice would use,
-so the samples are the voice's, bit for bit (docs/engine.md, What a voice costs).
+so the samples are the voice's, bit for bit (docs/engine.md, What a voice costs); the
+callback's :class:`~phantomtouch.engine.voices.PatternVoice` adds slices of them.
 """
 
 from __future__ import annotations

@@ -1,19 +1,7 @@
 """The audio callback's side of the engine: commands in, one block out.
 
-Callback contract (:meth:`Scheduler.render`): ``out`` is the sink's float32 buffer,
-shape (frames, channels); it is filled entirely. The callback never waits: it pops
-commands from the queue without a lock, applies each at the sample its frame asks for
-(a command whose frame has passed is applied at once and counted in ``late_commands``),
-renders the voices into ``out``, and runs the mixer. It allocates only small per-block
-temporaries, logs nothing and reports to the control side through counters and an event
-deque that the control side drains.
-
-Events are tuples: ``("start", voice, frame, late)``, ``("release", voice, frame)``,
-``("end", voice, frame)`` (silent from ``frame``), ``("cancel", voice, frame)`` (voided
-before it started) and ``("stop_all", frame)``.
-
-Where it runs: every method runs in real time (inside the audio callback) unless its
-docstring names another thread; construction is non real time.
+Every method runs in real time (inside the audio callback) unless its docstring names
+another thread; construction is non real time.
 """
 
 from __future__ import annotations
@@ -28,19 +16,26 @@ import numpy as np
 
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue, StartCommand
-from phantomtouch.engine.contacts import ContactGains
+from phantomtouch.engine.contacts import retarget_contacts
 from phantomtouch.engine.mixer import Mixer
 from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
 from phantomtouch.errors import ParameterError
+from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.schema.device import DeviceProfile
 
 RENDER_TIMES = 4096
-"""Render times the scheduler keeps for :meth:`Scheduler.render_load` (the last 11 s at
-128-frame blocks)."""
+"""Render times the scheduler keeps (the last 11 s at 128-frame blocks)."""
 
 
 class Scheduler:
     """Applies commands and renders blocks; owned by the audio callback.
+
+    :meth:`render` fills the sink's buffer entirely and never waits on another thread: it
+    pops commands without the queue's lock (in the engine process the callback pushes
+    them too, taking that lock, which no other thread takes there), applies each at the
+    sample its frame asks for (one whose frame has passed at once, counted in
+    ``late_commands``), renders the voices and runs the mixer. It allocates only small
+    per-block temporaries, logs nothing and reports through counters and :attr:`events`.
 
     Parameters
     ----------
@@ -60,14 +55,14 @@ class Scheduler:
     ----------
     frames : int
         Frames rendered so far: the first frame of the next block (``now_frames``).
-    drained_frame : int
-        First frame of the last block whose commands were taken (-1 before the first).
     active_voices : int
     callback_errors : int
         Blocks replaced by silence because rendering raised (the voices are dropped).
     last_error : BaseException or None
-    events : deque
-        Reports for the control side (see the module docstring).
+    events : deque of tuple
+        Reports the control side drains: ``("start", voice, frame, late)``,
+        ``("release", voice, frame)``, ``("end", voice, frame)`` (silent from ``frame``),
+        ``("cancel", voice, frame)`` (voided before it started), ``("stop_all", frame)``.
     render_loads : ndarray, shape (RENDER_TIMES,), float64
         Wall time of each of the last calls of :meth:`render` over the playing time of
         the frames it rendered (a ring; NaN where no call was timed yet). The engine
@@ -75,7 +70,8 @@ class Scheduler:
         (:func:`load_percentiles`) and the callback never does.
     intake : callable or None
         Called at the start of every block, before its commands apply: the engine
-        process takes its messages and contact positions here.
+        process takes its messages and contact positions here (set before the sink
+        starts).
     dac_delay : callable or None
         Returns the time from now until the block being rendered reaches the sound
         card's converter, s, when the sink knows it (None otherwise).
@@ -97,12 +93,12 @@ class Scheduler:
         self.clock = clock
         self.clocked = clocked
         self.mixer = Mixer(device)
-        self.contact_gains = ContactGains(device)
+        self.geometry = Geometry.for_device(device)
         self.work = Workspace(device.block_frames, device.channels)
         chunk = max(chunk_frames, device.block_frames) if chunk_frames > 0 else 0
         self.pool = RingPool(rings, chunk, device.channels)
         self.frames = 0
-        self.drained_frame = -1
+        self._drained_frame = -1
         self.active_voices = 0
         self.callback_errors = 0
         self.last_error: BaseException | None = None
@@ -123,12 +119,13 @@ class Scheduler:
 
     @property
     def late_commands(self) -> int:
+        """Commands applied after their frame had passed (any thread)."""
         return self.work.late_commands
 
     def next_block_frame(self) -> int:
         """First frame of the next block whose commands are not taken yet (any thread)."""
         frames = self.frames
-        return frames + self.block_frames if self.drained_frame == frames else frames
+        return frames + self.block_frames if self._drained_frame == frames else frames
 
     def render(self, out: np.ndarray) -> None:
         """Fill ``out`` (frames, channels), float32, with the next frames (the callback)."""
@@ -136,17 +133,6 @@ class Scheduler:
         if self.clocked:
             delay = self.dac_delay
             self.clock.observe(self.frames, began_s, None if delay is None else delay())
-        self._render_blocks(out)
-        playing_s = out.shape[0] / self.clock.sample_rate_hz
-        self.render_loads[self._timed % RENDER_TIMES] = (time.monotonic() - began_s) / playing_s
-        self._timed += 1
-
-    def render_load(self) -> tuple[float, float]:
-        """p99 and largest render load of the last ``RENDER_TIMES`` calls (any thread;
-        0 before the first call)."""
-        return load_percentiles(self.render_loads)
-
-    def _render_blocks(self, out: np.ndarray) -> None:
         step = self.block_frames
         for at in range(0, out.shape[0], step):
             block = out[at : at + step]
@@ -158,6 +144,9 @@ class Scheduler:
                 self.last_error = exc
                 self._drop_voices(self.frames)
                 self.frames += block.shape[0]
+        playing_s = out.shape[0] / self.clock.sample_rate_hz
+        self.render_loads[self._timed % RENDER_TIMES] = (time.monotonic() - began_s) / playing_s
+        self._timed += 1
 
     def _block(self, out: np.ndarray) -> None:
         start = self.frames
@@ -165,7 +154,7 @@ class Scheduler:
         if self.intake is not None:
             self.intake()
         self._apply_commands(start, end)
-        self.drained_frame = start
+        self._drained_frame = start
         waiting = self._waiting
         while waiting and waiting[0][0] < end:
             frame, _, voice = heapq.heappop(waiting)
@@ -173,7 +162,7 @@ class Scheduler:
                 self._begin(voice, frame, late=False)
         out.fill(0.0)
         if self._voices:
-            self.contact_gains.apply(self._voices, start, end, self.work)
+            retarget_contacts(self.geometry, self._voices, start, end, self.work)
             self._render_voices(out, start)
         self.mixer.finish(out)
         self.active_voices = len(self._voices)

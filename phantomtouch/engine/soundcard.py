@@ -1,19 +1,7 @@
 """The sound card sink (PortAudio through ``sounddevice``) and output device lookup.
 
-``sounddevice`` is imported only when a sound card is asked for: the engine runs without
-it (``phantomtouch[audio]`` installs it), falling back to the null sink. On Windows its
-bundled PortAudio is asked for ASIO (``SD_ENABLE_ASIO``, set before the import), so ASIO
-drivers are listed beside MME, DirectSound, WASAPI and WDM-KS.
-
-An output is named by its index, a part of its name, or ``HOSTAPI:NAME``: a host API
-(a case-insensitive part of its name, spaces ignored: ``ASIO``, ``WASAPI``, ``CoreAudio``,
-``ALSA``, ``JACK``) and a part of the device's name, e.g. ``ASIO:Focusrite``.
-
-PortAudio callback contract (:meth:`SoundDeviceSink._callback`): ``outdata`` is float32,
-shape (frames, stream channels), frames = ``block_frames``; it is filled entirely; the
-callback never blocks and never allocates beyond the engine's small per-block
-temporaries. Status flags are accumulated (``flags |= status``) and output underflows
-counted; both are read outside the callback.
+``sounddevice`` is imported only when a sound card is asked for (``phantomtouch[audio]``
+installs it); without it the engine falls back to the null sink.
 """
 
 from __future__ import annotations
@@ -35,16 +23,9 @@ from phantomtouch.schema.device import DeviceProfile
 logger = logging.getLogger(__name__)
 
 
-def device_error(exc: BaseException, action: str) -> DeviceError:
-    """The :class:`DeviceError` for a PortAudio (or ``sounddevice``) failure.
-
-    Use as ``raise device_error(exc, "cannot open ...") from exc``.
-    """
-    return DeviceError(f"{action}: {exc}")
-
-
 def _sounddevice() -> ModuleType:
-    if sys.platform == "win32":  # read once, at the import: sounddevice's bundled ASIO
+    """``sounddevice``, on Windows with its bundled PortAudio's ASIO drivers listed."""
+    if sys.platform == "win32":  # read once, at the import
         os.environ.setdefault("SD_ENABLE_ASIO", "1")
     try:
         import sounddevice
@@ -53,7 +34,7 @@ def _sounddevice() -> ModuleType:
             "sound card output needs the sounddevice package: pip install 'phantomtouch[audio]'"
         ) from exc
     except OSError as exc:  # the PortAudio library itself is missing
-        raise device_error(exc, "PortAudio is not available") from exc
+        raise DeviceError(f"PortAudio is not available: {exc}") from exc
     return sounddevice
 
 
@@ -78,7 +59,7 @@ def list_output_devices() -> list[dict[str, Any]]:
         hostapis = sd.query_hostapis()
         default_output = sd.default.device[1]
     except sd.PortAudioError as exc:
-        raise device_error(exc, "cannot list output devices") from exc
+        raise DeviceError(f"cannot list output devices: {exc}") from exc
     return [
         {
             "index": index,
@@ -135,24 +116,21 @@ def find_output_device(output: int | str | None, channels: int) -> dict[str, Any
         No such device, several match the name, or it has fewer than ``channels`` outputs.
     """
     devices = list_output_devices()
-    asked = output
+    asked, host_api = output, None
     if isinstance(output, str):
-        host_api, name = split_host_api(output, sorted({d["hostapi"] for d in devices}))
+        host_api, output = split_host_api(output, sorted({d["hostapi"] for d in devices}))
         if host_api is not None:
             devices = [d for d in devices if d["hostapi"] == host_api]
-            if not name:
-                suitable = [d for d in devices if d["max_output_channels"] >= channels]
-                if not suitable:
-                    raise DeviceError(
-                        f"output={output!r}: no {host_api} device has {channels} or more outputs"
-                    )
-                return suitable[0]
-            output = name
+            output = output or None
     if output is None:
         suitable = [d for d in devices if d["max_output_channels"] >= channels]
         if not suitable:
-            raise DeviceError(f"no output device has {channels} or more outputs")
-        return next((d for d in suitable if d["default"]), suitable[0])
+            within = "output" if host_api is None else host_api
+            raise DeviceError(
+                f"output={asked!r}: no {within} device has {channels} or more outputs"
+            )
+        # a host API alone: its first device; None: the default output first
+        return next((d for d in suitable if d["default"] and host_api is None), suitable[0])
     if isinstance(output, bool) or not isinstance(output, int | str):
         raise ParameterError(f"output={output!r} must be a device index, a name or None")
     if isinstance(output, int):
@@ -226,26 +204,24 @@ class SoundDeviceSink:
         stream_channels = int(self._map.max()) + 1 if self._map is not None else self.channels
         sd = _sounddevice()
         found = find_output_device(output, stream_channels)
-        self.device_index: int = found["index"]
-        self._name: str = found["name"]
+        self.output_device: str = found["name"]
         self._buffer = np.zeros((self.block_frames, self.channels), dtype=np.float32)
         self._render: RenderFn | None = None
-        self.flags = sd.CallbackFlags()
-        self._underruns = 0
+        self.underruns = 0
         self._dac_delay_s: float | None = None
         extra_settings = None
         if exclusive:
             if "wasapi" not in found["hostapi"].lower():
                 raise DeviceError(
-                    f"exclusive mode is WASAPI's; output device {self._name!r} is a "
-                    f"{found['hostapi']} device (name a WASAPI one: 'WASAPI:{self._name}')"
+                    f"exclusive mode is WASAPI's; output device {found['name']!r} is a "
+                    f"{found['hostapi']} device (name a WASAPI one: 'WASAPI:{found['name']}')"
                 )
             extra_settings = sd.WasapiSettings(exclusive=True)
         try:
             self._stream = sd.OutputStream(
                 samplerate=self.sample_rate_hz,
                 blocksize=self.block_frames,
-                device=self.device_index,
+                device=found["index"],
                 channels=stream_channels,
                 dtype="float32",
                 latency=latency,
@@ -253,7 +229,7 @@ class SoundDeviceSink:
                 extra_settings=extra_settings,
             )
         except (sd.PortAudioError, ValueError) as exc:
-            raise device_error(exc, f"cannot open output device {self._name!r}") from exc
+            raise DeviceError(f"cannot open output device {self.output_device!r}: {exc}") from exc
 
     @staticmethod
     def _check_map(channel_map: Sequence[int] | None, channels: int) -> np.ndarray | None:
@@ -276,14 +252,6 @@ class SoundDeviceSink:
         raise ParameterError(f"latency={latency!r} must be 'low', 'high' or seconds in (0, 1]")
 
     @property
-    def output_device(self) -> str | None:
-        return self._name
-
-    @property
-    def underruns(self) -> int:
-        return self._underruns
-
-    @property
     def output_latency_s(self) -> float:
         return float(self._stream.latency)
 
@@ -293,11 +261,11 @@ class SoundDeviceSink:
         return self._dac_delay_s
 
     def _callback(self, outdata: np.ndarray, frames: int, time_info: Any, status: Any) -> None:
+        """PortAudio's callback (real time): fill ``outdata``, float32, shape (frames,
+        stream channels), entirely; count output underflows."""
         self._dac_delay_s = time_info.outputBufferDacTime - time_info.currentTime
-        if status:
-            self.flags |= status
-            if status.output_underflow:
-                self._underruns += 1
+        if status.output_underflow:
+            self.underruns += 1
         render = self._render
         if render is None:
             outdata.fill(0.0)
@@ -313,29 +281,34 @@ class SoundDeviceSink:
             outdata[:, self._map] = block
 
     def start(self, render: RenderFn) -> None:
-        sd = _sounddevice()
+        """Start the stream, pulling blocks from ``render`` (non real time)."""
         self._render = render
         try:
-            self._stream.start()
-        except sd.PortAudioError as exc:
+            self._portaudio("start")
+        except DeviceError:
             self._render = None
-            raise device_error(exc, f"cannot start output device {self._name!r}") from exc
+            raise
 
     def stop(self) -> None:
-        sd = _sounddevice()
+        """Stop the stream (non real time)."""
         try:
-            self._stream.stop()
-        except sd.PortAudioError as exc:
-            raise device_error(exc, f"cannot stop output device {self._name!r}") from exc
+            self._portaudio("stop")
         finally:
             self._render = None
 
     def close(self) -> None:
+        """Close the stream (non real time)."""
+        self._portaudio("close")
+
+    def _portaudio(self, action: str) -> None:
+        """Call the stream's ``action`` method; a PortAudio failure is a DeviceError."""
         sd = _sounddevice()
         try:
-            self._stream.close()
+            getattr(self._stream, action)()
         except sd.PortAudioError as exc:
-            raise device_error(exc, f"cannot close output device {self._name!r}") from exc
+            raise DeviceError(
+                f"cannot {action} output device {self.output_device!r}: {exc}"
+            ) from exc
 
 
 def open_default_sink(
@@ -354,12 +327,11 @@ def open_default_sink(
     exclusive : bool
         WASAPI exclusive mode (see :class:`SoundDeviceSink`).
     """
-    if output is not None:
-        return SoundDeviceSink(device, output, exclusive=exclusive)
     try:
-        found = find_output_device(None, device.channels)
-        return SoundDeviceSink(device, found["index"], exclusive=exclusive)
+        return SoundDeviceSink(device, output, exclusive=exclusive)
     except DeviceError as exc:
+        if output is not None:
+            raise
         logger.info("no usable sound card (%s); using the null sink", exc)
         return NullSink(device)
 

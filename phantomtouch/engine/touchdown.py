@@ -1,11 +1,6 @@
-"""A touchdown's checks and computations, done once, by the front, outside real time.
-
-:class:`Touchdowns` checks a contact's carrier, intensity and position (a bad one raises
-ParameterError naming it) and computes what the audio side needs to start its voice: the
-phantom gains of the position, the voice's amplitude, and the impact transient's samples.
-The audio side (:class:`~phantomtouch.engine.board.ContactBoard`) only builds the voice
-from them.
-"""
+"""A touchdown's checks and computations, done once, by the front, outside real time: a
+bad carrier, intensity or position raises ParameterError naming it; the audio side only
+builds the voice from the gains, amplitude and transient computed here."""
 
 from __future__ import annotations
 
@@ -85,12 +80,7 @@ class Touchdowns:
             2.0 * np.pi * settings.transient_freq_hz * n / sample_rate_hz
         )
         self._burst_shape = shape.astype(np.float32)
-        full = settings.transient_intensity
-        self._burst_amplitude = (
-            amplitude_for_level(device.safety.max_level_db + 20.0 * math.log10(full), device)
-            if full > 0
-            else 0.0
-        )
+        self._burst_amplitude = contact_amplitude(device, settings.transient_intensity, None)
 
     def burst(self, normal_velocity_m_s: object) -> np.ndarray | None:
         """The impact transient for a normal velocity, m/s, or None without one.
