@@ -45,12 +45,12 @@ from phantomtouch.service.errors import (
 )
 from phantomtouch.service.flood import FloodGuard
 from phantomtouch.service.ws_messages import PROTOCOL_VERSION, MessageError, parse
+from phantomtouch.service.ws_sending import GONE, JsonSender
 
 if TYPE_CHECKING:
     from phantomtouch.fleet.gateway import Gateway
 
 _CONNECTIONS = itertools.count()
-_GONE = (WebSocketDisconnect, RuntimeError, OSError)
 
 
 class GatewaySession:
@@ -65,7 +65,7 @@ class GatewaySession:
         self.last_message_s = time.monotonic()
         self.limiter = FloodGuard(self.settings.ws_messages_per_s)
         self.grant: Grant | None = None
-        self._send_lock = asyncio.Lock()
+        self.sender = JsonSender(websocket)
         self._state_task: asyncio.Task[None] | None = None
 
     async def run(self) -> None:
@@ -89,7 +89,7 @@ class GatewaySession:
             self._subscribe(0.0, None)
             await self._release_all()
         if code is not None:
-            with contextlib.suppress(*_GONE):
+            with contextlib.suppress(*GONE):
                 await self.websocket.close(code, reason)
 
     async def _serve(self) -> tuple[int, str]:
@@ -127,15 +127,15 @@ class GatewaySession:
             await self._dispatch(message.type, data, armband, start_at_unix_s, message_id)
         except ValueError as exc:
             if isinstance(exc, ValidationError):
-                await self._send_error(describe(exc), message_id)
+                await self.sender.error(describe(exc), message_id)
             else:
-                await self._send_error(
+                await self.sender.error(
                     Problem(422, "invalid_json", f"the frame is not JSON: {exc}"), None
                 )
         except MessageError as exc:
-            await self._send_error(exc.problem, exc.message_id)
+            await self.sender.error(exc.problem, exc.message_id)
         except PhantomTouchError as exc:
-            await self._send_error(describe(exc), message_id)
+            await self.sender.error(describe(exc), message_id)
 
     @staticmethod
     def _need(armband: str | None, kind: str) -> str:
@@ -155,7 +155,7 @@ class GatewaySession:
         if kind == "hello":
             records = self.gateway.registry.online()
             assert self.grant is not None
-            await self._send(
+            await self.sender.send(
                 {
                     "type": "welcome",
                     "protocol": PROTOCOL_VERSION,
@@ -167,7 +167,7 @@ class GatewaySession:
                 }
             )
         elif kind == "ping":
-            await self._send({"type": "pong", "unix_time_s": time.time(), "id": message_id})
+            await self.sender.send({"type": "pong", "unix_time_s": time.time(), "id": message_id})
         elif kind == "play":
             target = self._need(armband, "play")
             touch = {k: v for k, v in data.items() if k not in ("type", "id")}
@@ -200,14 +200,12 @@ class GatewaySession:
             await client.contact(target, {**data, "owner": self.owner})
             if kind == "up":
                 self.held[target].discard(contact)
-            if message_id is not None:
-                await self._send({"type": "ok", "id": message_id})
+            await self.sender.ok(message_id)
         elif kind == "stop":
             await self._stop(armband, data.get("job_id"), message_id)
         elif kind == "subscribe":
             self._subscribe(float(data["rate_hz"]), armband)
-            if message_id is not None:
-                await self._send({"type": "ok", "id": message_id})
+            await self.sender.ok(message_id)
         else:
             raise ProtocolError(f"type={kind!r} is not available through a gateway")
 
@@ -228,7 +226,7 @@ class GatewaySession:
                 for r in self.gateway.registry.online()
                 if self.grant.allows(r.armband) and armband in (None, r.armband)
             ]
-            await self._send_unless_gone(
+            await self.sender.send_unless_gone(
                 {
                     "type": "state",
                     "unix_time_s": time.time(),
@@ -277,12 +275,9 @@ class GatewaySession:
                 error.get("message", ""),
                 error.get("fields", []),
             )
-            await self._send_error(problem, message_id)
-        elif message_id is not None:
-            answer: dict[str, Any] = {"type": "ok", "id": message_id}
-            if result is not None:
-                answer["result"] = result
-            await self._send(answer)
+            await self.sender.error(problem, message_id)
+        else:
+            await self.sender.ok(message_id, result)
 
     async def _keepalive(self) -> None:
         """Ping held armbands while the client talks; release them when it goes silent."""
@@ -295,7 +290,7 @@ class GatewaySession:
                 released = {a: sorted(c) for a, c in self.held.items() if c}
                 await self._release_all()
                 if released:
-                    await self._send_unless_gone(
+                    await self.sender.send_unless_gone(
                         {"type": "released", "reason": "watchdog", "contacts": released}
                     )
                 continue
@@ -310,25 +305,3 @@ class GatewaySession:
         for armband in held:
             with contextlib.suppress(Exception):
                 await self.gateway.client.contact(armband, {"type": "release", "owner": self.owner})
-
-    async def _send(self, message: dict[str, Any]) -> None:
-        if message.get("id", 0) is None:
-            del message["id"]
-        text = json.dumps(message)
-        async with self._send_lock:
-            await self.websocket.send_text(text)
-
-    async def _send_unless_gone(self, message: dict[str, Any]) -> None:
-        with contextlib.suppress(*_GONE):
-            await self._send(message)
-
-    async def _send_error(self, problem: Problem, message_id: Any) -> None:
-        answer: dict[str, Any] = {
-            "type": "error",
-            "code": problem.code,
-            "message": problem.message,
-            "fields": problem.fields,
-        }
-        if message_id is not None:
-            answer["id"] = message_id
-        await self._send(answer)

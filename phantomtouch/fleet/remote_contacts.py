@@ -20,11 +20,13 @@ import collections
 import json
 import time
 from collections.abc import Callable
+from dataclasses import KW_ONLY, dataclass, field
 from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
+from phantomtouch.service.contact_down import contact_down, refuse_if_down
 from phantomtouch.service.errors import QuotaError, TooLargeError
 from phantomtouch.service.ws_messages import Down, Move, Up
 
@@ -36,6 +38,7 @@ OWNER_PREFIX = "fleet:"
 MAX_OWNER_CHARS = 128
 
 
+@dataclass(eq=False)
 class RemoteContacts:
     """The remote owners of one node: their messages, applied to the engine's front.
 
@@ -46,22 +49,20 @@ class RemoteContacts:
     caller), before its contacts are seen gone: it must return at once.
     """
 
-    def __init__(
-        self,
-        engine: EngineFront,
-        *,
-        watchdog_s: float,
-        max_contacts: int,
-        max_bytes: int,
-        on_silent: Callable[[str], None] | None = None,
-    ) -> None:
-        self.engine = engine
-        self.on_silent = on_silent
-        self.watchdog_s = watchdog_s
-        self.max_contacts = max_contacts
-        self.max_bytes = max_bytes
-        self._silent: collections.deque[str] = collections.deque()
-        self._unsubscribe = engine.subscribe_released(self._released)
+    engine: EngineFront
+    _: KW_ONLY
+    watchdog_s: float
+    """Seconds without a message of an owner before the front releases its contacts."""
+    max_contacts: int
+    """Contacts one owner may hold down at once."""
+    max_bytes: int
+    """Largest message read, bytes."""
+    on_silent: Callable[[str], None] | None = None
+    _silent: collections.deque[str] = field(init=False, default_factory=collections.deque)
+    _unsubscribe: Callable[[], None] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self._unsubscribe = self.engine.subscribe_released(self._released)
 
     def _released(self, owner: str, contacts: tuple[str, ...], reason: str) -> None:
         """The front's deadline thread let go of a silent owner (any thread)."""
@@ -132,10 +133,7 @@ class RemoteContacts:
         return str(kind)
 
     def _down(self, engine_owner: str, held: list[str], down: Down) -> None:
-        if down.contact in held:
-            raise ProtocolError(
-                f"contact={down.contact!r} is already down: expected move or up, got down"
-            )
+        refuse_if_down(held, down.contact)
         if len(held) >= self.max_contacts:
             raise QuotaError(
                 f"contact={down.contact!r}: quota max_contacts_per_connection="
@@ -143,17 +141,7 @@ class RemoteContacts:
                 field="contact",
                 value=down.contact,
             )
-        self.engine.contact_down(
-            engine_owner,
-            down.contact,
-            down.x_cm,
-            down.y_cm,
-            intensity=down.intensity,
-            carrier=down.carrier,
-            law=down.law,
-            normal_velocity_m_s=down.normal_velocity_m_s,
-            deadline_s=self.watchdog_s,
-        )
+        contact_down(self.engine, engine_owner, down, deadline_s=self.watchdog_s)
 
     @staticmethod
     def _held(held: list[str], contact: str, got: str) -> None:
@@ -183,14 +171,15 @@ class RemoteContacts:
         return sum(len(held) for held in self.engine.contact_owners(OWNER_PREFIX).values())
 
 
+_DROP_REASONS: tuple[tuple[type[BaseException], str], ...] = (
+    (ValidationError, "invalid"),
+    (TooLargeError, "too_large"),
+    (QuotaError, "quota"),
+    (PhantomTouchError, "refused"),
+)
+"""A dropped message's metric label by its exception, the first that matches."""
+
+
 def drop_reason(exc: BaseException) -> str:
-    """The metric label of a dropped message."""
-    if isinstance(exc, ValidationError):
-        return "invalid"
-    if isinstance(exc, TooLargeError):
-        return "too_large"
-    if isinstance(exc, QuotaError):
-        return "quota"
-    if isinstance(exc, PhantomTouchError):
-        return "refused"
-    return "error"
+    """The metric label of a dropped message (``error`` for anything unforeseen)."""
+    return next((label for kind, label in _DROP_REASONS if isinstance(exc, kind)), "error")

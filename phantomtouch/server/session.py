@@ -30,7 +30,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import enum
-import json
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -39,6 +38,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
 from phantomtouch.service import scheduling
+from phantomtouch.service.contact_down import contact_down, refuse_if_down
 from phantomtouch.service.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
@@ -66,13 +66,10 @@ from phantomtouch.service.ws_messages import (
     Up,
     parse,
 )
+from phantomtouch.service.ws_sending import GONE, JsonSender
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
-
-
-_GONE = (WebSocketDisconnect, RuntimeError, OSError)
-"""What sending or closing raises once the client has gone."""
 
 
 class SessionState(enum.Enum):
@@ -103,7 +100,9 @@ class Session:
         self.limiter = FloodGuard(settings.ws_messages_per_s)
         self.owner = service.new_owner()
         self.state = SessionState.CONNECTING
-        self._send_lock = asyncio.Lock()
+        self.sender = JsonSender(
+            websocket, sent=lambda kind: service.metrics.ws_messages.labels("out", kind).inc()
+        )
         self._state_task: asyncio.Task[None] | None = None
         self._notices: set[asyncio.Task[None]] = set()
         self._count_in = service.metrics.ws_messages.labels("in", "move")
@@ -124,7 +123,7 @@ class Session:
         if refused is not None:
             self._expect(SessionState.CONNECTING, SessionState.CLOSED)
             self.service.metrics.ws_refused.labels(refused[0]).inc()
-            with contextlib.suppress(*_GONE):
+            with contextlib.suppress(*GONE):
                 await self.websocket.accept()
                 await self.websocket.close(WS_CLOSE_TRY_AGAIN_LATER, refused[1])
             return
@@ -167,7 +166,7 @@ class Session:
         if code is not None:
             try:
                 await self.websocket.close(code, reason)
-            except _GONE:
+            except GONE:
                 return
 
     async def _serve(self) -> None:
@@ -214,14 +213,14 @@ class Session:
                 f"until the rate falls; over it for {self.limiter.close_after_s:g} s closes "
                 "the connection (1008)"
             )
-            await self._send_error(Problem(429, "rate_limited", message), None)
+            await self.sender.error(Problem(429, "rate_limited", message), None)
 
     async def _handle_text(self, text: str, received_s: float) -> None:
         try:
             message = parse(text)
         except MessageError as exc:
             self.service.metrics.ws_messages.labels("in", "invalid").inc()
-            await self._send_error(exc.problem, exc.message_id)
+            await self.sender.error(exc.problem, exc.message_id)
             return
         if isinstance(message, Move):
             self._count_in.inc()
@@ -230,7 +229,7 @@ class Session:
         try:
             await self._dispatch(message, received_s)
         except (PhantomTouchError, ValidationError) as exc:
-            await self._send_error(describe(exc), message.id)
+            await self.sender.error(describe(exc), message.id)
 
     # -- messages ---------------------------------------------------------------------
 
@@ -241,8 +240,7 @@ class Session:
                 self.owner, message.contact, message.x_cm, message.y_cm, intensity=message.intensity
             )
             self.service.metrics.ws_ingest.observe(time.perf_counter() - received_s)
-            if message.id is not None:
-                await self._send({"type": "ok", "id": message.id})
+            await self.sender.ok(message.id)
         elif isinstance(message, Down):
             await self._down(message)
         elif isinstance(message, Up):
@@ -250,9 +248,9 @@ class Session:
             self.engine.contact_up(
                 self.owner, message.contact, normal_velocity_m_s=message.normal_velocity_m_s
             )
-            await self._ok(message)
+            await self.sender.ok(message.id)
         elif isinstance(message, Ping):
-            await self._send(
+            await self.sender.send(
                 {"type": "pong", "server_time_s": self.engine.server_time_s(), "id": message.id}
             )
         elif isinstance(message, Hello):
@@ -260,17 +258,17 @@ class Session:
                 await asyncio.to_thread(
                     self.service.wearer.choose, message.wearer, message.wearer_band, field="wearer"
                 )
-            await self._send(self._welcome(message))
+            await self.sender.send(self._welcome(message))
         elif isinstance(message, Play):
             job = await scheduling.schedule(
                 self.service, message.request, client=self.owner, owner=self.owner
             )
-            await self._ok(message, job.model_dump())
+            await self.sender.ok(message.id, job.model_dump())
         elif isinstance(message, Stop):
             await self._stop(message)
         elif isinstance(message, Subscribe):
             self._subscribe(message.rate_hz)
-            await self._ok(message)
+            await self.sender.ok(message.id)
 
     def _check_down(self, contact: str, got: str) -> None:
         if not self.engine.holds(self.owner, contact):
@@ -281,10 +279,7 @@ class Session:
 
     async def _down(self, message: Down) -> None:
         held = self.engine.contacts_of(self.owner)
-        if message.contact in held:
-            raise ProtocolError(
-                f"contact={message.contact!r} is already down: expected move or up, got down"
-            )
+        refuse_if_down(held, message.contact)
         limit = self.service.settings.max_contacts_per_connection
         if len(held) >= limit:
             raise QuotaError(
@@ -295,18 +290,8 @@ class Session:
             )
         if message.carrier is not None and message.carrier.kind != "sine":
             await asyncio.to_thread(self.engine.prepare_carrier, message.carrier)
-        self.engine.contact_down(
-            self.owner,
-            message.contact,
-            message.x_cm,
-            message.y_cm,
-            intensity=message.intensity,
-            carrier=message.carrier,
-            law=message.law,
-            normal_velocity_m_s=message.normal_velocity_m_s,
-            deadline_s=self.watchdog_s,
-        )
-        await self._ok(message)
+        contact_down(self.engine, self.owner, message, deadline_s=self.watchdog_s)
+        await self.sender.ok(message.id)
 
     async def _stop(self, message: Stop) -> None:
         if message.job_id is None:
@@ -319,7 +304,7 @@ class Session:
                     value=message.job_id,
                 )
             self.engine.stop(message.job_id)
-        await self._ok(message)
+        await self.sender.ok(message.id)
 
     def _welcome(self, message: Hello) -> dict[str, Any]:
         device = self.engine.device
@@ -356,7 +341,7 @@ class Session:
         due = loop.time()
         while self.state is SessionState.OPEN:
             status = self.engine.status().to_dict()
-            await self._send_unless_gone(
+            await self.sender.send_unless_gone(
                 {
                     "type": "state",
                     "server_time_s": self.engine.server_time_s(),
@@ -386,42 +371,6 @@ class Session:
         if not contacts or self.state is not SessionState.OPEN:
             return
         notice = {"type": "released", "reason": reason, "contacts": sorted(contacts)}
-        task = asyncio.get_running_loop().create_task(self._send_unless_gone(notice))
+        task = asyncio.get_running_loop().create_task(self.sender.send_unless_gone(notice))
         self._notices.add(task)
         task.add_done_callback(self._notices.discard)
-
-    # -- sending ------------------------------------------------------------------------
-
-    async def _send(self, message: dict[str, Any]) -> None:
-        if message.get("id", 0) is None:
-            del message["id"]
-        text = json.dumps(message)
-        async with self._send_lock:
-            await self.websocket.send_text(text)
-        self.service.metrics.ws_messages.labels("out", message["type"]).inc()
-
-    async def _send_unless_gone(self, message: dict[str, Any]) -> None:
-        """Send from a background task; a connection that is gone is not an error there."""
-        try:
-            await self._send(message)
-        except _GONE:
-            return
-
-    async def _ok(self, message: ClientMessage, result: Any = None) -> None:
-        if message.id is None:
-            return
-        answer: dict[str, Any] = {"type": "ok", "id": message.id}
-        if result is not None:
-            answer["result"] = result
-        await self._send(answer)
-
-    async def _send_error(self, problem: Problem, message_id: Any) -> None:
-        answer: dict[str, Any] = {
-            "type": "error",
-            "code": problem.code,
-            "message": problem.message,
-            "fields": problem.fields,
-        }
-        if message_id is not None:
-            answer["id"] = message_id
-        await self._send(answer)

@@ -15,13 +15,15 @@ from pydantic import TypeAdapter
 from phantomtouch.schema import HapticClip
 from phantomtouch.schema.clip import CLIP_NAME_REGEX
 from phantomtouch.server.deps import StoreDep
+from phantomtouch.server.routes import library
 from phantomtouch.service.bodies import strict_body
-from phantomtouch.service.errors import NotFoundError, responses
+from phantomtouch.service.errors import responses
 from phantomtouch.service.models import ClipInfo, name_rules
 
 router = APIRouter(prefix="/clips", tags=["patterns"])
 
 clip_body, CLIP_BODY_OPENAPI = strict_body(TypeAdapter(HapticClip))
+ClipBody = Annotated[HapticClip, Depends(clip_body)]
 ClipNameParam = Annotated[str, Path(**name_rules(CLIP_NAME_REGEX, "heartbeat"))]
 
 
@@ -41,44 +43,25 @@ def list_clips(store: StoreDep) -> list[ClipInfo]:
     return [clip_info(name, clip) for name, clip in store.list_clips()]
 
 
-@router.get(
-    "/{name}",
-    response_model=HapticClip,
-    responses=responses(401, 404, 422, 500, 503),
-    summary="One stored clip",
-)
+NOT_STORED = "in the clip library (GET /clips)"
+
+
+@library.get_item(router, HapticClip, "One stored clip")
 def get_clip(name: ClipNameParam, store: StoreDep) -> HapticClip:
     """The clip as it was stored."""
-    clip = store.get_clip(name)
-    if clip is None:
-        raise NotFoundError(
-            f"name={name!r} is not in the clip library (GET /clips)", field="name", value=name
-        )
-    return clip
+    return library.found(store.get_clip(name), name, NOT_STORED)
 
 
-@router.put(
-    "/{name}",
-    response_model=ClipInfo,
-    responses=responses(401, 413, 415, 422, 503),
-    summary="Store a clip",
-    openapi_extra=CLIP_BODY_OPENAPI,
-)
-def put_clip(
-    name: ClipNameParam, clip: Annotated[HapticClip, Depends(clip_body)], store: StoreDep
-) -> ClipInfo:
+@library.put_item(router, ClipInfo, "Store a clip", CLIP_BODY_OPENAPI)
+def put_clip(name: ClipNameParam, clip: ClipBody, store: StoreDep) -> ClipInfo:
     """Store (or replace) a clip; patterns that name it play the new one from now on."""
     store.put_clip(name, clip)
     return clip_info(name, clip)
 
 
-@router.delete(
-    "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary="Remove a clip"
-)
+@library.delete_item(router, "Remove a clip")
 def delete_clip(name: ClipNameParam, store: StoreDep) -> Response:
     """Remove a stored clip (patterns that name it answer 404 until it is back)."""
     if not store.delete_clip(name):
-        raise NotFoundError(
-            f"name={name!r} is not in the clip library (GET /clips)", field="name", value=name
-        )
+        raise library.not_stored(name, NOT_STORED)
     return Response(status_code=204)

@@ -11,8 +11,10 @@ the policy refuses before any request leaves the machine).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from importlib.resources import files
 from pathlib import Path
+from typing import Any
 
 from fastapi import APIRouter, Request
 from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html
@@ -38,36 +40,45 @@ SAME_ORIGIN_ONLY = "; ".join(
 router = APIRouter(include_in_schema=False)
 
 
-def _root(request: Request) -> str:
-    return str(request.scope.get("root_path", "")).rstrip("/")
+def _page(
+    request: Request,
+    html: Callable[..., HTMLResponse],
+    name: str,
+    assets: dict[str, str],
+    **options: Any,
+) -> HTMLResponse:
+    """The page ``html`` renders on ``/openapi.json``, titled ``name``: each argument of
+    ``assets`` names a file of :data:`ASSETS_PATH`; sent with :data:`SAME_ORIGIN_ONLY`."""
+    root = str(request.scope.get("root_path", "")).rstrip("/")
+    page = html(
+        openapi_url=f"{root}/openapi.json",
+        title=f"{TITLE} - {name}",
+        **{argument: f"{root}{ASSETS_PATH}/{file}" for argument, file in assets.items()},
+        **options,
+    )
+    page.headers["Content-Security-Policy"] = SAME_ORIGIN_ONLY
+    return page
 
 
 @router.get("/docs")
 async def swagger_ui(request: Request) -> HTMLResponse:
     """Swagger UI on ``/openapi.json``."""
-    root = _root(request)
-    page = get_swagger_ui_html(
-        openapi_url=f"{root}/openapi.json",
-        title=f"{TITLE} - Swagger UI",
-        swagger_js_url=f"{root}{ASSETS_PATH}/swagger-ui-bundle.js",
-        swagger_css_url=f"{root}{ASSETS_PATH}/swagger-ui.css",
-        swagger_favicon_url=f"{root}{ASSETS_PATH}/favicon.png",
+    assets = {
+        "swagger_js_url": "swagger-ui-bundle.js",
+        "swagger_css_url": "swagger-ui.css",
+        "swagger_favicon_url": "favicon.png",
+    }
+    return _page(
+        request,
+        get_swagger_ui_html,
+        "Swagger UI",
+        assets,
         swagger_ui_parameters={"validatorUrl": None},
     )
-    page.headers["Content-Security-Policy"] = SAME_ORIGIN_ONLY
-    return page
 
 
 @router.get("/redoc")
 async def redoc(request: Request) -> HTMLResponse:
     """ReDoc on ``/openapi.json``."""
-    root = _root(request)
-    page = get_redoc_html(
-        openapi_url=f"{root}/openapi.json",
-        title=f"{TITLE} - ReDoc",
-        redoc_js_url=f"{root}{ASSETS_PATH}/redoc.standalone.js",
-        redoc_favicon_url=f"{root}{ASSETS_PATH}/favicon.png",
-        with_google_fonts=False,
-    )
-    page.headers["Content-Security-Policy"] = SAME_ORIGIN_ONLY
-    return page
+    assets = {"redoc_js_url": "redoc.standalone.js", "redoc_favicon_url": "favicon.png"}
+    return _page(request, get_redoc_html, "ReDoc", assets, with_google_fonts=False)

@@ -9,9 +9,11 @@ from pydantic import TypeAdapter
 
 from phantomtouch.schema import TouchPattern
 from phantomtouch.server.deps import ClientDep, PatternNameParam, ServiceDep, StoreDep
+from phantomtouch.server.routes import library
+from phantomtouch.server.routes.touch import SCHEDULES
 from phantomtouch.service import scheduling
 from phantomtouch.service.bodies import strict_body
-from phantomtouch.service.errors import NotFoundError, responses
+from phantomtouch.service.errors import responses
 from phantomtouch.service.models import (
     JobAccepted,
     NamedTouch,
@@ -23,6 +25,7 @@ from phantomtouch.service.models import (
 router = APIRouter(prefix="/patterns", tags=["patterns"])
 
 pattern_body, PATTERN_BODY_OPENAPI = strict_body(TypeAdapter(TouchPattern))
+PatternBody = Annotated[TouchPattern, Depends(pattern_body)]
 play_body, PLAY_BODY_OPENAPI = strict_body(
     TypeAdapter(PlayRequest), required=False, default=PlayRequest()
 )
@@ -38,30 +41,14 @@ def list_patterns(store: StoreDep) -> list[PatternInfo]:
     ]
 
 
-@router.get(
-    "/{name}",
-    response_model=TouchPattern,
-    response_model_exclude_unset=True,
-    responses=responses(401, 404, 422, 500, 503),
-    summary="One stored pattern",
-)
+@library.get_item(router, TouchPattern, "One stored pattern", response_model_exclude_unset=True)
 def get_pattern(name: PatternNameParam, store: StoreDep) -> TouchPattern:
     """The pattern as it was stored with `PUT`."""
     return scheduling.stored_pattern(store, name, field="name")
 
 
-@router.put(
-    "/{name}",
-    response_model=PatternInfo,
-    responses=responses(401, 413, 415, 422, 503),
-    summary="Store a pattern",
-    openapi_extra=PATTERN_BODY_OPENAPI,
-)
-def put_pattern(
-    name: PatternNameParam,
-    pattern: Annotated[TouchPattern, Depends(pattern_body)],
-    service: ServiceDep,
-) -> PatternInfo:
+@library.put_item(router, PatternInfo, "Store a pattern", PATTERN_BODY_OPENAPI)
+def put_pattern(name: PatternNameParam, pattern: PatternBody, service: ServiceDep) -> PatternInfo:
     """Store (or replace) a pattern; it is planned first, so only playable patterns are kept."""
     summary = scheduling.plan_summary(
         service.plans.plan(scheduling.with_clip(pattern, service.store))
@@ -70,27 +57,16 @@ def put_pattern(
     return PatternInfo(name=name, summary=PlanSummary(**summary))
 
 
-@router.delete(
-    "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary="Remove a pattern"
-)
+@library.delete_item(router, "Remove a pattern")
 def delete_pattern(name: PatternNameParam, store: StoreDep) -> Response:
     """Remove a stored pattern."""
     if not store.delete(name):
-        raise NotFoundError(
-            f"name={name!r} is not in the pattern library (GET /patterns)",
-            field="name",
-            value=name,
-        )
+        raise library.not_stored(name, "in the pattern library (GET /patterns)")
     return Response(status_code=204)
 
 
 @router.post(
-    "/{name}/play",
-    status_code=202,
-    response_model=JobAccepted,
-    responses=responses(401, 404, 413, 415, 422, 429, 500, 503),
-    summary="Play a stored pattern",
-    openapi_extra=PLAY_BODY_OPENAPI,
+    "/{name}/play", **SCHEDULES, summary="Play a stored pattern", openapi_extra=PLAY_BODY_OPENAPI
 )
 async def play_pattern(
     name: PatternNameParam,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 from fastapi import APIRouter, Depends, Request
 from fastapi import Path as PathParam
@@ -40,14 +40,16 @@ JobIdParam = Annotated[
 ]
 
 
-@router.post(
-    "/touch",
-    status_code=202,
-    response_model=JobAccepted,
-    responses=responses(401, 404, 413, 415, 422, 429, 500, 503),
-    summary="Play a touch",
-    openapi_extra=TOUCH_BODY_OPENAPI,
-)
+SCHEDULES: dict[str, Any] = {
+    "status_code": 202,
+    "response_model": JobAccepted,
+    "responses": responses(401, 404, 413, 415, 422, 429, 500, 503),
+}
+"""How a route that schedules a touch answers (``POST /touch``, ``POST
+/patterns/{name}/play``): 202 with the job, or one of these errors."""
+
+
+@router.post("/touch", **SCHEDULES, summary="Play a touch", openapi_extra=TOUCH_BODY_OPENAPI)
 async def post_touch(request: TouchBody, service: ServiceDep, client: ClientDep) -> JobAccepted:
     """Schedule a touch: a whole pattern, a preset with overrides, or a stored pattern.
 
@@ -74,6 +76,14 @@ async def post_stop(service: ServiceDep) -> StopAnswer:
     return StopAnswer(server_time_s=service.engine.server_time_s())
 
 
+JOB_ANSWER: dict[str, Any] = {
+    "response_model": JobInfo,
+    "response_model_exclude_none": True,
+    "responses": responses(401, 404, 422),
+}
+"""How ``GET|DELETE /jobs/{job_id}`` answer: the job's state, or one of these errors."""
+
+
 def job_info(engine: EngineFront, job_id: str) -> JobInfo:
     """A job's state; an unknown id is :class:`NotFoundError`."""
     state = engine.job_state(job_id)
@@ -97,26 +107,14 @@ def job_info(engine: EngineFront, job_id: str) -> JobInfo:
     )
 
 
-@router.get(
-    "/jobs/{job_id}",
-    response_model=JobInfo,
-    response_model_exclude_none=True,
-    responses=responses(401, 404, 422),
-    summary="A job",
-)
+@router.get("/jobs/{job_id}", **JOB_ANSWER, summary="A job")
 async def get_job(job_id: JobIdParam, engine: EngineDep) -> JobInfo:
     """Where a job is: `scheduled`, `playing`, `finished` or `stopped` (with a `reason`
     when it stopped unasked: stolen, or the engine's fault)."""
     return job_info(engine, job_id)
 
 
-@router.delete(
-    "/jobs/{job_id}",
-    response_model=JobInfo,
-    response_model_exclude_none=True,
-    responses=responses(401, 404, 422),
-    summary="Stop a job",
-)
+@router.delete("/jobs/{job_id}", **JOB_ANSWER, summary="Stop a job")
 async def delete_job(job_id: JobIdParam, engine: EngineDep) -> JobInfo:
     """Stop one job (with its release ramp) and answer its new state.
 

@@ -17,6 +17,7 @@ from fastapi import APIRouter, Depends, Response
 from pydantic import TypeAdapter
 
 from phantomtouch.server.deps import ServiceDep
+from phantomtouch.server.routes import library
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import responses
 from phantomtouch.service.models import ActiveWearerInfo, WearerChoice
@@ -48,13 +49,7 @@ def get_active_wearer(service: ServiceDep) -> ActiveWearerInfo:
     return active_wearer(service)
 
 
-@router.put(
-    "",
-    response_model=ActiveWearerInfo,
-    responses=responses(401, 413, 415, 422, 503),
-    summary="Choose the wearer",
-    openapi_extra=CHOICE_BODY_OPENAPI,
-)
+@library.put_item(router, ActiveWearerInfo, "Choose the wearer", CHOICE_BODY_OPENAPI, path="")
 def put_active_wearer(
     choice: Annotated[WearerChoice, Depends(choice_body)], service: ServiceDep
 ) -> ActiveWearerInfo:

@@ -16,8 +16,9 @@ from pydantic import TypeAdapter
 
 from phantomtouch.schema.wearer import WEARER_NAME_REGEX, WearerProfile, check_channels
 from phantomtouch.server.deps import ServiceDep, StoreDep
+from phantomtouch.server.routes import library
 from phantomtouch.service.bodies import strict_body
-from phantomtouch.service.errors import NotFoundError, responses
+from phantomtouch.service.errors import responses
 from phantomtouch.service.models import WearerInfo
 
 router = APIRouter(prefix="/wearers", tags=["wearers"])
@@ -31,6 +32,7 @@ EXAMPLE = {
 }
 wearer_body, WEARER_BODY_OPENAPI = strict_body(TypeAdapter(WearerProfile))
 WEARER_BODY_OPENAPI["requestBody"]["content"]["application/json"]["example"] = EXAMPLE
+WearerBody = Annotated[WearerProfile, Depends(wearer_body)]
 WearerNameParam = Annotated[
     str,
     Path(
@@ -43,10 +45,7 @@ WearerNameParam = Annotated[
 ]
 
 
-def _missing(name: str) -> NotFoundError:
-    return NotFoundError(
-        f"name={name!r} is not a stored wearer (GET /wearers)", field="name", value=name
-    )
+NOT_STORED = "a stored wearer (GET /wearers)"
 
 
 @router.get("", response_model=list[WearerInfo], responses=responses(401, 503), summary="Wearers")
@@ -61,32 +60,14 @@ def list_wearers(service: ServiceDep) -> list[WearerInfo]:
     ]
 
 
-@router.get(
-    "/{name}",
-    response_model=WearerProfile,
-    responses=responses(401, 404, 422, 500, 503),
-    summary="One wearer profile",
-)
+@library.get_item(router, WearerProfile, "One wearer profile")
 def get_wearer(name: WearerNameParam, store: StoreDep) -> WearerProfile:
     """The profile as it was stored."""
-    profile = store.get_wearer(name)
-    if profile is None:
-        raise _missing(name)
-    return profile
+    return library.found(store.get_wearer(name), name, NOT_STORED)
 
 
-@router.put(
-    "/{name}",
-    response_model=WearerProfile,
-    responses=responses(401, 413, 415, 422, 503),
-    summary="Store a wearer profile",
-    openapi_extra=WEARER_BODY_OPENAPI,
-)
-def put_wearer(
-    name: WearerNameParam,
-    profile: Annotated[WearerProfile, Depends(wearer_body)],
-    service: ServiceDep,
-) -> WearerProfile:
+@library.put_item(router, WearerProfile, "Store a wearer profile", WEARER_BODY_OPENAPI)
+def put_wearer(name: WearerNameParam, profile: WearerBody, service: ServiceDep) -> WearerProfile:
     """Store (or replace) a profile: per band (`sine_100hz`, `noise_40_500hz`) and
     actuator (output channel, 1-based) an offset in dB, finite, within ±20 dB. A channel
     the device does not have is refused (422, the field named). When `name` is the wearer
@@ -98,13 +79,11 @@ def put_wearer(
     return profile
 
 
-@router.delete(
-    "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary="Remove a wearer"
-)
+@library.delete_item(router, "Remove a wearer")
 def delete_wearer(name: WearerNameParam, service: ServiceDep) -> Response:
     """Remove a stored profile; when it is the wearer in force, the output stage takes it
     off (the device's calibration alone) from the next block on."""
     if not service.store.delete_wearer(name):
-        raise _missing(name)
+        raise library.not_stored(name, NOT_STORED)
     service.wearer.removed(name)
     return Response(status_code=204)

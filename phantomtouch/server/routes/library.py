@@ -1,0 +1,89 @@
+"""The route shape the libraries share: ``GET|PUT|DELETE /{library}/{name}``.
+
+Clips, patterns and wearer profiles are each a library of named items, and ``PUT
+/wearer`` stores a choice as they store an item: each route answers with the same
+status and documents the same error responses, and an unknown name is the same 404.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+from fastapi import APIRouter
+from fastapi.types import DecoratedCallable
+
+from phantomtouch.service.errors import NotFoundError, responses
+
+Item = TypeVar("Item")
+
+
+def get_item(
+    router: APIRouter, model: Any, summary: str, **options: Any
+) -> Callable[[DecoratedCallable], DecoratedCallable]:
+    """``GET /{name}``: the stored item (404: no such item).
+
+    Parameters
+    ----------
+    router : APIRouter
+        The library's router (its prefix: ``/clips``, ``/patterns``, ``/wearers``).
+    model : type
+        The answer's model.
+    summary : str
+        The route's OpenAPI summary.
+    **options
+        More arguments of ``router.get`` (``response_model_exclude_unset``).
+    """
+    return router.get(
+        "/{name}",
+        response_model=model,
+        responses=responses(401, 404, 422, 500, 503),
+        summary=summary,
+        **options,
+    )
+
+
+def put_item(
+    router: APIRouter, model: Any, summary: str, body_openapi: dict[str, Any], path: str = "/{name}"
+) -> Callable[[DecoratedCallable], DecoratedCallable]:
+    """``PUT path``: store the item of a strict JSON body.
+
+    Parameters
+    ----------
+    router, model, summary
+        As :func:`get_item`.
+    body_openapi : dict
+        The body's OpenAPI entry, as :func:`~phantomtouch.service.bodies.strict_body`
+        makes it.
+    path : str
+        ``/{name}``, or ``""`` where the router's prefix names the one item (``/wearer``).
+    """
+    return router.put(
+        path,
+        response_model=model,
+        responses=responses(401, 413, 415, 422, 503),
+        summary=summary,
+        openapi_extra=body_openapi,
+    )
+
+
+def delete_item(
+    router: APIRouter, summary: str
+) -> Callable[[DecoratedCallable], DecoratedCallable]:
+    """``DELETE /{name}``: 204 without a body (404: no such item)."""
+    return router.delete(
+        "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary=summary
+    )
+
+
+def not_stored(name: str, where: str) -> NotFoundError:
+    """The 404 of an item ``name`` that is not ``where`` (``in the clip library (GET
+    /clips)``)."""
+    return NotFoundError(f"name={name!r} is not {where}", field="name", value=name)
+
+
+def found(item: Item | None, name: str, where: str) -> Item:
+    """``item``, read from the library for ``name``; None is :func:`not_stored`."""
+    if item is None:
+        raise not_stored(name, where)
+    return item
