@@ -9,7 +9,7 @@ from __future__ import annotations
 import ipaddress
 import re
 from pathlib import Path
-from typing import Literal, Self
+from typing import Annotated, Literal, Self
 
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -41,7 +41,26 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-class Settings(BaseSettings):
+VoiceCount = Annotated[int, Field(ge=1, le=4096)]
+"""A number of pattern voices sounding at once (the engine mixes at most 4096)."""
+
+
+class ClientLimits(BaseSettings):
+    """What an HTTP server of the project allows each client (the touch service, a fleet
+    gateway): request body and WebSocket message sizes, message rate and the watchdog."""
+
+    max_body_bytes: int = Field(default=1 << 20, ge=1024, le=64 << 20)
+    max_ws_message_bytes: int = Field(default=64 << 10, ge=256, le=16 << 20)
+    ws_messages_per_s: float = Field(
+        default=1000.0,
+        gt=0.0,
+        le=1_000_000.0,
+        description="Messages per second one WebSocket connection may send (1 s of burst).",
+    )
+    watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
+
+
+class Settings(ClientLimits):
     """Everything the service needs to start; each field has a sane default."""
 
     model_config = SettingsConfigDict(env_prefix="PHANTOMTOUCH_", extra="forbid")
@@ -99,15 +118,6 @@ class Settings(BaseSettings):
             "bound address (any IP address when bound to 0.0.0.0 or ::); '*' allows any."
         ),
     )
-    max_body_bytes: int = Field(default=1 << 20, ge=1024, le=64 << 20)
-    max_ws_message_bytes: int = Field(default=64 << 10, ge=256, le=16 << 20)
-    ws_messages_per_s: float = Field(
-        default=1000.0,
-        gt=0.0,
-        le=1_000_000.0,
-        description="Messages per second one WebSocket connection may send (1 s of burst).",
-    )
-    watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
     max_ws_connections: int = Field(
         default=64,
         ge=1,
@@ -138,10 +148,8 @@ class Settings(BaseSettings):
     max_concurrent_renders: int = Field(default=2, ge=1, le=64)
     max_render_duration_s: float = Field(default=600.0, gt=0.0, le=7200.0)
     queue_capacity: int = Field(default=4096, ge=16, le=1 << 20)
-    max_voices: int = Field(
+    max_voices: VoiceCount = Field(
         default=64,
-        ge=1,
-        le=4096,
         description=(
             "Most pattern voices that may sound at once, whatever the render budget allows."
         ),
@@ -162,10 +170,8 @@ class Settings(BaseSettings):
             "quietest sounding touch fades out in 5 ms to make room for it."
         ),
     )
-    max_voices_per_client: int | None = Field(
+    max_voices_per_client: VoiceCount | None = Field(
         default=None,
-        ge=1,
-        le=4096,
         description=(
             "Touches one client (a WebSocket connection, or an address over HTTP) may have "
             "scheduled or playing at once; None: three quarters of max_voices, so that "
