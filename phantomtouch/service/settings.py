@@ -49,15 +49,16 @@ class ClientLimits(BaseSettings):
     """What an HTTP server of the project allows each client (the touch service, a fleet
     gateway): request body and WebSocket message sizes, message rate and the watchdog."""
 
+    model_config = SettingsConfigDict(use_attribute_docstrings=True)
+
     max_body_bytes: int = Field(default=1 << 20, ge=1024, le=64 << 20)
+    """Largest request body in bytes (413 ``too_large`` beyond it)."""
     max_ws_message_bytes: int = Field(default=64 << 10, ge=256, le=16 << 20)
-    ws_messages_per_s: float = Field(
-        default=1000.0,
-        gt=0.0,
-        le=1_000_000.0,
-        description="Messages per second one WebSocket connection may send (1 s of burst).",
-    )
+    """Largest WebSocket message in bytes (close 1009 beyond it)."""
+    ws_messages_per_s: float = Field(default=1000.0, gt=0.0, le=1_000_000.0)
+    """Messages per second one WebSocket connection may send (1 s of burst)."""
     watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
+    """Silence after which a connection's contacts are released, in seconds."""
 
 
 class Settings(ClientLimits):
