@@ -95,8 +95,7 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
     _require_nats()
     from phantomtouch.fleet.gateway import create_gateway
     from phantomtouch.fleet.gateway_settings import GatewaySettings
-    from phantomtouch.service.listen import check_port_free, log_config
-    from phantomtouch.service.runner import run_app
+    from phantomtouch.service.listen import check_port_free, run_http
 
     options = {"host": args.host, "port": args.port, "token": args.token}
     try:
@@ -115,15 +114,7 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
         file=sys.stdout,
         flush=True,
     )
-    run_app(
-        create_gateway(settings, fleet),
-        host=settings.host,
-        port=settings.port,
-        ws_max_size=settings.max_ws_message_bytes,
-        log_config=log_config(),
-        access_log=False,
-        server_header=False,
-    )
+    run_http(create_gateway(settings, fleet), settings)
     return 0
 
 

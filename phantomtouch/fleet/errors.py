@@ -17,7 +17,7 @@ at start (:mod:`phantomtouch.fleet.startup`).
 from __future__ import annotations
 
 from phantomtouch.errors import DeviceError
-from phantomtouch.service.errors import ErrorCode, NotFoundError, ServiceError
+from phantomtouch.service.errors import NotFoundError, ServiceError
 
 
 class ArmbandNotFoundError(NotFoundError):
@@ -32,11 +32,8 @@ class ArmbandNotFoundError(NotFoundError):
         )
 
 
-class ArmbandUnavailableError(ServiceError):
+class ArmbandUnavailableError(ServiceError, status_code=503, code="device"):
     """A registered armband whose node did not answer (it died, or NATS lost it)."""
-
-    status_code = 503
-    code: ErrorCode = "device"
 
     def __init__(self, armband: str, reason: str) -> None:
         super().__init__(
@@ -51,11 +48,8 @@ class NoNodeError(ArmbandUnavailableError):
         super().__init__(armband, "no node answers its subjects")
 
 
-class ForbiddenArmbandError(ServiceError):
+class ForbiddenArmbandError(ServiceError, status_code=403, code="forbidden"):
     """A gateway token whose scope does not include the armband it addresses."""
-
-    status_code = 403
-    code: ErrorCode = "forbidden"
 
     def __init__(self, armband: str, player: str) -> None:
         super().__init__(

@@ -43,6 +43,7 @@ from phantomtouch.fleet.requests import pop_start_at_unix_s, request_token
 from phantomtouch.fleet.settings import FleetSettings
 from phantomtouch.fleet.startup import Deadline, exit_join_failed, open_registry
 from phantomtouch.service import errors
+from phantomtouch.service.app_state import app_state
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import UnauthorizedError
 from phantomtouch.service.limits import BodyLimitMiddleware
@@ -131,8 +132,7 @@ class Gateway:
 
 
 def _gateway(connection: HTTPConnection) -> Gateway:
-    gateway: Gateway = connection.app.state.gateway
-    return gateway
+    return app_state(connection, "gateway", Gateway)
 
 
 async def get_gateway(connection: HTTPConnection) -> Gateway:

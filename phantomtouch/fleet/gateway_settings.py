@@ -5,13 +5,13 @@ from __future__ import annotations
 from typing import Self
 
 from pydantic import Field, SecretStr, model_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsConfigDict
 
 from phantomtouch.fleet.auth import Grants, GrantSpec
-from phantomtouch.service.settings import is_loopback
+from phantomtouch.service.settings import ClientLimits, is_loopback
 
 
-class GatewaySettings(BaseSettings):
+class GatewaySettings(ClientLimits):
     """Where a gateway listens and what it lets through."""
 
     model_config = SettingsConfigDict(env_prefix="PHANTOMTOUCH_GATEWAY_", extra="forbid")
@@ -25,10 +25,6 @@ class GatewaySettings(BaseSettings):
         default_factory=dict, description="Player tokens and their armbands (JSON)."
     )
     allowed_hosts: list[str] = Field(default_factory=list)
-    max_body_bytes: int = Field(default=1 << 20, ge=1024, le=64 << 20)
-    max_ws_message_bytes: int = Field(default=64 << 10, ge=256, le=16 << 20)
-    ws_messages_per_s: float = Field(default=1000.0, gt=0.0, le=1_000_000.0)
-    watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
 
     def grants(self) -> Grants:
         admin = self.token.get_secret_value() if self.token is not None else None

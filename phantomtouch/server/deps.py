@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 from fastapi import Depends, Path
 from starlette.requests import HTTPConnection
 
+from phantomtouch.service.app_state import app_state
 from phantomtouch.service.models import PATTERN_NAME_REGEX, name_rules
 from phantomtouch.service.running import Service
 from phantomtouch.service.store import PatternStore
@@ -19,21 +20,16 @@ if TYPE_CHECKING:
 # handing each to a worker thread (a thread hop per dependency per request).
 
 
-def get_service_now(connection: HTTPConnection) -> Service:
-    service: Service = connection.app.state.service
-    return service
-
-
 async def get_service(connection: HTTPConnection) -> Service:
-    return get_service_now(connection)
+    return app_state(connection, "service", Service)
 
 
 async def get_engine(connection: HTTPConnection) -> EngineFront:
-    return get_service_now(connection).engine
+    return app_state(connection, "service", Service).engine
 
 
 async def get_store(connection: HTTPConnection) -> PatternStore:
-    return get_service_now(connection).store
+    return app_state(connection, "service", Service).store
 
 
 async def get_client(connection: HTTPConnection) -> str:

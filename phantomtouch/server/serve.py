@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.server.app import create_app
-from phantomtouch.service.listen import log_config
+from phantomtouch.service.listen import run_http
 from phantomtouch.service.running import Attachment
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
@@ -109,19 +109,13 @@ def serve(settings: Settings, *, attach: Sequence[Attachment] = ()) -> None:
     ------
     PhantomTouchError
         The service could not start (the engine, the fleet) or stop cleanly; see
-        :func:`~phantomtouch.service.runner.run_app`.
+        :func:`~phantomtouch.service.listen.run_http`.
     """
     from phantomtouch.server.wire import FairWebSocketProtocol, JsonErrorProtocol
-    from phantomtouch.service.runner import run_app
 
-    run_app(
+    run_http(
         create_app(settings, attach=attach),
+        settings,
         http=JsonErrorProtocol,
         ws=FairWebSocketProtocol,
-        host=settings.host,
-        port=settings.port,
-        ws_max_size=settings.max_ws_message_bytes,
-        log_config=log_config(),
-        access_log=False,
-        server_header=False,
     )

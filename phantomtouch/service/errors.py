@@ -85,12 +85,36 @@ WS_CLOSE_TRY_AGAIN_LATER = 1013
 ``max_ws_connections_per_address`` from the address); never for a loopback address."""
 
 
+_RETRY_SOON: Mapping[str, str] = {"Retry-After": "1"}
+
+
 class ServiceError(PhantomTouchError):
-    """A request the service refuses for a reason of its own (not of the renderer)."""
+    """A request the service refuses for a reason of its own (not of the renderer).
+
+    Each kind of refusal is a subclass that states its HTTP status, error code and extra
+    response headers in its class line: ``class X(ServiceError, status_code=404,
+    code="not_found")``; what it leaves out it inherits.
+    """
 
     status_code = 400
     code: ErrorCode = "invalid"
     headers: ClassVar[Mapping[str, str]] = {}
+
+    def __init_subclass__(
+        cls,
+        *,
+        status_code: int | None = None,
+        code: ErrorCode | None = None,
+        headers: Mapping[str, str] | None = None,
+        **kwargs: Any,
+    ) -> None:
+        super().__init_subclass__(**kwargs)
+        if status_code is not None:
+            cls.status_code = status_code
+        if code is not None:
+            cls.code = code
+        if headers is not None:
+            cls.headers = headers
 
     def __init__(self, message: str, *, field: str | None = None, value: Any = None) -> None:
         super().__init__(message)
@@ -98,85 +122,51 @@ class ServiceError(PhantomTouchError):
         self.value = value
 
 
-class NotFoundError(ServiceError, LookupError):
+class NotFoundError(ServiceError, LookupError, status_code=404, code="not_found"):
     """An unknown job, pattern, preset or route."""
 
-    status_code = 404
-    code: ErrorCode = "not_found"
 
-
-class MissingReferenceError(ServiceError):
+class MissingReferenceError(ServiceError, status_code=422):
     """A body field names something the service does not hold (a pattern's clip that is
     not in the library): the body is at fault, 422 naming the field."""
 
-    status_code = 422
-    code: ErrorCode = "invalid"
 
-
-class TooLargeError(ServiceError):
+class TooLargeError(ServiceError, status_code=413, code="too_large"):
     """A request body or WebSocket message over its size limit."""
 
-    status_code = 413
-    code: ErrorCode = "too_large"
 
-
-class RateLimitedError(ServiceError):
+class RateLimitedError(ServiceError, status_code=429, code="rate_limited", headers=_RETRY_SOON):
     """Too many requests or messages; retry after a moment."""
 
-    status_code = 429
-    code: ErrorCode = "rate_limited"
-    headers: ClassVar[Mapping[str, str]] = {"Retry-After": "1"}
 
-
-class QuotaError(ServiceError):
+class QuotaError(ServiceError, status_code=429, code="quota", headers=_RETRY_SOON):
     """One client's share (contacts, voices, voice-seconds ahead) is used up; others go on."""
 
-    status_code = 429
-    code: ErrorCode = "quota"
-    headers: ClassVar[Mapping[str, str]] = {"Retry-After": "1"}
 
-
-class StorageError(ServiceError):
+class StorageError(ServiceError, status_code=503, code="storage"):
     """The pattern store cannot be read or written: its disk is full or its file damaged."""
 
-    status_code = 503
-    code: ErrorCode = "storage"
 
-
-class UnauthorizedError(ServiceError):
+class UnauthorizedError(
+    ServiceError, status_code=401, code="unauthorized", headers={"WWW-Authenticate": "Bearer"}
+):
     """A token is required and was missing or wrong."""
 
-    status_code = 401
-    code: ErrorCode = "unauthorized"
-    headers: ClassVar[Mapping[str, str]] = {"WWW-Authenticate": "Bearer"}
 
-
-class ForbiddenOriginError(ServiceError):
+class ForbiddenOriginError(ServiceError, status_code=403, code="forbidden_origin"):
     """A browser request or WebSocket handshake from a web page of another origin."""
 
-    status_code = 403
-    code: ErrorCode = "forbidden_origin"
 
-
-class UnknownHostError(ServiceError):
+class UnknownHostError(ServiceError, status_code=421, code="unknown_host"):
     """A ``Host`` the service does not answer to (DNS rebinding, a misdirected request)."""
 
-    status_code = 421
-    code: ErrorCode = "unknown_host"
 
-
-class UnsupportedMediaTypeError(ServiceError):
+class UnsupportedMediaTypeError(ServiceError, status_code=415, code="unsupported_media_type"):
     """A request body not declared as ``application/json``."""
 
-    status_code = 415
-    code: ErrorCode = "unsupported_media_type"
 
-
-class StoredPatternError(ServiceError):
+class StoredPatternError(ServiceError, status_code=500, code="stored_pattern"):
     """A row of the pattern library that no longer reads as a pattern: the server's fault."""
-
-    status_code = 500
-    code: ErrorCode = "stored_pattern"
 
 
 class FieldProblem(BaseModel):
@@ -346,7 +336,7 @@ def describe(exc: BaseException) -> Problem:
         fields = [] if exc.field is None else [_problem(exc.field, exc.value, message)]
         return Problem(exc.status_code, exc.code, message, fields, exc.headers)
     if isinstance(exc, EngineBusyError):
-        return Problem(503, "busy", str(exc) or "the engine is busy", headers={"Retry-After": "1"})
+        return Problem(503, "busy", str(exc) or "the engine is busy", headers=_RETRY_SOON)
     if isinstance(exc, DeviceError):
         return Problem(503, "device", str(exc))
     if isinstance(exc, ParameterError | ProtocolError | PhantomTouchError):

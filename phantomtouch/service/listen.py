@@ -1,11 +1,11 @@
 """Before and while an HTTP server of the project listens (the touch service, the fleet's
-gateway): the port check made before anything opens, and uvicorn's logging."""
+gateway): the port check made before anything opens, and how uvicorn runs it."""
 
 from __future__ import annotations
 
 import copy
 import socket
-from typing import Any
+from typing import Any, Protocol
 
 from phantomtouch.errors import PhantomTouchError
 
@@ -24,6 +24,56 @@ def log_config() -> dict[str, Any]:
         "propagate": False,
     }
     return config
+
+
+class Listening(Protocol):
+    """Where an HTTP server of the project listens, and its largest WebSocket message."""
+
+    @property
+    def host(self) -> str: ...
+
+    @property
+    def port(self) -> int: ...
+
+    @property
+    def max_ws_message_bytes(self) -> int: ...
+
+
+def run_http(app: Any, settings: Listening, **options: Any) -> None:
+    """Serve ``app`` under uvicorn until SIGTERM or SIGINT, as every HTTP server of the
+    project runs: on ``settings.host`` and ``settings.port``, WebSocket messages up to
+    ``settings.max_ws_message_bytes``, :func:`log_config`'s logging, no access log and no
+    ``Server`` header.
+
+    Called by the command that serves, on its main thread.
+
+    Parameters
+    ----------
+    app
+        The ASGI application.
+    settings
+        Its address and WebSocket message limit.
+    **options
+        More ``uvicorn.Config`` options (the service's HTTP and WebSocket protocols).
+
+    Raises
+    ------
+    PhantomTouchError
+        The application could not start or stop cleanly; see
+        :func:`~phantomtouch.service.runner.run_app`.
+    """
+    from phantomtouch.service.runner import run_app
+
+    run_app(
+        app,
+        host=settings.host,
+        port=settings.port,
+        ws_max_size=settings.max_ws_message_bytes,
+        log_config=log_config(),
+        access_log=False,
+        server_header=False,
+        **options,
+    )
 
 
 def check_port_free(host: str, port: int) -> None:

@@ -8,6 +8,7 @@ figures (active voices, underruns, late commands, peak level ...) are read from
 from __future__ import annotations
 
 import collections
+import functools
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -146,68 +147,61 @@ class Metrics:
 
     def __init__(self) -> None:
         self.registry = CollectorRegistry(auto_describe=True)
-        self.requests = Counter(
+        counter = functools.partial(Counter, registry=self.registry)
+        histogram = functools.partial(Histogram, registry=self.registry)
+        self.requests = counter(
             "phantomtouch_http_requests",
             "HTTP requests by route template, method and status (499: the client left "
             "before its request arrived whole).",
             ["route", "method", "status"],
-            registry=self.registry,
         )
-        self.latency = Histogram(
+        self.latency = histogram(
             "phantomtouch_http_request_duration_seconds",
             "Time from request to the end of the response, by route template.",
             ["route"],
             buckets=_LATENCY_BUCKETS_S,
-            registry=self.registry,
         )
-        self.ws_messages = Counter(
+        self.ws_messages = counter(
             "phantomtouch_ws_messages",
             "WebSocket messages by direction (in/out) and type.",
             ["direction", "type"],
-            registry=self.registry,
         )
-        self.ws_ingest = Histogram(
+        self.ws_ingest = histogram(
             "phantomtouch_ws_move_ingest_seconds",
             "From a move frame's receipt in the session to engine.contact_move returning.",
             buckets=_INGEST_BUCKETS_S,
-            registry=self.registry,
         )
-        self.ws_watchdog_releases = Counter(
+        self.ws_watchdog_releases = counter(
             "phantomtouch_ws_watchdog_releases",
             "Times a silent connection's contacts were released by the watchdog.",
-            registry=self.registry,
         )
-        self.ws_dropped = Counter(
+        self.ws_dropped = counter(
             "phantomtouch_ws_dropped_messages",
             "WebSocket messages dropped unanswered: over the connection's message rate.",
-            registry=self.registry,
         )
-        self.ws_flood_closes = Counter(
+        self.ws_flood_closes = counter(
             "phantomtouch_ws_flood_closes",
             "WebSocket connections closed (1008) for staying over their message rate.",
-            registry=self.registry,
         )
-        self.ws_connections = Counter(
-            "phantomtouch_ws_connections", "WebSocket connections accepted.", registry=self.registry
+        self.ws_connections = counter(
+            "phantomtouch_ws_connections", "WebSocket connections accepted."
         )
         self.ws_open = Gauge(
             "phantomtouch_ws_open_connections",
             "WebSocket connections open now.",
             registry=self.registry,
         )
-        self.ws_refused = Counter(
+        self.ws_refused = counter(
             "phantomtouch_ws_refused_connections",
             "WebSocket connections refused (close 1013) by a connection cap "
             "(cap: total, per_address).",
             ["cap"],
-            registry=self.registry,
         )
-        self.refused_requests = Counter(
+        self.refused_requests = counter(
             "phantomtouch_refused_requests",
             "Requests and WebSocket handshakes refused for their Host, Origin or content "
             "type (check: host, origin, content_type; transport: http, websocket).",
             ["check", "transport"],
-            registry=self.registry,
         )
         self._engine = _EngineCollector()
         self.registry.register(self._engine)

@@ -221,6 +221,15 @@ class LegacyNamedTouch(Timing):
         )
 
 
+_TOUCH_TAGS: dict[type[BaseModel], str] = {
+    PresetTouch: "preset",
+    NamedTouch: "named",
+    LegacyNamedTouch: "legacy",
+    PatternTouch: "touch",
+}
+"""The tag of each touch request model in :data:`TouchRequest`."""
+
+
 def _touch_kind(data: Any) -> str | None:
     if isinstance(data, dict):
         if "preset" in data:
@@ -228,20 +237,14 @@ def _touch_kind(data: Any) -> str | None:
         if "stored" in data:
             return "named"
         return "legacy" if "pattern" in data and "path" not in data else "touch"
-    if isinstance(data, PresetTouch):
-        return "preset"
-    if isinstance(data, NamedTouch):
-        return "named"
-    if isinstance(data, LegacyNamedTouch):
-        return "legacy"
-    return "touch" if isinstance(data, PatternTouch) else None
+    return next((tag for model, tag in _TOUCH_TAGS.items() if isinstance(data, model)), None)
 
 
 TouchRequest = Annotated[
-    Annotated[PatternTouch, Tag("touch")]
-    | Annotated[PresetTouch, Tag("preset")]
-    | Annotated[NamedTouch, Tag("named")]
-    | Annotated[LegacyNamedTouch, Tag("legacy")],
+    Annotated[PatternTouch, Tag(_TOUCH_TAGS[PatternTouch])]
+    | Annotated[PresetTouch, Tag(_TOUCH_TAGS[PresetTouch])]
+    | Annotated[NamedTouch, Tag(_TOUCH_TAGS[NamedTouch])]
+    | Annotated[LegacyNamedTouch, Tag(_TOUCH_TAGS[LegacyNamedTouch])],
     Discriminator(
         _touch_kind,
         custom_error_type="invalid_touch",

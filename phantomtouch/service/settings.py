@@ -9,7 +9,7 @@ from __future__ import annotations
 import ipaddress
 import re
 from pathlib import Path
-from typing import Literal, Self
+from typing import Annotated, Literal, Self
 
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -41,171 +41,97 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-class Settings(BaseSettings):
+VoiceCount = Annotated[int, Field(ge=1, le=4096)]
+"""A number of pattern voices sounding at once (the engine mixes at most 4096)."""
+
+
+class ClientLimits(BaseSettings):
+    """What an HTTP server of the project allows each client (the touch service, a fleet
+    gateway): request body and WebSocket message sizes, message rate and the watchdog."""
+
+    model_config = SettingsConfigDict(use_attribute_docstrings=True)
+
+    max_body_bytes: int = Field(default=1 << 20, ge=1024, le=64 << 20)
+    """Largest request body in bytes (413 ``too_large`` beyond it)."""
+    max_ws_message_bytes: int = Field(default=64 << 10, ge=256, le=16 << 20)
+    """Largest WebSocket message in bytes (close 1009 beyond it)."""
+    ws_messages_per_s: float = Field(default=1000.0, gt=0.0, le=1_000_000.0)
+    """Messages per second one WebSocket connection may send (1 s of burst)."""
+    watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
+    """Silence after which a connection's contacts are released, in seconds."""
+
+
+class Settings(ClientLimits):
     """Everything the service needs to start; each field has a sane default."""
 
     model_config = SettingsConfigDict(env_prefix="PHANTOMTOUCH_", extra="forbid")
 
-    host: str = Field(default="127.0.0.1", min_length=1, description="Address to bind.")
+    host: str = Field(default="127.0.0.1", min_length=1)
+    """Address to bind."""
     port: int = Field(default=8000, ge=1, le=65535)
-    device_profile: Path | None = Field(
-        default=None, description="Device profile file (TOML or JSON); None: the paper's armband."
-    )
-    output_device: str | None = Field(
-        default=None,
-        description=(
-            "Sound-card output (name, index or 'HOSTAPI:NAME', e.g. 'ASIO:Focusrite') for "
-            "the engine; None: the first output with enough channels, else the null "
-            "output. 'null' forces the null output; 'capture:FILE.wav' records what plays "
-            "and writes it to that WAV at exit."
-        ),
-    )
-    wasapi_exclusive: bool = Field(
-        default=False,
-        description=(
-            "Open the WASAPI output in exclusive mode (Windows; the output must be a WASAPI "
-            "device, e.g. 'WASAPI:Speakers')."
-        ),
-    )
-    db_path: Path = Field(default_factory=default_db_path, description="SQLite pattern store.")
-    wearer: str | None = Field(
-        default=None,
-        pattern=WEARER_NAME_REGEX,
-        description=(
-            "Wearer profile (stored in the library, PUT /wearers/{name}) whose offsets the "
-            "output stage applies after the device's calibration; None: no profile."
-        ),
-    )
-    wearer_band: Band = Field(
-        default="sine_100hz",
-        description="Carrier band of the wearer profile the output stage applies.",
-    )
-    token: str | None = Field(
-        default=None,
-        min_length=16,
-        description="Bearer token every request must carry (required off loopback).",
-    )
-    cors_origins: list[str] = Field(
-        default_factory=list,
-        description=(
-            "Web page origins besides the service's own allowed to call the API from a "
-            "browser (CORS), e.g. 'http://localhost:5173'; '*' allows every page."
-        ),
-    )
-    allowed_hosts: list[str] = Field(
-        default_factory=list,
-        description=(
-            "Host names the service answers to besides localhost, 127.0.0.1, [::1] and the "
-            "bound address (any IP address when bound to 0.0.0.0 or ::); '*' allows any."
-        ),
-    )
-    max_body_bytes: int = Field(default=1 << 20, ge=1024, le=64 << 20)
-    max_ws_message_bytes: int = Field(default=64 << 10, ge=256, le=16 << 20)
-    ws_messages_per_s: float = Field(
-        default=1000.0,
-        gt=0.0,
-        le=1_000_000.0,
-        description="Messages per second one WebSocket connection may send (1 s of burst).",
-    )
-    watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
-    max_ws_connections: int = Field(
-        default=64,
-        ge=1,
-        le=100_000,
-        description=(
-            "WebSocket connections open at once in all, beyond which one from an address "
-            "other than loopback is refused (close 1013); loopback ones are never refused."
-        ),
-    )
-    max_ws_connections_per_address: int = Field(
-        default=16,
-        ge=1,
-        le=100_000,
-        description=(
-            "WebSocket connections open at once from one address other than loopback "
-            "(close 1013 beyond it)."
-        ),
-    )
-    max_contacts_per_connection: int = Field(
-        default=10,
-        ge=1,
-        le=256,
-        description=(
-            "Contacts one WebSocket connection may hold down at once (two hands); the "
-            "engine holds 128, so a dozen clients at their quota still leave room."
-        ),
-    )
+    device_profile: Path | None = None
+    """Device profile file (TOML or JSON); None: the paper's armband."""
+    output_device: str | None = None
+    """Sound-card output (name, index or 'HOSTAPI:NAME', e.g. 'ASIO:Focusrite') for the engine;
+    None: the first output with enough channels, else the null output. 'null' forces the null
+    output; 'capture:FILE.wav' records what plays and writes it to that WAV at exit."""
+    wasapi_exclusive: bool = False
+    """Open the WASAPI output in exclusive mode (Windows; the output must be a WASAPI device, e.g.
+    'WASAPI:Speakers')."""
+    db_path: Path = Field(default_factory=default_db_path)
+    """SQLite pattern store."""
+    wearer: str | None = Field(default=None, pattern=WEARER_NAME_REGEX)
+    """Wearer profile (stored in the library, PUT /wearers/{name}) whose offsets the output stage
+    applies after the device's calibration; None: no profile."""
+    wearer_band: Band = "sine_100hz"
+    """Carrier band of the wearer profile the output stage applies."""
+    token: str | None = Field(default=None, min_length=16)
+    """Bearer token every request must carry (required off loopback)."""
+    cors_origins: list[str] = Field(default_factory=list)
+    """Web page origins besides the service's own allowed to call the API from a browser (CORS),
+    e.g. 'http://localhost:5173'; '*' allows every page."""
+    allowed_hosts: list[str] = Field(default_factory=list)
+    """Host names the service answers to besides localhost, 127.0.0.1, [::1] and the bound address
+    (any IP address when bound to 0.0.0.0 or ::); '*' allows any."""
+    max_ws_connections: int = Field(default=64, ge=1, le=100_000)
+    """WebSocket connections open at once in all, beyond which one from an address other than
+    loopback is refused (close 1013); loopback ones are never refused."""
+    max_ws_connections_per_address: int = Field(default=16, ge=1, le=100_000)
+    """WebSocket connections open at once from one address other than loopback (close 1013 beyond
+    it)."""
+    max_contacts_per_connection: int = Field(default=10, ge=1, le=256)
+    """Contacts one WebSocket connection may hold down at once (two hands); the engine holds 128, so
+    a dozen clients at their quota still leave room."""
     max_concurrent_renders: int = Field(default=2, ge=1, le=64)
     max_render_duration_s: float = Field(default=600.0, gt=0.0, le=7200.0)
     queue_capacity: int = Field(default=4096, ge=16, le=1 << 20)
-    max_voices: int = Field(
-        default=64,
-        ge=1,
-        le=4096,
-        description=(
-            "Most pattern voices that may sound at once, whatever the render budget allows."
-        ),
-    )
-    render_budget: float = Field(
-        default=0.5,
-        gt=0.0,
-        le=1.0,
-        description=(
-            "Share of an audio block's playing time that pattern voices may take to render; "
-            "the engine measures what a voice costs and admits touches within it."
-        ),
-    )
-    voice_policy: Literal["refuse", "steal-oldest", "steal-quietest"] = Field(
-        default="steal-oldest",
-        description=(
-            "A touch beyond the render budget: refused (503 busy), or the oldest or the "
-            "quietest sounding touch fades out in 5 ms to make room for it."
-        ),
-    )
-    max_voices_per_client: int | None = Field(
-        default=None,
-        ge=1,
-        le=4096,
-        description=(
-            "Touches one client (a WebSocket connection, or an address over HTTP) may have "
-            "scheduled or playing at once; None: three quarters of max_voices, so that "
-            "one client never holds every voice."
-        ),
-    )
-    max_voice_seconds_per_client: float = Field(
-        default=14_400.0,
-        gt=0.0,
-        le=1_000_000.0,
-        description=(
-            "Seconds of touch still to play that one client may hold, summed over its "
-            "touches: long touches count by the time they hold (default: two of the "
-            "longest, 2 h each)."
-        ),
-    )
-    engine_process: bool = Field(
-        default=True,
-        description=(
-            "Run the engine in a process of its own (the default), so that request handling "
-            "never holds the interpreter lock its audio callback needs; False: a thread."
-        ),
-    )
-    engine_log_path: Path | None = Field(
-        default=None, description="Where the engine logs what it played (None: no log)."
-    )
-    osc_listen: str | None = Field(
-        default=None,
-        description=(
-            "Listen for OSC over UDP at HOST:PORT, a loopback address (VRChat sends to "
-            "127.0.0.1:9001); None: no OSC input."
-        ),
-    )
-    osc_map: Path | None = Field(
-        default=None,
-        description="OSC map file (TOML): avatar receivers on the forearm; None: one per actuator.",
-    )
-    osc_messages_per_s: float = Field(
-        default=20_000.0, gt=0.0, le=1_000_000.0, description="OSC messages admitted per second."
-    )
+    max_voices: VoiceCount = 64
+    """Most pattern voices that may sound at once, whatever the render budget allows."""
+    render_budget: float = Field(default=0.5, gt=0.0, le=1.0)
+    """Share of an audio block's playing time that pattern voices may take to render; the engine
+    measures what a voice costs and admits touches within it."""
+    voice_policy: Literal["refuse", "steal-oldest", "steal-quietest"] = "steal-oldest"
+    """A touch beyond the render budget: refused (503 busy), or the oldest or the quietest sounding
+    touch fades out in 5 ms to make room for it."""
+    max_voices_per_client: VoiceCount | None = None
+    """Touches one client (a WebSocket connection, or an address over HTTP) may have scheduled or
+    playing at once; None: three quarters of max_voices, so that one client never holds every
+    voice."""
+    max_voice_seconds_per_client: float = Field(default=14_400.0, gt=0.0, le=1_000_000.0)
+    """Seconds of touch still to play that one client may hold, summed over its touches: long
+    touches count by the time they hold (default: two of the longest, 2 h each)."""
+    engine_process: bool = True
+    """Run the engine in a process of its own (the default), so that request handling never holds
+    the interpreter lock its audio callback needs; False: a thread."""
+    engine_log_path: Path | None = None
+    """Where the engine logs what it played (None: no log)."""
+    osc_listen: str | None = None
+    """Listen for OSC over UDP at HOST:PORT, a loopback address (VRChat sends to 127.0.0.1:9001);
+    None: no OSC input."""
+    osc_map: Path | None = None
+    """OSC map file (TOML): avatar receivers on the forearm; None: one per actuator."""
+    osc_messages_per_s: float = Field(default=20_000.0, gt=0.0, le=1_000_000.0)
+    """OSC messages admitted per second."""
 
     @property
     def voices_per_client(self) -> int:

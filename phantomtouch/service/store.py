@@ -27,9 +27,9 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema import HapticClip, TouchPattern
@@ -40,6 +40,9 @@ from phantomtouch.service.models import PlanSummary
 logger = logging.getLogger("phantomtouch.server.store")
 Table = Literal["patterns", "clips", "wearers"]
 """The tables whose rows are written and deleted by name (never a value from a request)."""
+_DOCUMENT: dict[Table, str] = {"patterns": "pattern", "clips": "clip", "wearers": "profile"}
+"""The column holding each table's document as JSON."""
+Document = TypeVar("Document", bound=BaseModel)
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS patterns (
@@ -176,14 +179,7 @@ class PatternStore:
         StoredPatternError
             The row is there but no longer reads as a pattern.
         """
-        with self._using(writes=False) as db:
-            row = db.execute("SELECT pattern FROM patterns WHERE name = ?", (name,)).fetchone()
-        if row is None:
-            return None
-        try:
-            return TouchPattern.model_validate_json(row[0])
-        except ValidationError as exc:
-            raise StoredPatternError(unreadable(name, exc), field="pattern", value=name) from exc
+        return self._read("patterns", TouchPattern, name, field="pattern")
 
     def put(self, name: str, pattern: TouchPattern, summary: dict[str, Any]) -> bool:
         """Store ``pattern`` under ``name``; True if the name was new."""
@@ -193,6 +189,42 @@ class PatternStore:
     def delete(self, name: str) -> bool:
         """Remove ``name``; False if it was not stored."""
         return self._delete("patterns", name)
+
+    def _read(
+        self, table: Table, model: type[Document], name: str, *, field: str
+    ) -> Document | None:
+        """The document of the row ``name`` of ``table``, or None.
+
+        Raises
+        ------
+        StoredPatternError
+            The row is there but no longer reads as a ``model``; ``field`` names it.
+        """
+        with self._using(writes=False) as db:
+            row = db.execute(
+                f"SELECT {_DOCUMENT[table]} FROM {table} WHERE name = ?", (name,)
+            ).fetchone()
+        if row is None:
+            return None
+        try:
+            return model.model_validate_json(row[0])
+        except ValidationError as exc:
+            raise StoredPatternError(unreadable(name, exc), field=field, value=name) from exc
+
+    def _read_all(self, table: Table, model: type[Document]) -> builtins.list[tuple[str, Document]]:
+        """Every readable document of ``table`` by name, sorted by name (a row that no
+        longer reads is logged and left out)."""
+        with self._using(writes=False) as db:
+            rows = db.execute(
+                f"SELECT name, {_DOCUMENT[table]} FROM {table} ORDER BY name"
+            ).fetchall()
+        listed = []
+        for name, text in rows:
+            try:
+                listed.append((name, model.model_validate_json(text)))
+            except ValidationError as exc:
+                logger.warning("%s; left out of GET /%s", unreadable(name, exc), table)
+        return listed
 
     def _replace(self, table: Table, name: str, values: tuple[Any, ...]) -> bool:
         """Write the row ``(name, *values)`` of ``table`` in one transaction; True if the
@@ -219,26 +251,11 @@ class PatternStore:
 
     def list_clips(self) -> builtins.list[tuple[str, HapticClip]]:
         """Every readable clip, sorted by name (a row that no longer reads is logged)."""
-        with self._using(writes=False) as db:
-            rows = db.execute("SELECT name, clip FROM clips ORDER BY name").fetchall()
-        listed = []
-        for name, text in rows:
-            try:
-                listed.append((name, HapticClip.model_validate_json(text)))
-            except ValidationError as exc:
-                logger.warning("%s; left out of GET /clips", unreadable(name, exc))
-        return listed
+        return self._read_all("clips", HapticClip)
 
     def get_clip(self, name: str) -> HapticClip | None:
         """The clip stored as ``name``, or None (StoredPatternError: it no longer reads)."""
-        with self._using(writes=False) as db:
-            row = db.execute("SELECT clip FROM clips WHERE name = ?", (name,)).fetchone()
-        if row is None:
-            return None
-        try:
-            return HapticClip.model_validate_json(row[0])
-        except ValidationError as exc:
-            raise StoredPatternError(unreadable(name, exc), field="clip", value=name) from exc
+        return self._read("clips", HapticClip, name, field="clip")
 
     def put_clip(self, name: str, clip: HapticClip) -> bool:
         """Store ``clip`` under ``name``; True if the name was new."""
@@ -253,27 +270,12 @@ class PatternStore:
     def list_wearers(self) -> builtins.list[tuple[str, WearerProfile]]:
         """Every readable wearer profile, sorted by name (a row that no longer reads is
         logged and left out)."""
-        with self._using(writes=False) as db:
-            rows = db.execute("SELECT name, profile FROM wearers ORDER BY name").fetchall()
-        listed = []
-        for name, text in rows:
-            try:
-                listed.append((name, WearerProfile.model_validate_json(text)))
-            except ValidationError as exc:
-                logger.warning("%s; left out of GET /wearers", unreadable(name, exc))
-        return listed
+        return self._read_all("wearers", WearerProfile)
 
     def get_wearer(self, name: str) -> WearerProfile | None:
         """The wearer profile stored as ``name``, or None (StoredPatternError: it no longer
         reads)."""
-        with self._using(writes=False) as db:
-            row = db.execute("SELECT profile FROM wearers WHERE name = ?", (name,)).fetchone()
-        if row is None:
-            return None
-        try:
-            return WearerProfile.model_validate_json(row[0])
-        except ValidationError as exc:
-            raise StoredPatternError(unreadable(name, exc), field="wearer", value=name) from exc
+        return self._read("wearers", WearerProfile, name, field="wearer")
 
     def put_wearer(self, name: str, profile: WearerProfile) -> bool:
         """Store ``profile`` under ``name``; True if the name was new."""
