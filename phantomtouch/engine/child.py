@@ -1,5 +1,7 @@
-"""The engine process (:func:`serve`): one audio callback that does all of its Python
-work, at the start of each block (:meth:`Intake.run`; ``docs/engine.md``, Threads).
+"""The engine process (:func:`serve`): one audio callback that does its Python work at
+the start of each block (:meth:`Intake.run`), beside two threads that receive the host's
+messages and send the callback's reports (:mod:`phantomtouch.engine.link`;
+``docs/engine.md``, Threads).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import numpy as np
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, voice_costs
-from phantomtouch.engine.link import FrameReader, NonBlockingWriter, widen
+from phantomtouch.engine.link import Inbox, ReportBox
 from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
 from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.plan_memory import HeldArrays
@@ -33,8 +35,12 @@ logger = logging.getLogger(__name__)
 
 INTAKE_SHARE = 0.15
 """Share of a block's playing time the callback spends on the host's messages."""
-READ_BYTES = 1 << 18
-"""Most bytes read from the host's pipe per block."""
+MESSAGES_PER_BLOCK = 256
+"""Most of the host's messages the callback performs per block."""
+INBOX_MESSAGES = 4096
+"""Most of the host's messages received and waiting for the callback."""
+REPORTS_WAITING = 1024
+"""Most blocks' reports waiting to be sent to the host (more are dropped and counted)."""
 
 
 @dataclasses.dataclass
@@ -42,8 +48,8 @@ class Intake:
     """The engine process's state, used by its audio callback at each block's start."""
 
     core: Core
-    reader: FrameReader
-    writer: NonBlockingWriter
+    inbox: Inbox
+    report_box: ReportBox
     mark: Any
     """Sequence number of the host's last ``stop_all`` (shared memory)."""
     slots: MoveSlots
@@ -60,18 +66,21 @@ class Intake:
         self.figures: dict[str, Any] = self.core.figures()
 
     def run(self) -> None:
-        """At the start of each block (real time; see the module docstring)."""
+        """At the start of each block (real time; see the module docstring): the host's
+        messages come from the inbox's FIFO, without a system call or an unpickling."""
         began = time.perf_counter()
         self.report()
         self.check_mark()
-        reader = self.reader
-        reader.fill(READ_BYTES)
-        while (framed := reader.next()) is not None:
+        inbox = self.inbox
+        messages = inbox.messages
+        for _ in range(MESSAGES_PER_BLOCK):
+            if not messages:
+                break
             self.check_mark()
-            self.apply(framed)
+            self.apply(messages.popleft())
             if time.perf_counter() - began > self.budget_s:
                 break
-        if reader.closed and reader.pending_bytes == 0:
+        if inbox.drained:
             self.leave.set()  # the host is gone
         self.slots.drain(self.core.board.post_checked)
 
@@ -89,9 +98,7 @@ class Intake:
             events.extend(state.reports)
             state.reports.clear()
         if events:
-            self.writer.send(events)
-        else:
-            self.writer.flush()
+            self.report_box.put(events)
         figures = self.figures  # the render loads are in shared memory: the host's to sum up
         mixer = scheduler.mixer
         figures.update(
@@ -106,7 +113,7 @@ class Intake:
             levels=mixer.levels,
             callback_errors=scheduler.callback_errors,
             output_latency_s=core.clock.output_latency_s,
-            dropped_reports=self.writer.dropped,
+            dropped_reports=self.report_box.dropped,
             refused_commands=state.refused,
             running=core.running,
         )
@@ -150,22 +157,18 @@ def raise_priority(priority: int | None) -> None:
 
 
 def _wait_for_start(intake: Intake) -> bool:
-    """Perform the host's messages until it says ``StartSink`` (True) or ``Close``
-    (non real time, before the sink starts)."""
-    reader = intake.reader
-    os.set_blocking(reader.fd, True)
-    try:
-        while not reader.closed:
-            reader.fill(READ_BYTES)
-            while (framed := reader.next()) is not None:
-                if isinstance(framed[1], StartSink):
-                    return True
-                if isinstance(framed[1], Close):
-                    return False
-                intake.apply(framed)
-        return False
-    finally:
-        os.set_blocking(reader.fd, False)
+    """Receive and perform the host's messages until it says ``StartSink`` (True) or
+    ``Close`` (non real time, the main thread, before the sink and the inbox start)."""
+    while True:
+        try:
+            framed = intake.inbox.connection.recv()
+        except (EOFError, OSError):
+            return False
+        if isinstance(framed[1], StartSink):
+            return True
+        if isinstance(framed[1], Close):
+            return False
+        intake.apply(framed)
 
 
 def serve(
@@ -184,12 +187,13 @@ def serve(
     Parameters
     ----------
     commands : Connection
-        The host's ``(seq, message)`` pairs (read end; framed by
-        :mod:`phantomtouch.engine.link`).
+        The host's ``(seq, message)`` pairs (read end; received by the main thread
+        until the sink starts, then by the inbox's thread).
     reports : Connection
         Where the engine reports (write end): first ``("ready", (voice_cost,
         start_cost, prerendered_cost), backend, output_device)`` or ``("failed",
-        exception)``, then lists of events (:mod:`phantomtouch.engine.messages`).
+        exception)``, then lists of events (:mod:`phantomtouch.engine.messages`), sent
+        by the report box's thread.
     device_json : str
         The device profile as JSON.
     spec : SinkSpec
@@ -239,11 +243,10 @@ def serve(
         return
     refuse_building()  # from now on a noise loop is only what the host hands over
     reports.send(("ready", costs, sink.backend, sink.output_device))
-    widen(commands.fileno())
     intake = Intake(
         core,
-        FrameReader(commands.fileno()),
-        NonBlockingWriter(reports.fileno()),
+        Inbox(commands, INBOX_MESSAGES, poll_s=device.block_frames / device.sample_rate_hz),
+        ReportBox(reports, REPORTS_WAITING),
         mark,
         slots,
         status,
@@ -254,6 +257,7 @@ def serve(
         core.close(fade=False)
         return
     sys.setswitchinterval(0.001)
+    intake.inbox.start()
     core.start()
     intake.leave.wait()
     core.close(fade=True)  # a capture sink writes its WAV as it closes

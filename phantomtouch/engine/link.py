@@ -1,132 +1,121 @@
-"""Framed messages over the pipes between the host and the engine process: a pickle
-behind its length (4 bytes, big-endian, as :mod:`multiprocessing.connection` frames it,
-so the host sends and receives through its ``Connection``). Neither side waits for the
-other (``docs/engine.md``, Transports).
+"""The pipes between the host and the engine process, used only through their
+``multiprocessing`` ``Connection``s (on Windows a ``Connection``'s ``fileno()`` is a pipe
+handle, not a file descriptor). Each side has a thread of its own that sends or receives,
+so neither side waits for the other (``docs/engine.md``, Threads and Transports):
+
+- the host: :class:`Outbox` sends its messages;
+- the engine process: :class:`Inbox` receives the host's messages and :class:`ReportBox`
+  sends the audio callback's reports, each through a bounded FIFO the callback takes from
+  or puts into without a system call, a lock it waits for, or a pickle.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
 import pickle
-import struct
-import sys
 import threading
+import time
 from collections import deque
 from typing import Any
 
-_HEADER = struct.Struct("!i")
-PIPE_BYTES = 1 << 20
-"""Pipe buffer asked for (Linux ``F_SETPIPE_SZ``; the system's ``pipe-max-size``, 1 MB by
-default, caps it): a plan crosses in a few reads."""
 
-
-def encode(message: Any) -> bytes:
-    """A message as a frame: its length, then its pickle."""
-    payload = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-    return _HEADER.pack(len(payload)) + payload
-
-
-def widen(fd: int) -> None:
-    """Ask for a larger pipe buffer (no-op where the system does not offer it: Windows
-    has no ``fcntl``, macOS no ``F_SETPIPE_SZ``)."""
-    if sys.platform == "win32":
-        return
-    try:
-        import fcntl
-    except ImportError:  # a POSIX system's Python built without it
-        return
-    set_size = getattr(fcntl, "F_SETPIPE_SZ", None)
-    if set_size is None:
-        return
-    with contextlib.suppress(OSError):
-        fcntl.fcntl(fd, set_size, PIPE_BYTES)
-
-
-class FrameReader:
-    """Reads frames from a non-blocking pipe, a bounded number of bytes at a time.
+class Inbox:
+    """The host's messages in the engine process: a thread receives and unpickles them
+    into a FIFO the audio callback takes them from.
 
     Parameters
     ----------
-    fd : int
-        The read end; made non-blocking here.
+    connection : multiprocessing.connection.Connection
+        The read end of the host's pipe (blocking).
+    capacity : int, >= 1
+        Most messages waiting; while that many wait the thread stops receiving, so the
+        pipe and then the host's :class:`Outbox` fill.
+    poll_s : float, > 0
+        How often a thread that stopped receiving looks again (seconds; about a block).
     """
 
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
-        os.set_blocking(fd, False)
-        self._buffer = bytearray()
+    def __init__(self, connection: Any, capacity: int, poll_s: float) -> None:
+        self.connection = connection
+        self.messages: deque[Any] = deque()
+        """The messages received, oldest first (the callback pops from the left)."""
+        self._capacity = capacity
+        self._poll_s = poll_s
         self.closed = False
+        """Set once the host's end is closed (or the pipe broke): nothing more comes."""
+        self._thread = threading.Thread(target=self._run, name="phantomtouch-inbox", daemon=True)
 
-    def fill(self, max_bytes: int) -> None:
-        """Read what has arrived, at most ``max_bytes``; sets :attr:`closed` at EOF."""
+    def start(self) -> None:
+        """Start receiving (non real time, the engine process's main thread)."""
+        self._thread.start()
+
+    def _run(self) -> None:
+        """The inbox thread (non real time): receive until the host's end closes."""
+        messages = self.messages
         try:
-            data = os.read(self.fd, max_bytes)
-        except BlockingIOError:
-            return
-        except OSError:
-            self.closed = True
-            return
-        if not data:
-            self.closed = True
-        self._buffer += data
-
-    def next(self) -> Any | None:
-        """The next whole message, or None."""
-        buffer = self._buffer
-        if len(buffer) < _HEADER.size:
-            return None
-        (size,) = _HEADER.unpack_from(buffer)
-        end = _HEADER.size + size
-        if len(buffer) < end:
-            return None
-        payload = bytes(buffer[_HEADER.size : end])
-        del buffer[:end]
-        return pickle.loads(payload)
+            while True:
+                while len(messages) >= self._capacity:
+                    time.sleep(self._poll_s)
+                messages.append(self.connection.recv())
+        except (EOFError, OSError):
+            pass
+        finally:
+            self.closed = True  # after the last append: see `drained`
 
     @property
-    def pending_bytes(self) -> int:
-        return len(self._buffer)
+    def drained(self) -> bool:
+        """True once the host's end is closed and every message was taken (real time)."""
+        return self.closed and not self.messages  # `closed` first: nothing is appended after
 
 
-class NonBlockingWriter:
-    """Writes frames into a non-blocking pipe; what does not fit waits for :meth:`flush`.
+class ReportBox:
+    """The audio callback's reports, sent to the host by a thread of their own.
 
     Parameters
     ----------
-    fd : int
-    max_pending_bytes : int
-        More waiting than this and new frames are dropped (counted in :attr:`dropped`).
+    connection : multiprocessing.connection.Connection
+        The write end of the reports' pipe (blocking).
+    capacity : int, >= 1
+        Most reports waiting; more are dropped (counted in :attr:`dropped`), those
+        waiting keep their order.
     """
 
-    def __init__(self, fd: int, max_pending_bytes: int = 1 << 20) -> None:
-        self.fd = fd
-        os.set_blocking(fd, False)
-        self._pending = bytearray()
-        self._max = max_pending_bytes
+    def __init__(self, connection: Any, capacity: int) -> None:
+        self._connection = connection
+        self._waiting: deque[Any] = deque()
+        self._capacity = capacity
+        self._wake = threading.Lock()
+        """Held while nothing waits: the thread waits to acquire it, :meth:`put` releases
+        it (releasing never waits)."""
+        self._wake.acquire()
         self.dropped = 0
         self.broken = False
+        """Set once a send failed (the host is gone): nothing more is sent."""
+        self._thread = threading.Thread(
+            target=self._run, name="phantomtouch-report-box", daemon=True
+        )
+        self._thread.start()
 
-    def send(self, message: Any) -> None:
-        frame = encode(message)
-        if len(self._pending) + len(frame) > self._max:
+    def put(self, report: Any) -> None:
+        """Queue a report for the host and wake the thread (real time: no system call,
+        no pickle; only this method releases the wake lock, so it is held when released)."""
+        if len(self._waiting) >= self._capacity:
             self.dropped += 1
             return
-        self._pending += frame
-        self.flush()
+        self._waiting.append(report)
+        if self._wake.locked():
+            self._wake.release()
 
-    def flush(self) -> None:
-        """Write what the pipe takes now."""
-        if not self._pending or self.broken:
-            return
-        try:
-            written = os.write(self.fd, self._pending)
-        except BlockingIOError:
-            return
-        except OSError:
-            self.broken = True
-            return
-        del self._pending[:written]
+    def _run(self) -> None:
+        """The report box's thread (non real time): send what waits, oldest first."""
+        waiting = self._waiting
+        while True:
+            self._wake.acquire()
+            while waiting:
+                try:
+                    self._connection.send(waiting[0])
+                except OSError:
+                    self.broken = True
+                    return
+                waiting.popleft()
 
 
 class Outbox:

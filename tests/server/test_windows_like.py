@@ -4,8 +4,11 @@
 ``pwd``, ``grp`` and the like unimportable and removes POSIX-only ``os`` functions
 (``sched_setscheduler``, ``getuid``, ``killpg`` ...) in every interpreter started with it
 on ``PYTHONPATH``: the server and its engine process; there ``select.select`` takes sockets
-only, as Windows' does. The service then starts, plays a touch on a ``capture:`` output
-and stops, and the recording is the offline render sample for sample.
+only, as Windows' does, and ``os.read``, ``os.write`` and ``os.set_blocking`` refuse a pipe
+outside ``multiprocessing`` (a ``Connection``'s ``fileno()`` is a pipe handle on Windows,
+so the engine process talks through its ``Connection``s only). The service then starts,
+plays a touch on a ``capture:`` output and stops, and the recording is the offline render
+sample for sample.
 """
 
 from __future__ import annotations

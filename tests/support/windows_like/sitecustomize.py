@@ -6,13 +6,19 @@ functions in :data:`POSIX_ONLY_OS_FUNCTIONS` are removed from ``os``. Functions 
 standard library itself calls on Linux to start a process or a thread (``os.fork``,
 ``os.waitpid``, ``os.pipe`` ...) stay, since they have Windows counterparts behind the
 same standard-library calls. ``select.select`` raises ``OSError`` for anything but a
-socket, as Windows' does (WinError 10038). When ``PHANTOMTOUCH_WINDOWS_LIKE_MARKS`` names
-a folder, each interpreter writes a file named by its process id there, so a test can
-tell that the server and its engine process both ran this way.
+socket, as Windows' does (WinError 10038). ``os.read``, ``os.write`` and
+``os.set_blocking`` raise ``OSError(EBADF)`` on a pipe, as on Windows, where a
+``multiprocessing`` ``Connection``'s ``fileno()`` is a pipe handle and not a file
+descriptor; the ``multiprocessing`` package itself may still call them, since on Linux it
+reads and writes its own pipes with them where Windows has its handle calls. When
+``PHANTOMTOUCH_WINDOWS_LIKE_MARKS`` names a folder, each interpreter writes a file named
+by its process id there, so a test can tell that the server and its engine process both
+ran this way.
 """
 
 from __future__ import annotations
 
+import errno
 import importlib.abc
 import os
 import select
@@ -90,7 +96,30 @@ def _select_sockets_only(
     return _select(rlist, wlist, xlist, timeout)
 
 
+def _pipes_refused(function: Any) -> Any:
+    """``function`` (of a file descriptor first) refusing a pipe unless the caller is in
+    the ``multiprocessing`` package."""
+
+    def refusing(fd: int, *args: Any) -> Any:
+        caller = sys._getframe(1).f_globals.get("__name__") or ""
+        if not caller.startswith("multiprocessing.") and _is_pipe(fd):
+            raise OSError(errno.EBADF, "Bad file descriptor (a pipe handle on Windows)")
+        return function(fd, *args)
+
+    return refusing
+
+
+def _is_pipe(fd: int) -> bool:
+    try:
+        return stat.S_ISFIFO(os.fstat(fd).st_mode)
+    except OSError:
+        return False
+
+
 select.select = _select_sockets_only
+os.read = _pipes_refused(os.read)
+os.write = _pipes_refused(os.write)
+os.set_blocking = _pipes_refused(os.set_blocking)
 for _name in POSIX_ONLY_MODULES:
     sys.modules.pop(_name, None)
 sys.meta_path.insert(0, _Refuse())
