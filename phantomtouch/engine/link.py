@@ -140,12 +140,14 @@ class Outbox:
         self._thread = threading.Thread(target=self._run, name="phantomtouch-outbox", daemon=True)
         self._thread.start()
 
-    def put(self, message: Any) -> bool:
+    def put(self, message: Any, *, release: bool = False) -> bool:
         """Queue a message, pickled here (host, the caller's thread); False when the outbox
-        is full or closed."""
+        is closed or broken, or full unless it is a ``release`` (a command that ends a
+        sound is small and must reach the engine process: it is taken past the limit)."""
         frame = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
         with self._ready:
-            if self._closed or self.broken or self._bytes + len(frame) > self._max:
+            full = self._bytes + len(frame) > self._max and not release
+            if self._closed or self.broken or full:
                 return False
             self._frames.append(frame)
             self._bytes += len(frame)

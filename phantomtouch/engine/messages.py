@@ -126,6 +126,10 @@ class ReleaseOwner:
     owner: str
 
 
+RELEASES = (ReleaseJob, ContactUp, ReleaseOwner)
+"""Commands that end a sound: never refused for room (``link.Outbox.put``)."""
+
+
 @dataclass(frozen=True, slots=True)
 class HoldNoise:
     """A noise loop the host wrote into the shared memory named ``name``: use it for

@@ -539,8 +539,8 @@ class ContactCalls:
 
 
 def post_release(audio: LocalAudio | ChildAudio, message: Command) -> None:
-    """Post a release; a full pipe drops it (the voice ends on its own, or the contact's
-    slot is gone). Host, under the front's lock."""
+    """Post a release (host, under the front's lock). A full pipe takes it all the same;
+    only an engine process that is gone refuses it, and its replacement starts silent."""
     with contextlib.suppress(EngineBusyError):
         audio.post(message)
 

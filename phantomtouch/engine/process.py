@@ -16,6 +16,7 @@ from phantomtouch.engine.checks import check_int
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import (
+    RELEASES,
     Close,
     Command,
     ContactMove,
@@ -137,7 +138,7 @@ class ChildAudio:
 
     def _write(self, child: ChildProcess, message: Command) -> bool:
         self._seq += 1
-        return child.outbox.put((self._seq, message))
+        return child.outbox.put((self._seq, message), release=isinstance(message, RELEASES))
 
     def post(self, message: Command) -> None:
         """Queue a message for the engine process (host, under the front's lock); a
@@ -146,7 +147,8 @@ class ChildAudio:
         Raises
         ------
         EngineBusyError
-            The pipe is full (the engine process does not read).
+            The pipe is full (the engine process does not read); never for a release
+            (``RELEASES``), which only a closed or broken pipe refuses.
         """
         if isinstance(message, HoldPlan):
             shared = self._shared_plans.share(

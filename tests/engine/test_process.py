@@ -358,3 +358,16 @@ def test_the_host_reads_the_callback_s_render_loads_from_shared_memory() -> None
             time.sleep(0.05)
         status = engine.status()
         assert 0.0 < status.render_load_p99 <= status.render_load_max
+
+
+def test_a_release_gets_through_a_full_outbox() -> None:
+    """An outbox at its limit refuses a new touch but never a release: the contact's voice
+    ends (before, the release was dropped and the contact kept sounding)."""
+    with ProcessEngine(DEVICE, SinkSpec("null")) as engine:
+        engine.contact_down("a", "1", 1.0, 2.0)
+        wait_until(lambda: engine.status().active_voices == 1)
+        engine._audio._child.outbox._max = 0  # as if the engine process fell that far behind
+        with pytest.raises(EngineBusyError, match="pipe is full"):
+            engine.contact_down("b", "1", 3.0, 9.0)
+        engine.contact_up("a", "1")
+        wait_until(lambda: engine.status().active_voices == 0)
