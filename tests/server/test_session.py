@@ -20,6 +20,7 @@ from phantomtouch.service.errors import (
     WS_CLOSE_UNSUPPORTED_DATA,
 )
 from tests.support.service import LONG, make_settings
+from tests.support.yardstick import WakeUpLag
 
 TOKEN = "s3cret-token-0123456789"
 
@@ -108,10 +109,16 @@ def test_watchdog_releases_a_silent_client(app_client: Callable[..., TestClient]
 
 
 def test_pings_keep_contacts_alive(app_client: Callable[..., TestClient]) -> None:
-    with app_client(watchdog_s=0.3) as client, client.websocket_connect("/ws") as ws:
+    """Pings a third of the watchdog apart keep a contact for over twice the watchdog. The
+    watchdog is 0.3 s on a quiet machine, and grows by ten times how late a thread of the
+    test was woken just before, so that a ping that is late on a busy one is still in time."""
+    with WakeUpLag() as lag:
+        time.sleep(0.2)
+    watchdog_s = 0.3 + 10 * lag.worst_s
+    with app_client(watchdog_s=watchdog_s) as client, client.websocket_connect("/ws") as ws:
         ask(ws, {"type": "down", "contact": "L", "x_cm": 1.9, "y_cm": 7.2, "id": 1})
         for _ in range(8):
-            time.sleep(0.1)
+            time.sleep(watchdog_s / 3)
             assert ask(ws, {"type": "ping"})["type"] == "pong"
         assert [c["contact"] for c in contacts(client)] == ["L"]
 
