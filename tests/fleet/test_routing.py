@@ -23,7 +23,10 @@ def test_the_registry_lists_every_armband_with_its_device(fleet: Fleet) -> None:
         listing = httpx.get(f"{fleet.gateways[0].url}/armbands", timeout=5.0).json()
         return all(r["clock_offset_s"] is not None for r in listing)
 
-    wait_until(measured, 3.0, "each node read back a heartbeat's time stamp")
+    wait_until(measured, 30.0, "each node read back a heartbeat's time stamp")
+    began = time.monotonic()
+    measured()
+    listing_s = time.monotonic() - began  # the yardstick: a plain request of this run
     for gateway in fleet.gateways:
         listing = httpx.get(f"{gateway.url}/armbands", timeout=5.0).json()
         assert {r["armband"]: r["site"] for r in listing} == SITES
@@ -34,8 +37,9 @@ def test_the_registry_lists_every_armband_with_its_device(fleet: Fleet) -> None:
             assert record["status"] == "ok"
             # Node and NATS servers share this machine's clock: the offset each node
             # measured is the time from its clock reading to the server's stamp, the
-            # publish's latency: milliseconds, up to a few hundred on a loaded machine.
-            assert 0.0 <= -record["clock_offset_s"] < 0.5
+            # publish's latency: milliseconds on a quiet machine, within 0.5 s and ten
+            # times a listing's time on a loaded one.
+            assert 0.0 <= -record["clock_offset_s"] < 0.5 + 10 * listing_s
 
 
 def test_every_listing_names_each_armband_once_while_heartbeats_replace_records(
