@@ -54,7 +54,7 @@ def test_moves_reach_the_addressed_armband_and_the_latest_wins(fleet: Fleet) -> 
         )
         assert answer["type"] == "error"
         assert "not down on armband 'a1'" in answer["message"]
-    wait_until(lambda: _remote_contacts(fleet, "a3") == [], 3.0, "contact released on close")
+    wait_until(lambda: _remote_contacts(fleet, "a3") == [], 30.0, "contact released on close")
 
 
 def test_a_contact_without_an_armband_is_refused_by_name(fleet: Fleet) -> None:

@@ -25,7 +25,7 @@ def test_a_dead_armband_is_refused_by_name_never_accepted(fleet: Fleet) -> None:
         return {r["armband"] for r in httpx.get(f"{gateway.url}/armbands").json()}
 
     try:
-        wait_until(lambda: "a4" in listed(), 5.0, "a4 registered")
+        wait_until(lambda: "a4" in listed(), 30.0, "a4 registered")
         assert httpx.post(f"{gateway.url}/armbands/a4/touch", json=STROKE).status_code == 202
         statuses = set()
         with WakeUpLag() as lag:  # 3 s past the TTL on a quiet machine, more as it is late
@@ -93,7 +93,7 @@ def test_malformed_fleet_messages_are_counted_and_dropped(fleet: Fleet) -> None:
     )
     assert answer["status"] == 422
     assert answer["body"]["error"]["code"] == "invalid"  # type: ignore[index]
-    wait_until(lambda: count("contact", "too_large") > before["too_large"], 3.0, "counted")
+    wait_until(lambda: count("contact", "too_large") > before["too_large"], 30.0, "counted")
     assert count("contact", "invalid") > before["invalid"]  # x_cm="far"
     assert count("contact", "refused") >= before["refused"] + 2  # not JSON; move before down
     assert count("touch", "invalid") >= 1
