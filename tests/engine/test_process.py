@@ -31,6 +31,7 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.errors import DeviceError
 from tests.support.jack import JackRecorder, JackServer
+from tests.support.yardstick import WakeUpLag
 
 DEVICE = DeviceProfile.default()
 STROKE = TouchPattern.model_validate(
@@ -292,19 +293,22 @@ def test_an_engine_process_killed_is_noticed_refused_and_restarted() -> None:
         engine.contact_down("a", "1", 1.0, 2.0)
         old_pid = engine.pid
         assert old_pid is not None
-        os.kill(old_pid, signal.SIGKILL)
-        began = time.monotonic()
-        wait_until(lambda: engine.state != "running", timeout_s=1.0)
-        assert time.monotonic() - began < 1.0
-        assert faults == ["gone"]
-        assert engine.job_state(job.job_id).state == "stopped"  # type: ignore[union-attr]
-        assert engine.status().active_contacts == []
-        if engine.state != "running":  # refused with a clear error while it restarts
-            with pytest.raises(DeviceError, match="restart"):
-                engine.schedule(STROKE)
-        began = time.monotonic()
-        engine.stop_all()  # never waits, whatever the engine's state
-        assert time.monotonic() - began < 0.1
+        with WakeUpLag() as lag:  # 1 s and 0.1 s on a quiet machine, more on a busy one
+            os.kill(old_pid, signal.SIGKILL)
+            began = time.monotonic()
+            wait_until(lambda: engine.state != "running")
+            noticed_s = time.monotonic() - began
+            assert faults == ["gone"]
+            assert engine.job_state(job.job_id).state == "stopped"  # type: ignore[union-attr]
+            assert engine.status().active_contacts == []
+            if engine.state != "running":  # refused with a clear error while it restarts
+                with pytest.raises(DeviceError, match="restart"):
+                    engine.schedule(STROKE)
+            began = time.monotonic()
+            engine.stop_all()  # never waits, whatever the engine's state
+            stop_s = time.monotonic() - began
+        assert noticed_s < 1.0 + 10 * lag.worst_s, (noticed_s, lag.worst_s)
+        assert stop_s < 0.1 + 10 * lag.worst_s, (stop_s, lag.worst_s)
         wait_until(lambda: engine.state == "running", timeout_s=30.0)
         assert engine.pid != old_pid and engine.status().restarts == 1
         again = engine.schedule(STROKE)
@@ -323,11 +327,15 @@ def test_an_engine_process_stopped_is_noticed_and_replaced() -> None:
         assert old_pid is not None
         os.kill(old_pid, signal.SIGSTOP)
         try:
-            began = time.monotonic()
-            engine.stop_all()
-            status = engine.status()  # answered at once from shared memory
-            assert time.monotonic() - began < 0.1 and status.state == "running"
-            wait_until(lambda: engine.state != "running", timeout_s=1.5)
+            with WakeUpLag() as lag:  # 0.1 s and 1.5 s on a quiet machine
+                began = time.monotonic()
+                engine.stop_all()
+                status = engine.status()  # answered at once from shared memory
+                answered_s = time.monotonic() - began
+                wait_until(lambda: engine.state != "running")
+                noticed_s = time.monotonic() - began
+            assert answered_s < 0.1 + 10 * lag.worst_s and status.state == "running"
+            assert noticed_s < 1.5 + 10 * lag.worst_s, (noticed_s, lag.worst_s)
             assert faults == ["stalled"]
         finally:
             with contextlib.suppress(ProcessLookupError):

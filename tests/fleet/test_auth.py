@@ -111,7 +111,7 @@ def test_nats_credentials_come_from_the_environment_and_stay_out_of_logs(tmp_pat
                 lambda: (
                     [r["armband"] for r in httpx.get(f"{gateway.url}/armbands").json()] == ["solo"]
                 ),
-                5.0,
+                30.0,
                 "the node registered",
             )
             answer = httpx.post(f"{gateway.url}/armbands/solo/touch", json=STROKE)

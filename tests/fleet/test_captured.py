@@ -70,15 +70,20 @@ def test_the_recordings_hold_each_touch_on_its_armbands_only_in_step(
     captured: CapturedFleet,
 ) -> None:
     gateway, nodes = captured.gateway, captured.nodes
-    single = httpx.post(f"{gateway.url}/armbands/a2/touch", json=TAP, timeout=5.0)
+    began = time.monotonic()
+    single = httpx.post(f"{gateway.url}/armbands/a2/touch", json=TAP, timeout=30.0)
+    single_s = time.monotonic() - began  # the yardstick of a touch's way to a node
     assert single.status_code == 202, single.text
     single_start = nodes["a2"].wait_played(single.json()["job_id"])
     duration_s = single.json()["duration_s"]
-    start_at_unix_s = time.time() + duration_s + 0.7  # after the single touch has ended
+    # After the single touch has ended, with 0.7 s to reach the nodes on a quiet machine
+    # and ten times as long as the single touch took to reach its node on a busy one.
+    lead_s = 0.7 + 10 * single_s
+    start_at_unix_s = time.time() + duration_s + lead_s
     together = httpx.post(
         f"{gateway.url}/touch",
         json={**TAP, "armbands": sorted(SITES), "start_at_unix_s": start_at_unix_s},
-        timeout=5.0,
+        timeout=30.0,
     )
     assert together.status_code == 202, together.text
     starts = {
@@ -86,7 +91,15 @@ def test_the_recordings_hold_each_touch_on_its_armbands_only_in_step(
         for armband, job in together.json()["jobs"].items()
     }
     assert not any(start["late"] for start in starts.values())
-    time.sleep(max(0.0, start_at_unix_s + duration_s + 0.3 - time.time()))  # they end
+    # They end, in each engine's own frames (a busy machine's engine lags the wall clock).
+    for armband, start in starts.items():
+        end_frame = start["frame"] + round(
+            (duration_s + 0.3) * DeviceProfile.default().sample_rate_hz
+        )
+        deadline = time.monotonic() + 60.0
+        while httpx.get(f"{nodes[armband].url}/clock", timeout=30.0).json()["frames"] < end_frame:
+            assert time.monotonic() < deadline, f"{armband}'s engine stalled"
+            time.sleep(0.05)
     for node in nodes.values():
         node.stop()  # a graceful shutdown: the WAV is written as the engine closes
 
@@ -114,5 +127,5 @@ def test_the_recordings_hold_each_touch_on_its_armbands_only_in_step(
         moved_s.append(abs(starts[armband]["server_time_s"] - job["start_at_s"]))
     spread_s = max(onsets_s) - min(onsets_s)
     assert spread_s <= 4 * 256 / 48000 + 2 * max(moved_s), (spread_s, moved_s)
-    # and a touch not synchronised would be start_at_unix_s's 0.7 s lead or more off
-    assert spread_s < 0.35
+    # and a touch not synchronised would be start_at_unix_s's lead or more off
+    assert spread_s < lead_s / 2 + 2 * max(moved_s)

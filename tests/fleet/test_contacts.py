@@ -10,6 +10,7 @@ from websockets.sync.client import ClientConnection, connect
 
 from tests.fleet.conftest import Fleet
 from tests.support.fleet import WATCHDOG_S, Gateway, wait_until
+from tests.support.yardstick import WakeUpLag
 
 
 def _ask(ws: ClientConnection, message: dict[str, Any]) -> dict[str, Any]:
@@ -53,7 +54,7 @@ def test_moves_reach_the_addressed_armband_and_the_latest_wins(fleet: Fleet) -> 
         )
         assert answer["type"] == "error"
         assert "not down on armband 'a1'" in answer["message"]
-    wait_until(lambda: _remote_contacts(fleet, "a3") == [], 3.0, "contact released on close")
+    wait_until(lambda: _remote_contacts(fleet, "a3") == [], 30.0, "contact released on close")
 
 
 def test_a_contact_without_an_armband_is_refused_by_name(fleet: Fleet) -> None:
@@ -77,15 +78,17 @@ def test_a_vanished_gateway_releases_its_contacts_on_every_armband(fleet: Fleet)
             down = {"type": "down", "armband": armband, "contact": "c", "x_cm": 1.9, "y_cm": 7.2}
             assert _ask(ws, {**down, "id": armband})["type"] == "ok"
         assert len(_remote_contacts(fleet, "a1")) == len(_remote_contacts(fleet, "a2")) == 1
-        gateway.kill()
-        killed_s = time.monotonic()
-        for armband in ("a1", "a2"):
-            wait_until(
-                lambda a=armband: _remote_contacts(fleet, a) == [], 5.0, f"{armband} released"
-            )
-        elapsed_s = time.monotonic() - killed_s
-        # The node's fleet watchdog lets go after watchdog_s of silence, checked every quarter.
-        assert elapsed_s < WATCHDOG_S * 1.25 + 2.0
+        with WakeUpLag() as lag:
+            gateway.kill()
+            killed_s = time.monotonic()
+            for armband in ("a1", "a2"):
+                wait_until(
+                    lambda a=armband: _remote_contacts(fleet, a) == [], 60.0, f"{armband} released"
+                )
+            elapsed_s = time.monotonic() - killed_s
+        # The node's fleet watchdog lets go after watchdog_s of silence, checked every quarter
+        # (plus 2 s on a quiet machine, more as this one was late).
+        assert elapsed_s < WATCHDOG_S * 1.25 + 2.0 + 10 * lag.worst_s, (elapsed_s, lag.worst_s)
         node = fleet.nodes["a1"]
         released = node.metric(
             "phantomtouch_fleet_messages_total", 'outcome="watchdog_release",subject="contact"'

@@ -13,6 +13,7 @@ from phantomtouch.fleet.nats_config import inbox_prefix
 from tests.fleet.conftest import CLIENT, Fleet
 from tests.support.fleet import TTL_S, ArmbandNode, wait_until
 from tests.support.service import STROKE
+from tests.support.yardstick import WakeUpLag
 
 
 def test_a_dead_armband_is_refused_by_name_never_accepted(fleet: Fleet) -> None:
@@ -24,17 +25,20 @@ def test_a_dead_armband_is_refused_by_name_never_accepted(fleet: Fleet) -> None:
         return {r["armband"] for r in httpx.get(f"{gateway.url}/armbands").json()}
 
     try:
-        wait_until(lambda: "a4" in listed(), 5.0, "a4 registered")
+        wait_until(lambda: "a4" in listed(), 30.0, "a4 registered")
         assert httpx.post(f"{gateway.url}/armbands/a4/touch", json=STROKE).status_code == 202
-        node.kill()
-        killed_s = time.monotonic()
         statuses = set()
-        while "a4" in listed():
-            answer = httpx.post(f"{gateway.url}/armbands/a4/touch", json=STROKE, timeout=10.0)
-            statuses.add(answer.status_code)
-            assert answer.status_code in (404, 503), answer.text
-            assert "armband='a4'" in answer.json()["error"]["message"]
-            assert time.monotonic() - killed_s < TTL_S + 3.0, "a4 still registered after its TTL"
+        with WakeUpLag() as lag:  # 3 s past the TTL on a quiet machine, more as it is late
+            node.kill()
+            killed_s = time.monotonic()
+            while "a4" in listed():
+                answer = httpx.post(f"{gateway.url}/armbands/a4/touch", json=STROKE, timeout=10.0)
+                statuses.add(answer.status_code)
+                assert answer.status_code in (404, 503), answer.text
+                assert "armband='a4'" in answer.json()["error"]["message"]
+                assert time.monotonic() - killed_s < 60.0, "a4 still registered"
+            gone_s = time.monotonic() - killed_s
+        assert gone_s < TTL_S + 3.0 + 10 * lag.worst_s, ("a4 registered past its TTL", gone_s)
         assert 503 in statuses  # while registered, nobody answers its subjects
         answer = httpx.post(f"{gateway.url}/armbands/a4/touch", json=STROKE)
         assert answer.status_code == 404
@@ -89,7 +93,7 @@ def test_malformed_fleet_messages_are_counted_and_dropped(fleet: Fleet) -> None:
     )
     assert answer["status"] == 422
     assert answer["body"]["error"]["code"] == "invalid"  # type: ignore[index]
-    wait_until(lambda: count("contact", "too_large") > before["too_large"], 3.0, "counted")
+    wait_until(lambda: count("contact", "too_large") > before["too_large"], 30.0, "counted")
     assert count("contact", "invalid") > before["invalid"]  # x_cm="far"
     assert count("contact", "refused") >= before["refused"] + 2  # not JSON; move before down
     assert count("touch", "invalid") >= 1

@@ -23,7 +23,10 @@ def test_the_registry_lists_every_armband_with_its_device(fleet: Fleet) -> None:
         listing = httpx.get(f"{fleet.gateways[0].url}/armbands", timeout=5.0).json()
         return all(r["clock_offset_s"] is not None for r in listing)
 
-    wait_until(measured, 3.0, "each node read back a heartbeat's time stamp")
+    wait_until(measured, 30.0, "each node read back a heartbeat's time stamp")
+    began = time.monotonic()
+    measured()
+    listing_s = time.monotonic() - began  # the yardstick: a plain request of this run
     for gateway in fleet.gateways:
         listing = httpx.get(f"{gateway.url}/armbands", timeout=5.0).json()
         assert {r["armband"]: r["site"] for r in listing} == SITES
@@ -34,8 +37,9 @@ def test_the_registry_lists_every_armband_with_its_device(fleet: Fleet) -> None:
             assert record["status"] == "ok"
             # Node and NATS servers share this machine's clock: the offset each node
             # measured is the time from its clock reading to the server's stamp, the
-            # publish's latency: milliseconds, up to a few hundred on a loaded machine.
-            assert 0.0 <= -record["clock_offset_s"] < 0.5
+            # publish's latency: milliseconds on a quiet machine, within 0.5 s and ten
+            # times a listing's time on a loaded one.
+            assert 0.0 <= -record["clock_offset_s"] < 0.5 + 10 * listing_s
 
 
 def test_every_listing_names_each_armband_once_while_heartbeats_replace_records(
@@ -103,9 +107,11 @@ def test_an_unknown_armband_is_refused_by_name(fleet: Fleet) -> None:
 
 
 def test_one_touch_starts_on_three_armbands_at_the_same_instant(fleet: Fleet) -> None:
-    # 1 s ahead: time enough for the request to reach each node on a loaded machine (one
-    # that arrives after its start time plays at once, late, as the job log would say).
-    start_at_unix_s = time.time() + 1.0
+    # 1 s ahead on a quiet machine, and ten times as long as a plain touch took to reach a
+    # node on a busy one: time enough for the request to reach each node (one that arrives
+    # after its start time plays at once, late, as the job log would say).
+    lead_s = 1.0 + 10 * plain_touch_s(fleet)
+    start_at_unix_s = time.time() + lead_s
     answer = httpx.post(
         f"{fleet.gateways[0].url}/touch",
         json={**STROKE, "armbands": ["a1", "a2", "a3"], "start_at_unix_s": start_at_unix_s},
@@ -131,8 +137,16 @@ def test_one_touch_starts_on_three_armbands_at_the_same_instant(fleet: Fleet) ->
     assert spread_s <= tolerance_s, (spread_s, tolerance_s)
     for onset_s in onsets.values():
         assert abs(onset_s - start_at_unix_s) <= tolerance_s
-    # and a touch not synchronised would start when its request arrives, a second early
-    assert spread_s < 0.35
+    # and a touch not synchronised would start when its request arrives, its lead early
+    assert spread_s < lead_s / 3 + tolerance_s
+
+
+def plain_touch_s(fleet: Fleet) -> float:
+    """How long a touch took to reach a node through a gateway, in this run, s."""
+    began = time.monotonic()
+    answer = httpx.post(f"{fleet.gateways[0].url}/armbands/a1/touch", json=STROKE, timeout=30.0)
+    assert answer.status_code == 202, answer.text
+    return time.monotonic() - began
 
 
 def moved_s(played: dict[str, Any], start_at_s: float) -> float:
@@ -202,12 +216,13 @@ def test_the_python_client_addresses_a_named_armband(fleet: Fleet) -> None:
 
     with Client(fleet.gateways[1].url) as client:
         assert sorted(r["armband"] for r in client.armbands()) == ["a1", "a2", "a3"]
-        start_at_unix_s = time.time() + 1.0
+        lead_s = 1.0 + 10 * plain_touch_s(fleet)  # as in the synchronised start above
+        start_at_unix_s = time.time() + lead_s
         job = client.touch(preset="vr/tap", armband="a1", start_at_unix_s=start_at_unix_s)
         played = fleet.nodes["a1"].wait_played(str(job.job_id))
         assert played["frame"] == job.start_frame
         tolerance_s = 4 * 256 / 48000 + 2 * moved_s(played, job.start_at_s)
         assert abs(played["unix_time_s"] - start_at_unix_s) <= tolerance_s
-        assert abs(played["unix_time_s"] - start_at_unix_s) < 0.35
+        assert abs(played["unix_time_s"] - start_at_unix_s) < lead_s / 3 + tolerance_s
         with pytest.raises(NotFound, match="armband='a9'"):
             client.touch(preset="vr/tap", armband="a9")

@@ -20,6 +20,7 @@ from phantomtouch.osc.bridge import OWNER, OscBridge
 from phantomtouch.osc.mapping import ReceiverMap, default_map
 from phantomtouch.schema import DeviceProfile
 from tests.osc.support import FRAME_S, energy_track, proximity, send_stream
+from tests.support.yardstick import WakeUpLag
 
 DEVICE = DeviceProfile.default()
 START_Y_CM, END_Y_CM = 12.0, 2.4
@@ -53,7 +54,7 @@ def test_the_phantom_follows_a_hand_sliding_over_the_receivers(engine) -> None:
     eng, sink = engine
     receivers = _map()
     sent_frames: list[int] = []
-    with OscBridge(eng, receivers, port=0) as bridge:
+    with OscBridge(eng, receivers, port=0) as bridge, WakeUpLag() as lag:
         client = SimpleUDPClient(*bridge.address)
         send_stream(
             client,
@@ -83,7 +84,9 @@ def test_the_phantom_follows_a_hand_sliding_over_the_receivers(engine) -> None:
         & (k * FRAME_S > APPROACH_S + 0.05)
         & (k * FRAME_S < APPROACH_S + SLIDE_S - 0.05)
     )
-    assert sliding.sum() > 100  # of 171 windows in 1.9 s (fewer when the clock lagged)
+    # Of 171 windows in 1.9 s, fewer where the engine's clock lagged: its pacer drops the
+    # time it was woken late by, as much as a thread of this process lost meanwhile.
+    assert sliding.sum() > 100 * lag.on_time_fraction, (sliding.sum(), lag.on_time_fraction)
 
     # Continuous: the phantom never jumps, and the level never drops out while sliding.
     positions = np.array([(r.x_cm, r.y_cm) for r in receivers.receiver])
@@ -107,14 +110,19 @@ def test_the_phantom_follows_a_hand_sliding_over_the_receivers(engine) -> None:
 
     # It is where the receivers say, sum(p_i y_i) / sum(p_i) of the values sent, some
     # time ago: the window averages 11 ms, the engine ramps over a 5.3 ms block, the
-    # smoothing lags 5 ms (about three frames in all), and on a busy machine the threads
-    # of sender, bridge and engine wait for a core now and then: the phantom is where
-    # the values of one of the last nine frames (100 ms) put it, nearly always within
-    # 0.5 mm, and never far off.
+    # smoothing lags 5 ms (about three frames in all), and the threads of sender, bridge
+    # and engine wait for a core now and then: the phantom is where the values of one of
+    # the last nine frames (100 ms) put it, and of as many more frames as a thread of this
+    # process was at most woken late meanwhile, nearly always within 0.5 mm, and never
+    # far off.
+    late_frames = int(np.ceil(lag.worst_s / FRAME_S))
+    print(f"woken up to {lag.worst_s * 1e3:.1f} ms late, {late_frames} frames more; on time for")
+    print(f"{lag.on_time_fraction:.2f} of the time; {sliding.sum()} windows")
+
     def lagged_error(reference: Callable[[int], float]) -> np.ndarray:
         return np.array(
             [
-                min(abs(yi - reference(j)) for j in range(i - 8, i + 1))
+                min(abs(yi - reference(j)) for j in range(i - 8 - late_frames, i + 1))
                 for yi, i in zip(y, k[sliding], strict=True)
             ]
         )
@@ -146,7 +154,8 @@ def test_silence_releases_the_contact(engine) -> None:
             time.sleep(0.02)
         assert bridge.contacts == []
         assert bridge.watchdog_releases == 1
-        time.sleep(0.1)
+        while eng.status().to_dict()["active_contacts"] and time.monotonic() < deadline + 5.0:
+            time.sleep(0.01)
         assert eng.status().to_dict()["active_contacts"] == []
 
 

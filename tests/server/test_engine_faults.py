@@ -21,6 +21,7 @@ import pytest
 from phantomtouch import DeviceProfile
 from tests.support.jack import JackServer, start_jack_or_skip
 from tests.support.live_server import LiveServer, engine_pid
+from tests.support.yardstick import WakeUpLag
 
 LONG_TOUCH = {
     "path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]},
@@ -82,10 +83,11 @@ def test_kill_9_then_stop_answers_refuses_then_restarts(live: LiveServer) -> Non
         os.kill(old, signal.SIGKILL)
         stop = client.post("/stop", timeout=RESPONSIVE_S)
         assert stop.status_code == 200 and stop.json()["stopped"] is True
-        began = time.monotonic()
-        wait_for(lambda: health(client)["status"] == "degraded", timeout_s=3.0, server=live)
-        noticed_s = time.monotonic() - began
-        assert noticed_s < 1.5, f"noticed after {noticed_s:.2f} s"
+        with WakeUpLag() as lag:  # 1.5 s on a quiet machine, more as it is late
+            began = time.monotonic()
+            wait_for(lambda: health(client)["status"] == "degraded", timeout_s=30.0, server=live)
+            noticed_s = time.monotonic() - began
+        assert noticed_s < 1.5 + 10 * lag.worst_s, (noticed_s, lag.worst_s)
         assert client.get(f"/jobs/{job}").json()["state"] == "stopped"
         refused = client.post("/touch", json=LONG_TOUCH)
         if health(client)["status"] == "degraded":  # refused, not accepted into nothing

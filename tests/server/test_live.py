@@ -15,11 +15,13 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
 
 from tests.support.live_server import LiveServer
 from tests.support.service import LONG, STROKE
+from tests.support.yardstick import WakeUpLag
 
 
 def metric(live: LiveServer, name: str) -> float:
@@ -116,16 +118,20 @@ def test_vanished_clients_are_released(live: LiveServer) -> None:
             await ask(killed, {"type": "down", "contact": "gone", "x_cm": 3, "y_cm": 9, "id": 1})
             assert sorted(await contacts_seen(observer)) == ["gone", "quiet"]
 
-            killed.transport.abort()  # the socket dies without a closing handshake
-            deadline = time.monotonic() + 1.0
-            while "gone" in await contacts_seen(observer):
-                assert time.monotonic() < deadline, "a dropped connection releases at once"
-            assert await contacts_seen(observer) == ["quiet"]
+            with WakeUpLag() as lag:  # 1 s, and 1 s past the watchdog's 2 s, when on time
+                killed.transport.abort()  # the socket dies without a closing handshake
+                started = time.monotonic()
+                while "gone" in await contacts_seen(observer):
+                    assert time.monotonic() - started < 30.0, "a dropped connection is released"
+                dropped_s = time.monotonic() - started
+                assert await contacts_seen(observer) == ["quiet"]
 
-            started = time.monotonic()  # the silent client neither sends nor closes
-            while await contacts_seen(observer):
-                assert time.monotonic() - started < 2.0 + 1.0, "the 2 s watchdog releases it"
-            assert time.monotonic() - started > 1.0
+                started = time.monotonic()  # the silent client neither sends nor closes
+                while await contacts_seen(observer):
+                    assert time.monotonic() - started < 30.0, "the 2 s watchdog releases it"
+                silent_s = time.monotonic() - started
+            assert dropped_s < 1.0 + 10 * lag.worst_s, ("released at once", dropped_s, lag.worst_s)
+            assert 1.0 < silent_s < 2.0 + 1.0 + 10 * lag.worst_s, (silent_s, lag.worst_s)
             assert await receive(silent) == {
                 "type": "released",
                 "reason": "watchdog",
@@ -142,12 +148,13 @@ def test_stop_under_load(live: LiveServer) -> None:
     Touches answered before the stop was sent must be stopped; those in flight while it
     ran may land on either side of it and are stopped one by one afterwards.
     """
-    clients, per_client, budget_s = 4, 300, 15.0
+    clients, per_client, budget_s = 4, 300, 120.0
     stop_sent = threading.Event()
     stop_done = threading.Event()
     before: list[str] = []
     in_flight: list[str] = []
     statuses: list[int] = []
+    touch_s: list[float] = []
     lock = threading.Lock()
 
     def hammer() -> None:
@@ -156,8 +163,10 @@ def test_stop_under_load(live: LiveServer) -> None:
             for _ in range(per_client):
                 if stop_done.is_set() or time.monotonic() > deadline:
                     return
+                began = time.monotonic()
                 answer = client.post("/touch", json=LONG)
                 with lock:
+                    touch_s.append(time.monotonic() - began)
                     statuses.append(answer.status_code)
                     if answer.status_code == 202:
                         job = answer.json()["job_id"]
@@ -166,7 +175,7 @@ def test_stop_under_load(live: LiveServer) -> None:
     threads = [threading.Thread(target=hammer) for _ in range(clients)]
     for thread in threads:
         thread.start()
-    assert wait_until(lambda: len(statuses) >= 400, 10.0), "load is running"
+    assert wait_until(lambda: len(statuses) >= 100, budget_s / 2), "load is running"
     with httpx.Client(base_url=live.url, timeout=10) as client:
         stop_sent.set()
         started = time.monotonic()
@@ -177,7 +186,9 @@ def test_stop_under_load(live: LiveServer) -> None:
         thread.join(budget_s + 10)
     assert answer.status_code == 200
     assert set(statuses) <= {202, 429, 503}, "played, over this client's quota, or busy"
-    assert stop_s < 1.0, f"POST /stop took {stop_s:.3f} s under load"
+    # 1 s, and more as a plain POST /touch took longer in this run
+    bound_s = 1.0 + 20 * float(np.median(touch_s))
+    assert stop_s < bound_s, f"POST /stop took {stop_s:.3f} s under load, over {bound_s:.3f} s"
     with httpx.Client(base_url=live.url, timeout=10) as client:
         states = {client.get(f"/jobs/{job}").json()["state"] for job in before}
         assert states == {"stopped"}

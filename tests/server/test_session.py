@@ -20,6 +20,7 @@ from phantomtouch.service.errors import (
     WS_CLOSE_UNSUPPORTED_DATA,
 )
 from tests.support.service import LONG, make_settings
+from tests.support.yardstick import WakeUpLag
 
 TOKEN = "s3cret-token-0123456789"
 
@@ -108,10 +109,16 @@ def test_watchdog_releases_a_silent_client(app_client: Callable[..., TestClient]
 
 
 def test_pings_keep_contacts_alive(app_client: Callable[..., TestClient]) -> None:
-    with app_client(watchdog_s=0.3) as client, client.websocket_connect("/ws") as ws:
+    """Pings a third of the watchdog apart keep a contact for over twice the watchdog. The
+    watchdog is 0.3 s on a quiet machine, and grows by ten times how late a thread of the
+    test was woken just before, so that a ping that is late on a busy one is still in time."""
+    with WakeUpLag() as lag:
+        time.sleep(0.2)
+    watchdog_s = 0.3 + 10 * lag.worst_s
+    with app_client(watchdog_s=watchdog_s) as client, client.websocket_connect("/ws") as ws:
         ask(ws, {"type": "down", "contact": "L", "x_cm": 1.9, "y_cm": 7.2, "id": 1})
         for _ in range(8):
-            time.sleep(0.1)
+            time.sleep(watchdog_s / 3)
             assert ask(ws, {"type": "ping"})["type"] == "pong"
         assert [c["contact"] for c in contacts(client)] == ["L"]
 
@@ -193,16 +200,18 @@ def test_a_flood_is_answered_once_then_closed_1008(app_client: Callable[..., Tes
     """Over the rate: the first dropped message is answered, the rest only counted; a
     flood that goes on for a second closes the connection."""
     with app_client(ws_messages_per_s=10) as client, client.websocket_connect("/ws") as ws:
-        sent = 0
-        deadline = time.monotonic() + 1.6  # 5 ms apart: the bucket admits about one in 20
+        sent_s: list[float] = []
+        started_s = time.monotonic()
+        deadline = started_s + 1.6  # 5 ms apart: the bucket admits about one in 20
         while time.monotonic() < deadline:
-            ws.send_json({"type": "ping", "id": sent})
-            sent += 1
-            time.sleep(0.005 if sent > 30 else 0.0)  # a burst of 30, then 200 per second
+            ws.send_json({"type": "ping", "id": len(sent_s)})
+            sent_s.append(time.monotonic() - started_s)
+            time.sleep(0.005 if len(sent_s) > 30 else 0.0)  # a burst of 30, then 200 per second
         answers: list[dict[str, Any]] = []
         with pytest.raises(WebSocketDisconnect) as closed:
             while True:
                 answers.append(ws.receive_json())
+        closed_s = time.monotonic() - started_s
         metrics = client.get("/metrics").text
     assert closed.value.code == WS_CLOSE_POLICY_VIOLATION
     assert "for 1 s" in closed.value.reason
@@ -210,12 +219,17 @@ def test_a_flood_is_answered_once_then_closed_1008(app_client: Callable[..., Tes
     assert [a["code"] for a in refused] == ["rate_limited"], "only the first drop is answered"
     assert "more than 10 messages per second" in refused[0]["message"]
     pongs = len(answers) - 1
-    assert 10 <= pongs <= 10 + 10 * 1.6 + 1, "the burst, then what the bucket admits"
+    # The burst, then what the bucket admits until the close: 1.6 s on time, longer on a
+    # busy machine where the server reads the messages later than they were sent.
+    assert 10 <= pongs <= 10 + 10 * closed_s + 1, "the burst, then what the bucket admits"
     match = re.search(r"^phantomtouch_ws_dropped_messages_total (\S+)$", metrics, re.MULTILINE)
     assert match is not None
     reason = re.search(r"; (\d+) messages dropped", closed.value.reason)
     assert reason is not None
-    assert float(match.group(1)) == int(reason.group(1)) >= 100, "a second of drops, counted"
+    # A second of drops, counted: at least half of what was sent in the first second past
+    # the bucket's ten (about 200 on time; fewer where the sender's sleeps overran).
+    first_second = sum(1 for t_s in sent_s if t_s < 1.0) - 10
+    assert float(match.group(1)) == int(reason.group(1)) >= first_second / 2, first_second
     assert "phantomtouch_ws_flood_closes_total 1.0" in metrics
 
 

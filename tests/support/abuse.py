@@ -74,22 +74,26 @@ def in_process(function: Callable[..., Any], *args: Any) -> Any:
 def ping_flood(ws_url: str, limit_s: float = 4.0, most: int = 400_000) -> dict[str, Any]:
     """Send ``ping`` in a tight loop until the server closes (or the bounds are reached).
 
-    Returns the close code, when it came (s after the first ping), how many pings were
-    sent, how many answers came back and how many of them were errors.
+    Returns the close code, when it came and when the first error came (the flood began,
+    as the server saw it; both s after the first ping), how many pings were sent, how many
+    answers came back and how many of them were errors.
     """
 
     async def flood() -> dict[str, Any]:
         sent = answers = errors = 0
-        closed_at_s = float("nan")
+        closed_at_s = first_error_s = float("nan")
         started = time.monotonic()
         async with connect(ws_url, max_queue=None) as ws:
 
             async def read() -> None:
-                nonlocal answers, errors, closed_at_s
+                nonlocal answers, errors, closed_at_s, first_error_s
                 try:
                     async for text in ws:
                         answers += 1
-                        errors += json.loads(text)["type"] == "error"
+                        if json.loads(text)["type"] == "error":
+                            errors += 1
+                            if errors == 1:
+                                first_error_s = time.monotonic() - started
                 except ConnectionClosed:
                     pass
                 closed_at_s = time.monotonic() - started
@@ -109,6 +113,7 @@ def ping_flood(ws_url: str, limit_s: float = 4.0, most: int = 400_000) -> dict[s
             return {
                 "code": ws.close_code,
                 "closed_after_s": closed_at_s,
+                "first_error_s": first_error_s,
                 "sent": sent,
                 "answers": answers,
                 "errors": errors,

@@ -81,7 +81,7 @@ class ArmbandNode(LiveServer):
         records = [json.loads(line) for line in self.stimulus_log.read_text().splitlines()]
         return [r for r in records if r["event"] == "start" and r["kind"] == "job"]
 
-    def wait_played(self, job_id: str, timeout_s: float = 5.0) -> dict[str, Any]:
+    def wait_played(self, job_id: str, timeout_s: float = 60.0) -> dict[str, Any]:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             for record in self.played():
