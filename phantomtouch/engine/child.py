@@ -23,7 +23,14 @@ from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, voice_costs
 from phantomtouch.engine.link import Inbox, ReportBox
-from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
+from phantomtouch.engine.messages import (
+    AudioState,
+    Close,
+    PlanReleased,
+    StartSink,
+    perform,
+    prepare,
+)
 from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.plan_memory import HeldArrays
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
@@ -94,9 +101,11 @@ class Intake:
         state.loops.collect()
         events = core.events()
         events.extend(PlanReleased(handle) for handle in state.arrays.collect())
-        if state.reports:
-            events.extend(state.reports)
-            state.reports.clear()
+        reports = state.reports  # the inbox thread appends too: take what is there now
+        if reports:
+            taken = len(reports)
+            events.extend(reports[:taken])
+            del reports[:taken]
         if events:
             self.report_box.put(events)
         figures = self.figures  # the render loads are in shared memory: the host's to sum up
@@ -112,6 +121,7 @@ class Intake:
             queue_depth=core.queue.depth,
             levels=mixer.levels,
             callback_errors=scheduler.callback_errors,
+            inline_renders=scheduler.inline_renders,
             output_latency_s=core.clock.output_latency_s,
             dropped_reports=self.report_box.dropped,
             refused_commands=state.refused,
@@ -127,6 +137,24 @@ class Intake:
             self.core.stop_all()
             self.slots.unbind_all()
 
+    def prepare(self, framed: tuple[int, Any]) -> tuple[int, Any] | None:
+        """Prepare one ``(seq, message)`` of the host before the callback takes it (non
+        real time: the inbox thread; :func:`~phantomtouch.engine.messages.prepare`);
+        None: nothing is left for the callback. A failure is counted as a callback error."""
+        seq, message = framed
+        try:
+            staged = prepare(self.state, message)
+        except Exception as exc:
+            self.fail(exc)
+            return None
+        return None if staged is None else (seq, staged)
+
+    def fail(self, exc: Exception) -> None:
+        """Count a bug in performing a message as a callback error (any thread)."""
+        scheduler = self.core.scheduler
+        scheduler.callback_errors += 1
+        scheduler.last_error = exc
+
     def apply(self, framed: tuple[int, Any]) -> None:
         """Perform one ``(seq, message)`` of the host (real time); one sent before the
         last ``stop_all`` is void. Checked by the host: a failure here is a bug, counted
@@ -135,9 +163,7 @@ class Intake:
         try:
             perform(self.state, message, void=seq < self.handled_mark)
         except Exception as exc:
-            scheduler = self.core.scheduler
-            scheduler.callback_errors += 1
-            scheduler.last_error = exc
+            self.fail(exc)
         if self.state.leave:
             self.leave.set()
 
@@ -257,7 +283,7 @@ def serve(
         core.close(fade=False)
         return
     sys.setswitchinterval(0.001)
-    intake.inbox.start()
+    intake.inbox.start(intake.prepare)
     core.start()
     intake.leave.wait()
     core.close(fade=True)  # a capture sink writes its WAV as it closes

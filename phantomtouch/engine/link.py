@@ -15,12 +15,13 @@ import pickle
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 
 class Inbox:
-    """The host's messages in the engine process: a thread receives and unpickles them
-    into a FIFO the audio callback takes them from.
+    """The host's messages in the engine process: a thread receives, unpickles and
+    prepares them into a FIFO the audio callback takes them from.
 
     Parameters
     ----------
@@ -41,20 +42,27 @@ class Inbox:
         self._poll_s = poll_s
         self.closed = False
         """Set once the host's end is closed (or the pipe broke): nothing more comes."""
+        self._prepare: Callable[[Any], Any] | None = None
         self._thread = threading.Thread(target=self._run, name="phantomtouch-inbox", daemon=True)
 
-    def start(self) -> None:
-        """Start receiving (non real time, the engine process's main thread)."""
+    def start(self, prepare: Callable[[Any], Any]) -> None:
+        """Start receiving; each message is passed through ``prepare`` in the inbox thread
+        and what it returns is queued, unless None (non real time, the engine process's
+        main thread)."""
+        self._prepare = prepare
         self._thread.start()
 
     def _run(self) -> None:
         """The inbox thread (non real time): receive until the host's end closes."""
-        messages = self.messages
+        messages, prepare = self.messages, self._prepare
+        assert prepare is not None
         try:
             while True:
                 while len(messages) >= self._capacity:
                     time.sleep(self._poll_s)
-                messages.append(self.connection.recv())
+                prepared = prepare(self.connection.recv())
+                if prepared is not None:
+                    messages.append(prepared)
         except (EOFError, OSError):
             pass
         finally:

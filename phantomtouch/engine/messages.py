@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from phantomtouch.engine.noise import HeldLoops
     from phantomtouch.engine.plan_memory import HeldArrays
     from phantomtouch.engine.shared import MoveSlots
+    from phantomtouch.engine.voices import PatternVoice
 
 # -- commands, front -> audio side ------------------------------------------------------
 
@@ -59,6 +60,16 @@ class StartJob:
     plan_key: int
     owner: str | None
     frame: int | None
+
+
+@dataclass(frozen=True, slots=True)
+class StartVoice:
+    """A :class:`StartJob` prepared by :func:`prepare`: its voice built, or None and why
+    (``refusal``: what, reason). Made by the audio side, never sent by the host."""
+
+    start: StartJob
+    voice: PatternVoice | None
+    refusal: tuple[str, str] = ("", "")
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,6 +181,7 @@ Command = (
     HoldPlan
     | DropPlan
     | StartJob
+    | StartVoice
     | ReleaseJob
     | ContactDown
     | ContactMove
@@ -307,21 +319,35 @@ def _drop_plan(state: AudioState, message: DropPlan, void: bool) -> None:
         state.reports.append(PlanReleased(message.handle))
 
 
-def _start_job(state: AudioState, message: StartJob, void: bool) -> None:
-    """Real time. Start a voice of a plan held; a void or refused start is reported
-    cancelled."""
-    core = state.core
+def _prepare_start(state: AudioState, message: StartJob) -> StartVoice:
+    """Non real time (see :func:`prepare`): build the voice of a plan held."""
     held = state.plans.get(message.plan_key)
-    if not void:
-        if held is None:
-            state.refuse("plan", message.job_id, f"plan {message.plan_key} was not handed over")
-        else:
-            try:
-                core.start_job(message.job_id, held[0], message.owner, message.frame, held[1])
-                return
-            except LookupError as exc:  # a noise loop not handed over
-                state.refuse("noise loop", message.job_id, str(exc))
-    state.reports.append(Cancelled("job", message.job_id, core.scheduler.frames))
+    if held is None:
+        return StartVoice(message, None, ("plan", f"plan {message.plan_key} was not handed over"))
+    try:
+        voice = state.core.job_voice(message.job_id, held[0], message.owner, held[1])
+    except LookupError as exc:  # a noise loop not handed over
+        return StartVoice(message, None, ("noise loop", str(exc)))
+    return StartVoice(message, voice)
+
+
+def _start_voice(state: AudioState, message: StartVoice, void: bool) -> None:
+    """Real time. Start a prepared voice; a void or refused start is reported cancelled."""
+    core, start, voice = state.core, message.start, message.voice
+    if voice is not None and not void:
+        core.start_job(voice, start.frame)
+        return
+    if voice is not None:
+        voice.finish(core.scheduler.pool)
+    elif not void:
+        state.refuse(message.refusal[0], start.job_id, message.refusal[1])
+    state.reports.append(Cancelled("job", start.job_id, core.scheduler.frames))
+
+
+def _start_job(state: AudioState, message: StartJob, void: bool) -> None:
+    """Non real time: the caller's thread (the in-process engine; the engine process before
+    its sink starts) prepares and starts it at once."""
+    _start_voice(state, _prepare_start(state, message), void)
 
 
 def _release_job(state: AudioState, message: ReleaseJob, void: bool) -> None:
@@ -409,6 +435,7 @@ APPLIERS: dict[type, Callable[[AudioState, Any, bool], None]] = {
     HoldPlan: _hold_plan,
     DropPlan: _drop_plan,
     StartJob: _start_job,
+    StartVoice: _start_voice,
     ReleaseJob: _release_job,
     ContactDown: _contact_down,
     ContactMove: _contact_move,
@@ -421,6 +448,17 @@ APPLIERS: dict[type, Callable[[AudioState, Any, bool], None]] = {
     Close: _close,
 }
 """Each command's applier, by the command's class."""
+
+
+def prepare(state: AudioState, message: Command) -> Command | None:
+    """Do the heavy part of a command before the callback sees it, in the order the commands
+    came (non real time: the engine process's inbox thread): map what a ``HoldPlan`` or
+    ``HoldNoise`` names, build a ``StartJob``'s voice. Returns what is left to
+    :func:`perform`, None for nothing."""
+    if isinstance(message, HoldPlan | HoldNoise):
+        perform(state, message)
+        return None
+    return _prepare_start(state, message) if isinstance(message, StartJob) else message
 
 
 def perform(state: AudioState, message: Command, *, void: bool = False) -> None:
