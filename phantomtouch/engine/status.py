@@ -61,6 +61,9 @@ class EngineStatus:
     refused_commands : int
         Commands the audio side refused because their data (a plan, a noise loop) was
         not handed to it; 0 unless the host has a bug: the audio side never builds them.
+    inline_renders : int
+        Times the audio callback rendered into a voice's ring that ran dry (the
+        render-ahead thread fell behind).
     """
 
     backend: str
@@ -92,6 +95,7 @@ class EngineStatus:
     callback_errors: int
     restarts: int
     refused_commands: int = 0
+    inline_renders: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
