@@ -1,13 +1,5 @@
-"""Render-ahead: the rings of pattern voices are filled by a thread of their own, never in
-the audio callback while they have frames (``docs/engine.md``, Threads).
-
-A voice is handed over by whoever prepares it, before the callback sees it
-(:meth:`RenderAhead.add`: it takes a ring and renders its first chunks there); the thread
-then renders a chunk into each ring that has room for one. The callback renders into a
-ring only when it would otherwise run dry (the thread fell behind), counted in
-``Workspace.inline_renders``; a voice's lock keeps the two from rendering it at once and
-its ring from going back to the pool while the thread writes into it.
-"""
+"""Render-ahead: a thread of its own fills the rings of pattern voices, so that the audio
+callback renders into one only when it would run dry (``docs/engine.md``, Threads)."""
 
 from __future__ import annotations
 

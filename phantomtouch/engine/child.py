@@ -23,14 +23,8 @@ from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, voice_costs
 from phantomtouch.engine.link import Inbox, ReportBox
-from phantomtouch.engine.messages import (
-    AudioState,
-    Close,
-    PlanReleased,
-    StartSink,
-    perform,
-    prepare,
-)
+from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
+from phantomtouch.engine.messages import prepare as prepare_message
 from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.plan_memory import HeldArrays
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
@@ -101,11 +95,9 @@ class Intake:
         state.loops.collect()
         events = core.events()
         events.extend(PlanReleased(handle) for handle in state.arrays.collect())
-        reports = state.reports  # the inbox thread appends too: take what is there now
-        if reports:
-            taken = len(reports)
-            events.extend(reports[:taken])
-            del reports[:taken]
+        if taken := len(state.reports):  # the inbox thread appends too: take what is there
+            events.extend(state.reports[:taken])
+            del state.reports[:taken]
         if events:
             self.report_box.put(events)
         figures = self.figures  # the render loads are in shared memory: the host's to sum up
@@ -138,22 +130,15 @@ class Intake:
             self.slots.unbind_all()
 
     def prepare(self, framed: tuple[int, Any]) -> tuple[int, Any] | None:
-        """Prepare one ``(seq, message)`` of the host before the callback takes it (non
-        real time: the inbox thread; :func:`~phantomtouch.engine.messages.prepare`);
-        None: nothing is left for the callback. A failure is counted as a callback error."""
-        seq, message = framed
+        """Prepare one ``(seq, message)`` of the host (non real time: the inbox thread;
+        :func:`~phantomtouch.engine.messages.prepare`); None: nothing left to perform."""
         try:
-            staged = prepare(self.state, message)
-        except Exception as exc:
-            self.fail(exc)
+            staged = prepare_message(self.state, framed[1])
+        except Exception as exc:  # a bug, counted as in `apply`
+            self.core.scheduler.callback_errors += 1
+            self.core.scheduler.last_error = exc
             return None
-        return None if staged is None else (seq, staged)
-
-    def fail(self, exc: Exception) -> None:
-        """Count a bug in performing a message as a callback error (any thread)."""
-        scheduler = self.core.scheduler
-        scheduler.callback_errors += 1
-        scheduler.last_error = exc
+        return None if staged is None else (framed[0], staged)
 
     def apply(self, framed: tuple[int, Any]) -> None:
         """Perform one ``(seq, message)`` of the host (real time); one sent before the
@@ -163,7 +148,9 @@ class Intake:
         try:
             perform(self.state, message, void=seq < self.handled_mark)
         except Exception as exc:
-            self.fail(exc)
+            scheduler = self.core.scheduler
+            scheduler.callback_errors += 1
+            scheduler.last_error = exc
         if self.state.leave:
             self.leave.set()
 

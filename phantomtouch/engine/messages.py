@@ -64,12 +64,11 @@ class StartJob:
 
 @dataclass(frozen=True, slots=True)
 class StartVoice:
-    """A :class:`StartJob` prepared by :func:`prepare`: its voice built, or None and why
-    (``refusal``: what, reason). Made by the audio side, never sent by the host."""
+    """A :class:`StartJob` prepared by :func:`prepare`: its voice built (None: refused).
+    Made by the audio side, never sent by the host."""
 
     start: StartJob
     voice: PatternVoice | None
-    refusal: tuple[str, str] = ("", "")
 
 
 @dataclass(frozen=True, slots=True)
@@ -320,28 +319,28 @@ def _drop_plan(state: AudioState, message: DropPlan, void: bool) -> None:
 
 
 def _prepare_start(state: AudioState, message: StartJob) -> StartVoice:
-    """Non real time (see :func:`prepare`): build the voice of a plan held."""
+    """Non real time (see :func:`prepare`): build the voice of a plan held, or refuse it."""
     held = state.plans.get(message.plan_key)
-    if held is None:
-        return StartVoice(message, None, ("plan", f"plan {message.plan_key} was not handed over"))
     try:
-        voice = state.core.job_voice(message.job_id, held[0], message.owner, held[1])
-    except LookupError as exc:  # a noise loop not handed over
-        return StartVoice(message, None, ("noise loop", str(exc)))
-    return StartVoice(message, voice)
+        if held is None:
+            raise LookupError(f"plan {message.plan_key} was not handed over")
+        return StartVoice(
+            message, state.core.job_voice(message.job_id, held[0], message.owner, held[1])
+        )
+    except LookupError as exc:  # a plan or a noise loop not handed over
+        state.refuse("plan" if held is None else "noise loop", message.job_id, str(exc))
+        return StartVoice(message, None)
 
 
 def _start_voice(state: AudioState, message: StartVoice, void: bool) -> None:
     """Real time. Start a prepared voice; a void or refused start is reported cancelled."""
-    core, start, voice = state.core, message.start, message.voice
+    core, voice = state.core, message.voice
     if voice is not None and not void:
-        core.start_job(voice, start.frame)
+        core.start_job(voice, message.start.frame)
         return
     if voice is not None:
         voice.finish(core.scheduler.pool)
-    elif not void:
-        state.refuse(message.refusal[0], start.job_id, message.refusal[1])
-    state.reports.append(Cancelled("job", start.job_id, core.scheduler.frames))
+    state.reports.append(Cancelled("job", message.start.job_id, core.scheduler.frames))
 
 
 def _start_job(state: AudioState, message: StartJob, void: bool) -> None:
