@@ -64,7 +64,6 @@ class Intake:
         self.leave = threading.Event()
         device = self.core.device
         self.budget_s = INTAKE_SHARE * (device.block_frames / device.sample_rate_hz)
-        self.figures: dict[str, Any] = self.core.figures()
 
     def run(self) -> None:
         """At the start of each block (real time; see the module docstring): the host's
@@ -100,25 +99,8 @@ class Intake:
             del state.reports[:taken]
         if events:
             self.report_box.put(events)
-        figures = self.figures  # the render loads are in shared memory: the host's to sum up
-        mixer = scheduler.mixer
-        figures.update(
-            now_frames=scheduler.frames,
-            active_voices=scheduler.active_voices,
-            underruns=core.sink.underruns,
-            late_commands=scheduler.late_commands,
-            muted_blocks=mixer.muted_blocks,
-            limited_blocks=mixer.limited_blocks,
-            peak=mixer.peak,
-            queue_depth=core.queue.depth,
-            levels=mixer.levels,
-            callback_errors=scheduler.callback_errors,
-            inline_renders=scheduler.inline_renders,
-            output_latency_s=core.clock.output_latency_s,
-            dropped_reports=self.report_box.dropped,
-            refused_commands=state.refused,
-            running=core.running,
-        )
+        figures = core.figures(loads=False)  # the render loads: the host's to sum up
+        figures.update(dropped_reports=self.report_box.dropped, refused_commands=state.refused)
         self.status.write(figures)
 
     def check_mark(self) -> None:

@@ -194,12 +194,12 @@ class Core:
                 out.append((Ended if kind == "end" else Cancelled)(voice.kind, voice.key, frame))
         return out
 
-    def figures(self) -> dict[str, Any]:
-        """Clock, voices, levels and counters (any thread, real time or not; a
-        consistent-enough look)."""
+    def figures(self, loads: bool = True) -> dict[str, Any]:
+        """Clock, voices, levels and counters, with the render loads' p99 and largest when
+        ``loads`` (any thread, real time or not; a consistent-enough look)."""
         scheduler = self.scheduler
         mixer = scheduler.mixer
-        load_p99, load_max = load_percentiles(scheduler.render_loads)
+        load_p99, load_max = load_percentiles(scheduler.render_loads) if loads else (0.0, 0.0)
         return {
             "now_frames": scheduler.frames,
             "active_voices": scheduler.active_voices,

@@ -1,12 +1,7 @@
 """The pipes between the host and the engine process, used only through their
-``multiprocessing`` ``Connection``s (on Windows a ``Connection``'s ``fileno()`` is a pipe
-handle, not a file descriptor). Each side has a thread of its own that sends or receives,
-so neither side waits for the other (``docs/engine.md``, Threads and Transports):
-
-- the host: :class:`Outbox` sends its messages;
-- the engine process: :class:`Inbox` receives the host's messages and :class:`ReportBox`
-  sends the audio callback's reports, each through a bounded FIFO the callback takes from
-  or puts into without a system call, a lock it waits for, or a pickle.
+``multiprocessing`` ``Connection``s, each side sending or receiving from a thread of its
+own (:class:`Outbox` in the host; :class:`Inbox`, :class:`ReportBox` in the engine
+process), so neither waits for the other (``docs/engine.md``, Threads and Transports).
 """
 
 from __future__ import annotations
