@@ -246,7 +246,7 @@ class PatternVoice(Voice):
                 self._ring = None
                 return False
             room = self._size - self._chunk
-            while self.release_frame is None and self._write < self.plan.frames:
+            while self._write < self.silent_from - self.start_frame:  # through a fade too
                 if self._write - self._read > room:
                     break
                 self.refill(self._chunk)
