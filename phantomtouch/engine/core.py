@@ -215,7 +215,7 @@ class Core:
             "render_load_p99": load_p99,
             "render_load_max": load_max,
             "callback_errors": scheduler.callback_errors,
-            "inline_renders": scheduler.inline_renders,
+            "inline_renders": scheduler.work.inline_renders,
         }
 
 

@@ -122,11 +122,6 @@ class Scheduler:
         """Commands applied after their frame had passed (any thread)."""
         return self.work.late_commands
 
-    @property
-    def inline_renders(self) -> int:
-        """Times the callback rendered into a voice's ring that ran dry (any thread)."""
-        return self.work.inline_renders
-
     def next_block_frame(self) -> int:
         """First frame of the next block whose commands are not taken yet (any thread)."""
         frames = self.frames
