@@ -147,12 +147,9 @@ class SharedClock(_Rows, FrameMapping):
         self.dropped_anchors = 0
 
     def publish(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
-        """Write a new anchor (one writer thread at a time: the engine's); a ``publish``
-        for :class:`~phantomtouch.engine.clock.SampleClock`.
-
-        Never waits: with a lock the host holds, the anchor is dropped (and counted); the
-        engine clock publishes again at the next block.
-        """
+        """Write a new anchor: a ``publish`` for :class:`~phantomtouch.engine.clock.SampleClock`
+        (real time, the engine's one writer thread). Never waits: while the host holds the
+        lock the anchor is dropped (and counted); the next block publishes a newer one."""
         if not self._store(0, (anchor_frame, anchor_s, output_latency_s), wait=False):
             self.dropped_anchors += 1
 
@@ -169,11 +166,10 @@ class SharedClock(_Rows, FrameMapping):
 class MoveSlots(_Rows):
     """One slot per contact that is down: the newest position, written by the host.
 
-    The host binds a slot to a contact when it touches down (with a new generation
-    number, so that what the slot held for an earlier contact is never applied to the
-    new one) and writes moves into it; the engine process binds the slot to the contact
-    once the touchdown is through, and the audio callback hands every new position to
-    the engine.
+    The host takes a slot for a contact at its touchdown, with a new generation (what
+    the slot held for an earlier contact is never applied), and writes its moves; the
+    engine process binds the slot once the touchdown is through and its callback hands
+    every new position to the engine.
 
     Parameters
     ----------
@@ -245,12 +241,9 @@ class MoveSlots(_Rows):
     def drain(
         self, post: Callable[[str, str, float, float, float | None, int | None], None]
     ) -> None:
-        """Hand every new position to ``post(owner, contact, x, y, intensity, frame)``.
-
-        Audio callback: a vectorised look at the sequence numbers, then a copy of each
-        changed row; a row caught mid-write waits for the next block. With a lock: a copy
-        of every row if the lock is free at once, else nothing until the next block.
-        """
+        """Hand every new position to ``post(owner, contact, x, y, intensity, frame)``
+        (real time, the audio callback). A row caught mid-write, or every row while the
+        host holds the lock, waits for the next block."""
         rows = self._read(wait=False)
         if rows is None:
             return
@@ -286,11 +279,9 @@ STATUS_FIELDS = (
 
 
 class StatusBlock:
-    """The engine process's figures, written by its audio callback at every block.
-
-    ``beat_s`` is the server time of the last block: the host tells from it whether
-    audio still flows. Figures are for monitoring, read without a lock (each is one
-    aligned float64, so a read never sees half a value; a snapshot may mix two blocks).
+    """The engine process's figures, written by its audio callback at every block;
+    ``beat_s``, the server time of the last block, tells the host whether audio flows.
+    Read without a lock: each is one aligned float64 (a snapshot may mix two blocks).
 
     Parameters
     ----------
