@@ -17,7 +17,7 @@ from phantomtouch.engine.front import MAX_VOICES as MAX_VOICES  # re-exported
 from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import AudioState, Command, ContactMove, Event, perform
 from phantomtouch.engine.sinks import NullSink, Sink
-from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.errors import DeviceError
 from phantomtouch.renderer.plan import plan
 from phantomtouch.renderer.presets import preset
 from phantomtouch.schema.device import DeviceProfile
@@ -28,9 +28,8 @@ RENDER_AHEAD_FRAMES = 8192
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`):
 most of a refill's cost is per call, so long chunks make a sounding voice cheap."""
 RENDER_AHEAD_RINGS = 64
-"""Most pattern voices that render ahead at once: the engine preallocates a ring (two
-chunks, 512 KB at 8 channels; memory is taken only once a ring is used) for each of
-``min(max_voices, RENDER_AHEAD_RINGS)`` voices; voices beyond render block by block."""
+"""Most pattern voices that render ahead at once, each in a ring of two chunks (512 KB at
+8 channels, taken once used); voices beyond render block by block."""
 HOUSEKEEPING_PERIOD_S = 0.05
 COST_PRESET = "exp1/noise-high-v3"
 """The pattern whose voices measure what a voice costs: noise, the dearest carrier."""
@@ -45,28 +44,10 @@ def voice_costs(core: Core) -> tuple[float, float, float]:
 
 
 class LocalAudio:
-    """The audio side in this process (see the module docstring).
+    """The audio side in this process (module docstring); arguments as for :class:`Engine`.
+    Without ``links.costs``, a voice's cost is measured when a real-time sink starts."""
 
-    Parameters
-    ----------
-    device : DeviceProfile
-    sink : Sink
-    links : Links
-        Without ``links.costs``, a voice's cost is measured when a real-time sink starts.
-    render_ahead_frames, clock
-        As for :class:`Engine`.
-    """
-
-    def __init__(
-        self,
-        device: DeviceProfile,
-        sink: Sink,
-        links: Links,
-        *,
-        render_ahead_frames: int,
-        clock: SampleClock,
-    ) -> None:
-        self._device = device
+    def __init__(self, device: DeviceProfile, sink: Sink, links: Links, chunk_frames: int) -> None:
         self._links = links
         self.core = Core(
             device,
@@ -74,13 +55,11 @@ class LocalAudio:
             settings=links.settings,
             queue_capacity=links.queue_capacity,
             rings=min(links.max_voices, RENDER_AHEAD_RINGS),
-            chunk_frames=render_ahead_frames,
-            clock=clock,
+            chunk_frames=chunk_frames,
+            clock=SampleClock(device.sample_rate_hz),
         )
         self._state = AudioState(self.core)
         self._reported: deque[Event] = deque()  # the appliers' own events, for the front
-        self.backend = sink.backend
-        self.output_device = sink.output_device
         self.costs = links.costs
         self._lock = threading.Lock()
         self._events_lock = threading.Lock()  # one thread at a time takes the events
@@ -191,8 +170,8 @@ class LocalAudio:
         figures = self.core.figures()
         figures.update(
             refused_commands=self._state.refused,
-            backend=self.backend,
-            output_device=self.output_device,
+            backend=self.core.sink.backend,
+            output_device=self.core.sink.output_device,
             state="closed" if self._closed else "running" if figures["running"] else "starting",
         )
         return figures
@@ -212,8 +191,6 @@ class Engine(EngineFront):
         :func:`~phantomtouch.engine.soundcard.open_default_sink` for the sound card).
     render_ahead_frames : int, >= 0
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
-    clock : SampleClock or None
-        The sample clock to keep, at the device's sample rate; None: a new one.
     **options
         The keywords of :class:`~phantomtouch.engine.front.EngineFront`.
 
@@ -231,26 +208,12 @@ class Engine(EngineFront):
         sink: Sink | None = None,
         *,
         render_ahead_frames: int = RENDER_AHEAD_FRAMES,
-        clock: SampleClock | None = None,
         **options: Any,
     ) -> None:
-        if clock is not None and (
-            not isinstance(clock, SampleClock) or clock.sample_rate_hz != device.sample_rate_hz
-        ):
-            raise ParameterError(
-                f"clock={clock!r} must be a SampleClock at {device.sample_rate_hz} Hz or None"
-            )
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
-
         super().__init__(
             device,
-            lambda links: LocalAudio(
-                device,
-                sink if sink is not None else NullSink(device),
-                links,
-                render_ahead_frames=render_ahead_frames,
-                clock=clock if clock is not None else SampleClock(device.sample_rate_hz),
-            ),
+            lambda links: LocalAudio(device, sink or NullSink(device), links, render_ahead_frames),
             **options,
         )
 
@@ -258,10 +221,5 @@ class Engine(EngineFront):
 
     @property
     def core(self) -> Core:
-        """The audio side's core (sink, scheduler, voices)."""
+        """The audio side's core (sink, scheduler, voices; host, any thread)."""
         return self._audio.core
-
-    @property
-    def sink(self) -> Sink:
-        """The sink the engine plays into (owned by the engine)."""
-        return self._audio.core.sink

@@ -51,18 +51,8 @@ REALTIME_PRIORITY = 1
 
 
 class ChildAudio:
-    """The audio side in an engine process (see the module docstring); host only.
-
-    Parameters
-    ----------
-    device : DeviceProfile
-    spec : SinkSpec
-    links : Links
-    render_ahead_frames : int
-    priority : int or None
-    on_fault : callable or None
-        See :class:`ProcessEngine`.
-    """
+    """The audio side in an engine process (module docstring); arguments as for
+    :class:`ProcessEngine`. Host only."""
 
     def __init__(
         self,
@@ -95,7 +85,7 @@ class ChildAudio:
         self._loops = SharedLoops()
         self._shared_plans = SharedPlans()
         self._seq = 0
-        self._child = self._start_child()
+        self._child = self._spawn(START_TIMEOUT_S)
         self.costs: tuple[float, float, float] | None = self._child.costs
         self.backend = self._child.backend
         self.output_device = self._child.output_device
@@ -112,13 +102,10 @@ class ChildAudio:
 
     # -- the engine process ---------------------------------------------------------------
 
-    def _start_child(self, timeout_s: float = START_TIMEOUT_S) -> ChildProcess:
-        child = spawn(self._device, self._spec, self._options, self._priority, timeout_s)
-        child.reader = threading.Thread(
-            target=self._read_reports, args=(child,), name="phantomtouch-reports", daemon=True
+    def _spawn(self, timeout_s: float) -> ChildProcess:
+        return spawn(
+            self._device, self._spec, self._options, self._priority, self._read_reports, timeout_s
         )
-        child.reader.start()
-        return child
 
     def _read_reports(self, child: ChildProcess) -> None:
         """Host, the reports thread: free released loops and plans' blocks, hand the rest
@@ -237,7 +224,7 @@ class ChildAudio:
         delay_s = RETRY_FIRST_S
         while self._set_state("restarting"):
             try:
-                child = self._start_child(RESTART_TIMEOUT_S)
+                child = self._spawn(RESTART_TIMEOUT_S)
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
                 self._set_state("gone")
@@ -246,27 +233,26 @@ class ChildAudio:
                 if self._wearer is not None:
                     child.outbox.put((0, self._wearer))
                 with self._lock:
-                    closing = self._halt.is_set()  # closed while this one started
-                    if not closing:
+                    adopted = not self._halt.is_set()  # not closed while this one started
+                    if adopted:
                         self._reset_records()
                         self._child = child
                         self.restarts += 1
-                if not closing:
-                    self._wait_running(child, RESTART_TIMEOUT_S)
-                    if self.state == "running":
-                        return
+                if adopted and self._wait_running(child, RESTART_TIMEOUT_S):
+                    return
                 child.end(kill=True)
             self._halt.wait(delay_s)
             delay_s = min(RETRY_MAX_S, 2 * delay_s)
 
-    def _wait_running(self, child: ChildProcess, timeout_s: float = START_TIMEOUT_S) -> None:
+    def _wait_running(self, child: ChildProcess, timeout_s: float) -> bool:
+        """Wait until ``child`` plays: True, the state is ``running``; else ``gone``."""
         deadline = time.monotonic() + timeout_s
         while not child.status.read()["running"]:
             if not child.process.is_alive() or time.monotonic() > deadline:
                 self._set_state("gone")
-                return
+                return False
             time.sleep(0.01)
-        self._set_state("running")
+        return self._set_state("running")
 
     def _set_state(self, state: str) -> bool:
         """Set the state unless the engine is closing; False when it is."""
@@ -292,8 +278,7 @@ class ChildAudio:
             self._started = True
             child = self._child
             self._write(child, StartSink())
-        self._wait_running(child)
-        if self.state != "running":
+        if not self._wait_running(child, START_TIMEOUT_S):
             raise DeviceError("the engine process did not start playing")
 
     def close(self) -> None:
@@ -329,11 +314,12 @@ class ChildAudio:
     def check_ready(self) -> None:
         """Raise DeviceError unless the engine process takes commands."""
         state = self.state
-        if state in ("running", "starting"):
-            return
         if state == "closed":
             raise DeviceError("the engine is closed")
-        raise DeviceError(f"the engine process is {state}; it is being restarted, retry shortly")
+        if state not in ("running", "starting"):
+            raise DeviceError(
+                f"the engine process is {state}; it is being restarted, retry shortly"
+            )
 
     def figures(self) -> dict[str, Any]:
         figures = self._child.status.read()

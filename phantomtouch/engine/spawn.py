@@ -8,6 +8,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 import threading
+from collections.abc import Callable
 from multiprocessing.connection import wait
 from typing import Any
 
@@ -54,7 +55,7 @@ class ChildProcess:
     costs: tuple[float, float, float]
     backend: str
     output_device: str | None
-    reader: threading.Thread | None = None
+    reader: threading.Thread = dataclasses.field(init=False)
 
     def end(self, *, kill: bool) -> None:
         """End the process (killed with ``kill``), its outbox and its reader."""
@@ -66,8 +67,7 @@ class ChildProcess:
             self.process.kill()
             self.process.join()
         self.outbox.close(0.1)
-        if self.reader is not None:
-            self.reader.join(1.0)
+        self.reader.join(1.0)
         self.reports.close()
 
 
@@ -76,9 +76,11 @@ def spawn(
     spec: SinkSpec,
     options: dict[str, Any],
     priority: int | None,
-    timeout_s: float = START_TIMEOUT_S,
+    read_reports: Callable[[ChildProcess], None],
+    timeout_s: float,
 ) -> ChildProcess:
-    """Start an engine process and wait for its first report (ready, or the error).
+    """Start an engine process, wait for its first report (ready, or the error), then
+    start a thread that runs ``read_reports(child)``.
 
     Raises
     ------
@@ -92,40 +94,35 @@ def spawn(
     status = StatusBlock(device.channels)
     mark = context.Value("q", 0, lock=False)
     loads = context.RawArray("d", RENDER_TIMES)
+    device_json = device.model_dump_json()
+    shared = {"clock": clock.raw, "slots": slots.raw, "status": status.raw, "loads": loads}
     commands_in, commands_out = context.Pipe(duplex=False)
     reports_in, reports_out = context.Pipe(duplex=False)
     process = context.Process(
         target=serve,
-        args=(
-            commands_in,
-            reports_out,
-            device.model_dump_json(),
-            spec,
-            options,
-            mark,
-            priority,
-            {
-                "clock": clock.raw,
-                "slots": slots.raw,
-                "status": status.raw,
-                "loads": loads,
-            },
-        ),
+        args=(commands_in, reports_out, device_json, spec, options, mark, priority, shared),
         name="phantomtouch-engine",
         daemon=True,
     )
     process.start()
     commands_in.close()
     reports_out.close()
-    try:
-        ready = _first_report(reports_in, process, timeout_s)
+    try:  # connection.wait, not select: Windows' select takes sockets only
+        if not wait([reports_in, process.sentinel], timeout_s):
+            raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
+        try:
+            ready = reports_in.recv()
+        except (EOFError, OSError):
+            raise DeviceError("the engine process ended while starting") from None
+        if ready[0] == "failed":
+            raise ready[1]
     except BaseException:
         reports_in.close()
         commands_out.close()
         process.kill()
         process.join(CLOSE_TIMEOUT_S)
         raise
-    return ChildProcess(
+    child = ChildProcess(
         process=process,
         outbox=Outbox(commands_out),
         reports=reports_in,
@@ -138,17 +135,8 @@ def spawn(
         backend=str(ready[2]),
         output_device=ready[3],
     )
-
-
-def _first_report(reports: Any, process: Any, timeout_s: float) -> Any:
-    """Wait for the pipe or the process's end (``multiprocessing.connection.wait``: Windows'
-    ``select`` takes sockets only), then read the first report."""
-    if not wait([reports, process.sentinel], timeout_s):
-        raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
-    try:
-        message = reports.recv()
-    except (EOFError, OSError):
-        raise DeviceError("the engine process ended while starting") from None
-    if message[0] == "failed":
-        raise message[1]
-    return message
+    child.reader = threading.Thread(
+        target=read_reports, args=(child,), name="phantomtouch-reports", daemon=True
+    )
+    child.reader.start()
+    return child
