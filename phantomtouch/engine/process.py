@@ -6,6 +6,7 @@ interpreter lock the audio callback needs. Nothing here waits for the engine pro
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -30,7 +31,7 @@ from phantomtouch.engine.noise import SharedLoops, loop_key
 from phantomtouch.engine.plan_memory import SharedPlans
 from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
-from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim, spawn
+from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim
 from phantomtouch.errors import DeviceError, EngineBusyError
 from phantomtouch.schema.device import DeviceProfile
 
@@ -64,7 +65,6 @@ class ChildAudio:
         on_fault: Callable[[str], None] | None,
     ) -> None:
         self._device = device
-        self._spec = spec
         self._links = links
         self._options = {
             "queue_capacity": links.queue_capacity,
@@ -74,7 +74,9 @@ class ChildAudio:
             "costs": links.costs,
             "contact_slots": links.settings.max_contacts,
         }
-        self._priority = priority
+        self._spawn = functools.partial(
+            ChildProcess, device, spec, self._options, priority, self._read_reports
+        )
         self.on_fault = on_fault
         self.state = "starting"
         self._started = False
@@ -101,11 +103,6 @@ class ChildAudio:
         self._shared_plans.clear()
 
     # -- the engine process ---------------------------------------------------------------
-
-    def _spawn(self, timeout_s: float) -> ChildProcess:
-        return spawn(
-            self._device, self._spec, self._options, self._priority, self._read_reports, timeout_s
-        )
 
     def _read_reports(self, child: ChildProcess) -> None:
         """Host, the reports thread: free released loops and plans' blocks, hand the rest

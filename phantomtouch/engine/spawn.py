@@ -1,5 +1,5 @@
-"""Starting an engine process (:func:`spawn`), and what the host shares with it
-(:class:`ChildProcess`). Host, non real time.
+"""Starting an engine process and what the host shares with it (:class:`ChildProcess`).
+Host, non real time.
 """
 
 from __future__ import annotations
@@ -38,24 +38,79 @@ def slim(plan: Plan) -> Plan:
     return dataclasses.replace(plan, pattern=pattern, device=None, geometry=None)  # type: ignore[arg-type]
 
 
-@dataclasses.dataclass
 class ChildProcess:
-    """One engine process and what is shared with it (host)."""
+    """An engine process, started and ready, and what the host shares with it: the
+    ``outbox`` of its commands, its ``reports`` (read by a thread that runs
+    ``read_reports(child)``), and in shared memory its ``clock``, move ``slots``,
+    ``status``, stop ``mark`` and render ``loads``. Host.
 
-    process: Any
-    outbox: Outbox
-    reports: Any
-    """The read end of the reports' pipe (a ``multiprocessing.connection.Connection``)."""
-    clock: SharedClock
-    slots: MoveSlots
-    status: StatusBlock
-    mark: Any
-    loads: np.ndarray
-    """The audio callback's render loads (see :class:`~phantomtouch.engine.scheduler.Scheduler`)."""
-    costs: tuple[float, float, float]
-    backend: str
-    output_device: str | None
-    reader: threading.Thread = dataclasses.field(init=False)
+    Parameters
+    ----------
+    device, spec, options, priority
+        What :func:`~phantomtouch.engine.child.serve` plays with.
+    read_reports : callable
+    timeout_s : float
+        Longest wait for the first report.
+
+    Raises
+    ------
+    DeviceError
+        It did not start within ``timeout_s``, or ended while starting; or the error it
+        reported (its sink could not open).
+    """
+
+    def __init__(
+        self,
+        device: DeviceProfile,
+        spec: SinkSpec,
+        options: dict[str, Any],
+        priority: int | None,
+        read_reports: Callable[[ChildProcess], None],
+        timeout_s: float,
+    ) -> None:
+        context = multiprocessing.get_context("spawn")
+        self.clock = SharedClock(device.sample_rate_hz)
+        self.slots = MoveSlots(options["contact_slots"])
+        self.status = StatusBlock(device.channels)
+        self.mark = context.Value("q", 0, lock=False)
+        loads = context.RawArray("d", RENDER_TIMES)
+        self.loads = np.frombuffer(loads, dtype=np.float64)
+        raw = dict(clock=self.clock.raw, slots=self.slots.raw, status=self.status.raw, loads=loads)
+        commands_in, commands_out = context.Pipe(duplex=False)
+        self.reports, reports_out = context.Pipe(duplex=False)
+        device_json = device.model_dump_json()
+        self.process = context.Process(
+            target=serve,
+            args=(commands_in, reports_out, device_json, spec, options, self.mark, priority, raw),
+            name="phantomtouch-engine",
+            daemon=True,
+        )
+        self.process.start()
+        commands_in.close()
+        reports_out.close()
+        try:  # connection.wait, not select: Windows' select takes sockets only
+            if not wait([self.reports, self.process.sentinel], timeout_s):
+                raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
+            try:
+                ready = self.reports.recv()
+            except (EOFError, OSError):
+                raise DeviceError("the engine process ended while starting") from None
+            if ready[0] == "failed":
+                raise ready[1]
+        except BaseException:
+            self.reports.close()
+            commands_out.close()
+            self.process.kill()
+            self.process.join(CLOSE_TIMEOUT_S)
+            raise
+        self.outbox = Outbox(commands_out)
+        self.costs = (float(ready[1][0]), float(ready[1][1]), float(ready[1][2]))
+        self.backend = str(ready[2])
+        self.output_device: str | None = ready[3]
+        self.reader = threading.Thread(
+            target=read_reports, args=(self,), name="phantomtouch-reports", daemon=True
+        )
+        self.reader.start()
 
     def end(self, *, kill: bool) -> None:
         """End the process (killed with ``kill``), its outbox and its reader."""
@@ -69,74 +124,3 @@ class ChildProcess:
         self.outbox.close(0.1)
         self.reader.join(1.0)
         self.reports.close()
-
-
-def spawn(
-    device: DeviceProfile,
-    spec: SinkSpec,
-    options: dict[str, Any],
-    priority: int | None,
-    read_reports: Callable[[ChildProcess], None],
-    timeout_s: float,
-) -> ChildProcess:
-    """Start an engine process, wait for its first report (ready, or the error), then
-    start a thread that runs ``read_reports(child)``.
-
-    Raises
-    ------
-    DeviceError
-        It did not start within ``timeout_s``, or ended while starting; or the error it
-        reported (its sink could not open).
-    """
-    context = multiprocessing.get_context("spawn")
-    clock = SharedClock(device.sample_rate_hz)
-    slots = MoveSlots(options["contact_slots"])
-    status = StatusBlock(device.channels)
-    mark = context.Value("q", 0, lock=False)
-    loads = context.RawArray("d", RENDER_TIMES)
-    device_json = device.model_dump_json()
-    shared = {"clock": clock.raw, "slots": slots.raw, "status": status.raw, "loads": loads}
-    commands_in, commands_out = context.Pipe(duplex=False)
-    reports_in, reports_out = context.Pipe(duplex=False)
-    process = context.Process(
-        target=serve,
-        args=(commands_in, reports_out, device_json, spec, options, mark, priority, shared),
-        name="phantomtouch-engine",
-        daemon=True,
-    )
-    process.start()
-    commands_in.close()
-    reports_out.close()
-    try:  # connection.wait, not select: Windows' select takes sockets only
-        if not wait([reports_in, process.sentinel], timeout_s):
-            raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
-        try:
-            ready = reports_in.recv()
-        except (EOFError, OSError):
-            raise DeviceError("the engine process ended while starting") from None
-        if ready[0] == "failed":
-            raise ready[1]
-    except BaseException:
-        reports_in.close()
-        commands_out.close()
-        process.kill()
-        process.join(CLOSE_TIMEOUT_S)
-        raise
-    child = ChildProcess(
-        process=process,
-        outbox=Outbox(commands_out),
-        reports=reports_in,
-        clock=clock,
-        slots=slots,
-        status=status,
-        mark=mark,
-        loads=np.frombuffer(loads, dtype=np.float64),
-        costs=(float(ready[1][0]), float(ready[1][1]), float(ready[1][2])),
-        backend=str(ready[2]),
-        output_device=ready[3],
-    )
-    child.reader = threading.Thread(
-        target=read_reports, args=(child,), name="phantomtouch-reports", daemon=True
-    )
-    child.reader.start()
-    return child
