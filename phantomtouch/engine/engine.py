@@ -72,8 +72,7 @@ class LocalAudio:
         """Measure a voice's cost (unless given), start the sink and the housekeeping
         thread; no-op when running. Host, non real time."""
         with self._lock:
-            if self._closed:
-                raise DeviceError("the engine is closed")
+            self.check_ready()
             if self.core.running:
                 return
             if self.costs is None and self.core.sink.realtime:

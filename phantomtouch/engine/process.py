@@ -379,16 +379,11 @@ class ProcessEngine(EngineFront):
         if realtime_priority is not None:
             check_int("realtime_priority", realtime_priority, 1, 99)
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
-
+        spec = sink if sink is not None else SinkSpec()
         super().__init__(
             device,
             lambda links: ChildAudio(
-                device,
-                sink if sink is not None else SinkSpec(),
-                links,
-                render_ahead_frames,
-                realtime_priority,
-                on_fault,
+                device, spec, links, render_ahead_frames, realtime_priority, on_fault
             ),
             **options,
         )
