@@ -17,7 +17,7 @@ from phantomtouch.engine.front import MAX_VOICES as MAX_VOICES  # re-exported
 from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import AudioState, Command, ContactMove, Event, perform
 from phantomtouch.engine.sinks import NullSink, Sink
-from phantomtouch.errors import DeviceError
+from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.renderer.plan import plan
 from phantomtouch.renderer.presets import preset
 from phantomtouch.schema.device import DeviceProfile
@@ -47,7 +47,9 @@ class LocalAudio:
     """The audio side in this process (module docstring); arguments as for :class:`Engine`.
     Without ``links.costs``, a voice's cost is measured when a real-time sink starts."""
 
-    def __init__(self, device: DeviceProfile, sink: Sink, links: Links, chunk_frames: int) -> None:
+    def __init__(
+        self, device: DeviceProfile, sink: Sink, links: Links, chunk_frames: int, clock: SampleClock
+    ) -> None:
         self._links = links
         self.core = Core(
             device,
@@ -56,7 +58,7 @@ class LocalAudio:
             queue_capacity=links.queue_capacity,
             rings=min(links.max_voices, RENDER_AHEAD_RINGS),
             chunk_frames=chunk_frames,
-            clock=SampleClock(device.sample_rate_hz),
+            clock=clock,
         )
         self._state = AudioState(self.core)
         self._reported: deque[Event] = deque()  # the appliers' own events, for the front
@@ -190,6 +192,8 @@ class Engine(EngineFront):
         :func:`~phantomtouch.engine.soundcard.open_default_sink` for the sound card).
     render_ahead_frames : int, >= 0
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
+    clock : SampleClock or None
+        The sample clock to keep, at the device's sample rate; None: a new one.
     **options
         The keywords of :class:`~phantomtouch.engine.front.EngineFront`.
 
@@ -207,12 +211,25 @@ class Engine(EngineFront):
         sink: Sink | None = None,
         *,
         render_ahead_frames: int = RENDER_AHEAD_FRAMES,
+        clock: SampleClock | None = None,
         **options: Any,
     ) -> None:
+        if clock is not None and (
+            not isinstance(clock, SampleClock) or clock.sample_rate_hz != device.sample_rate_hz
+        ):
+            raise ParameterError(
+                f"clock={clock!r} must be a SampleClock at {device.sample_rate_hz} Hz or None"
+            )
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
         super().__init__(
             device,
-            lambda links: LocalAudio(device, sink or NullSink(device), links, render_ahead_frames),
+            lambda links: LocalAudio(
+                device,
+                sink or NullSink(device),
+                links,
+                render_ahead_frames,
+                clock or SampleClock(device.sample_rate_hz),
+            ),
             **options,
         )
 
