@@ -225,10 +225,10 @@ class Engine(EngineFront):
             device,
             lambda links: LocalAudio(
                 device,
-                sink or NullSink(device),
+                sink if sink is not None else NullSink(device),
                 links,
                 render_ahead_frames,
-                clock or SampleClock(device.sample_rate_hz),
+                clock if clock is not None else SampleClock(device.sample_rate_hz),
             ),
             **options,
         )
