@@ -1,8 +1,5 @@
-"""Argument checks shared by the engine's public methods.
-
-Each returns the checked value or raises :class:`~phantomtouch.errors.ParameterError`
-with a message that names the argument, its value and what is allowed.
-"""
+"""Argument checks shared by the engine's public methods: each returns the checked value
+or raises ParameterError naming the argument, its value and what is allowed."""
 
 from __future__ import annotations
 
