@@ -62,11 +62,9 @@ class ContactBoard:
         voice = self._contacts.get((owner, contact))
         if voice is None:
             return
-        amplitude = (
-            voice.mailbox.amplitude
-            if intensity is None
-            else contact_amplitude(self.device, intensity, None)
-        )
+        amplitude = voice.mailbox.amplitude
+        if intensity is not None:
+            amplitude = contact_amplitude(self.device, intensity, None)
         voice.mailbox = Position(next(self._serials), x_cm, y_cm, amplitude, frame)
 
     def up(self, owner: str, contact: str, burst: np.ndarray | None, frame: int | None) -> None:

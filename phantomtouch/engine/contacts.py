@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class ContactSettings:
-    """How live contacts start, end and strike (checked on construction; the front's)."""
+    """How live contacts start, end and strike; every field is checked on construction."""
 
     attack_s: float = 0.01
     """Linear fade-in on touchdown, s, within [0, 5]."""

@@ -14,14 +14,9 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypedDict, Unpack
 
-from phantomtouch.engine.checks import check_frame, check_id, check_range
+from phantomtouch.engine.checks import check_frame, check_id, check_law, check_range
 from phantomtouch.engine.messages import Command, ContactDown, ContactMove, ContactUp, ReleaseOwner
-from phantomtouch.engine.touchdown import (
-    Touchdowns,
-    check_contact_carrier,
-    check_law,
-    contact_amplitude,
-)
+from phantomtouch.engine.touchdown import Touchdowns, check_contact_carrier, contact_amplitude
 from phantomtouch.errors import EngineBusyError, ParameterError, ProtocolError
 from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
@@ -47,15 +42,14 @@ Released = tuple[str, tuple[str, ...], str]
 
 
 class MoveOptions(TypedDict, total=False):
-    """The keyword arguments of :meth:`ContactCalls.contact_move`, which
-    :meth:`ContactCalls.contact_down` takes too (see theirs for what each means)."""
+    """Keywords of :meth:`ContactCalls.contact_move`, which ``contact_down`` takes too."""
 
     intensity: float | None
     at_frame: int | None
 
 
 class DownOptions(MoveOptions, total=False):
-    """The keyword arguments of :meth:`ContactCalls.contact_down`."""
+    """Keywords of :meth:`ContactCalls.contact_down`."""
 
     carrier: Carrier | None
     law: str
@@ -395,19 +389,14 @@ class ContactCalls:
         at_frame: int | None = None,
     ) -> None:
         """Lift-off: the contact fades out over ``contact.release_s`` (host, any thread).
-        Never refused; a contact that is not down is ignored (``up`` is idempotent).
-
-        Parameters
-        ----------
-        owner, contact, at_frame
-            As in :meth:`contact_down`.
-        normal_velocity_m_s : float or None, |value| <= 10
-            Adds a lift-off transient at the last position.
+        Never refused; a contact that is not down is ignored (``up`` is idempotent). With
+        ``normal_velocity_m_s`` (m/s, |value| <= 10), a lift-off transient is added at the
+        last position.
 
         Raises
         ------
         ParameterError
-            An argument is out of range.
+            An argument is out of range (ids, ``normal_velocity_m_s``, ``at_frame``).
         """
         check_id("owner", owner)
         check_id("contact", contact)

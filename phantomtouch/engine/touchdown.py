@@ -11,7 +11,7 @@ import numpy as np
 from phantomtouch.engine.checks import check_range
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.errors import ParameterError
-from phantomtouch.renderer.gains import LAWS, gains_for_points
+from phantomtouch.renderer.gains import gains_for_points
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.levels import amplitude_for_level, table_i_level_db
 from phantomtouch.renderer.plan import check_carrier_frequencies
@@ -22,13 +22,6 @@ MAX_VELOCITY_M_S = 10.0
 _TRANSIENT_TIME_CONSTANTS = 7.0
 
 CarrierModel = SineCarrier | NoiseCarrier | CombinedCarrier
-
-
-def check_law(law: object) -> str:
-    """An interpolation law of the renderer."""
-    if not isinstance(law, str) or law not in LAWS:
-        raise ParameterError(f"law={law!r} must be one of {sorted(LAWS)}")
-    return law
 
 
 def contact_amplitude(device: DeviceProfile, intensity: object, carrier: object) -> float:
