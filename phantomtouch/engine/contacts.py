@@ -159,11 +159,8 @@ class ContactVoice(Voice):
     ) -> None:
         """Ramp towards ``position`` in the block from ``block_start``; ``unit_gains``,
         shape (channels,), float32, are its phantom gains."""
-        if (
-            position.frame is not None
-            and position.frame < block_start
-            and self.start_frame <= block_start
-        ):
+        late = position.frame is not None and position.frame < block_start
+        if late and self.start_frame <= block_start:
             work.late_commands += 1
         self._applied = position.serial
         self._unit = unit_gains

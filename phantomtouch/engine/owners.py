@@ -110,13 +110,8 @@ class ContactRecord:
 
 
 class OwnerTable:
-    """Contacts by owner, oldest first.
-
-    Parameters
-    ----------
-    max_contacts : int, >= 1
-        Contacts down at once over every owner (the engine's contact slots).
-    """
+    """Contacts by owner, oldest first: at most ``max_contacts`` (>= 1, the engine's contact
+    slots) down at once over every owner."""
 
     def __init__(self, max_contacts: int) -> None:
         self.max_contacts = max_contacts
@@ -199,15 +194,9 @@ class OwnerTable:
 
 class DeadlineThread:
     """The thread that releases contacts past their deadline (``phantomtouch-deadlines``,
-    never the audio callback), while some contact has one.
-
-    Parameters
-    ----------
-    expire : callable
-        ``expire(now_s) -> next_deadline_s or None`` (``time.monotonic()`` clock): releases
-        what is due. The thread sleeps until the deadline it returns or a :meth:`wake`,
-        and ends on None.
-    """
+    never the audio callback), while some contact has one: it calls ``expire(now_s)``
+    (``time.monotonic()`` clock), which releases what is due and returns the next deadline
+    or None, then sleeps until that deadline or a :meth:`wake`, and ends on None."""
 
     def __init__(self, expire: Callable[[float], float | None]) -> None:
         self._expire = expire
@@ -326,7 +315,7 @@ class ContactCalls:
             self._audio.check_ready()
             held = self._contacts.held(owner).get(contact)
             if held is None and (victim := self._contacts.make_room(owner)) is not None:
-                self._lift(*victim)
+                self._lift(victim[2], ContactUp(victim[0], victim[1], None, None))
                 taken.append((victim[0], (victim[1],), "quota"))
             slot = self._audio.claim_slot(None if held is None else held.slot)
             bound = () if slot is None else slot  # the move slot it reads, if any
@@ -405,8 +394,7 @@ class ContactCalls:
         with self._lock:
             record = self._contacts.pop(owner, contact)
             if record is not None:
-                self._audio.free_slot(record.slot)
-                post_release(self._audio, ContactUp(owner, contact, burst, frame))
+                self._lift(record, ContactUp(owner, contact, burst, frame))
 
     def release_owner(self, owner: str, reason: str = "released") -> None:
         """Release every contact of ``owner`` (with the release ramp) and publish them as
@@ -465,7 +453,7 @@ class ContactCalls:
             due = self._contacts.expired(now_s, prefix)
             for owner, held in due.items():
                 for contact, record in held.items():
-                    self._lift(owner, contact, record)
+                    self._lift(record, ContactUp(owner, contact, None, None))
         self._listeners.publish([(owner, tuple(held), "watchdog") for owner, held in due.items()])
         return list(due)
 
@@ -475,10 +463,10 @@ class ContactCalls:
         with self._lock:
             return self._contacts.next_deadline()
 
-    def _lift(self, owner: str, contact: str, record: ContactRecord) -> None:
-        """Lift a contact the table let go of, without a transient (the lock held)."""
+    def _lift(self, record: ContactRecord, up: ContactUp) -> None:
+        """Free the slot of a contact the table let go of, post its ``up`` (lock held)."""
         self._audio.free_slot(record.slot)
-        post_release(self._audio, ContactUp(owner, contact, None, None))
+        post_release(self._audio, up)
 
 
 def post_release(audio: LocalAudio | ChildAudio, message: Command) -> None:
