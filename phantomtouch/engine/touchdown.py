@@ -62,8 +62,8 @@ class Touchdowns:
         self._geometry = Geometry.for_device(device)
         decay_frames = settings.transient_decay_s * device.sample_rate_hz
         n = np.arange(math.ceil(_TRANSIENT_TIME_CONSTANTS * decay_frames), dtype=np.float64)
-        omega = 2.0 * np.pi * settings.transient_freq_hz
-        shape = np.exp(-n / decay_frames) * np.sin(omega * n / device.sample_rate_hz)
+        omega_rad_s = 2.0 * np.pi * settings.transient_freq_hz
+        shape = np.exp(-n / decay_frames) * np.sin(omega_rad_s * n / device.sample_rate_hz)
         self._burst_shape = shape.astype(np.float32)
         self._burst_amplitude = contact_amplitude(device, settings.transient_intensity, None)
 
