@@ -1,17 +1,7 @@
 """The real-time part: sample clock, scheduler, voices, mixer, safety limiter, sinks.
 
-::
-
-    from phantomtouch.engine import Engine, open_default_sink
-
-    engine = Engine(device, open_default_sink(device))
-    engine.start()
-    job = engine.schedule(pattern, start_frame=engine.frames_at(engine.server_time_s() + 0.02))
-    engine.contact_down("client", "finger", 1.9, 7.2)
-    engine.close()
-
-``docs/engine.md`` maps the modules. The engine imports the renderer and the schema,
-never the server.
+``docs/service.md`` shows it in use, ``docs/engine.md`` maps its modules. The engine
+imports the renderer and the schema, never the server.
 """
 
 from phantomtouch.engine.contacts import ContactSettings

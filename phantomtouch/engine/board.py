@@ -1,5 +1,4 @@
-"""The contacts that sound, keyed by ``(owner, contact)``: started from touchdowns the front
-checked and computed, moved by posted positions, released. It checks nothing."""
+"""The contacts that sound on the audio side, keyed by ``(owner, contact)``."""
 
 from __future__ import annotations
 
@@ -19,23 +18,12 @@ if TYPE_CHECKING:
 
 
 class ContactBoard:
-    """Contacts that sound, and how to start, move and release them.
-
-    Every method runs where the messages are performed: real time in the engine process's
-    audio callback, or the calling thread of the in-process engine (under the front's lock).
-
-    Parameters
-    ----------
-    device : DeviceProfile
-    settings : ContactSettings
-    queue : CommandQueue
-        Where touchdowns and releases go.
-
-    Attributes
-    ----------
-    attack_frames, release_frames : int
-        ``settings.attack_s`` and ``settings.release_s`` in frames (the latter >= 1).
-    """
+    """Contacts that sound, started from touchdowns the front checked and computed, moved
+    by posted positions, released into ``queue`` (a :class:`CommandQueue`); it checks
+    nothing. Every method runs where the messages are performed: real time in the engine
+    process's audio callback, or the calling thread of the in-process engine (under the
+    front's lock). ``attack_frames`` and ``release_frames`` (>= 1) are the settings'
+    ``attack_s`` and ``release_s`` in frames."""
 
     def __init__(self, device: DeviceProfile, settings: ContactSettings, queue: CommandQueue):
         self.device = device
@@ -47,13 +35,8 @@ class ContactBoard:
 
     def down(self, down: ContactDown, first_frame: int) -> None:
         """Start a touchdown's voice at ``first_frame`` (``down.frame``, or the next block's
-        when that is None); a contact already sounding under its id is released.
-
-        Raises
-        ------
-        LookupError
-            The carrier's noise loop was not handed to this process.
-        """
+        when that is None); a contact already sounding under its id is released. Raises
+        LookupError when the carrier's noise loop was not handed to this process."""
         source = make_source(down.carrier, self.device.sample_rate_hz)
         voice = ContactVoice(
             down, next(self._serials), source, self.attack_frames, self.release_frames
@@ -74,18 +57,14 @@ class ContactBoard:
         intensity: float | None,
         frame: int | None,
     ) -> None:
-        """Post a position checked by the front; a contact not sounding is ignored.
-
-        Replaces the voice's mailbox (None intensity: the amplitude is unchanged).
-        """
+        """Post a position checked by the front into the voice's mailbox (None intensity:
+        the amplitude is unchanged); a contact not sounding is ignored."""
         voice = self._contacts.get((owner, contact))
         if voice is None:
             return
-        amplitude = (
-            voice.mailbox.amplitude
-            if intensity is None
-            else contact_amplitude(self.device, intensity, None)
-        )
+        amplitude = voice.mailbox.amplitude
+        if intensity is not None:
+            amplitude = contact_amplitude(self.device, intensity, None)
         voice.mailbox = Position(next(self._serials), x_cm, y_cm, amplitude, frame)
 
     def up(self, owner: str, contact: str, burst: np.ndarray | None, frame: int | None) -> None:

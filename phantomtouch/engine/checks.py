@@ -1,8 +1,5 @@
-"""Argument checks shared by the engine's public methods.
-
-Each returns the checked value or raises :class:`~phantomtouch.errors.ParameterError`
-with a message that names the argument, its value and what is allowed.
-"""
+"""Argument checks shared by the engine's public methods: each returns the checked value
+or raises ParameterError naming the argument, its value and what is allowed."""
 
 from __future__ import annotations
 
@@ -11,6 +8,7 @@ import math
 import numpy as np
 
 from phantomtouch.errors import ParameterError
+from phantomtouch.renderer.gains import LAWS
 
 MAX_ID_CHARS = 64
 
@@ -46,6 +44,13 @@ def check_id(name: str, value: object) -> str:
     if not isinstance(value, str) or not 1 <= len(value) <= MAX_ID_CHARS:
         raise ParameterError(f"{name}={value!r} must be a string of 1 to {MAX_ID_CHARS} characters")
     return value
+
+
+def check_law(law: object) -> str:
+    """An interpolation law of the renderer."""
+    if not isinstance(law, str) or law not in LAWS:
+        raise ParameterError(f"law={law!r} must be one of {sorted(LAWS)}")
+    return law
 
 
 def check_frame(name: str, value: object) -> int | None:

@@ -21,19 +21,16 @@ LATENCY_FOLLOW = 1.0 / 16.0
 
 
 class FrameMapping(abc.ABC):
-    """Maps frames of the engine's output to seconds on the server clock and back.
-
-    ``time_at(frame)`` is when that frame is expected to leave the sound card: the time its
-    block was computed, plus ``(frame - block start) / sample_rate_hz``, plus the sink's
-    output latency.
-    """
+    """Maps frames of the engine's output to seconds on the server clock and back: a
+    frame leaves the sound card when its block was computed, plus its offset in the
+    block over ``sample_rate_hz``, plus the sink's output latency."""
 
     sample_rate_hz: int
 
     @abc.abstractmethod
     def anchor(self) -> tuple[int, float, float]:
         """``(anchor_frame, anchor_s, output_latency_s)``: the block from ``anchor_frame``
-        was computed at server time ``anchor_s``."""
+        was computed at server time ``anchor_s`` (any thread)."""
 
     def time_at(self, frame: int) -> float:
         """Server time, s, at which ``frame`` leaves the sound card (host)."""
@@ -76,7 +73,7 @@ class SampleClock(FrameMapping):
 
     def _changed(self) -> None:
         if self._publish is not None:
-            self._publish(self._anchor[0], self._anchor[1], self._latency_s)
+            self._publish(*self.anchor())
 
     @property
     def output_latency_s(self) -> float:
@@ -116,5 +113,4 @@ class SampleClock(FrameMapping):
         self._changed()
 
     def anchor(self) -> tuple[int, float, float]:
-        """As :meth:`FrameMapping.anchor` (any thread)."""
         return self._anchor[0], self._anchor[1], self._latency_s

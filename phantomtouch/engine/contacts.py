@@ -1,8 +1,5 @@
 """Live contacts: a hand touching the forearm, moved by the newest position, struck by
-an impact transient (how: ``docs/engine.md``, "Live contacts"). :class:`ContactSettings`
-is checked by the front; a :class:`ContactVoice` runs in real time, inside the audio
-callback, except its mailbox, which the side that posts moves writes.
-"""
+an impact transient (how: ``docs/engine.md``, "Live contacts")."""
 
 from __future__ import annotations
 
@@ -24,33 +21,24 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class ContactSettings:
-    """How live contacts start, end and strike.
-
-    Parameters
-    ----------
-    attack_s : float, 0 <= attack_s <= 5
-        Linear fade-in on touchdown, s.
-    release_s : float, 0.001 <= release_s <= 5
-        Linear fade-out on lift-off, and of a stopped job or a released client, s.
-    transient_freq_hz : float, 1 <= transient_freq_hz <= 1000
-        Frequency of the impact transient, Hz.
-    transient_decay_s : float, 0.001 <= transient_decay_s <= 0.5
-        Time constant of its exponential decay, s.
-    transient_full_velocity_m_s : float, 0.01 <= ... <= 10
-        Normal velocity of the hand that gives the full transient, m/s.
-    transient_intensity : float, 0 <= transient_intensity <= 1
-        Full transient amplitude as a relative intensity (1 = ``safety.max_level_db``).
-    max_contacts : int, 1 <= max_contacts <= 4096
-        Most contacts down at once (all clients together).
-    """
+    """How live contacts start, end and strike; every field is checked on construction."""
 
     attack_s: float = 0.01
+    """Linear fade-in on touchdown, s, within [0, 5]."""
     release_s: float = 0.08
+    """Linear fade-out on lift-off, and of a stopped job or a released client, s, within
+    [0.001, 5]."""
     transient_freq_hz: float = 250.0
+    """Frequency of the impact transient, Hz, within [1, 1000]."""
     transient_decay_s: float = 0.008
+    """Time constant of its exponential decay, s, within [0.001, 0.5]."""
     transient_full_velocity_m_s: float = 0.5
+    """Normal velocity of the hand that gives the full transient, m/s, within [0.01, 10]."""
     transient_intensity: float = 0.5
+    """Full transient amplitude, a relative intensity within [0, 1] (1 = the device's
+    ``safety.max_level_db``)."""
     max_contacts: int = 128
+    """Most contacts down at once (all clients together), within [1, 4096]."""
 
     def __post_init__(self) -> None:
         check_range("attack_s", self.attack_s, 0.0, 5.0, "s")
@@ -66,41 +54,30 @@ class ContactSettings:
 
 @dataclass(frozen=True, slots=True)
 class Position:
-    """One posted position of a contact, before its gains are known.
-
-    Attributes
-    ----------
-    serial : int
-        Increases with every post; the callback applies a position once.
-    x_cm, y_cm : float
-        As given (before projection onto the layout).
-    amplitude : float
-        The contact's amplitude from this position on.
-    frame : int or None
-        Frame at which the position applies; None: the next block.
-    """
+    """One posted position of a contact, before its gains are known."""
 
     serial: int
+    """Increases with every post; the callback applies a position once."""
     x_cm: float
     y_cm: float
+    """As given (before projection onto the layout)."""
     amplitude: float
+    """The contact's amplitude from this position on."""
     frame: int | None
+    """Frame at which the position applies; None: the next block."""
 
 
 class ContactVoice(Voice):
-    """One live contact: a carrier at a moving phantom position.
-
-    Built by :class:`~phantomtouch.engine.board.ContactBoard`; after that the side that
-    posts moves only writes :attr:`mailbox`, a :class:`Position`, and the callback applies
-    it (:func:`retarget_contacts`). Its gains ramp linearly across each block from where
-    the last block ended to the newest target.
+    """One live contact: a carrier at a moving phantom position (real time, in the audio
+    callback; the side that posts moves only writes :attr:`mailbox`, a :class:`Position`,
+    which :func:`retarget_contacts` applies).
 
     Parameters
     ----------
     down : ContactDown
         The touchdown, checked and computed by the front.
     serial : int
-        Serial of its first position (see :class:`Position`).
+        Serial of its first position.
     source : CarrierSource
         The carrier's samples.
     attack_frames, release_frames : int, >= 0 and >= 1
@@ -180,15 +157,10 @@ class ContactVoice(Voice):
     def retarget(
         self, position: Position, unit_gains: np.ndarray, block_start: int, work: Workspace
     ) -> None:
-        """Ramp towards ``position`` in the block from ``block_start``.
-
-        ``unit_gains``, shape (channels,), float32, are the phantom gains of the position.
-        """
-        if (
-            position.frame is not None
-            and position.frame < block_start
-            and self.start_frame <= block_start
-        ):
+        """Ramp towards ``position`` in the block from ``block_start``; ``unit_gains``,
+        shape (channels,), float32, are its phantom gains."""
+        late = position.frame is not None and position.frame < block_start
+        if late and self.start_frame <= block_start:
             work.late_commands += 1
         self._applied = position.serial
         self._unit = unit_gains

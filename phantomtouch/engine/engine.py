@@ -28,9 +28,8 @@ RENDER_AHEAD_FRAMES = 8192
 """Frames a pattern voice renders ahead at a time (see :mod:`phantomtouch.engine.voices`):
 most of a refill's cost is per call, so long chunks make a sounding voice cheap."""
 RENDER_AHEAD_RINGS = 64
-"""Most pattern voices that render ahead at once: the engine preallocates a ring (two
-chunks, 512 KB at 8 channels; memory is taken only once a ring is used) for each of
-``min(max_voices, RENDER_AHEAD_RINGS)`` voices; voices beyond render block by block."""
+"""Most pattern voices that render ahead at once, each in a ring of two chunks (512 KB at
+8 channels, taken once used); voices beyond render block by block."""
 HOUSEKEEPING_PERIOD_S = 0.05
 COST_PRESET = "exp1/noise-high-v3"
 """The pattern whose voices measure what a voice costs: noise, the dearest carrier."""
@@ -45,28 +44,12 @@ def voice_costs(core: Core) -> tuple[float, float, float]:
 
 
 class LocalAudio:
-    """The audio side in this process (see the module docstring).
-
-    Parameters
-    ----------
-    device : DeviceProfile
-    sink : Sink
-    links : Links
-        Without ``links.costs``, a voice's cost is measured when a real-time sink starts.
-    render_ahead_frames, clock
-        As for :class:`Engine`.
-    """
+    """The audio side in this process (module docstring); arguments as for :class:`Engine`.
+    Without ``links.costs``, a voice's cost is measured when a real-time sink starts."""
 
     def __init__(
-        self,
-        device: DeviceProfile,
-        sink: Sink,
-        links: Links,
-        *,
-        render_ahead_frames: int,
-        clock: SampleClock,
+        self, device: DeviceProfile, sink: Sink, links: Links, chunk_frames: int, clock: SampleClock
     ) -> None:
-        self._device = device
         self._links = links
         self.core = Core(
             device,
@@ -74,13 +57,11 @@ class LocalAudio:
             settings=links.settings,
             queue_capacity=links.queue_capacity,
             rings=min(links.max_voices, RENDER_AHEAD_RINGS),
-            chunk_frames=render_ahead_frames,
+            chunk_frames=chunk_frames,
             clock=clock,
         )
         self._state = AudioState(self.core)
         self._reported: deque[Event] = deque()  # the appliers' own events, for the front
-        self.backend = sink.backend
-        self.output_device = sink.output_device
         self.costs = links.costs
         self._lock = threading.Lock()
         self._events_lock = threading.Lock()  # one thread at a time takes the events
@@ -93,8 +74,7 @@ class LocalAudio:
         """Measure a voice's cost (unless given), start the sink and the housekeeping
         thread; no-op when running. Host, non real time."""
         with self._lock:
-            if self._closed:
-                raise DeviceError("the engine is closed")
+            self.check_ready()
             if self.core.running:
                 return
             if self.costs is None and self.core.sink.realtime:
@@ -191,8 +171,8 @@ class LocalAudio:
         figures = self.core.figures()
         figures.update(
             refused_commands=self._state.refused,
-            backend=self.backend,
-            output_device=self.output_device,
+            backend=self.core.sink.backend,
+            output_device=self.core.sink.output_device,
             state="closed" if self._closed else "running" if figures["running"] else "starting",
         )
         return figures
@@ -241,15 +221,14 @@ class Engine(EngineFront):
                 f"clock={clock!r} must be a SampleClock at {device.sample_rate_hz} Hz or None"
             )
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
-
         super().__init__(
             device,
             lambda links: LocalAudio(
                 device,
                 sink if sink is not None else NullSink(device),
                 links,
-                render_ahead_frames=render_ahead_frames,
-                clock=clock if clock is not None else SampleClock(device.sample_rate_hz),
+                render_ahead_frames,
+                clock if clock is not None else SampleClock(device.sample_rate_hz),
             ),
             **options,
         )
@@ -258,10 +237,5 @@ class Engine(EngineFront):
 
     @property
     def core(self) -> Core:
-        """The audio side's core (sink, scheduler, voices)."""
+        """The audio side's core (sink, scheduler, voices; host, any thread)."""
         return self._audio.core
-
-    @property
-    def sink(self) -> Sink:
-        """The sink the engine plays into (owned by the engine)."""
-        return self._audio.core.sink

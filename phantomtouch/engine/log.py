@@ -1,18 +1,7 @@
 """The stimulus log: what was played, from which sample, at which time.
 
-One JSON object per line, appended to a file, written by the engine's housekeeping
-thread (never by the audio callback). Every record has ``event``, ``frame`` (on the
-engine's sample clock), ``server_time_s`` (monotonic server clock) and ``unix_time_s``
-(wall clock) of that frame leaving the sound card, and says what it is about:
-
-- ``{"event": "start", "kind": "job", "job_id", "owner", "late", "summary", "pattern"}``
-  (``pattern`` is the TouchPattern as JSON, left out for paths of more than 1000 points)
-- ``{"event": "start", "kind": "contact", "owner", "contact", "x_cm", "y_cm", "amplitude"}``
-- ``{"event": "release", ...}``: a stop, a lift-off or a released client; the fade-out
-  begins at ``frame``
-- ``{"event": "end", ...}``: silent from ``frame`` on
-- ``{"event": "cancel", ...}``: a job stopped before it started
-- ``{"event": "stop_all"}``
+One JSON object per line, appended by the engine's housekeeping thread (never by the
+audio callback); ``docs/engine.md`` (The stimulus log) lists the records.
 """
 
 from __future__ import annotations
@@ -26,7 +15,7 @@ from phantomtouch.errors import ParameterError
 
 
 class StimulusLog:
-    """Appends JSON lines to a file.
+    """Appends JSON lines to a file (host, any thread).
 
     Parameters
     ----------
@@ -50,15 +39,12 @@ class StimulusLog:
         self._lock = threading.Lock()
 
     def write(self, records: list[dict[str, Any]]) -> None:
-        """Append records, one line each, and flush."""
-        if not records:
-            return
+        """Append records, one line each, and flush; nothing once closed."""
         text = "".join(json.dumps(record, separators=(",", ":")) + "\n" for record in records)
         with self._lock:
-            if self._file is None:
-                return
-            self._file.write(text)
-            self._file.flush()
+            if self._file is not None and text:
+                self._file.write(text)
+                self._file.flush()
 
     def close(self) -> None:
         with self._lock:

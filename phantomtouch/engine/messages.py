@@ -1,17 +1,15 @@
 """Every command the audio side takes and every event it reports, each one typed.
 
-A command is a frozen, slotted dataclass and one applier in :data:`APPLIERS`, which
-:func:`perform` looks up by class; events come back as the classes below. Appliers run
-in real time in the engine process (inside the audio callback) and in the front's
-calling thread in the in-process engine; none computes anything heavy, and what was not
-handed over is refused (:class:`Refused`), never built (docs/engine.md, Messages).
+A command is a frozen, slotted dataclass whose ``apply`` is its one applier (real time in
+the engine process's callback; the caller's thread in the in-process engine), computing
+nothing heavy: what was not handed over is refused, never built (docs/engine.md, Messages).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, get_args
 
 import numpy as np
 
@@ -28,7 +26,7 @@ if TYPE_CHECKING:
     from phantomtouch.engine.shared import MoveSlots
     from phantomtouch.engine.voices import PatternVoice
 
-# -- commands, front -> audio side ------------------------------------------------------
+# -- commands, front -> audio side, each with its applier ------------------------------
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +41,23 @@ class HoldPlan:
     prerendered: Prerendered | None
     shared: SharedArrays | None = None
 
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time. Keep the plan (even when void: it was handed once), its heavy arrays
+        mapped from the host's block; in the engine process, refuse heavy arrays inline."""
+        plan, prerendered, handle, arrays = self.plan, self.prerendered, self.handle, state.arrays
+        if self.shared is not None:
+            try:
+                if arrays is None:
+                    raise LookupError("this audio side maps no shared plans")
+                plan, prerendered = arrays.hold(handle, plan, self.shared)
+            except (LookupError, OSError) as exc:
+                state.refuse("plan", handle, f"plan {handle}: {exc}")
+                return
+        elif arrays is not None and (size := heavy_bytes(plan, prerendered)) >= SHARE_MIN_BYTES:
+            state.refuse("plan", handle, f"plan {handle} carries {size} bytes inline")
+            return
+        state.plans[handle] = (state.core.widen(plan), prerendered)
+
 
 @dataclass(frozen=True, slots=True)
 class DropPlan:
@@ -50,6 +65,13 @@ class DropPlan:
     play it keep it to their end."""
 
     handle: int
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time. Forget the plan; sounding voices keep their reference, and its block
+        is released (and reported) once none reads it."""
+        state.plans.pop(self.handle, None)
+        if state.arrays is None or not state.arrays.drop(self.handle):
+            state.reports.append(PlanReleased(self.handle))
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,6 +83,22 @@ class StartJob:
     owner: str | None
     frame: int | None
 
+    def prepare(self, state: AudioState) -> StartVoice:
+        """Non real time (see :func:`prepare`): build the voice of a plan held, or refuse it."""
+        held = state.plans.get(self.plan_key)
+        try:
+            if held is None:
+                raise LookupError(f"plan {self.plan_key} was not handed over")
+            return StartVoice(self, state.core.job_voice(self.job_id, held[0], self.owner, held[1]))
+        except LookupError as exc:  # a plan or a noise loop not handed over
+            state.refuse("plan" if held is None else "noise loop", self.job_id, str(exc))
+            return StartVoice(self, None)
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Non real time: the caller's thread (the in-process engine; the engine process
+        before its sink starts) prepares and starts it at once."""
+        self.prepare(state).apply(state, void)
+
 
 @dataclass(frozen=True, slots=True)
 class StartVoice:
@@ -69,6 +107,16 @@ class StartVoice:
 
     start: StartJob
     voice: PatternVoice | None
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time. Start the voice; a void or refused start is reported cancelled."""
+        core, voice = state.core, self.voice
+        if voice is not None and not void:
+            core.start_job(voice, self.start.frame)
+            return
+        if voice is not None:
+            voice.finish(core.scheduler.pool)
+        state.reports.append(Cancelled("job", self.start.job_id, core.scheduler.frames))
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,6 +127,11 @@ class ReleaseJob:
     job_id: str
     frame: int | None
     fade_frames: int | None
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time."""
+        if not void:
+            state.core.release_job(self.job_id, self.frame, self.fade_frames)
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,6 +158,18 @@ class ContactDown:
     slot: int | None = None
     generation: int = 0
 
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time. Build the contact voice from the front's parts and start it."""
+        if void:
+            return
+        try:
+            state.core.contact_down(self)
+        except LookupError as exc:  # a noise loop not handed over
+            state.refuse("noise loop", (self.owner, self.contact), str(exc))
+            return
+        if state.slots is not None and self.slot is not None:
+            state.slots.bind(self.slot, self.generation, self.owner, self.contact)
+
 
 @dataclass(frozen=True, slots=True)
 class ContactMove:
@@ -118,6 +183,13 @@ class ContactMove:
     intensity: float | None
     frame: int | None
 
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time."""
+        if not void:
+            state.core.board.post_checked(
+                self.owner, self.contact, self.x_cm, self.y_cm, self.intensity, self.frame
+            )
+
 
 @dataclass(frozen=True, slots=True)
 class ContactUp:
@@ -128,12 +200,28 @@ class ContactUp:
     burst: np.ndarray | None
     frame: int | None
 
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time."""
+        if void:
+            return
+        if state.slots is not None:
+            state.slots.unbind(self.owner, self.contact)
+        state.core.board.up(self.owner, self.contact, self.burst, self.frame)
+
 
 @dataclass(frozen=True, slots=True)
 class ReleaseOwner:
     """Release every contact of ``owner``."""
 
     owner: str
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time."""
+        if void:
+            return
+        if state.slots is not None:
+            state.slots.unbind(self.owner)
+        state.core.board.release_owner(self.owner)
 
 
 RELEASES = (ReleaseJob, ContactUp, ReleaseOwner)
@@ -148,6 +236,13 @@ class HoldNoise:
     key: NoiseKey
     name: str
 
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time: map the host's shared memory (no copy, nothing computed)."""
+        if state.loops is None:
+            state.refuse("noise loop", self.key, "this audio side takes no shared loops")
+            return
+        state.loops.hold(self.key, self.name)
+
 
 @dataclass(frozen=True, slots=True)
 class DropNoise:
@@ -155,6 +250,12 @@ class DropNoise:
     reads it any more, so that the host may free it."""
 
     key: NoiseKey
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time: stop handing the loop to new voices; it is released (and reported)
+        once no voice reads it."""
+        if state.loops is not None:
+            state.loops.drop(self.key)
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,15 +266,28 @@ class SetWearerGains:
 
     gains: np.ndarray
 
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time: leave the gains for the next block (kept even when void: a stop does not
+        take the wearer off)."""
+        state.core.scheduler.mixer.wearer.set(self.gains)
+
 
 @dataclass(frozen=True, slots=True)
 class StartSink:
     """Start playing (engine process, before its first block)."""
 
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Non real time (before the first block)."""
+        state.start_sink = True
+
 
 @dataclass(frozen=True, slots=True)
 class Close:
     """Fade out and end (engine process)."""
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time: the engine process's main thread fades out and ends."""
+        state.leave = True
 
 
 Command = (
@@ -267,7 +381,7 @@ class Refused:
 
 Event = Started | Released | Ended | Cancelled | StoppedAll | NoiseReleased | PlanReleased | Refused
 
-# -- the audio side's state, and the appliers -------------------------------------------
+# -- the audio side's state and the table of appliers -------------------------------
 
 
 @dataclass
@@ -291,162 +405,10 @@ class AudioState:
         self.reports.append(Refused(what, key, reason))
 
 
-def _hold_plan(state: AudioState, message: HoldPlan, void: bool) -> None:
-    """Real time. Keep the plan (even when void: it was handed once), its heavy arrays
-    mapped from the host's block; in the engine process, refuse heavy arrays inline."""
-    plan, prerendered, handle = message.plan, message.prerendered, message.handle
-    arrays = state.arrays
-    if message.shared is not None:
-        try:
-            if arrays is None:
-                raise LookupError("this audio side maps no shared plans")
-            plan, prerendered = arrays.hold(handle, plan, message.shared)
-        except (LookupError, OSError) as exc:
-            state.refuse("plan", handle, f"plan {handle}: {exc}")
-            return
-    elif arrays is not None and (size := heavy_bytes(plan, prerendered)) >= SHARE_MIN_BYTES:
-        state.refuse("plan", handle, f"plan {handle} carries {size} bytes inline")
-        return
-    state.plans[handle] = (state.core.widen(plan), prerendered)
-
-
-def _drop_plan(state: AudioState, message: DropPlan, void: bool) -> None:
-    """Real time. Forget the plan; sounding voices keep their reference, and its block
-    is released (and reported) once none reads it."""
-    state.plans.pop(message.handle, None)
-    if state.arrays is None or not state.arrays.drop(message.handle):
-        state.reports.append(PlanReleased(message.handle))
-
-
-def _prepare_start(state: AudioState, message: StartJob) -> StartVoice:
-    """Non real time (see :func:`prepare`): build the voice of a plan held, or refuse it."""
-    held = state.plans.get(message.plan_key)
-    try:
-        if held is None:
-            raise LookupError(f"plan {message.plan_key} was not handed over")
-        return StartVoice(
-            message, state.core.job_voice(message.job_id, held[0], message.owner, held[1])
-        )
-    except LookupError as exc:  # a plan or a noise loop not handed over
-        state.refuse("plan" if held is None else "noise loop", message.job_id, str(exc))
-        return StartVoice(message, None)
-
-
-def _start_voice(state: AudioState, message: StartVoice, void: bool) -> None:
-    """Real time. Start a prepared voice; a void or refused start is reported cancelled."""
-    core, voice = state.core, message.voice
-    if voice is not None and not void:
-        core.start_job(voice, message.start.frame)
-        return
-    if voice is not None:
-        voice.finish(core.scheduler.pool)
-    state.reports.append(Cancelled("job", message.start.job_id, core.scheduler.frames))
-
-
-def _start_job(state: AudioState, message: StartJob, void: bool) -> None:
-    """Non real time: the caller's thread (the in-process engine; the engine process before
-    its sink starts) prepares and starts it at once."""
-    _start_voice(state, _prepare_start(state, message), void)
-
-
-def _release_job(state: AudioState, message: ReleaseJob, void: bool) -> None:
-    """Real time."""
-    if not void:
-        state.core.release_job(message.job_id, message.frame, message.fade_frames)
-
-
-def _contact_down(state: AudioState, message: ContactDown, void: bool) -> None:
-    """Real time. Build the contact voice from the front's parts and start it."""
-    if void:
-        return
-    try:
-        state.core.contact_down(message)
-    except LookupError as exc:  # a noise loop not handed over
-        state.refuse("noise loop", (message.owner, message.contact), str(exc))
-        return
-    if state.slots is not None and message.slot is not None:
-        state.slots.bind(message.slot, message.generation, message.owner, message.contact)
-
-
-def _contact_move(state: AudioState, message: ContactMove, void: bool) -> None:
-    """Real time."""
-    if not void:
-        state.core.board.post_checked(
-            message.owner,
-            message.contact,
-            message.x_cm,
-            message.y_cm,
-            message.intensity,
-            message.frame,
-        )
-
-
-def _contact_up(state: AudioState, message: ContactUp, void: bool) -> None:
-    """Real time."""
-    if void:
-        return
-    if state.slots is not None:
-        state.slots.unbind(message.owner, message.contact)
-    state.core.board.up(message.owner, message.contact, message.burst, message.frame)
-
-
-def _release_owner(state: AudioState, message: ReleaseOwner, void: bool) -> None:
-    """Real time."""
-    if void:
-        return
-    if state.slots is not None:
-        state.slots.unbind(message.owner)
-    state.core.board.release_owner(message.owner)
-
-
-def _hold_noise(state: AudioState, message: HoldNoise, void: bool) -> None:
-    """Real time: map the host's shared memory (no copy, nothing computed)."""
-    if state.loops is None:
-        state.refuse("noise loop", message.key, "this audio side takes no shared loops")
-        return
-    state.loops.hold(message.key, message.name)
-
-
-def _drop_noise(state: AudioState, message: DropNoise, void: bool) -> None:
-    """Real time: stop handing the loop to new voices; it is released (and reported)
-    once no voice reads it."""
-    if state.loops is not None:
-        state.loops.drop(message.key)
-
-
-def _set_wearer_gains(state: AudioState, message: SetWearerGains, void: bool) -> None:
-    """Real time: leave the gains for the next block (kept even when void: a stop does not
-    take the wearer off)."""
-    state.core.scheduler.mixer.wearer.set(message.gains)
-
-
-def _start_sink(state: AudioState, message: StartSink, void: bool) -> None:
-    """Non real time (before the first block)."""
-    state.start_sink = True
-
-
-def _close(state: AudioState, message: Close, void: bool) -> None:
-    """Real time: the engine process's main thread fades out and ends."""
-    state.leave = True
-
-
-APPLIERS: dict[type, Callable[[AudioState, Any, bool], None]] = {
-    HoldPlan: _hold_plan,
-    DropPlan: _drop_plan,
-    StartJob: _start_job,
-    StartVoice: _start_voice,
-    ReleaseJob: _release_job,
-    ContactDown: _contact_down,
-    ContactMove: _contact_move,
-    ContactUp: _contact_up,
-    ReleaseOwner: _release_owner,
-    HoldNoise: _hold_noise,
-    DropNoise: _drop_noise,
-    SetWearerGains: _set_wearer_gains,
-    StartSink: _start_sink,
-    Close: _close,
+APPLIERS: dict[type, Callable[[Any, AudioState, bool], None]] = {
+    kind: kind.apply for kind in get_args(Command)
 }
-"""Each command's applier, by the command's class."""
+"""Each command's applier (its ``apply``), by the command's class."""
 
 
 def prepare(state: AudioState, message: Command) -> Command | None:
@@ -457,7 +419,7 @@ def prepare(state: AudioState, message: Command) -> Command | None:
     if isinstance(message, HoldPlan | HoldNoise):
         perform(state, message)
         return None
-    return _prepare_start(state, message) if isinstance(message, StartJob) else message
+    return message.prepare(state) if isinstance(message, StartJob) else message
 
 
 def perform(state: AudioState, message: Command, *, void: bool = False) -> None:
@@ -466,4 +428,4 @@ def perform(state: AudioState, message: Command, *, void: bool = False) -> None:
     ``void``: the command was sent before a ``stop_all`` the audio side has seen; its
     applier keeps what must outlive it (a plan, a noise loop) and plays nothing.
     """
-    APPLIERS[type(message)](state, message, void)
+    APPLIERS[type(message)](message, state, void)

@@ -1,9 +1,6 @@
-"""Noise loops handed to the engine process through shared memory, owned by the host.
-
-The host computes a loop (2^20 frames, 4 MB) outside the audio callback and writes it
-into a block (:class:`SharedLoops`); the engine process maps it (:class:`HeldLoops`) and
-never builds one. docs/engine.md (Heavy work is staged) tells the whole exchange.
-"""
+"""Noise loops (2^20 frames, 4 MB) the host computes and writes into shared memory
+(:class:`SharedLoops`) and the engine process maps (:class:`HeldLoops`) and never builds
+(docs/engine.md, Heavy work is staged)."""
 
 from __future__ import annotations
 
@@ -33,10 +30,8 @@ def loop_key(carrier: object, sample_rate_hz: int) -> NoiseKey | None:
 
 
 class SharedLoops(HostBlocks[NoiseKey]):
-    """The host's noise loops in shared memory, and which of them the engine process holds.
-
-    Any host thread may call it; computing a loop happens outside every lock, in
-    :meth:`prepare`.
+    """The host's noise loops in shared memory, and which of them the engine process
+    holds (any host thread).
 
     Parameters
     ----------
@@ -50,7 +45,8 @@ class SharedLoops(HostBlocks[NoiseKey]):
 
     @staticmethod
     def prepare(key: NoiseKey | None) -> None:
-        """Compute a loop ahead (non real time, any host thread; cached by the renderer)."""
+        """Compute a loop ahead, outside every lock (non real time, any host thread; cached
+        by the renderer)."""
         if key is not None:
             noise_loop(*key)
 

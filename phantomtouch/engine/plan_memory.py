@@ -1,27 +1,25 @@
-"""Plans' heavy arrays handed to the engine process through shared memory the host owns.
-
-From :data:`SHARE_MIN_BYTES` on, a plan's prerendered samples and timelines cross in a
-block per plan that the host writes (:class:`SharedPlans`) and the engine process maps
-(:class:`HeldArrays`); the ``HoldPlan`` in the pipe carries the plan without them and
-the block's layout (:class:`SharedArrays`). docs/engine.md (Heavy work is staged) tells
-the whole exchange.
-"""
+"""Plans' heavy arrays (prerendered samples, timelines) in a block of shared memory per
+plan, from :data:`SHARE_MIN_BYTES` on: the host writes it (:class:`SharedPlans`), the
+engine process maps it (:class:`HeldArrays`), and the ``HoldPlan`` in the pipe carries
+the plan without them and the block's layout (docs/engine.md, Heavy work is staged)."""
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
 
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.shared import HostBlocks, MappedBlocks, view, write_block
-from phantomtouch.renderer.plan import Plan, Timeline
+from phantomtouch.renderer.plan import Plan
 
 SHARE_MIN_BYTES = 128 << 10
 """A plan whose arrays (samples and timelines) hold this many bytes or more crosses by
 shared memory."""
-_FIELDS = ("times_s", "points_cm", "intensity")
+_PLACES = tuple(itertools.product(("forward", "backward"), ("times_s", "points_cm", "intensity")))
+"""A timeline's arrays, by side of the plan and name."""
 _EMPTY = np.zeros(0, dtype=np.float64)
 
 
@@ -41,25 +39,21 @@ def heavy_bytes(plan: Plan, prerendered: Prerendered | None) -> int:
 
 def _arrays(plan: Plan, prerendered: Prerendered | None) -> list[tuple[str, np.ndarray]]:
     found = [] if prerendered is None else [("samples", prerendered.samples)]
-    for side in ("forward", "backward"):
-        timeline = getattr(plan, side)
-        if timeline is not None:
-            for name in _FIELDS:
-                array = getattr(timeline, name)
-                if array is not None:
-                    found.append((f"{side}.{name}", array))
+    for side, name in _PLACES:
+        array = getattr(getattr(plan, side), name, None)  # None: no timeline, or no array
+        if array is not None:
+            found.append((f"{side}.{name}", array))
     return found
 
 
 def _with_arrays(plan: Plan, arrays: dict[str, np.ndarray]) -> Plan:
     """The plan with the timeline arrays named in ``arrays`` (``side.name``) replaced."""
-    changes: dict[str, Timeline] = {}
-    for side in ("forward", "backward"):
-        timeline = getattr(plan, side)
-        given = {n: arrays[f"{side}.{n}"] for n in _FIELDS if f"{side}.{n}" in arrays}
-        if timeline is not None and given:
-            changes[side] = dataclasses.replace(timeline, **given)
-    return dataclasses.replace(plan, **changes)  # type: ignore[arg-type]
+    given: dict[str, dict[str, np.ndarray]] = {}
+    for side, name in _PLACES:
+        if f"{side}.{name}" in arrays and getattr(plan, side) is not None:
+            given.setdefault(side, {})[name] = arrays[f"{side}.{name}"]
+    changes = {side: dataclasses.replace(getattr(plan, side), **new) for side, new in given.items()}
+    return dataclasses.replace(plan, **changes)
 
 
 class SharedPlans(HostBlocks[int]):

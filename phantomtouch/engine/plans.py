@@ -1,9 +1,6 @@
-"""The one plan cache: plans by their pattern's content, each with one handle, minted once.
-
-The audio side holds a plan only under the handle minted here, from the ``HoldPlan``
-that hands it over until the ``DropPlan`` that releases it (acknowledged by
-``PlanReleased``); docs/engine.md (One plan cache) tells the rest. Every method runs in
-the host, on any thread; planning and rendering happen outside the cache's lock.
+"""The one plan cache: plans by their pattern's content, each with one handle, minted once
+(docs/engine.md, One plan cache). Every method runs in the host, on any thread; planning
+and rendering happen outside the cache's lock.
 """
 
 from __future__ import annotations
@@ -174,21 +171,20 @@ class PlanCache:
             known = None if too_large else self._entries.get(key)
             if known is not None and (prerendered is None or known.prerendered is not None):
                 return known
-            if known is not None:  # planned before, rendered now: same handle
+            if known is None:
+                known = HeldPlan(next(self._handles), resolved, prerendered, size + samples)
+                if too_large or size > self.max_bytes // 8:
+                    known.kept = False  # the front releases it after its one job
+                    return known
+                self._entries[key] = known
+                self._made[id(resolved)] = (weakref.ref(resolved), key)
+                self.bytes += size
+            else:  # planned before, rendered now: same handle
                 known.prerendered = prerendered
                 known.bytes += samples
-                self.bytes += samples
-                self._trim()
-                return known
-            held = HeldPlan(next(self._handles), resolved, prerendered, size + samples)
-            if too_large or size > self.max_bytes // 8:
-                held.kept = False  # the front releases it after its one job
-                return held
-            self._entries[key] = held
-            self._made[id(resolved)] = (weakref.ref(resolved), key)
-            self.bytes += held.bytes
+            self.bytes += samples
             self._trim()
-        return held
+        return known
 
     def _trim(self) -> None:
         """Drop the least recently used entries beyond the bound (under the lock)."""

@@ -1,9 +1,6 @@
-"""Short plans rendered whole before they play, so the audio callback only adds samples.
-
-:func:`prerender` runs in the requesting thread with the renderer the voice would use,
-so the samples are the voice's, bit for bit (docs/engine.md, What a voice costs); the
-callback's :class:`~phantomtouch.engine.voices.PatternVoice` adds slices of them.
-"""
+"""Short plans rendered whole before they play, in the requesting thread and by the
+voice's own renderer, so the callback's ``PatternVoice`` only adds their samples, bit for
+bit the voice's (docs/engine.md, What a voice costs)."""
 
 from __future__ import annotations
 

@@ -6,6 +6,7 @@ interpreter lock the audio callback needs. Nothing here waits for the engine pro
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -30,7 +31,7 @@ from phantomtouch.engine.noise import SharedLoops, loop_key
 from phantomtouch.engine.plan_memory import SharedPlans
 from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
-from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim, spawn
+from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim
 from phantomtouch.errors import DeviceError, EngineBusyError
 from phantomtouch.schema.device import DeviceProfile
 
@@ -51,18 +52,8 @@ REALTIME_PRIORITY = 1
 
 
 class ChildAudio:
-    """The audio side in an engine process (see the module docstring); host only.
-
-    Parameters
-    ----------
-    device : DeviceProfile
-    spec : SinkSpec
-    links : Links
-    render_ahead_frames : int
-    priority : int or None
-    on_fault : callable or None
-        See :class:`ProcessEngine`.
-    """
+    """The audio side in an engine process (module docstring); arguments as for
+    :class:`ProcessEngine`. Host only."""
 
     def __init__(
         self,
@@ -74,7 +65,6 @@ class ChildAudio:
         on_fault: Callable[[str], None] | None,
     ) -> None:
         self._device = device
-        self._spec = spec
         self._links = links
         self._options = {
             "queue_capacity": links.queue_capacity,
@@ -84,7 +74,9 @@ class ChildAudio:
             "costs": links.costs,
             "contact_slots": links.settings.max_contacts,
         }
-        self._priority = priority
+        self._spawn = functools.partial(
+            ChildProcess, device, spec, self._options, priority, self._read_reports
+        )
         self.on_fault = on_fault
         self.state = "starting"
         self._started = False
@@ -95,7 +87,7 @@ class ChildAudio:
         self._loops = SharedLoops()
         self._shared_plans = SharedPlans()
         self._seq = 0
-        self._child = self._start_child()
+        self._child = self._spawn(START_TIMEOUT_S)
         self.costs: tuple[float, float, float] | None = self._child.costs
         self.backend = self._child.backend
         self.output_device = self._child.output_device
@@ -111,14 +103,6 @@ class ChildAudio:
         self._shared_plans.clear()
 
     # -- the engine process ---------------------------------------------------------------
-
-    def _start_child(self, timeout_s: float = START_TIMEOUT_S) -> ChildProcess:
-        child = spawn(self._device, self._spec, self._options, self._priority, timeout_s)
-        child.reader = threading.Thread(
-            target=self._read_reports, args=(child,), name="phantomtouch-reports", daemon=True
-        )
-        child.reader.start()
-        return child
 
     def _read_reports(self, child: ChildProcess) -> None:
         """Host, the reports thread: free released loops and plans' blocks, hand the rest
@@ -237,7 +221,7 @@ class ChildAudio:
         delay_s = RETRY_FIRST_S
         while self._set_state("restarting"):
             try:
-                child = self._start_child(RESTART_TIMEOUT_S)
+                child = self._spawn(RESTART_TIMEOUT_S)
             except Exception as exc:  # the sound card may be gone: try again, less often
                 logger.error("the engine process could not be restarted: %s", exc)
                 self._set_state("gone")
@@ -246,27 +230,26 @@ class ChildAudio:
                 if self._wearer is not None:
                     child.outbox.put((0, self._wearer))
                 with self._lock:
-                    closing = self._halt.is_set()  # closed while this one started
-                    if not closing:
+                    adopted = not self._halt.is_set()  # not closed while this one started
+                    if adopted:
                         self._reset_records()
                         self._child = child
                         self.restarts += 1
-                if not closing:
-                    self._wait_running(child, RESTART_TIMEOUT_S)
-                    if self.state == "running":
-                        return
+                if adopted and self._wait_running(child, RESTART_TIMEOUT_S):
+                    return
                 child.end(kill=True)
             self._halt.wait(delay_s)
             delay_s = min(RETRY_MAX_S, 2 * delay_s)
 
-    def _wait_running(self, child: ChildProcess, timeout_s: float = START_TIMEOUT_S) -> None:
+    def _wait_running(self, child: ChildProcess, timeout_s: float) -> bool:
+        """Wait until ``child`` plays: True, the state is ``running``; else ``gone``."""
         deadline = time.monotonic() + timeout_s
         while not child.status.read()["running"]:
             if not child.process.is_alive() or time.monotonic() > deadline:
                 self._set_state("gone")
-                return
+                return False
             time.sleep(0.01)
-        self._set_state("running")
+        return self._set_state("running")
 
     def _set_state(self, state: str) -> bool:
         """Set the state unless the engine is closing; False when it is."""
@@ -292,8 +275,7 @@ class ChildAudio:
             self._started = True
             child = self._child
             self._write(child, StartSink())
-        self._wait_running(child)
-        if self.state != "running":
+        if not self._wait_running(child, START_TIMEOUT_S):
             raise DeviceError("the engine process did not start playing")
 
     def close(self) -> None:
@@ -329,11 +311,12 @@ class ChildAudio:
     def check_ready(self) -> None:
         """Raise DeviceError unless the engine process takes commands."""
         state = self.state
-        if state in ("running", "starting"):
-            return
         if state == "closed":
             raise DeviceError("the engine is closed")
-        raise DeviceError(f"the engine process is {state}; it is being restarted, retry shortly")
+        if state not in ("running", "starting"):
+            raise DeviceError(
+                f"the engine process is {state}; it is being restarted, retry shortly"
+            )
 
     def figures(self) -> dict[str, Any]:
         figures = self._child.status.read()
@@ -396,16 +379,11 @@ class ProcessEngine(EngineFront):
         if realtime_priority is not None:
             check_int("realtime_priority", realtime_priority, 1, 99)
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
-
+        spec = sink if sink is not None else SinkSpec()
         super().__init__(
             device,
             lambda links: ChildAudio(
-                device,
-                sink if sink is not None else SinkSpec(),
-                links,
-                render_ahead_frames,
-                realtime_priority,
-                on_fault,
+                device, spec, links, render_ahead_frames, realtime_priority, on_fault
             ),
             **options,
         )

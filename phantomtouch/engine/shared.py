@@ -1,12 +1,7 @@
-"""What the host and the engine process share without a message.
-
-:class:`SharedClock` (the sample clock's anchor), :class:`MoveSlots` (the newest position
-of every contact that is down) and :class:`StatusBlock` (figures and heartbeat) are
-float64 arrays inherited by the engine process; :class:`HostBlocks` and
-:class:`MappedBlocks` are blocks of shared memory the host writes (noise loops, plans'
-heavy arrays) and the engine process maps. docs/engine.md (Transports) says why each
-crosses this way, and how the clock and slots are guarded: a sequence lock on x86, a
-lock elsewhere or with ``PHANTOMTOUCH_SHARED_LOCKS=1`` that the audio callback only tries.
+"""What the host and the engine process share without a message: float64 arrays the
+engine process inherits (clock anchor, move slots, figures) and blocks of shared memory
+the host writes and the engine process maps (noise loops, plans' heavy arrays).
+docs/engine.md (Transports) says why each crosses this way and how each is guarded.
 """
 
 from __future__ import annotations
@@ -17,7 +12,7 @@ import multiprocessing
 import os
 import platform
 import threading
-from collections import OrderedDict, deque
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from multiprocessing import shared_memory
@@ -44,17 +39,10 @@ def sequence_locks_are_safe(machine: str | None = None) -> bool:
     return (platform.machine() if machine is None else machine).lower() in _IN_ORDER_STORES
 
 
-def _locked(locked: bool | None) -> bool:
-    if locked is not None:
-        return locked
-    return os.environ.get(LOCKS_VARIABLE) == "1" or not sequence_locks_are_safe()
-
-
 @dataclass(frozen=True)
 class SharedBuffer:
-    """Float64 values in shared memory and, where sequence locks are unsafe, their lock.
-
-    Passed to the engine process as it starts (both halves are inherited, not copied).
+    """Float64 values in shared memory and, where sequence locks are unsafe, their lock,
+    both inherited by the engine process as it starts.
 
     Attributes
     ----------
@@ -70,8 +58,10 @@ class SharedBuffer:
     def allocate(cls, count: int, locked: bool | None = None) -> SharedBuffer:
         """``count`` zeros, with a lock if ``locked`` (None: off x86 or when the
         environment asks for it)."""
+        if locked is None:
+            locked = os.environ.get(LOCKS_VARIABLE) == "1" or not sequence_locks_are_safe()
         context = multiprocessing.get_context("spawn")
-        return cls(context.RawArray("d", count), context.Lock() if _locked(locked) else None)
+        return cls(context.RawArray("d", count), context.Lock() if locked else None)
 
 
 class _Rows:
@@ -97,12 +87,41 @@ class _Rows:
         """A lock guards the values, not sequence locks."""
         return self._lock is not None
 
-    def _store(self, row: int, *values: float) -> None:
-        """Write a row between two steps of its sequence number (under the lock, if any)."""
-        target = self._rows[row]
-        target[0] += 1.0
-        target[1:] = values
-        target[0] += 1.0
+    def _store(self, row: int, values: tuple[float, ...], wait: bool) -> bool:
+        """Write a row between two steps of its sequence number, under the lock if any;
+        False: the lock was held and ``wait`` False, nothing written."""
+        lock = self._lock
+        if lock is not None and not lock.acquire(wait):
+            return False
+        try:
+            target = self._rows[row]
+            target[0] += 1.0
+            target[1:] = values
+            target[0] += 1.0
+        finally:
+            if lock is not None:
+                lock.release()
+        return True
+
+    def _read(self, wait: bool) -> np.ndarray | None:
+        """With a lock, a copy of the rows taken under it (None: the lock was held and
+        ``wait`` False); else the shared rows themselves, read through :meth:`_row`."""
+        lock = self._lock
+        if lock is None:
+            return self._rows
+        if not lock.acquire(wait):
+            return None
+        try:
+            return self._rows.copy()
+        finally:
+            lock.release()
+
+    @staticmethod
+    def _row(rows: np.ndarray, index: int) -> np.ndarray | None:
+        """A copy of row ``index`` of ``rows``; None: caught mid-write (its sequence
+        number odd, or changed while copied)."""
+        row = rows[index].copy()
+        return row if row[0] % 2.0 == 0.0 and rows[index, 0] == row[0] else None
 
 
 class SharedClock(_Rows, FrameMapping):
@@ -112,7 +131,7 @@ class SharedClock(_Rows, FrameMapping):
     ----------
     sample_rate_hz : int, > 0
     raw, locked
-        As for the move slots (:class:`MoveSlots`).
+        As for :class:`_Rows`.
 
     Attributes
     ----------
@@ -128,55 +147,36 @@ class SharedClock(_Rows, FrameMapping):
         self.dropped_anchors = 0
 
     def publish(self, anchor_frame: int, anchor_s: float, output_latency_s: float) -> None:
-        """Write a new anchor (one writer thread at a time: the engine's); a ``publish``
-        for :class:`~phantomtouch.engine.clock.SampleClock`.
-
-        Never waits: with a lock the host holds, the anchor is dropped (and counted); the
-        engine clock publishes again at the next block.
-        """
-        lock = self._lock
-        if lock is None:
-            self._store(0, anchor_frame, anchor_s, output_latency_s)
-        elif lock.acquire(False):
-            try:
-                self._store(0, anchor_frame, anchor_s, output_latency_s)
-            finally:
-                lock.release()
-        else:
+        """Write a new anchor: a ``publish`` for :class:`~phantomtouch.engine.clock.SampleClock`
+        (real time, the engine's one writer thread). Never waits: while the host holds the
+        lock the anchor is dropped (and counted); the next block publishes a newer one."""
+        if not self._store(0, (anchor_frame, anchor_s, output_latency_s), wait=False):
             self.dropped_anchors += 1
 
     def anchor(self) -> tuple[int, float, float]:
-        """``(anchor_frame, anchor_s, output_latency_s)``, consistent (host)."""
-        values = self._rows[0]
-        if self._lock is not None:
-            with self._lock:
-                frame, anchor_s, latency_s = float(values[1]), float(values[2]), float(values[3])
-            return int(frame), anchor_s, latency_s
-        while True:
-            seq = values[0]
-            frame, anchor_s, latency_s = float(values[1]), float(values[2]), float(values[3])
-            if seq % 2.0 == 0.0 and values[0] == seq:
-                return int(frame), anchor_s, latency_s
+        """``(anchor_frame, anchor_s, output_latency_s)``, consistent (host; waits for a
+        lock)."""
+        row = None
+        while row is None:
+            rows = self._read(wait=True)
+            row = None if rows is None else self._row(rows, 0)
+        return int(row[1]), float(row[2]), float(row[3])
 
 
 class MoveSlots(_Rows):
     """One slot per contact that is down: the newest position, written by the host.
 
-    The host binds a slot to a contact when it touches down (with a new generation
-    number, so that what the slot held for an earlier contact is never applied to the
-    new one) and writes moves into it; the engine process binds the slot to the contact
-    once the touchdown is through, and the audio callback hands every new position to
-    the engine.
+    The host takes a slot for a contact at its touchdown, with a new generation (what
+    the slot held for an earlier contact is never applied), and writes its moves; the
+    engine process binds the slot once the touchdown is through and its callback hands
+    every new position to the engine.
 
     Parameters
     ----------
     capacity : int, >= 1
         Slots (the engine's ``contact.max_contacts``).
-    raw : SharedBuffer, or None
-        The shared memory (as passed to the child); None: allocate it.
-    locked : bool or None
-        When allocating: guard it with a lock (True) or sequence locks (False); None: a
-        lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
+    raw, locked
+        As for :class:`_Rows`.
     """
 
     def __init__(
@@ -219,15 +219,8 @@ class MoveSlots(_Rows):
         frame: int | None,
     ) -> None:
         """Post a position (one writer thread at a time; with a lock, waits for it)."""
-        with self._lock or contextlib.nullcontext():
-            self._store(
-                slot,
-                generation,
-                x_cm,
-                y_cm,
-                math.nan if intensity is None else intensity,
-                math.nan if frame is None else frame,
-            )
+        values = (generation, x_cm, y_cm, intensity, frame)
+        self._store(slot, tuple(math.nan if v is None else v for v in values), wait=True)
 
     # -- the engine process -----------------------------------------------------------
 
@@ -248,29 +241,17 @@ class MoveSlots(_Rows):
     def drain(
         self, post: Callable[[str, str, float, float, float | None, int | None], None]
     ) -> None:
-        """Hand every new position to ``post(owner, contact, x, y, intensity, frame)``.
-
-        Audio callback: a vectorised look at the sequence numbers, then a copy of each
-        changed row; a row caught mid-write waits for the next block. With a lock: a copy
-        of every row if the lock is free at once, else nothing until the next block.
-        """
-        rows = self._rows
-        lock = self._lock
-        if lock is not None:
-            if not lock.acquire(False):
-                return
-            try:
-                rows = rows.copy()
-            finally:
-                lock.release()
-        seqs = rows[:, 0].copy()
-        changed = np.flatnonzero(seqs != self._seen)
-        for slot in changed.tolist():
-            row = rows[slot].copy()
-            seq = row[0]
-            if seq % 2.0 != 0.0 or rows[slot, 0] != seq:
+        """Hand every new position to ``post(owner, contact, x, y, intensity, frame)``
+        (real time, the audio callback). A row caught mid-write, or every row while the
+        host holds the lock, waits for the next block."""
+        rows = self._read(wait=False)
+        if rows is None:
+            return
+        for slot in np.flatnonzero(rows[:, 0] != self._seen).tolist():
+            row = self._row(rows, slot)
+            if row is None:
                 continue
-            self._seen[slot] = seq
+            self._seen[slot] = row[0]
             bound = self._bound[slot]
             if bound is None or bound[2] != row[1]:
                 continue
@@ -299,11 +280,9 @@ STATUS_FIELDS = (
 
 
 class StatusBlock:
-    """The engine process's figures, written by its audio callback at every block.
-
-    ``beat_s`` is the server time of the last block: the host tells from it whether
-    audio still flows. Figures are for monitoring, read without a lock (each is one
-    aligned float64, so a read never sees half a value; a snapshot may mix two blocks).
+    """The engine process's figures, written by its audio callback at every block;
+    ``beat_s``, the server time of the last block, tells the host whether audio flows.
+    Read without a lock: each is one aligned float64 (a snapshot may mix two blocks).
 
     Parameters
     ----------
@@ -317,12 +296,11 @@ class StatusBlock:
         size = len(STATUS_FIELDS) + self.channels
         self.raw = raw if raw is not None else SharedBuffer.allocate(size, False).values
         self._values = np.frombuffer(self.raw, dtype=np.float64)
-        self._index = {name: i for i, name in enumerate(STATUS_FIELDS)}
 
     def write(self, figures: dict[str, Any]) -> None:
         """Write figures (the engine process's callback); names not listed are ignored."""
         values = self._values
-        for name, i in self._index.items():
+        for i, name in enumerate(STATUS_FIELDS):
             value = figures.get(name)
             if value is not None:
                 values[i] = float(value)
@@ -337,9 +315,9 @@ class StatusBlock:
 
     def read(self) -> dict[str, Any]:
         """Every figure, with ``levels`` a list of floats."""
-        values = self._values.copy()
-        figures: dict[str, Any] = {name: float(values[i]) for name, i in self._index.items()}
-        figures["levels"] = [float(v) for v in values[len(STATUS_FIELDS) :]]
+        values = self._values.tolist()
+        figures: dict[str, Any] = dict(zip(STATUS_FIELDS, values, strict=False))
+        figures["levels"] = values[len(STATUS_FIELDS) :]
         figures["running"] = figures["running"] > 0.0
         return figures
 
@@ -385,13 +363,14 @@ class HostBlocks(Generic[K]):
     guards the records).
 
     A key has at most one live block, kept in least recently used order; a live block
-    the engine process was told to drop is retired until it reports the release.
+    the engine process was told to drop is retired, oldest first, until it reports the
+    release.
     """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._live: OrderedDict[K, shared_memory.SharedMemory] = OrderedDict()
-        self._retired: dict[K, deque[shared_memory.SharedMemory]] = {}
+        self._retired: list[tuple[K, shared_memory.SharedMemory]] = []
 
     def __len__(self) -> int:
         with self._lock:
@@ -405,7 +384,7 @@ class HostBlocks(Generic[K]):
     def waiting(self) -> int:
         """Retired blocks whose release the engine process has not reported yet (host)."""
         with self._lock:
-            return sum(len(blocks) for blocks in self._retired.values())
+            return len(self._retired)
 
     def _use(self, key: K) -> bool:
         """Mark the live block of ``key`` used now; False: there is none."""
@@ -433,27 +412,21 @@ class HostBlocks(Generic[K]):
         with self._lock:
             block = self._live.pop(key, None)
             if block is not None:
-                self._retired.setdefault(key, deque()).append(block)
+                self._retired.append((key, block))
 
     def released(self, key: K) -> None:
         """The engine process reported it released a block of ``key``: free the oldest
         block retired for it, or else its live block (host, the reports thread)."""
         with self._lock:
-            blocks = self._retired.get(key)
-            if blocks:
-                block: shared_memory.SharedMemory | None = blocks.popleft()
-                if not blocks:
-                    del self._retired[key]
-            else:
-                block = self._live.pop(key, None)
+            retired = next((i for i, (k, _) in enumerate(self._retired) if k == key), None)
+            block = self._live.pop(key, None) if retired is None else self._retired.pop(retired)[1]
         if block is not None:
             unlink_block(block)
 
     def clear(self) -> None:
         """Free every block: the engine process that mapped them is gone (host)."""
         with self._lock:
-            blocks = list(self._live.values())
-            blocks += [block for queue in self._retired.values() for block in queue]
+            blocks = list(self._live.values()) + [block for _, block in self._retired]
             self._live.clear()
             self._retired.clear()
         for block in blocks:

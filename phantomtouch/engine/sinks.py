@@ -21,37 +21,27 @@ RenderFn = Callable[[np.ndarray], None]
 
 class Sink(Protocol):
     """Where the engine's blocks go: once per block, the sink calls the engine's render
-    function with a float32 buffer of shape (block_frames, channels) that it fills.
-
-    Attributes
-    ----------
-    backend : str
-        ``"sounddevice"``, ``"null"`` or ``"capture"``.
-    output_device : str or None
-        Name of the sound card output, None without one.
-    realtime : bool
-        Blocks are pulled at the pace of a clock (not by the caller).
-    sample_rate_hz, block_frames, channels : int
-    underruns : int
-        Blocks the output needed before they were ready.
-    output_latency_s : float
-        Time from a block's computation to its first frame leaving the output, s.
-    """
+    function with a float32 buffer of shape (block_frames, channels) that it fills."""
 
     backend: str
+    """``"sounddevice"``, ``"null"`` or ``"capture"``."""
     realtime: bool
+    """Blocks are pulled at the pace of a clock (not by the caller)."""
     sample_rate_hz: int
     block_frames: int
     channels: int
 
     @property
-    def output_device(self) -> str | None: ...
+    def output_device(self) -> str | None:
+        """Name of the sound card output, None without one."""
 
     @property
-    def underruns(self) -> int: ...
+    def underruns(self) -> int:
+        """Blocks the output needed before they were ready."""
 
     @property
-    def output_latency_s(self) -> float: ...
+    def output_latency_s(self) -> float:
+        """Time from a block's computation to its first frame leaving the output, s."""
 
     def start(self, render: RenderFn) -> None:
         """Begin pulling blocks from ``render`` (non real time)."""
@@ -63,11 +53,16 @@ class Sink(Protocol):
         """Release the output; the sink cannot be started again (non real time)."""
 
 
-class _PacedSink:
-    """A sink whose thread renders one block per block period of the monotonic clock.
+class NullSink:
+    """Pulls blocks at real-time pace and drops them (no sound card): its thread renders
+    one block per block period of the monotonic clock. A block is late when its period
+    began more than one period ago; it then counts as an underrun and the pace restarts
+    from now (a real output would have played silence).
 
-    A block is late when its period began more than one period ago; it then counts as
-    an underrun and the pace restarts from now (a real output would have played silence).
+    Parameters
+    ----------
+    device : DeviceProfile
+        Sample rate, block size and channels.
     """
 
     backend = "null"
@@ -121,17 +116,7 @@ class _PacedSink:
         """Keep what the sink keeps of a block just rendered (the null sink: nothing)."""
 
 
-class NullSink(_PacedSink):
-    """Pulls blocks at real-time pace and drops them (no sound card).
-
-    Parameters
-    ----------
-    device : DeviceProfile
-        Sample rate, block size and channels.
-    """
-
-
-class CaptureSink(_PacedSink):
+class CaptureSink(NullSink):
     """Records every block the engine renders.
 
     Parameters

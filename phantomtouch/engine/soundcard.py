@@ -90,8 +90,7 @@ def split_host_api(output: str, host_apis: Sequence[str]) -> tuple[str | None, s
         return None, output
     wanted = _squeezed(prefix)
     matches = [api for api in host_apis if wanted in _squeezed(api)]
-    exact = [api for api in matches if _squeezed(api) == wanted]
-    chosen = exact or matches
+    chosen = [api for api in matches if _squeezed(api) == wanted] or matches
     if len(chosen) != 1:
         return None, output
     return chosen[0], name.strip()
@@ -319,13 +318,10 @@ def open_default_sink(
     Parameters
     ----------
     device : DeviceProfile
-    output : int, str or None
-        A device index, part of its name or ``HOSTAPI:NAME``; then that device or
-        :class:`DeviceError`. None: the default output if it has ``device.channels``
-        outputs, else the first device that has; without one (or without PortAudio), a
-        :class:`NullSink`.
-    exclusive : bool
-        WASAPI exclusive mode (see :class:`SoundDeviceSink`).
+    output, exclusive
+        As for :class:`SoundDeviceSink`: a device asked for opens or raises
+        :class:`DeviceError`; with None, no device with enough outputs (or no PortAudio)
+        gives a :class:`NullSink`.
     """
     try:
         return SoundDeviceSink(device, output, exclusive=exclusive)
@@ -343,19 +339,13 @@ class SinkSpec:
     Parameters
     ----------
     backend : {"default", "sounddevice", "null", "capture"}
-        ``"default"``: :func:`~phantomtouch.engine.open_default_sink` (the sound card with
-        enough outputs, else the null sink).
-    output : int, str or None
-        Sound card output (index or part of its name) for "default" and "sounddevice".
-    channel_map : tuple of int or None
-        For "sounddevice" (see :class:`~phantomtouch.engine.SoundDeviceSink`).
-    latency : {"low", "high"} or float
-        For "sounddevice".
+        ``"default"``: :func:`open_default_sink` (the sound card with enough outputs, else
+        the null sink).
+    output, channel_map, latency, exclusive
+        As for :class:`SoundDeviceSink` (``output`` and ``exclusive`` also for "default").
     wav_path : str or None
         For "capture": a real-time capture sink whose recording is written to this
         float32 WAV when the engine closes.
-    exclusive : bool
-        For "default" and "sounddevice": WASAPI exclusive mode.
     """
 
     backend: str = "default"

@@ -1,5 +1,5 @@
-"""Starting an engine process (:func:`spawn`), and what the host shares with it
-(:class:`ChildProcess`). Host, non real time.
+"""Starting an engine process and what the host shares with it (:class:`ChildProcess`).
+Host, non real time.
 """
 
 from __future__ import annotations
@@ -8,6 +8,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 import threading
+from collections.abc import Callable
 from multiprocessing.connection import wait
 from typing import Any
 
@@ -37,24 +38,79 @@ def slim(plan: Plan) -> Plan:
     return dataclasses.replace(plan, pattern=pattern, device=None, geometry=None)  # type: ignore[arg-type]
 
 
-@dataclasses.dataclass
 class ChildProcess:
-    """One engine process and what is shared with it (host)."""
+    """An engine process, started and ready, and what the host shares with it: the
+    ``outbox`` of its commands, its ``reports`` (read by a thread that runs
+    ``read_reports(child)``), and in shared memory its ``clock``, move ``slots``,
+    ``status``, stop ``mark`` and render ``loads``. Host.
 
-    process: Any
-    outbox: Outbox
-    reports: Any
-    """The read end of the reports' pipe (a ``multiprocessing.connection.Connection``)."""
-    clock: SharedClock
-    slots: MoveSlots
-    status: StatusBlock
-    mark: Any
-    loads: np.ndarray
-    """The audio callback's render loads (see :class:`~phantomtouch.engine.scheduler.Scheduler`)."""
-    costs: tuple[float, float, float]
-    backend: str
-    output_device: str | None
-    reader: threading.Thread | None = None
+    Parameters
+    ----------
+    device, spec, options, priority
+        What :func:`~phantomtouch.engine.child.serve` plays with.
+    read_reports : callable
+    timeout_s : float
+        Longest wait for the first report.
+
+    Raises
+    ------
+    DeviceError
+        It did not start within ``timeout_s``, or ended while starting; or the error it
+        reported (its sink could not open).
+    """
+
+    def __init__(
+        self,
+        device: DeviceProfile,
+        spec: SinkSpec,
+        options: dict[str, Any],
+        priority: int | None,
+        read_reports: Callable[[ChildProcess], None],
+        timeout_s: float,
+    ) -> None:
+        context = multiprocessing.get_context("spawn")
+        self.clock = SharedClock(device.sample_rate_hz)
+        self.slots = MoveSlots(options["contact_slots"])
+        self.status = StatusBlock(device.channels)
+        self.mark = context.Value("q", 0, lock=False)
+        loads = context.RawArray("d", RENDER_TIMES)
+        self.loads = np.frombuffer(loads, dtype=np.float64)
+        raw = dict(clock=self.clock.raw, slots=self.slots.raw, status=self.status.raw, loads=loads)
+        commands_in, commands_out = context.Pipe(duplex=False)
+        self.reports, reports_out = context.Pipe(duplex=False)
+        device_json = device.model_dump_json()
+        self.process = context.Process(
+            target=serve,
+            args=(commands_in, reports_out, device_json, spec, options, self.mark, priority, raw),
+            name="phantomtouch-engine",
+            daemon=True,
+        )
+        self.process.start()
+        commands_in.close()
+        reports_out.close()
+        try:  # connection.wait, not select: Windows' select takes sockets only
+            if not wait([self.reports, self.process.sentinel], timeout_s):
+                raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
+            try:
+                ready = self.reports.recv()
+            except (EOFError, OSError):
+                raise DeviceError("the engine process ended while starting") from None
+            if ready[0] == "failed":
+                raise ready[1]
+        except BaseException:
+            self.reports.close()
+            commands_out.close()
+            self.process.kill()
+            self.process.join(CLOSE_TIMEOUT_S)
+            raise
+        self.outbox = Outbox(commands_out)
+        self.costs = (float(ready[1][0]), float(ready[1][1]), float(ready[1][2]))
+        self.backend = str(ready[2])
+        self.output_device: str | None = ready[3]
+        self.reader = threading.Thread(
+            target=read_reports, args=(self,), name="phantomtouch-reports", daemon=True
+        )
+        self.reader.start()
 
     def end(self, *, kill: bool) -> None:
         """End the process (killed with ``kill``), its outbox and its reader."""
@@ -66,89 +122,5 @@ class ChildProcess:
             self.process.kill()
             self.process.join()
         self.outbox.close(0.1)
-        if self.reader is not None:
-            self.reader.join(1.0)
+        self.reader.join(1.0)
         self.reports.close()
-
-
-def spawn(
-    device: DeviceProfile,
-    spec: SinkSpec,
-    options: dict[str, Any],
-    priority: int | None,
-    timeout_s: float = START_TIMEOUT_S,
-) -> ChildProcess:
-    """Start an engine process and wait for its first report (ready, or the error).
-
-    Raises
-    ------
-    DeviceError
-        It did not start within ``timeout_s``, or ended while starting; or the error it
-        reported (its sink could not open).
-    """
-    context = multiprocessing.get_context("spawn")
-    clock = SharedClock(device.sample_rate_hz)
-    slots = MoveSlots(options["contact_slots"])
-    status = StatusBlock(device.channels)
-    mark = context.Value("q", 0, lock=False)
-    loads = context.RawArray("d", RENDER_TIMES)
-    commands_in, commands_out = context.Pipe(duplex=False)
-    reports_in, reports_out = context.Pipe(duplex=False)
-    process = context.Process(
-        target=serve,
-        args=(
-            commands_in,
-            reports_out,
-            device.model_dump_json(),
-            spec,
-            options,
-            mark,
-            priority,
-            {
-                "clock": clock.raw,
-                "slots": slots.raw,
-                "status": status.raw,
-                "loads": loads,
-            },
-        ),
-        name="phantomtouch-engine",
-        daemon=True,
-    )
-    process.start()
-    commands_in.close()
-    reports_out.close()
-    try:
-        ready = _first_report(reports_in, process, timeout_s)
-    except BaseException:
-        reports_in.close()
-        commands_out.close()
-        process.kill()
-        process.join(CLOSE_TIMEOUT_S)
-        raise
-    return ChildProcess(
-        process=process,
-        outbox=Outbox(commands_out),
-        reports=reports_in,
-        clock=clock,
-        slots=slots,
-        status=status,
-        mark=mark,
-        loads=np.frombuffer(loads, dtype=np.float64),
-        costs=(float(ready[1][0]), float(ready[1][1]), float(ready[1][2])),
-        backend=str(ready[2]),
-        output_device=ready[3],
-    )
-
-
-def _first_report(reports: Any, process: Any, timeout_s: float) -> Any:
-    """Wait for the pipe or the process's end (``multiprocessing.connection.wait``: Windows'
-    ``select`` takes sockets only), then read the first report."""
-    if not wait([reports, process.sentinel], timeout_s):
-        raise DeviceError(f"the engine process did not start within {timeout_s:g} s")
-    try:
-        message = reports.recv()
-    except (EOFError, OSError):
-        raise DeviceError("the engine process ended while starting") from None
-    if message[0] == "failed":
-        raise message[1]
-    return message

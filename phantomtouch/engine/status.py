@@ -12,55 +12,37 @@ class EngineStatus:
 
     Attributes
     ----------
-    backend : {"sounddevice", "null", "capture"}
-    output_device : str or None
-    sample_rate_hz, block_frames, channels : int
+    backend, output_device, sample_rate_hz, block_frames, channels
+        The sink's (``"sounddevice"``, ``"null"`` or ``"capture"``; the sound card output
+        or None) and the device's.
     now_frames : int
         Frames handed to the sink so far.
-    active_voices : int
-        Voices rendering (jobs and contacts, releasing ones included).
-    active_contacts : list of dict
-        ``{"owner", "contact", "x_cm", "y_cm"}`` of every contact that is down.
-    levels : list of float
-        Peak absolute value per channel of the last block (after calibration, limiter).
-    peak : float
-        Largest absolute output sample since start.
-    underruns : int
-        Blocks the output needed before they were ready (sink's count).
-    late_commands : int
-        Commands applied after their frame had passed.
-    muted_blocks : int
-        Blocks replaced by silence because they carried NaN or Inf.
-    limited_blocks : int
-        Blocks the safety limiter turned down.
-    output_latency_s : float
+    active_voices, active_contacts
+        Voices rendering (releasing ones included); ``{"owner", "contact", "x_cm",
+        "y_cm"}`` of every contact that is down.
+    levels, peak
+        Peak absolute value per channel of the last block (after calibration, limiter),
+        and the largest output sample since start.
+    underruns, late_commands, muted_blocks, limited_blocks, callback_errors : int
+        Blocks the output needed before they were ready (the sink's count); commands
+        applied after their frame had passed; blocks muted for NaN or Inf, turned down by
+        the limiter, replaced by silence because rendering raised.
     queue_depth, queue_capacity : int
         Voices waiting to start, and how many may wait.
-    running : bool
     render_load_p99, render_load_max : float
-        p99 and largest wall time the audio callback took for a block, over the last
-        4096 blocks, as a fraction of the block's playing time (1.0: the output underruns
-        unless it has more buffered).
-    state : {"running", "starting", "stalled", "gone", "closed"}
-        Whether audio flows: ``stalled`` (the engine process stopped calling back) and
-        ``gone`` (it died) last until it is restarted.
-    voice_capacity : int
-        Pattern voices admitted at once: ``render_budget`` over ``voice_cost``, at most
-        ``max_voices``.
-    voice_cost : float
-        Measured render load of one pattern voice, a fraction of a block's playing time.
-    start_cost : float
-        What a voice adds to the block it begins in, a fraction of its playing time.
-    starts_per_block : int
-        Pattern voices that may begin in one block.
-    render_budget : float
-    callback_errors : int
-        Blocks replaced by silence because rendering raised.
-    restarts : int
-        Times the engine process was restarted after it died or stalled.
+        p99 and largest time the callback took for a block over the last 4096 blocks, as
+        a share of the block's playing time (1.0: the output underruns).
+    state, running, restarts
+        ``"running"``, ``"starting"``, ``"stalled"``, ``"gone"`` (both until a restart),
+        ``"closed"``; times the engine process was restarted after it died or stalled.
+    voice_capacity, voice_cost, start_cost, starts_per_block, render_budget
+        Admission by budget (``docs/engine.md``): pattern voices admitted at once, the
+        measured load of one and what one adds to the block it begins in, starts per
+        block, and the share of a block voices may take.
     refused_commands : int
-        Commands the audio side refused because their data (a plan, a noise loop) was
-        not handed to it; 0 unless the host has a bug: the audio side never builds them.
+        Commands refused for data (a plan, a noise loop) not handed over: a host bug.
+    output_latency_s : float
+        Time from a block's computation to its first frame leaving the sound card, s.
     inline_renders : int
         Times the audio callback rendered into a voice's ring that ran dry (the
         render-ahead thread fell behind).

@@ -11,7 +11,7 @@ import numpy as np
 from phantomtouch.engine.checks import check_range
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.errors import ParameterError
-from phantomtouch.renderer.gains import LAWS, gains_for_points
+from phantomtouch.renderer.gains import gains_for_points
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.levels import amplitude_for_level, table_i_level_db
 from phantomtouch.renderer.plan import check_carrier_frequencies
@@ -22,13 +22,6 @@ MAX_VELOCITY_M_S = 10.0
 _TRANSIENT_TIME_CONSTANTS = 7.0
 
 CarrierModel = SineCarrier | NoiseCarrier | CombinedCarrier
-
-
-def check_law(law: object) -> str:
-    """An interpolation law of the renderer."""
-    if not isinstance(law, str) or law not in LAWS:
-        raise ParameterError(f"law={law!r} must be one of {sorted(LAWS)}")
-    return law
 
 
 def contact_amplitude(device: DeviceProfile, intensity: object, carrier: object) -> float:
@@ -52,7 +45,7 @@ def check_contact_carrier(device: DeviceProfile, carrier: object) -> CarrierMode
     """A carrier the device's sample rate can play (None: a 100 Hz sine)."""
     if carrier is None:
         return SineCarrier()
-    if not isinstance(carrier, SineCarrier | NoiseCarrier | CombinedCarrier):
+    if not isinstance(carrier, CarrierModel):
         raise ParameterError(
             f"carrier={carrier!r} must be a SineCarrier, NoiseCarrier or CombinedCarrier"
         )
@@ -61,35 +54,22 @@ def check_contact_carrier(device: DeviceProfile, carrier: object) -> CarrierMode
 
 
 class Touchdowns:
-    """Gains and transients of touchdowns and lift-offs (the front's threads).
-
-    Parameters
-    ----------
-    device : DeviceProfile
-    settings : ContactSettings
-    """
+    """Gains and transients of touchdowns and lift-offs, for ``device`` as ``settings`` say
+    (the front's threads)."""
 
     def __init__(self, device: DeviceProfile, settings: ContactSettings) -> None:
-        self.device = device
         self.settings = settings
         self._geometry = Geometry.for_device(device)
-        sample_rate_hz = device.sample_rate_hz
-        decay_frames = settings.transient_decay_s * sample_rate_hz
+        decay_frames = settings.transient_decay_s * device.sample_rate_hz
         n = np.arange(math.ceil(_TRANSIENT_TIME_CONSTANTS * decay_frames), dtype=np.float64)
-        shape = np.exp(-n / decay_frames) * np.sin(
-            2.0 * np.pi * settings.transient_freq_hz * n / sample_rate_hz
-        )
+        omega_rad_s = 2.0 * np.pi * settings.transient_freq_hz
+        shape = np.exp(-n / decay_frames) * np.sin(omega_rad_s * n / device.sample_rate_hz)
         self._burst_shape = shape.astype(np.float32)
         self._burst_amplitude = contact_amplitude(device, settings.transient_intensity, None)
 
     def burst(self, normal_velocity_m_s: object) -> np.ndarray | None:
-        """The impact transient for a normal velocity, m/s, or None without one.
-
-        Raises
-        ------
-        ParameterError
-            ``normal_velocity_m_s`` is not within +-``MAX_VELOCITY_M_S``.
-        """
+        """The impact transient for a normal velocity, m/s, or None without one; raises
+        ParameterError when it is not within +-``MAX_VELOCITY_M_S``."""
         if normal_velocity_m_s is None:
             return None
         velocity = check_range(
