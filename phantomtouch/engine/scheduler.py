@@ -30,12 +30,9 @@ RENDER_TIMES = 4096
 class Scheduler:
     """Applies commands and renders blocks; owned by the audio callback.
 
-    :meth:`render` fills the sink's buffer entirely and never waits on another thread: it
-    pops commands without the queue's lock (in the engine process the callback pushes
-    them too, taking that lock, which no other thread takes there), applies each at the
-    sample its frame asks for (one whose frame has passed at once, counted in
-    ``late_commands``), renders the voices and runs the mixer. It allocates only small
-    per-block temporaries, logs nothing and reports through counters and :attr:`events`.
+    :meth:`render` fills the sink's buffer, pops commands without the queue's lock and
+    applies each at the sample its frame asks for (a late one at once, counted in
+    ``late_commands``); it logs nothing and reports through counters and :attr:`events`.
 
     Parameters
     ----------
