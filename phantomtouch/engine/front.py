@@ -1,19 +1,9 @@
 """The engine's front: its API and every fact the host keeps, over one audio side.
 
-:class:`EngineFront` is the engine's API and owns every fact the host keeps, each in one
-place: the job table (what is playing, admitted by the voice budget, the owners' quotas
-and fair shares: :mod:`~phantomtouch.engine.jobs`), the contacts that are down
-(:mod:`~phantomtouch.engine.owners`), the stimulus log. It checks every argument,
-computes what the audio side needs, decides, and posts one typed message
-(:mod:`phantomtouch.engine.messages`) through its audio side's ``post``:
-:class:`~phantomtouch.engine.engine.LocalAudio` performs it at once in this process,
-:class:`~phantomtouch.engine.process.ChildAudio` writes it to the engine process. No call
-waits for the audio side; ``docs/engine.md`` tells the rest (admission by budget, the
-voice policy).
-
-Every public method runs in the host (the process that made the engine), on any thread
-the caller has (the web server's event loop, its workers, a script); the front's lock
-makes them safe to call at once.
+:class:`EngineFront` checks every argument, decides, and posts one typed message
+(:mod:`~phantomtouch.engine.messages`) to its audio side, never waiting for it. Every
+public method runs in the host, on any of the caller's threads (the front's lock makes
+them safe to call at once); ``docs/engine.md`` tells the rest.
 """
 
 from __future__ import annotations
@@ -23,7 +13,6 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
-from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self
 
 from phantomtouch.engine.admission import RENDER_BUDGET, Admission
@@ -55,21 +44,7 @@ STEAL_FADE_S = 0.005
 
 _CASTS: dict[str, Callable[[Any], Any]] = {"int": int, "float": float, "str": str, "bool": bool}
 """How a status field of each type is made from the audio side's figure (numpy scalars
-become Python numbers)."""
-
-
-def _same(value: object) -> object:
-    return value
-
-
-class _DeviceFigure:
-    """A figure of the front's device, read as an attribute of the front (its name)."""
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        self._name = name
-
-    def __get__(self, front: EngineFront, owner: type | None = None) -> int:
-        return int(getattr(front.device, self._name))
+become Python numbers; other fields are taken as they are)."""
 
 
 @dataclass(frozen=True)
@@ -140,14 +115,17 @@ class EngineFront(JobCalls, ContactCalls):
         check_range("prerender_max_s", prerender_max_s, 0.0, 10.0, "s")
         if contact is not None and not isinstance(contact, ContactSettings):
             raise ParameterError(f"contact={contact!r} must be ContactSettings or None")
-        costs = None
-        if voice_cost is not None:
-            check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
-            costs = (voice_cost, 0.0, voice_cost)  # given, not measured
-        if start_cost is not None:
-            check_range("start_cost", start_cost, 1e-6, 100.0, "")
-            costs = (voice_cost or 0.0, start_cost, voice_cost or 0.0)
+        for name, cost in (("voice_cost", voice_cost), ("start_cost", start_cost)):
+            if cost is not None:
+                check_range(name, cost, 1e-6, 100.0, "")
+        costs = None  # measured by the audio side, unless given
+        if voice_cost is not None or start_cost is not None:
+            costs = (voice_cost or 0.0, start_cost or 0.0, voice_cost or 0.0)
         self._device = device
+        self.sample_rate_hz = device.sample_rate_hz
+        """The device's figures (host, any thread)."""
+        self.block_frames = device.block_frames
+        self.channels = device.channels
         self._settings = contact or ContactSettings()
         self._queue_capacity = queue_capacity
         self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
@@ -169,8 +147,7 @@ class EngineFront(JobCalls, ContactCalls):
             self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost
         )
         self._audio: LocalAudio | ChildAudio = audio(links)
-        if self._audio.costs is not None:
-            self._admission.set_costs(self._audio.costs)
+        self._admission.take_costs(self._audio.costs)
 
     # -- life cycle and the sample clock (host) ------------------------------------------
 
@@ -184,9 +161,7 @@ class EngineFront(JobCalls, ContactCalls):
             The engine is closed, or the audio side cannot start.
         """
         self._audio.start()
-        costs = self._audio.costs
-        if costs is not None and self._admission.voice_cost <= 0.0:
-            self._admission.set_costs(costs)
+        self._admission.take_costs(self._audio.costs)
 
     def close(self) -> None:
         """Fade everything out, close the audio side, flush the log. Idempotent; host,
@@ -256,9 +231,8 @@ class EngineFront(JobCalls, ContactCalls):
             for event in events:
                 if isinstance(event, PlanReleased):
                     self.plans.released(event.handle)
-            self._reports.apply(events)
-            records = self._reports.take_backlog()
-        self._reports.flush(records)
+            records = self._reports.apply(events)
+        self._reports.write(records)
 
     def status(self) -> EngineStatus:
         """A snapshot of clock, voices, levels and counters (host, any thread); never
@@ -286,7 +260,7 @@ class EngineFront(JobCalls, ContactCalls):
         )
         return EngineStatus(
             **{
-                field.name: _CASTS.get(str(field.type), _same)(values[field.name])
+                field.name: _CASTS.get(str(field.type), lambda value: value)(values[field.name])
                 for field in fields(EngineStatus)
             }
         )
@@ -322,19 +296,10 @@ class EngineFront(JobCalls, ContactCalls):
         self.start()
         return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc_info: object) -> None:
         self.close()
 
     @property
     def device(self) -> DeviceProfile:
-        """The device profile (host, any thread; so are the three figures of it below)."""
+        """The device profile (host, any thread)."""
         return self._device
-
-    sample_rate_hz = _DeviceFigure()
-    block_frames = _DeviceFigure()
-    channels = _DeviceFigure()

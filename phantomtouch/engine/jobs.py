@@ -1,9 +1,8 @@
-"""Jobs: the one table of what is playing on the host (``docs/engine.md``).
+"""Jobs: the one table of what is playing on the host, and the front's job calls.
 
 A job is ``scheduled`` until its first frame is played, ``playing`` until its last, then
-``finished`` — or ``stopped`` once a stop was asked for (it then fades out over the
-release). The table keeps every job that is not over and the most recent ones that are;
-it admits a job within the voice budget, its owner's quota and the fair shares.
+``finished``, or ``stopped`` once a stop was asked for (it then fades out over the
+release). Admission, quotas and fair shares: ``docs/engine.md``.
 """
 
 from __future__ import annotations
@@ -13,7 +12,7 @@ import uuid
 from collections import Counter, OrderedDict
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, fields
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, cast, get_args
 
 from phantomtouch.engine.admission import Admission
 from phantomtouch.engine.checks import check_ahead, check_frame, check_id
@@ -31,12 +30,13 @@ if TYPE_CHECKING:
 
 JobStateName = Literal["scheduled", "playing", "finished", "stopped"]
 Policy = Literal["refuse", "steal-oldest", "steal-quietest"]
-POLICIES: tuple[Policy, ...] = ("refuse", "steal-oldest", "steal-quietest")
+POLICIES: tuple[Policy, ...] = get_args(Policy)
 """What happens to a job beyond the voice budget: refused (EngineBusyError), or the
-oldest or the quietest sounding job fades out to make room (as game audio engines steal
-voices)."""
+oldest or the quietest sounding job fades out to make room."""
 HISTORY_JOBS = 1000
 """Jobs that are over and still answered by :meth:`Engine.job_state`."""
+MAX_SCHEDULE_AHEAD_S = 3600.0
+"""Latest start a job may ask for, s after the current frame."""
 
 
 @dataclass(frozen=True)
@@ -47,17 +47,15 @@ class Job:
     ----------
     job_id : str
     start_frame : int
-        Frame of its first sample on the engine's sample clock. For a job scheduled as
-        soon as possible this is the block it is expected to start in;
-        :meth:`Engine.job_state` gives the frame it actually started at.
+        Frame of its first sample (for a job as soon as possible: the block it is expected
+        to start in; :meth:`Engine.job_state` gives the frame it started at).
     frames : int
-        Length of the pattern, frames.
     duration_s : float
     summary : dict
-        The plan's summary (``Plan.summary()``).
+        ``Plan.summary()``.
     start_at_s : float or None
         Server time, s, at which ``start_frame`` leaves the sound card, fixed when the job
-        was scheduled (:attr:`JobState.requested_start_at_s` answers the same value).
+        was scheduled (also :attr:`JobState.requested_start_at_s`).
     """
 
     job_id: str
@@ -88,12 +86,10 @@ class JobState:
     late : bool
         It started after its requested frame (its command arrived too late).
     requested_start_at_s : float or None
-        Server time, s, of ``requested_start_frame`` as :attr:`Job.start_at_s` gave it
-        (the clock's mapping of frames to time moves a little as it tracks the card).
+        :attr:`Job.start_at_s`.
     reason : str or None
-        Why a ``stopped`` job stopped when no one asked it to: ``stolen`` (faded out to
-        make room for another), or the engine's fault (``engine gone before it played``,
-        ``engine stalled while it played``); None otherwise.
+        Why it stopped unasked: ``stolen`` (to make room for another), or ``engine gone``
+        or ``engine stalled``, ``before it played`` or ``while it played``; else None.
     """
 
     job_id: str
@@ -114,11 +110,8 @@ class JobState:
 
 @dataclass
 class JobRecord:
-    """The control side's mutable view of one job (under the engine's lock).
-
-    ``plan`` is dropped once the job is over; a ``stolen`` job was faded out to make
-    room for another and no longer counts against the voice budget.
-    """
+    """The front's mutable view of one job (under its lock); ``plan`` is dropped once the
+    job is over, and a ``stolen`` one no longer counts against the voice budget."""
 
     plan: Plan | None
     job_id: str
@@ -139,7 +132,6 @@ class JobRecord:
 
     @classmethod
     def planned(cls, plan: Plan, job_id: str, owner: str | None, first_frame: int) -> JobRecord:
-        """A new job of ``owner`` playing ``plan`` from ``first_frame``."""
         return cls(plan, job_id, owner, first_frame, plan.frames, plan.duration_s, plan.amplitude)
 
     @property
@@ -168,8 +160,7 @@ class OwnerQuota:
     voices : int, >= 1
         Jobs scheduled or playing at once.
     seconds : float, > 0
-        Seconds still to play, summed over those jobs: a long job counts by the time it
-        holds, not only as one.
+        Seconds still to play, summed over those jobs.
     """
 
     voices: int
@@ -177,9 +168,9 @@ class OwnerQuota:
 
 
 class QuotaRefused(PhantomTouchError):
-    """A job would take its owner past its ``quota`` (an :class:`OwnerQuota`), by its
-    ``limit`` (``voices`` or ``seconds``): the owner's ``jobs`` not over hold ``held_s``
-    s still to play, and the job would add ``ahead_s`` s."""
+    """A job would take its owner past its ``quota`` by its ``limit`` (``voices`` or
+    ``seconds``): the owner's ``jobs`` not over hold ``held_s`` s still to play, and the
+    job would add ``ahead_s`` s."""
 
     def __init__(self, quota: OwnerQuota, limit: str, jobs: int, held_s: float, ahead_s: float):
         super().__init__(f"past the owner's {quota} by {limit}: {jobs} jobs hold {held_s:g} s")
@@ -191,15 +182,8 @@ class QuotaRefused(PhantomTouchError):
 
 
 class JobTable:
-    """Jobs by id: those not over yet, and the last ``history`` that are.
-
-    A job that was asked to stop no longer counts as live, though the callback has yet to
-    silence it.
-
-    Parameters
-    ----------
-    history : int, >= 0
-    """
+    """Jobs by id: those scheduled or playing, those asked to stop (the callback has yet to
+    silence them), and the last ``history`` (>= 0) that are over."""
 
     def __init__(self, history: int = HISTORY_JOBS) -> None:
         self.history = history
@@ -210,17 +194,6 @@ class JobTable:
     def __len__(self) -> int:
         """Jobs scheduled or playing (not stopping, not over)."""
         return len(self._live)
-
-    def _sounding(self, start_frame: int, end_frame: int) -> list[JobRecord]:
-        """Jobs not over and not stolen that sound within [start, end) frames."""
-        return [
-            record
-            for table in (self._live, self._stopping)
-            for record in table.values()
-            if not record.stolen
-            and record.first_frame < end_frame
-            and record.last_frame > start_frame
-        ]
 
     def check_quota(
         self,
@@ -235,16 +208,14 @@ class JobTable:
         """Refuse a job of ``owner`` of ``frames`` from ``start_frame`` that would take it
         past ``quota``.
 
-        Counted are the owner's jobs scheduled or playing (not stopped) that sound after
-        ``next_frame`` (the first frame of the next block, where a job asked for as soon
-        as possible begins), each by its frames from then to its end; the new job by its
-        frames from then (or from ``start_frame``, if later) to its end. ``rate_hz``
-        converts frames to seconds.
+        Counted are the owner's jobs scheduled or playing that sound after ``next_frame``
+        (the first frame of the next block), each by its frames from then to its end, and
+        the new job by its frames from then (or from ``start_frame``, if later) to its end,
+        at ``rate_hz``.
 
         Raises
         ------
         QuotaRefused
-            Naming the bound (``voices`` or ``seconds``) and what the owner holds.
         """
         ends = [r.last_frame for r in self._live.values() if r.owner == owner]
         ahead = [end - next_frame for end in ends if end > next_frame]
@@ -268,17 +239,11 @@ class JobTable:
         owner: str | None = None,
     ) -> list[JobRecord]:
         """Make room for a job of ``owner`` of ``frames`` from ``start_frame`` costing
-        ``cost``, or refuse.
+        ``cost``: the jobs to steal (the caller fades them out), or refuse.
 
-        Refused when ``jobs`` are scheduled or playing already. When, together with the
-        jobs sounding at the same time, it would exceed the render ``budget`` (the sum of
-        their costs, shares of a block) or ``voices`` voices, ``policy`` decides:
-        ``refuse``, or the jobs to steal, as few as make room, are returned; the caller
-        fades them out. Each is taken from whoever holds the most voices then (max-min
-        fairness, the new job counted for its owner; on a tie the new job's owner first),
-        and among that owner's jobs sounding at the start, the oldest started or the
-        quietest. An owner holding fewer voices than another is never stolen from: if
-        the largest holder has nothing to steal at the start, the job is refused.
+        Refused when ``jobs`` are scheduled or playing. Beyond the ``budget`` (the sum of
+        the costs of the jobs sounding with it, shares of a block) or ``voices``,
+        ``policy`` refuses or steals as few jobs as make room, fairly (``docs/engine.md``).
 
         Raises
         ------
@@ -290,7 +255,13 @@ class JobTable:
                 f"the engine is full: {len(self._live)} jobs are scheduled or playing; "
                 f"at most queue_capacity={jobs}"
             )
-        sounding = self._sounding(start_frame, start_frame + frames)
+        sounding = [
+            record
+            for record in [*self._live.values(), *self._stopping.values()]
+            if not record.stolen
+            and record.first_frame < start_frame + frames
+            and record.last_frame > start_frame
+        ]
         load = cost + sum(record.cost for record in sounding)
         count = len(sounding) + 1
         if _fits(load, count, budget, voices):
@@ -371,32 +342,26 @@ def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
 def _fair_victims(
     sounding: list[JobRecord], start_frame: int, owner: str | None, policy: Policy
 ) -> Iterator[JobRecord]:
-    """Jobs to steal, in turn, each from the largest holder of the voices left (see
-    :meth:`JobTable.admit`); ends when the largest holder has nothing to steal."""
+    """Jobs to steal, in turn, each from the largest holder of the voices left (the new
+    job counted for ``owner``, who comes first on a tie) among its jobs sounding at
+    ``start_frame``, the oldest started or the quietest; ends when the largest holders
+    have nothing to steal (the others hold less)."""
     held = Counter(record.owner for record in sounding)
     held[owner] += 1
+    order = _age if policy == "steal-oldest" else _quiet
     candidates: dict[str | None, list[JobRecord]] = {}
-    for record in sounding:
+    for record in sorted(sounding, key=order, reverse=True):
         if record.first_frame <= start_frame and record.state != "stopped":
             candidates.setdefault(record.owner, []).append(record)
-    for group in candidates.values():
-        group.sort(key=_age if policy == "steal-oldest" else _quiet, reverse=True)
     while True:
         most = max(held.values())
-        largest = [o for o, n in held.items() if n == most]
-        holder = owner
-        if owner not in largest:
-            ready = [o for o in largest if candidates.get(o)]
-            if not ready:
-                return  # the largest holders have nothing to steal; the others hold less
-            order = _age if policy == "steal-oldest" else _quiet
-            holder = min(ready, key=lambda o: order(candidates[o][-1]))
-        taken = candidates.get(holder)
-        if not taken:
+        largest = [owner] if held[owner] == most else [o for o, n in held.items() if n == most]
+        ready = [o for o in largest if candidates.get(o)]
+        if not ready:
             return
-        record = taken.pop()
+        holder = min(ready, key=lambda o: order(candidates[o][-1]))
         held[holder] -= 1
-        yield record
+        yield candidates[holder].pop()
 
 
 def _age(record: JobRecord) -> tuple[int, str]:
@@ -410,10 +375,6 @@ def _quiet(record: JobRecord) -> tuple[float, int]:
 def _fits(load: float, count: int, budget: float, voices: int) -> bool:
     """Within ``voices``, and within the ``budget`` (one voice alone always fits it)."""
     return count <= voices and (count <= 1 or load <= budget * (1.0 + 1e-9))
-
-
-MAX_SCHEDULE_AHEAD_S = 3600.0
-"""Latest start a job may ask for, s after the current frame."""
 
 
 class JobCalls:
@@ -433,20 +394,18 @@ class JobCalls:
 
     @staticmethod
     def _check_policy(policy: object) -> Policy:
-        for known in POLICIES:
-            if policy == known:
-                return known
-        raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
+        if policy not in POLICIES:
+            raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
+        return cast(Policy, policy)
 
     @property
     def voice_capacity(self) -> int:
-        """Pattern voices that may sound at once (see :class:`Admission`); host, any thread."""
+        """Pattern voices that may sound at once (:class:`Admission`; host, any thread)."""
         return self._admission.voice_capacity
 
     @property
     def starts_per_block(self) -> int:
-        """Pattern voices that may begin in one block (see :class:`Admission`); host, any
-        thread."""
+        """Pattern voices that may begin in one block (:class:`Admission`; host, any thread)."""
         return self._admission.starts_per_block
 
     @property
@@ -483,8 +442,7 @@ class JobCalls:
             :attr:`stop_count` when the request arrived: if ``stop_all`` was called
             since, the job is void (accepted as ``stopped``; it never plays).
         quota : OwnerQuota or None
-            The most ``owner``'s jobs not over may hold, this one included
-            (:meth:`~phantomtouch.engine.jobs.JobTable.check_quota`); None: no bound.
+            The most ``owner``'s jobs not over may hold, this one included; None: no bound.
 
         Returns
         -------
@@ -541,10 +499,8 @@ class JobCalls:
                 policy=chosen,
                 owner=owner,
             )
-            if prerendered is None:  # nothing to render in the callback
-                now_frames = self._audio.now_frames
-                self._admission.charge_churn(now_frames)
-                first, frame = self._admission.place_start(first, frame, now_frames)
+            if prerendered is None:  # a prerendered one renders nothing in the callback
+                first, frame = self._admission.begin(first, frame, self._audio.now_frames)
                 record.requested_start_frame = first
             record.requested_start_at_s = self._audio.time_at(first)  # one value for all
             self._audio.provide(carrier)
