@@ -1,8 +1,4 @@
-"""What the audio side reports, turned into job states and stimulus-log records.
-
-The front applies events under its lock; the log is written outside it, never by the
-audio callback.
-"""
+"""What the audio side reports, applied to the job table and made stimulus-log records."""
 
 from __future__ import annotations
 
@@ -11,7 +7,6 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from phantomtouch.engine.jobs import JobTable
-from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.messages import (
     Cancelled,
     Ended,
@@ -28,82 +23,71 @@ _NAMES: dict[type, str] = {Started: "start", Released: "release", Ended: "end", 
 """The stimulus log's name of each event."""
 
 
-class Reports:
-    """Applies events to the job table and writes the stimulus log.
+def apply_events(
+    jobs: JobTable, events: Iterable[Event], time_at: Callable[[int], float] | None
+) -> list[dict[str, Any]]:
+    """Apply the audio side's events to ``jobs`` (host, under the front's lock).
 
     Parameters
     ----------
     jobs : JobTable
-    time_at : callable
-        ``time_at(frame)``: server time, s, of a frame leaving the sound card.
-    log : StimulusLog or None
+    events : iterable of Event
+        Those about anything but voices (a noise loop released, a refusal) pass.
+    time_at : callable or None
+        ``time_at(frame)``: server time, s, of a frame leaving the sound card; None: no
+        stimulus log is kept.
+
+    Returns
+    -------
+    list of dict
+        The stimulus-log records of the events, for the caller to write outside the lock.
     """
+    records: list[dict[str, Any]] = []
+    for event in events:
+        if isinstance(event, VoiceEvent):
+            record = _voice_event(jobs, event, time_at is not None)
+        elif isinstance(event, StoppedAll):
+            record = {"event": "stop_all"}
+        else:
+            continue
+        if time_at is not None:
+            time_s = time_at(event.frame)
+            unix_s = time_s + (time.time() - time.monotonic())
+            record.update(frame=event.frame, server_time_s=time_s, unix_time_s=unix_s)
+            records.append(record)
+    return records
 
-    def __init__(
-        self, jobs: JobTable, time_at: Callable[[int], float], log: StimulusLog | None
-    ) -> None:
-        self._jobs = jobs
-        self._time_at = time_at
-        self._log = log
 
-    def apply(self, events: Iterable[Event]) -> list[dict[str, Any]]:
-        """Apply events and return the log records due (host, under the front's lock);
-        events about anything but voices (a noise loop released, a refusal) pass."""
-        records: list[dict[str, Any]] = []
-        for event in events:
-            if isinstance(event, VoiceEvent):
-                record = self._voice_event(event)
-            elif isinstance(event, StoppedAll):
-                record = {"event": "stop_all"}
-            else:
-                continue
-            if self._log is not None:
-                time_s = self._time_at(event.frame)
-                unix_s = time_s + (time.time() - time.monotonic())
-                record.update(frame=event.frame, server_time_s=time_s, unix_time_s=unix_s)
-                records.append(record)
-        return records
-
-    def _voice_event(self, event: VoiceEvent) -> dict[str, Any]:
-        record: dict[str, Any] = {"event": _NAMES[type(event)], "kind": event.kind}
-        if event.kind != "job":
-            record["owner"], record["contact"] = event.key
-            if isinstance(event, Started):
-                record.update(x_cm=event.x_cm, y_cm=event.y_cm, amplitude=event.amplitude)
-            return record
-        job = self._jobs.get(event.key)
-        record.update(job_id=event.key, owner=None if job is None else job.owner)
-        if job is None:
-            return record
+def _voice_event(jobs: JobTable, event: VoiceEvent, logged: bool) -> dict[str, Any]:
+    record: dict[str, Any] = {"event": _NAMES[type(event)], "kind": event.kind}
+    if event.kind != "job":
+        record["owner"], record["contact"] = event.key
         if isinstance(event, Started):
-            if self._log is not None and job.plan:
-                record.update(late=event.late, summary=job.plan.summary())
-                path = job.plan.pattern.path
-                points = getattr(path, "points_cm", None) or getattr(path, "keyframes", None)
-                if len(points or ()) <= LOG_PATTERN_MAX_POINTS:
-                    record["pattern"] = job.plan.pattern.model_dump(mode="json")
-            job.start_frame, job.late = event.frame, event.late
-            if job.state == "scheduled":
-                job.state = "playing"
-        elif isinstance(event, Released):
-            job.end_frame = event.silent_from
-        elif isinstance(event, Ended):
-            job.end_frame = event.frame
-            if job.state != "stopped":
-                job.state = "finished"
-            self._jobs.retire(job)
-        else:  # cancelled
-            job.state = "stopped"
-            job.end_frame = job.requested_start_frame
-            self._jobs.retire(job)
+            record.update(x_cm=event.x_cm, y_cm=event.y_cm, amplitude=event.amplitude)
         return record
-
-    def write(self, records: list[dict[str, Any]]) -> None:
-        """Write the records :meth:`apply` returned (host, outside the front's lock)."""
-        if self._log is not None:
-            self._log.write(records)
-
-    def close(self) -> None:
-        """Close the log (host)."""
-        if self._log is not None:
-            self._log.close()
+    job = jobs.get(event.key)
+    record.update(job_id=event.key, owner=None if job is None else job.owner)
+    if job is None:
+        return record
+    if isinstance(event, Started):
+        if logged and job.plan:
+            record.update(late=event.late, summary=job.plan.summary())
+            path = job.plan.pattern.path
+            points = getattr(path, "points_cm", None) or getattr(path, "keyframes", None)
+            if len(points or ()) <= LOG_PATTERN_MAX_POINTS:
+                record["pattern"] = job.plan.pattern.model_dump(mode="json")
+        job.start_frame, job.late = event.frame, event.late
+        if job.state == "scheduled":
+            job.state = "playing"
+    elif isinstance(event, Released):
+        job.end_frame = event.silent_from
+    elif isinstance(event, Ended):
+        job.end_frame = event.frame
+        if job.state != "stopped":
+            job.state = "finished"
+        jobs.retire(job)
+    else:  # cancelled
+        job.state = "stopped"
+        job.end_frame = job.requested_start_frame
+        jobs.retire(job)
+    return record

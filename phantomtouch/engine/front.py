@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Self
 from phantomtouch.engine.admission import RENDER_BUDGET, Admission
 from phantomtouch.engine.checks import check_channel_gains, check_int, check_range, check_seconds
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.events import Reports
+from phantomtouch.engine.events import apply_events
 from phantomtouch.engine.jobs import JobCalls, JobTable, Policy
 from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.messages import Event, PlanReleased, SetWearerGains
@@ -62,7 +62,7 @@ class Links:
 
 
 class EngineFront(JobCalls, ContactCalls):
-    """The engine's API and the host's state, over one audio side (module docstring).
+    """The engine's API and the host's state, over one audio side.
 
     Parameters
     ----------
@@ -80,11 +80,10 @@ class EngineFront(JobCalls, ContactCalls):
     render_budget : float, 0 < render_budget <= 1
         Share of a block's playing time pattern voices may take (``RENDER_BUDGET``).
     voice_policy : {"refuse", "steal-oldest", "steal-quietest"}
-        What a job beyond the budget does (see the module docstring).
+        What a job beyond the budget does (:data:`~phantomtouch.engine.jobs.POLICIES`).
     prerender_max_s : float, 0 <= prerender_max_s <= 10
-        Plans at most this long are rendered whole when scheduled, so that the callback
-        only adds their samples (:mod:`phantomtouch.engine.prerender`); 0: every plan
-        renders in the callback.
+        Plans at most this long, s, are rendered whole when scheduled
+        (:mod:`phantomtouch.engine.prerender`); 0: every plan renders in the callback.
     voice_cost, start_cost : float or None, 1e-6 <= cost <= 100
         Render load of one sounding pattern voice, and what one adds to the block it
         begins in, as shares of a block; None: measured by the audio side
@@ -141,19 +140,16 @@ class EngineFront(JobCalls, ContactCalls):
         self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
         self._closed = False
-        log = StimulusLog(log_path) if log_path is not None else None
-        self._reports = Reports(self._jobs, self.time_at, log)
+        self._log = StimulusLog(log_path) if log_path is not None else None
         links = Links(
             self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost
         )
         self._audio: LocalAudio | ChildAudio = audio(links)
         self._admission.take_costs(self._audio.costs)
 
-    # -- life cycle and the sample clock (host) ------------------------------------------
-
     def start(self) -> None:
         """Start playing (no-op when playing): measure a voice's cost if the audio side
-        must, start its sink and wait until it plays. Host, any thread.
+        must, start its sink and wait until it plays; host, any thread.
 
         Raises
         ------
@@ -171,8 +167,8 @@ class EngineFront(JobCalls, ContactCalls):
         finally:
             with self._lock:
                 closed, self._closed = self._closed, True
-            if not closed:
-                self._reports.close()
+            if not closed and self._log is not None:
+                self._log.close()
 
     @property
     def now_frames(self) -> int:
@@ -189,9 +185,8 @@ class EngineFront(JobCalls, ContactCalls):
         return self._audio.time_at(check_int("frame", frame, -(1 << 62), 1 << 62))
 
     def _lost(self, state: str) -> None:
-        """The audio side is gone or stalled: nothing it played sounds any more (host,
-        the engine process's watchdog). Every contact is published as ``released`` with
-        reason ``engine <state>``."""
+        """The audio side is gone or stalled: every job and contact is over, each contact
+        published as ``released`` with reason ``engine <state>`` (host, the watchdog)."""
         with self._lock:
             self._jobs.drop_all(self.now_frames, fault=state)
             self.plans.unhand_all()
@@ -204,15 +199,10 @@ class EngineFront(JobCalls, ContactCalls):
         any thread)."""
         return time.monotonic()
 
-    # -- everything off, and monitoring -----------------------------------------------
-
     def stop_all(self) -> None:
-        """Everything off: every job and every contact of every client fades out (host,
-        any thread).
-
-        Never refused, never waits: jobs and touchdowns accepted before this call never
-        start, whatever state the audio side is in. Each owner's contacts are published
-        as ``released`` with reason ``stop``.
+        """Everything off: every job and contact fades out, each contact published as
+        ``released`` with reason ``stop`` (host, any thread). Never refused, never waits:
+        jobs and touchdowns accepted before it never start, whatever the audio side's state.
         """
         with self._lock:
             self._stop_count += 1
@@ -231,8 +221,9 @@ class EngineFront(JobCalls, ContactCalls):
             for event in events:
                 if isinstance(event, PlanReleased):
                     self.plans.released(event.handle)
-            records = self._reports.apply(events)
-        self._reports.write(records)
+            records = apply_events(self._jobs, events, self.time_at if self._log else None)
+        if self._log is not None:
+            self._log.write(records)
 
     def status(self) -> EngineStatus:
         """A snapshot of clock, voices, levels and counters (host, any thread); never
@@ -265,13 +256,10 @@ class EngineFront(JobCalls, ContactCalls):
             }
         )
 
-    # -- the wearer's gains at the output stage -----------------------------------------
-
     def set_wearer_gains(self, gains: object) -> None:
         """Scale each output channel by ``gains`` from the next block on, ramped across
-        that block; host, any thread. Applied after the device's calibration and before
-        the limiter and the ceiling; all ones: no wearer (the output is then bit for bit
-        what it is without this call). Kept across a stop and an engine restart.
+        that block, across stops and engine restarts (host, any thread; where in the
+        output stage: ``docs/engine.md``).
 
         Parameters
         ----------
@@ -289,8 +277,6 @@ class EngineFront(JobCalls, ContactCalls):
         checked = check_channel_gains("gains", gains, self._device.channels)
         with self._lock:
             self._audio.post(SetWearerGains(checked))
-
-    # -- the device's figures, and use as a context manager ---------------------------
 
     def __enter__(self) -> Self:
         self.start()

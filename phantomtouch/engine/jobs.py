@@ -45,12 +45,9 @@ class Job:
 
     Attributes
     ----------
-    job_id : str
     start_frame : int
         Frame of its first sample (for a job as soon as possible: the block it is expected
         to start in; :meth:`Engine.job_state` gives the frame it started at).
-    frames : int
-    duration_s : float
     summary : dict
         ``Plan.summary()``.
     start_at_s : float or None
@@ -72,17 +69,11 @@ class JobState:
 
     Attributes
     ----------
-    job_id : str
-    state : {"scheduled", "playing", "finished", "stopped"}
-    owner : str or None
     start_frame : int
         Actual first frame once it started; the requested one before.
     end_frame : int
         Frame from which it is silent: ``start_frame + frames`` unless stopped, then the
         end of its release (``start_frame`` when stopped before it started).
-    frames : int
-    duration_s : float
-    requested_start_frame : int
     late : bool
         It started after its requested frame (its command arrived too late).
     requested_start_at_s : float or None
