@@ -1,8 +1,5 @@
-"""Admission by budget: how many pattern voices may sound, and begin, at once.
-
-:class:`Admission` turns the voice costs the audio side measured into the front's limits;
-unmeasured costs (0) leave them at ``max_voices`` and unbounded (``docs/engine.md``).
-"""
+"""Admission by budget: how many pattern voices may sound, and begin, at once
+(``docs/engine.md``)."""
 
 from __future__ import annotations
 
@@ -22,12 +19,12 @@ may take."""
 CHURN_WINDOW_S = 0.1
 """Over how long a burst of beginnings may exceed ``CHURN_SHARE`` before it is refused."""
 MAX_START_DELAY_S = 0.02
-"""How far a job that asks to start as soon as possible may be moved to a later block
-when the next ones already begin as many voices as they may; beyond it, it is refused."""
+"""How far, s, a job asked for as soon as possible may move to a block with room."""
 
 
 class Admission:
-    """The voice, start and churn limits of one engine (the front's lock held).
+    """The voice, start and churn limits of one engine, from the measured costs (the
+    front's lock held); unmeasured costs (0) leave them at ``max_voices`` and unbounded.
 
     Parameters
     ----------

@@ -26,21 +26,12 @@ _NAMES: dict[type, str] = {Started: "start", Released: "release", Ended: "end", 
 def apply_events(
     jobs: JobTable, events: Iterable[Event], time_at: Callable[[int], float] | None
 ) -> list[dict[str, Any]]:
-    """Apply the audio side's events to ``jobs`` (host, under the front's lock).
+    """Apply the audio side's events to ``jobs`` (host, under the front's lock) and
+    return their stimulus-log records, to be written outside it.
 
-    Parameters
-    ----------
-    jobs : JobTable
-    events : iterable of Event
-        Those about anything but voices (a noise loop released, a refusal) pass.
-    time_at : callable or None
-        ``time_at(frame)``: server time, s, of a frame leaving the sound card; None: no
-        stimulus log is kept.
-
-    Returns
-    -------
-    list of dict
-        The stimulus-log records of the events, for the caller to write outside the lock.
+    ``time_at(frame)`` is the server time, s, of a frame leaving the sound card (None: no
+    log is kept, no records are made). Events about anything but voices (a noise loop
+    released, a refusal) pass.
     """
     records: list[dict[str, Any]] = []
     for event in events:

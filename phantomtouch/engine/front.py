@@ -36,12 +36,9 @@ if TYPE_CHECKING:
 
 MAX_QUEUE_CAPACITY = 1_000_000
 MAX_VOICES = 64
-"""Default of ``max_voices``: the most pattern voices that may sound at once, whatever
-the budget allows."""
+"""Default of ``max_voices``."""
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
-
-
 _CASTS: dict[str, Callable[[Any], Any]] = {"int": int, "float": float, "str": str, "bool": bool}
 """How a status field of each type is made from the audio side's figure (numpy scalars
 become Python numbers; other fields are taken as they are)."""
@@ -86,9 +83,8 @@ class EngineFront(JobCalls, ContactCalls):
         (:mod:`phantomtouch.engine.prerender`); 0: every plan renders in the callback.
     voice_cost, start_cost : float or None, 1e-6 <= cost <= 100
         Render load of one sounding pattern voice, and what one adds to the block it
-        begins in, as shares of a block; None: measured by the audio side
-        (:func:`~phantomtouch.engine.core.measure_costs`). A ``voice_cost`` given alone
-        leaves the starts per block unbounded.
+        begins in, shares of a block; None: measured by the audio side (a ``voice_cost``
+        given alone leaves the starts per block unbounded).
     """
 
     def __init__(

@@ -1,8 +1,7 @@
 """Jobs: the one table of what is playing on the host, and the front's job calls.
 
-A job is ``scheduled`` until its first frame is played, ``playing`` until its last, then
-``finished``, or ``stopped`` once a stop was asked for (it then fades out over the
-release). Admission, quotas and fair shares: ``docs/engine.md``.
+A job is ``scheduled``, ``playing``, then ``finished``, or ``stopped`` once a stop was
+asked for (it fades out over the release); admission and fair shares: ``docs/engine.md``.
 """
 
 from __future__ import annotations
@@ -51,8 +50,7 @@ class Job:
     summary : dict
         ``Plan.summary()``.
     start_at_s : float or None
-        Server time, s, at which ``start_frame`` leaves the sound card, fixed when the job
-        was scheduled (also :attr:`JobState.requested_start_at_s`).
+        Server time, s, at which ``start_frame`` leaves the sound card, fixed when scheduled.
     """
 
     job_id: str
@@ -76,8 +74,6 @@ class JobState:
         end of its release (``start_frame`` when stopped before it started).
     late : bool
         It started after its requested frame (its command arrived too late).
-    requested_start_at_s : float or None
-        :attr:`Job.start_at_s`.
     reason : str or None
         Why it stopped unasked: ``stolen`` (to make room for another), or ``engine gone``
         or ``engine stalled``, ``before it played`` or ``while it played``; else None.
@@ -144,15 +140,8 @@ class JobRecord:
 
 @dataclass(frozen=True)
 class OwnerQuota:
-    """The most one owner's jobs that are not over may hold (:meth:`JobTable.check_quota`).
-
-    Attributes
-    ----------
-    voices : int, >= 1
-        Jobs scheduled or playing at once.
-    seconds : float, > 0
-        Seconds still to play, summed over those jobs.
-    """
+    """The most one owner's jobs that are not over may hold: ``voices`` (>= 1) jobs
+    scheduled or playing at once, ``seconds`` (> 0) still to play, summed over them."""
 
     voices: int
     seconds: float
@@ -196,18 +185,10 @@ class JobTable:
         next_frame: int,
         rate_hz: int,
     ) -> None:
-        """Refuse a job of ``owner`` of ``frames`` from ``start_frame`` that would take it
-        past ``quota``.
-
-        Counted are the owner's jobs scheduled or playing that sound after ``next_frame``
-        (the first frame of the next block), each by its frames from then to its end, and
-        the new job by its frames from then (or from ``start_frame``, if later) to its end,
-        at ``rate_hz``.
-
-        Raises
-        ------
-        QuotaRefused
-        """
+        """Raise :class:`QuotaRefused` if a job of ``owner`` of ``frames`` from
+        ``start_frame`` would take it past ``quota``: the owner's jobs scheduled or playing
+        count by their frames after ``next_frame`` (the next block's first), the new one by
+        its frames from then or ``start_frame``, if later, at ``rate_hz``."""
         ends = [r.last_frame for r in self._live.values() if r.owner == owner]
         ahead = [end - next_frame for end in ends if end > next_frame]
         held_s = sum(ahead) / rate_hz
@@ -229,17 +210,11 @@ class JobTable:
         policy: Policy,
         owner: str | None = None,
     ) -> list[JobRecord]:
-        """Make room for a job of ``owner`` of ``frames`` from ``start_frame`` costing
-        ``cost``: the jobs to steal (the caller fades them out), or refuse.
-
-        Refused when ``jobs`` are scheduled or playing. Beyond the ``budget`` (the sum of
-        the costs of the jobs sounding with it, shares of a block) or ``voices``,
-        ``policy`` refuses or steals as few jobs as make room, fairly (``docs/engine.md``).
-
-        Raises
-        ------
-        EngineBusyError
-            Naming the limit (``queue_capacity``, or the voice budget) and the count.
+        """The jobs to steal (the caller fades them out) to make room for a job of
+        ``owner`` of ``frames`` from ``start_frame`` costing ``cost``, or refuse it with
+        ``EngineBusyError``: when ``jobs`` are scheduled or playing, or beyond the
+        ``budget`` (the costs of the jobs sounding with it, shares of a block) or
+        ``voices`` unless ``policy`` steals as few as make room, fairly (``docs/engine.md``).
         """
         if len(self._live) >= jobs:
             raise EngineBusyError(
@@ -421,12 +396,11 @@ class JobCalls:
         pattern : TouchPattern or Plan
             A plan must be made for this engine's device.
         start_frame : int or None
-            Frame of the pattern's first sample, at most ``MAX_SCHEDULE_AHEAD_S`` ahead;
-            a frame that has passed when the command arrives starts at once (counted in
-            ``late_commands``). None: as soon as possible, at the next block.
+            Frame of its first sample, at most ``MAX_SCHEDULE_AHEAD_S`` ahead; one passed
+            when the command arrives starts at once (``late_commands``). None: at the next
+            block.
         owner : str or None
-            The client it belongs to (1-64 characters), for the log, job states, fair
-            shares and ``quota``.
+            The client it belongs to (1-64 characters), for the log, fair shares, ``quota``.
         policy : {"refuse", "steal-oldest", "steal-quietest"} or None
             Beyond the voice budget (None: the engine's ``voice_policy``).
         stop_count : int or None
@@ -442,13 +416,11 @@ class JobCalls:
         Raises
         ------
         ParameterError
-            The pattern cannot be planned, or an argument is out of range (a ``quota``
-            without an ``owner``).
+            The pattern cannot be planned, or an argument is out of range.
         QuotaRefused
             The job would take ``owner`` past ``quota``.
         EngineBusyError
-            ``queue_capacity`` jobs are scheduled or playing, or the voice budget is
-            full and the policy refuses (or nothing can be stolen).
+            ``queue_capacity`` jobs are scheduled or playing, or the voice budget is full.
         DeviceError
             The engine is closed, or its audio side is not running.
         """
@@ -499,8 +471,7 @@ class JobCalls:
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
                 victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames
-                fade = ReleaseJob(victim.job_id, first, self._steal_fade_frames)
-                post_release(self._audio, fade)
+                post_release(self._audio, ReleaseJob(victim.job_id, first, self._steal_fade_frames))
             self._jobs.add(record)
         return self._job(record, resolved)
 
@@ -545,13 +516,7 @@ class JobCalls:
 
     def stop(self, job_id: str) -> bool:
         """Stop a job: it fades out over ``contact.release_s`` (or never starts); host,
-        any thread.
-
-        Returns
-        -------
-        bool
-            False if the job is unknown or already over (finished or stopped).
-        """
+        any thread. Returns False if the job is unknown or already over."""
         with self._lock:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
             if record is None or record.plan is None or record.state in ("finished", "stopped"):
