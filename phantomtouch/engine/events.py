@@ -72,13 +72,9 @@ def _voice_event(jobs: JobTable, event: VoiceEvent, logged: bool) -> dict[str, A
             job.state = "playing"
     elif isinstance(event, Released):
         job.end_frame = event.silent_from
-    elif isinstance(event, Ended):
-        job.end_frame = event.frame
-        if job.state != "stopped":
-            job.state = "finished"
-        jobs.retire(job)
-    else:  # cancelled
-        job.state = "stopped"
-        job.end_frame = job.requested_start_frame
+    else:  # ended, or cancelled before it started
+        ended = isinstance(event, Ended)
+        job.state = "finished" if ended and job.state != "stopped" else "stopped"
+        job.end_frame = event.frame if ended else job.requested_start_frame
         jobs.retire(job)
     return record

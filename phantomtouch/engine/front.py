@@ -135,7 +135,6 @@ class EngineFront(JobCalls, ContactCalls):
         self._listeners = Listeners()
         self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
-        self._closed = False
         self._log = StimulusLog(log_path) if log_path is not None else None
         links = Links(
             self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost
@@ -161,9 +160,7 @@ class EngineFront(JobCalls, ContactCalls):
         try:
             self._audio.close()
         finally:
-            with self._lock:
-                closed, self._closed = self._closed, True
-            if not closed and self._log is not None:
+            if self._log is not None:
                 self._log.close()
 
     @property
