@@ -251,8 +251,8 @@ class EngineFront(JobCalls, ContactCalls):
 
     def set_wearer_gains(self, gains: object) -> None:
         """Scale each output channel by ``gains`` from the next block on, ramped across
-        that block, across stops and engine restarts (host, any thread; where in the
-        output stage: ``docs/engine.md``).
+        that block and kept across stops and engine restarts (host, any thread; where in
+        the output stage: ``docs/engine.md``).
 
         Parameters
         ----------
