@@ -9,7 +9,7 @@ from __future__ import annotations
 import threading
 import uuid
 from collections import Counter, OrderedDict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, fields
 from typing import TYPE_CHECKING, Any, Literal, cast, get_args
 
@@ -36,6 +36,11 @@ HISTORY_JOBS = 1000
 """Jobs that are over and still answered by :meth:`Engine.job_state`."""
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
+_STEAL_ORDER: dict[str, Callable[[JobRecord], tuple[Any, ...]]] = {
+    "steal-oldest": lambda record: (record.first_frame, record.job_id),
+    "steal-quietest": lambda record: (record.amplitude, record.first_frame),
+}
+"""How a policy orders an owner's sounding jobs: the least is stolen first."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +134,11 @@ class JobRecord:
     def last_frame(self) -> int:
         """The frame from which it is silent (:attr:`JobState.end_frame`)."""
         return self.first_frame + self.frames if self.end_frame is None else self.end_frame
+
+    def job(self, summary: dict[str, Any]) -> Job:
+        """What :meth:`JobCalls.schedule` answers."""
+        first, start_at_s = self.requested_start_frame, self.requested_start_at_s
+        return Job(self.job_id, first, self.frames, self.duration_s, summary, start_at_s)
 
     def snapshot(self) -> JobState:
         values = {name.name: getattr(self, name.name) for name in fields(JobState)}
@@ -314,7 +324,7 @@ def _fair_victims(
     have nothing to steal (the others hold less)."""
     held = Counter(record.owner for record in sounding)
     held[owner] += 1
-    order = _age if policy == "steal-oldest" else _quiet
+    order = _STEAL_ORDER[policy]
     candidates: dict[str | None, list[JobRecord]] = {}
     for record in sorted(sounding, key=order, reverse=True):
         if record.first_frame <= start_frame and record.state != "stopped":
@@ -328,14 +338,6 @@ def _fair_victims(
         holder = min(ready, key=lambda o: order(candidates[o][-1]))
         held[holder] -= 1
         yield candidates[holder].pop()
-
-
-def _age(record: JobRecord) -> tuple[int, str]:
-    return record.first_frame, record.job_id
-
-
-def _quiet(record: JobRecord) -> tuple[float, int]:
-    return record.amplitude, record.first_frame
 
 
 def _fits(load: float, count: int, budget: float, voices: int) -> bool:
@@ -450,7 +452,7 @@ class JobCalls:
             if stop_count is not None and stop_count != self._stop_count:
                 record.state, record.end_frame = "stopped", first
                 self._jobs.retire(record)
-                return self._job(record, resolved)
+                return record.job(resolved.summary())
             record.cost = self._admission.cost(prerendered is not None)
             victims = self._jobs.admit(
                 first,
@@ -473,7 +475,7 @@ class JobCalls:
                 victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames
                 post_release(self._audio, ReleaseJob(victim.job_id, first, self._steal_fade_frames))
             self._jobs.add(record)
-        return self._job(record, resolved)
+        return record.job(resolved.summary())
 
     def _start(self, entry: HeldPlan, start: StartJob) -> None:
         """Hand the entry's plan over unless the audio side holds it, post the start, and
@@ -489,17 +491,6 @@ class JobCalls:
             if old.handed:
                 self.plans.release(old)
                 self._audio.post(DropPlan(old.handle))
-
-    @staticmethod
-    def _job(record: JobRecord, resolved: Plan) -> Job:
-        return Job(
-            job_id=record.job_id,
-            start_frame=record.requested_start_frame,
-            frames=resolved.frames,
-            duration_s=resolved.duration_s,
-            summary=resolved.summary(),
-            start_at_s=record.requested_start_at_s,
-        )
 
     async def schedule_async(self, pattern: TouchPattern | Plan, **options: Any) -> Job:
         """:meth:`schedule` for a coroutine, with its keywords (host, the event loop; it
