@@ -11,7 +11,7 @@ import uuid
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, fields
-from typing import TYPE_CHECKING, Any, Literal, cast, get_args
+from typing import TYPE_CHECKING, Any, Literal, get_args
 
 from phantomtouch.engine.admission import Admission
 from phantomtouch.engine.checks import check_ahead, check_frame, check_id
@@ -362,9 +362,10 @@ class JobCalls:
 
     @staticmethod
     def _check_policy(policy: object) -> Policy:
-        if policy not in POLICIES:
-            raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
-        return cast(Policy, policy)
+        for known in POLICIES:
+            if policy == known:
+                return known
+        raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
 
     @property
     def voice_capacity(self) -> int:
