@@ -55,7 +55,8 @@ class Job:
     summary : dict
         ``Plan.summary()``.
     start_at_s : float or None
-        Server time, s, at which ``start_frame`` leaves the sound card, fixed when scheduled.
+        Server time, s, at which ``start_frame`` leaves the sound card, fixed when scheduled
+        (:attr:`JobState.requested_start_at_s`; the clock's mapping moves as it tracks the card).
     """
 
     job_id: str
