@@ -1,13 +1,10 @@
-"""Admission by budget: how many pattern voices may sound, and begin, at once.
-
-:class:`Admission` turns the voice costs the audio side measured
-(:func:`~phantomtouch.engine.core.measure_costs`) into the front's limits; unmeasured
-costs (0) leave them at ``max_voices`` and unbounded (``docs/engine.md``).
-"""
+"""Admission by budget: how many pattern voices may sound, and begin, at once
+(``docs/engine.md``)."""
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 
 from phantomtouch.errors import EngineBusyError
 from phantomtouch.schema.device import DeviceProfile
@@ -15,22 +12,19 @@ from phantomtouch.schema.device import DeviceProfile
 RENDER_BUDGET = 0.5
 """Default share of a block's playing time that pattern voices may take to render."""
 START_SHARE = 0.2
-"""Share of a block's playing time that voices beginning in it may take (a voice's first
-block costs more than the next: it renders before the callback's spread refills)."""
+"""Share of a block's playing time that voices beginning in it may take."""
 CHURN_SHARE = 0.15
 """Share of the callback's time, on average, that the first frames of beginning voices
-may take: a flood of touches costs by how fast they begin, not only by how many sound at
-once. (Touches short enough to be rendered whole beforehand render nothing in the
-callback and are not counted: :mod:`phantomtouch.engine.prerender`.)"""
+may take."""
 CHURN_WINDOW_S = 0.1
 """Over how long a burst of beginnings may exceed ``CHURN_SHARE`` before it is refused."""
 MAX_START_DELAY_S = 0.02
-"""How far a job that asks to start as soon as possible may be moved to a later block
-when the next ones already begin as many voices as they may; beyond it, it is refused."""
+"""How far, s, a job asked for as soon as possible may move to a block with room."""
 
 
 class Admission:
-    """The voice, start and churn limits of one engine (the front's lock held).
+    """The voice, start and churn limits of one engine, from the measured costs (the
+    front's lock held); unmeasured costs (0) leave them at ``max_voices`` and unbounded.
 
     Parameters
     ----------
@@ -51,10 +45,8 @@ class Admission:
         self.block_frames = device.block_frames
         self.max_voices = max_voices
         self.render_budget = float(render_budget)
-        self.voice_cost = 0.0
-        self.start_cost = 0.0
-        self.prerendered_cost = 0.0
-        self._starts: dict[int, int] = {}  # block index: jobs that begin in it
+        self.voice_cost = self.start_cost = self.prerendered_cost = 0.0
+        self._starts: Counter[int] = Counter()  # block index: jobs that begin in it
         self._churn = 0.0  # first-chunk work admitted and not yet paid off, in blocks
         self._churn_block = 0.0
 
@@ -63,11 +55,12 @@ class Admission:
         self._starts.clear()
         self._churn = self._churn_block = 0.0
 
-    def set_costs(self, costs: tuple[float, float, float]) -> None:
-        """Set ``(voice_cost, start_cost, prerendered_cost)``, as
-        :func:`~phantomtouch.engine.core.measure_costs` gives them."""
-        voice, start, prerendered = (float(cost) for cost in costs)
-        self.voice_cost, self.start_cost, self.prerendered_cost = voice, start, prerendered
+    def take_costs(self, costs: tuple[float, float, float] | None) -> None:
+        """Take ``(voice_cost, start_cost, prerendered_cost)`` as
+        :func:`~phantomtouch.engine.core.measure_costs` gives them, unless None or a
+        voice's cost is known already."""
+        if costs is not None and self.voice_cost <= 0.0:
+            self.voice_cost, self.start_cost, self.prerendered_cost = map(float, costs)
 
     def cost(self, prerendered: bool) -> float:
         """What a job costs while it sounds: prerendered, or rendered in the callback."""
@@ -89,53 +82,42 @@ class Admission:
             return 1 << 30
         return max(1, math.floor(START_SHARE / self.start_cost))
 
-    def charge_churn(self, now_frames: int) -> None:
-        """Count a job's first frames (``start_cost``) against ``CHURN_SHARE``, or refuse it.
+    def begin(self, first: int, frame: int | None, now_frames: int) -> tuple[int, int | None]:
+        """Admit the beginning of a job that renders in the callback, or refuse it
+        (``EngineBusyError``); returns its first frame and the frame to send (None: as
+        soon as possible).
 
-        The account drains by ``CHURN_SHARE`` of a block per block played and may hold
-        ``CHURN_WINDOW_S`` worth of it.
+        Its first block (``start_cost``) is charged to an account that drains by
+        ``CHURN_SHARE`` of a block per block played and holds ``CHURN_WINDOW_S`` worth.
+        At most ``starts_per_block`` begin in a block: a job for a given ``frame`` keeps
+        it, one as soon as possible (``frame`` None) may move up to ``MAX_START_DELAY_S``.
         """
-        if self.start_cost <= 0.0:
-            return
-        now_block = now_frames / self.block_frames
-        paid = (now_block - self._churn_block) * CHURN_SHARE
-        self._churn, self._churn_block = max(0.0, self._churn - paid), now_block
-        cost = self.start_cost
-        window = CHURN_SHARE * CHURN_WINDOW_S * self.sample_rate_hz / self.block_frames
-        if self._churn + cost > max(window, cost):
-            raise EngineBusyError(
-                "touches begin faster than the engine can render their first frames "
-                f"(at most {CHURN_SHARE:.0%} of its time); retry later"
-            )
-        self._churn += cost
-
-    def place_start(self, first: int, frame: int | None, now_frames: int) -> tuple[int, int | None]:
-        """The block a job begins in, within the budget of starts per block.
-
-        Returns the job's first frame and the frame to send (None: as soon as possible).
-        A job for a given frame keeps it or is refused; one as soon as possible may move
-        up to ``MAX_START_DELAY_S`` later.
-        """
+        size = self.block_frames
+        if self.start_cost > 0.0:
+            now_block = now_frames / size
+            paid = (now_block - self._churn_block) * CHURN_SHARE
+            self._churn, self._churn_block = max(0.0, self._churn - paid), now_block
+            window = CHURN_SHARE * CHURN_WINDOW_S * self.sample_rate_hz / size
+            if self._churn + self.start_cost > max(window, self.start_cost):
+                raise EngineBusyError(
+                    "touches begin faster than the engine can render their first frames "
+                    f"(at most {CHURN_SHARE:.0%} of its time); retry later"
+                )
+            self._churn += self.start_cost
         per_block = self.starts_per_block
         if per_block >= 1 << 30:
             return first, frame
-        size = self.block_frames
         starts = self._starts
-        now_block = now_frames // size
-        for old in [b for b in starts if b < now_block]:
+        for old in [b for b in starts if b < now_frames // size]:
             del starts[old]
         block = first // size
-        if frame is not None:
-            if starts.get(block, 0) >= per_block:
-                raise EngineBusyError(
-                    f"{per_block} pattern voices already begin in the block of "
-                    f"start_frame={frame} (what one block can begin at once); choose "
-                    "another frame"
-                )
-            starts[block] = starts.get(block, 0) + 1
-            return first, frame
+        if frame is not None and starts[block] >= per_block:
+            raise EngineBusyError(
+                f"{per_block} pattern voices already begin in the block of start_frame={frame} "
+                "(what one block can begin at once); choose another frame"
+            )
         last = block + max(1, math.ceil(MAX_START_DELAY_S * self.sample_rate_hz / size))
-        while starts.get(block, 0) >= per_block:
+        while starts[block] >= per_block:
             block += 1
             if block > last:
                 raise EngineBusyError(
@@ -143,7 +125,7 @@ class Admission:
                     f"{MAX_START_DELAY_S * 1000:g} ms (what one block can begin at once); "
                     "retry later"
                 )
-        starts[block] = starts.get(block, 0) + 1
+        starts[block] += 1
         if block * size > first:
             return block * size, block * size
-        return first, None
+        return first, frame

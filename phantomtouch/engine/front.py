@@ -1,19 +1,9 @@
 """The engine's front: its API and every fact the host keeps, over one audio side.
 
-:class:`EngineFront` is the engine's API and owns every fact the host keeps, each in one
-place: the job table (what is playing, admitted by the voice budget, the owners' quotas
-and fair shares: :mod:`~phantomtouch.engine.jobs`), the contacts that are down
-(:mod:`~phantomtouch.engine.owners`), the stimulus log. It checks every argument,
-computes what the audio side needs, decides, and posts one typed message
-(:mod:`phantomtouch.engine.messages`) through its audio side's ``post``:
-:class:`~phantomtouch.engine.engine.LocalAudio` performs it at once in this process,
-:class:`~phantomtouch.engine.process.ChildAudio` writes it to the engine process. No call
-waits for the audio side; ``docs/engine.md`` tells the rest (admission by budget, the
-voice policy).
-
-Every public method runs in the host (the process that made the engine), on any thread
-the caller has (the web server's event loop, its workers, a script); the front's lock
-makes them safe to call at once.
+:class:`EngineFront` checks every argument, decides, and posts one typed message
+(:mod:`~phantomtouch.engine.messages`) to its audio side, never waiting for it. Every
+public method runs in the host, on any of the caller's threads (the front's lock makes
+them safe to call at once); ``docs/engine.md`` tells the rest.
 """
 
 from __future__ import annotations
@@ -23,13 +13,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
-from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self
 
 from phantomtouch.engine.admission import RENDER_BUDGET, Admission
 from phantomtouch.engine.checks import check_channel_gains, check_int, check_range, check_seconds
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.events import Reports
+from phantomtouch.engine.events import apply_events
 from phantomtouch.engine.jobs import JobCalls, JobTable, Policy
 from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.messages import Event, PlanReleased, SetWearerGains
@@ -47,29 +36,12 @@ if TYPE_CHECKING:
 
 MAX_QUEUE_CAPACITY = 1_000_000
 MAX_VOICES = 64
-"""Default of ``max_voices``: the most pattern voices that may sound at once, whatever
-the budget allows."""
+"""Default of ``max_voices``."""
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
-
-
 _CASTS: dict[str, Callable[[Any], Any]] = {"int": int, "float": float, "str": str, "bool": bool}
 """How a status field of each type is made from the audio side's figure (numpy scalars
-become Python numbers)."""
-
-
-def _same(value: object) -> object:
-    return value
-
-
-class _DeviceFigure:
-    """A figure of the front's device, read as an attribute of the front (its name)."""
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        self._name = name
-
-    def __get__(self, front: EngineFront, owner: type | None = None) -> int:
-        return int(getattr(front.device, self._name))
+become Python numbers; other fields are taken as they are)."""
 
 
 @dataclass(frozen=True)
@@ -87,7 +59,7 @@ class Links:
 
 
 class EngineFront(JobCalls, ContactCalls):
-    """The engine's API and the host's state, over one audio side (module docstring).
+    """The engine's API and the host's state, over one audio side.
 
     Parameters
     ----------
@@ -105,16 +77,14 @@ class EngineFront(JobCalls, ContactCalls):
     render_budget : float, 0 < render_budget <= 1
         Share of a block's playing time pattern voices may take (``RENDER_BUDGET``).
     voice_policy : {"refuse", "steal-oldest", "steal-quietest"}
-        What a job beyond the budget does (see the module docstring).
+        What a job beyond the budget does (:data:`~phantomtouch.engine.jobs.POLICIES`).
     prerender_max_s : float, 0 <= prerender_max_s <= 10
-        Plans at most this long are rendered whole when scheduled, so that the callback
-        only adds their samples (:mod:`phantomtouch.engine.prerender`); 0: every plan
-        renders in the callback.
+        Plans at most this long, s, are rendered whole when scheduled
+        (:mod:`phantomtouch.engine.prerender`); 0: every plan renders in the callback.
     voice_cost, start_cost : float or None, 1e-6 <= cost <= 100
         Render load of one sounding pattern voice, and what one adds to the block it
-        begins in, as shares of a block; None: measured by the audio side
-        (:func:`~phantomtouch.engine.core.measure_costs`). A ``voice_cost`` given alone
-        leaves the starts per block unbounded.
+        begins in, shares of a block; None: measured by the audio side (a ``voice_cost``
+        given alone leaves the starts per block unbounded).
     """
 
     def __init__(
@@ -140,14 +110,17 @@ class EngineFront(JobCalls, ContactCalls):
         check_range("prerender_max_s", prerender_max_s, 0.0, 10.0, "s")
         if contact is not None and not isinstance(contact, ContactSettings):
             raise ParameterError(f"contact={contact!r} must be ContactSettings or None")
-        costs = None
-        if voice_cost is not None:
-            check_range("voice_cost", voice_cost, 1e-6, 100.0, "")
-            costs = (voice_cost, 0.0, voice_cost)  # given, not measured
-        if start_cost is not None:
-            check_range("start_cost", start_cost, 1e-6, 100.0, "")
-            costs = (voice_cost or 0.0, start_cost, voice_cost or 0.0)
+        for name, cost in (("voice_cost", voice_cost), ("start_cost", start_cost)):
+            if cost is not None:
+                check_range(name, cost, 1e-6, 100.0, "")
+        costs = None  # measured by the audio side, unless given
+        if voice_cost is not None or start_cost is not None:
+            costs = (voice_cost or 0.0, start_cost or 0.0, voice_cost or 0.0)
         self._device = device
+        self.sample_rate_hz = device.sample_rate_hz
+        """The device's figures (host, any thread)."""
+        self.block_frames = device.block_frames
+        self.channels = device.channels
         self._settings = contact or ContactSettings()
         self._queue_capacity = queue_capacity
         self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
@@ -162,21 +135,16 @@ class EngineFront(JobCalls, ContactCalls):
         self._listeners = Listeners()
         self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
-        self._closed = False
-        log = StimulusLog(log_path) if log_path is not None else None
-        self._reports = Reports(self._jobs, self.time_at, log)
+        self._log = StimulusLog(log_path) if log_path is not None else None
         links = Links(
             self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost
         )
         self._audio: LocalAudio | ChildAudio = audio(links)
-        if self._audio.costs is not None:
-            self._admission.set_costs(self._audio.costs)
-
-    # -- life cycle and the sample clock (host) ------------------------------------------
+        self._admission.take_costs(self._audio.costs)
 
     def start(self) -> None:
         """Start playing (no-op when playing): measure a voice's cost if the audio side
-        must, start its sink and wait until it plays. Host, any thread.
+        must, start its sink and wait until it plays; host, any thread.
 
         Raises
         ------
@@ -184,9 +152,7 @@ class EngineFront(JobCalls, ContactCalls):
             The engine is closed, or the audio side cannot start.
         """
         self._audio.start()
-        costs = self._audio.costs
-        if costs is not None and self._admission.voice_cost <= 0.0:
-            self._admission.set_costs(costs)
+        self._admission.take_costs(self._audio.costs)
 
     def close(self) -> None:
         """Fade everything out, close the audio side, flush the log. Idempotent; host,
@@ -194,10 +160,8 @@ class EngineFront(JobCalls, ContactCalls):
         try:
             self._audio.close()
         finally:
-            with self._lock:
-                closed, self._closed = self._closed, True
-            if not closed:
-                self._reports.close()
+            if self._log is not None:
+                self._log.close()
 
     @property
     def now_frames(self) -> int:
@@ -214,9 +178,8 @@ class EngineFront(JobCalls, ContactCalls):
         return self._audio.time_at(check_int("frame", frame, -(1 << 62), 1 << 62))
 
     def _lost(self, state: str) -> None:
-        """The audio side is gone or stalled: nothing it played sounds any more (host,
-        the engine process's watchdog). Every contact is published as ``released`` with
-        reason ``engine <state>``."""
+        """The audio side is gone or stalled: every job and contact is over, each contact
+        published as ``released`` with reason ``engine <state>`` (host, the watchdog)."""
         with self._lock:
             self._jobs.drop_all(self.now_frames, fault=state)
             self.plans.unhand_all()
@@ -229,15 +192,10 @@ class EngineFront(JobCalls, ContactCalls):
         any thread)."""
         return time.monotonic()
 
-    # -- everything off, and monitoring -----------------------------------------------
-
     def stop_all(self) -> None:
-        """Everything off: every job and every contact of every client fades out (host,
-        any thread).
-
-        Never refused, never waits: jobs and touchdowns accepted before this call never
-        start, whatever state the audio side is in. Each owner's contacts are published
-        as ``released`` with reason ``stop``.
+        """Everything off: every job and contact fades out, each contact published as
+        ``released`` with reason ``stop`` (host, any thread). Never refused, never waits:
+        jobs and touchdowns accepted before it never start, whatever the audio side's state.
         """
         with self._lock:
             self._stop_count += 1
@@ -256,9 +214,9 @@ class EngineFront(JobCalls, ContactCalls):
             for event in events:
                 if isinstance(event, PlanReleased):
                     self.plans.released(event.handle)
-            self._reports.apply(events)
-            records = self._reports.take_backlog()
-        self._reports.flush(records)
+            records = apply_events(self._jobs, events, self.time_at if self._log else None)
+        if self._log is not None:
+            self._log.write(records)
 
     def status(self) -> EngineStatus:
         """A snapshot of clock, voices, levels and counters (host, any thread); never
@@ -286,18 +244,15 @@ class EngineFront(JobCalls, ContactCalls):
         )
         return EngineStatus(
             **{
-                field.name: _CASTS.get(str(field.type), _same)(values[field.name])
+                field.name: _CASTS.get(str(field.type), lambda value: value)(values[field.name])
                 for field in fields(EngineStatus)
             }
         )
 
-    # -- the wearer's gains at the output stage -----------------------------------------
-
     def set_wearer_gains(self, gains: object) -> None:
         """Scale each output channel by ``gains`` from the next block on, ramped across
-        that block; host, any thread. Applied after the device's calibration and before
-        the limiter and the ceiling; all ones: no wearer (the output is then bit for bit
-        what it is without this call). Kept across a stop and an engine restart.
+        that block and kept across stops and engine restarts (host, any thread; where in
+        the output stage: ``docs/engine.md``).
 
         Parameters
         ----------
@@ -316,25 +271,14 @@ class EngineFront(JobCalls, ContactCalls):
         with self._lock:
             self._audio.post(SetWearerGains(checked))
 
-    # -- the device's figures, and use as a context manager ---------------------------
-
     def __enter__(self) -> Self:
         self.start()
         return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc_info: object) -> None:
         self.close()
 
     @property
     def device(self) -> DeviceProfile:
-        """The device profile (host, any thread; so are the three figures of it below)."""
+        """The device profile (host, any thread)."""
         return self._device
-
-    sample_rate_hz = _DeviceFigure()
-    block_frames = _DeviceFigure()
-    channels = _DeviceFigure()

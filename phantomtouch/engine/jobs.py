@@ -1,9 +1,7 @@
-"""Jobs: the one table of what is playing on the host (``docs/engine.md``).
+"""Jobs: the one table of what is playing on the host, and the front's job calls.
 
-A job is ``scheduled`` until its first frame is played, ``playing`` until its last, then
-``finished`` — or ``stopped`` once a stop was asked for (it then fades out over the
-release). The table keeps every job that is not over and the most recent ones that are;
-it admits a job within the voice budget, its owner's quota and the fair shares.
+A job is ``scheduled``, ``playing``, then ``finished``, or ``stopped`` once a stop was
+asked for (it fades out over the release); admission and fair shares: ``docs/engine.md``.
 """
 
 from __future__ import annotations
@@ -11,9 +9,9 @@ from __future__ import annotations
 import threading
 import uuid
 from collections import Counter, OrderedDict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, fields
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, get_args
 
 from phantomtouch.engine.admission import Admission
 from phantomtouch.engine.checks import check_ahead, check_frame, check_id
@@ -31,12 +29,18 @@ if TYPE_CHECKING:
 
 JobStateName = Literal["scheduled", "playing", "finished", "stopped"]
 Policy = Literal["refuse", "steal-oldest", "steal-quietest"]
-POLICIES: tuple[Policy, ...] = ("refuse", "steal-oldest", "steal-quietest")
+POLICIES: tuple[Policy, ...] = get_args(Policy)
 """What happens to a job beyond the voice budget: refused (EngineBusyError), or the
-oldest or the quietest sounding job fades out to make room (as game audio engines steal
-voices)."""
+oldest or the quietest sounding job fades out to make room."""
 HISTORY_JOBS = 1000
 """Jobs that are over and still answered by :meth:`Engine.job_state`."""
+MAX_SCHEDULE_AHEAD_S = 3600.0
+"""Latest start a job may ask for, s after the current frame."""
+_STEAL_ORDER: dict[str, Callable[[JobRecord], tuple[Any, ...]]] = {
+    "steal-oldest": lambda record: (record.first_frame, record.job_id),
+    "steal-quietest": lambda record: (record.amplitude, record.first_frame),
+}
+"""How a policy orders an owner's sounding jobs: the least is stolen first."""
 
 
 @dataclass(frozen=True)
@@ -45,19 +49,14 @@ class Job:
 
     Attributes
     ----------
-    job_id : str
     start_frame : int
-        Frame of its first sample on the engine's sample clock. For a job scheduled as
-        soon as possible this is the block it is expected to start in;
-        :meth:`Engine.job_state` gives the frame it actually started at.
-    frames : int
-        Length of the pattern, frames.
-    duration_s : float
+        Frame of its first sample (for a job as soon as possible: the block it is expected
+        to start in; :meth:`Engine.job_state` gives the frame it started at).
     summary : dict
-        The plan's summary (``Plan.summary()``).
+        ``Plan.summary()``.
     start_at_s : float or None
-        Server time, s, at which ``start_frame`` leaves the sound card, fixed when the job
-        was scheduled (:attr:`JobState.requested_start_at_s` answers the same value).
+        Server time, s, at which ``start_frame`` leaves the sound card, fixed when scheduled
+        (:attr:`JobState.requested_start_at_s`; the clock's mapping moves as it tracks the card).
     """
 
     job_id: str
@@ -74,26 +73,16 @@ class JobState:
 
     Attributes
     ----------
-    job_id : str
-    state : {"scheduled", "playing", "finished", "stopped"}
-    owner : str or None
     start_frame : int
         Actual first frame once it started; the requested one before.
     end_frame : int
         Frame from which it is silent: ``start_frame + frames`` unless stopped, then the
         end of its release (``start_frame`` when stopped before it started).
-    frames : int
-    duration_s : float
-    requested_start_frame : int
     late : bool
         It started after its requested frame (its command arrived too late).
-    requested_start_at_s : float or None
-        Server time, s, of ``requested_start_frame`` as :attr:`Job.start_at_s` gave it
-        (the clock's mapping of frames to time moves a little as it tracks the card).
     reason : str or None
-        Why a ``stopped`` job stopped when no one asked it to: ``stolen`` (faded out to
-        make room for another), or the engine's fault (``engine gone before it played``,
-        ``engine stalled while it played``); None otherwise.
+        Why it stopped unasked: ``stolen`` (to make room for another), or ``engine gone``
+        or ``engine stalled``, ``before it played`` or ``while it played``; else None.
     """
 
     job_id: str
@@ -114,11 +103,8 @@ class JobState:
 
 @dataclass
 class JobRecord:
-    """The control side's mutable view of one job (under the engine's lock).
-
-    ``plan`` is dropped once the job is over; a ``stolen`` job was faded out to make
-    room for another and no longer counts against the voice budget.
-    """
+    """The front's mutable view of one job (under its lock); ``plan`` is dropped once the
+    job is over, and a ``stolen`` one no longer counts against the voice budget."""
 
     plan: Plan | None
     job_id: str
@@ -139,7 +125,6 @@ class JobRecord:
 
     @classmethod
     def planned(cls, plan: Plan, job_id: str, owner: str | None, first_frame: int) -> JobRecord:
-        """A new job of ``owner`` playing ``plan`` from ``first_frame``."""
         return cls(plan, job_id, owner, first_frame, plan.frames, plan.duration_s, plan.amplitude)
 
     @property
@@ -151,6 +136,11 @@ class JobRecord:
         """The frame from which it is silent (:attr:`JobState.end_frame`)."""
         return self.first_frame + self.frames if self.end_frame is None else self.end_frame
 
+    def job(self, summary: dict[str, Any]) -> Job:
+        """What :meth:`JobCalls.schedule` answers."""
+        first, start_at_s = self.requested_start_frame, self.requested_start_at_s
+        return Job(self.job_id, first, self.frames, self.duration_s, summary, start_at_s)
+
     def snapshot(self) -> JobState:
         values = {name.name: getattr(self, name.name) for name in fields(JobState)}
         values.update(start_frame=self.first_frame, end_frame=self.last_frame)
@@ -161,25 +151,17 @@ class JobRecord:
 
 @dataclass(frozen=True)
 class OwnerQuota:
-    """The most one owner's jobs that are not over may hold (:meth:`JobTable.check_quota`).
-
-    Attributes
-    ----------
-    voices : int, >= 1
-        Jobs scheduled or playing at once.
-    seconds : float, > 0
-        Seconds still to play, summed over those jobs: a long job counts by the time it
-        holds, not only as one.
-    """
+    """The most one owner's jobs that are not over may hold: ``voices`` (>= 1) jobs
+    scheduled or playing at once, ``seconds`` (> 0) still to play, summed over them."""
 
     voices: int
     seconds: float
 
 
 class QuotaRefused(PhantomTouchError):
-    """A job would take its owner past its ``quota`` (an :class:`OwnerQuota`), by its
-    ``limit`` (``voices`` or ``seconds``): the owner's ``jobs`` not over hold ``held_s``
-    s still to play, and the job would add ``ahead_s`` s."""
+    """A job would take its owner past its ``quota`` by its ``limit`` (``voices`` or
+    ``seconds``): the owner's ``jobs`` not over hold ``held_s`` s still to play, and the
+    job would add ``ahead_s`` s."""
 
     def __init__(self, quota: OwnerQuota, limit: str, jobs: int, held_s: float, ahead_s: float):
         super().__init__(f"past the owner's {quota} by {limit}: {jobs} jobs hold {held_s:g} s")
@@ -191,15 +173,8 @@ class QuotaRefused(PhantomTouchError):
 
 
 class JobTable:
-    """Jobs by id: those not over yet, and the last ``history`` that are.
-
-    A job that was asked to stop no longer counts as live, though the callback has yet to
-    silence it.
-
-    Parameters
-    ----------
-    history : int, >= 0
-    """
+    """Jobs by id: those scheduled or playing, those asked to stop (the callback has yet to
+    silence them), and the last ``history`` (>= 0) that are over."""
 
     def __init__(self, history: int = HISTORY_JOBS) -> None:
         self.history = history
@@ -211,17 +186,6 @@ class JobTable:
         """Jobs scheduled or playing (not stopping, not over)."""
         return len(self._live)
 
-    def _sounding(self, start_frame: int, end_frame: int) -> list[JobRecord]:
-        """Jobs not over and not stolen that sound within [start, end) frames."""
-        return [
-            record
-            for table in (self._live, self._stopping)
-            for record in table.values()
-            if not record.stolen
-            and record.first_frame < end_frame
-            and record.last_frame > start_frame
-        ]
-
     def check_quota(
         self,
         owner: str,
@@ -232,20 +196,10 @@ class JobTable:
         next_frame: int,
         rate_hz: int,
     ) -> None:
-        """Refuse a job of ``owner`` of ``frames`` from ``start_frame`` that would take it
-        past ``quota``.
-
-        Counted are the owner's jobs scheduled or playing (not stopped) that sound after
-        ``next_frame`` (the first frame of the next block, where a job asked for as soon
-        as possible begins), each by its frames from then to its end; the new job by its
-        frames from then (or from ``start_frame``, if later) to its end. ``rate_hz``
-        converts frames to seconds.
-
-        Raises
-        ------
-        QuotaRefused
-            Naming the bound (``voices`` or ``seconds``) and what the owner holds.
-        """
+        """Raise :class:`QuotaRefused` if a job of ``owner`` of ``frames`` from
+        ``start_frame`` would take it past ``quota``: the owner's jobs scheduled or playing
+        count by their frames after ``next_frame`` (the next block's first), the new one by
+        its frames from then or ``start_frame``, if later, at ``rate_hz``."""
         ends = [r.last_frame for r in self._live.values() if r.owner == owner]
         ahead = [end - next_frame for end in ends if end > next_frame]
         held_s = sum(ahead) / rate_hz
@@ -267,30 +221,24 @@ class JobTable:
         policy: Policy,
         owner: str | None = None,
     ) -> list[JobRecord]:
-        """Make room for a job of ``owner`` of ``frames`` from ``start_frame`` costing
-        ``cost``, or refuse.
-
-        Refused when ``jobs`` are scheduled or playing already. When, together with the
-        jobs sounding at the same time, it would exceed the render ``budget`` (the sum of
-        their costs, shares of a block) or ``voices`` voices, ``policy`` decides:
-        ``refuse``, or the jobs to steal, as few as make room, are returned; the caller
-        fades them out. Each is taken from whoever holds the most voices then (max-min
-        fairness, the new job counted for its owner; on a tie the new job's owner first),
-        and among that owner's jobs sounding at the start, the oldest started or the
-        quietest. An owner holding fewer voices than another is never stolen from: if
-        the largest holder has nothing to steal at the start, the job is refused.
-
-        Raises
-        ------
-        EngineBusyError
-            Naming the limit (``queue_capacity``, or the voice budget) and the count.
+        """The jobs to steal (the caller fades them out) to make room for a job of
+        ``owner`` of ``frames`` from ``start_frame`` costing ``cost``, or refuse it with
+        ``EngineBusyError``: when ``jobs`` are scheduled or playing, or beyond the
+        ``budget`` (the costs of the jobs sounding with it, shares of a block) or
+        ``voices`` unless ``policy`` steals as few as make room, fairly (``docs/engine.md``).
         """
         if len(self._live) >= jobs:
             raise EngineBusyError(
                 f"the engine is full: {len(self._live)} jobs are scheduled or playing; "
                 f"at most queue_capacity={jobs}"
             )
-        sounding = self._sounding(start_frame, start_frame + frames)
+        sounding = [
+            record
+            for record in [*self._live.values(), *self._stopping.values()]
+            if not record.stolen
+            and record.first_frame < start_frame + frames
+            and record.last_frame > start_frame
+        ]
         load = cost + sum(record.cost for record in sounding)
         count = len(sounding) + 1
         if _fits(load, count, budget, voices):
@@ -371,49 +319,31 @@ def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
 def _fair_victims(
     sounding: list[JobRecord], start_frame: int, owner: str | None, policy: Policy
 ) -> Iterator[JobRecord]:
-    """Jobs to steal, in turn, each from the largest holder of the voices left (see
-    :meth:`JobTable.admit`); ends when the largest holder has nothing to steal."""
+    """Jobs to steal, in turn, each from the largest holder of the voices left (the new
+    job counted for ``owner``, who comes first on a tie) among its jobs sounding at
+    ``start_frame``, the oldest started or the quietest; ends when the largest holders
+    have nothing to steal (the others hold less)."""
     held = Counter(record.owner for record in sounding)
     held[owner] += 1
+    order = _STEAL_ORDER[policy]
     candidates: dict[str | None, list[JobRecord]] = {}
-    for record in sounding:
+    for record in sorted(sounding, key=order, reverse=True):
         if record.first_frame <= start_frame and record.state != "stopped":
             candidates.setdefault(record.owner, []).append(record)
-    for group in candidates.values():
-        group.sort(key=_age if policy == "steal-oldest" else _quiet, reverse=True)
     while True:
         most = max(held.values())
-        largest = [o for o, n in held.items() if n == most]
-        holder = owner
-        if owner not in largest:
-            ready = [o for o in largest if candidates.get(o)]
-            if not ready:
-                return  # the largest holders have nothing to steal; the others hold less
-            order = _age if policy == "steal-oldest" else _quiet
-            holder = min(ready, key=lambda o: order(candidates[o][-1]))
-        taken = candidates.get(holder)
-        if not taken:
+        largest = [owner] if held[owner] == most else [o for o, n in held.items() if n == most]
+        ready = [o for o in largest if candidates.get(o)]
+        if not ready:
             return
-        record = taken.pop()
+        holder = min(ready, key=lambda o: order(candidates[o][-1]))
         held[holder] -= 1
-        yield record
-
-
-def _age(record: JobRecord) -> tuple[int, str]:
-    return record.first_frame, record.job_id
-
-
-def _quiet(record: JobRecord) -> tuple[float, int]:
-    return record.amplitude, record.first_frame
+        yield candidates[holder].pop()
 
 
 def _fits(load: float, count: int, budget: float, voices: int) -> bool:
     """Within ``voices``, and within the ``budget`` (one voice alone always fits it)."""
     return count <= voices and (count <= 1 or load <= budget * (1.0 + 1e-9))
-
-
-MAX_SCHEDULE_AHEAD_S = 3600.0
-"""Latest start a job may ask for, s after the current frame."""
 
 
 class JobCalls:
@@ -440,12 +370,12 @@ class JobCalls:
 
     @property
     def voice_capacity(self) -> int:
-        """Pattern voices that may sound at once (see :class:`Admission`); host, any thread."""
+        """Pattern voices that may sound at once (:class:`Admission`; host, any thread)."""
         return self._admission.voice_capacity
 
     @property
     def starts_per_block(self) -> int:
-        """Pattern voices that may begin in one block (see :class:`Admission`); host, any
+        """Pattern voices that may begin in one block (:class:`Admission`); host, any
         thread."""
         return self._admission.starts_per_block
 
@@ -471,20 +401,18 @@ class JobCalls:
         pattern : TouchPattern or Plan
             A plan must be made for this engine's device.
         start_frame : int or None
-            Frame of the pattern's first sample, at most ``MAX_SCHEDULE_AHEAD_S`` ahead;
-            a frame that has passed when the command arrives starts at once (counted in
-            ``late_commands``). None: as soon as possible, at the next block.
+            Frame of its first sample, at most ``MAX_SCHEDULE_AHEAD_S`` ahead; one passed
+            when the command arrives starts at once (``late_commands``). None: at the next
+            block.
         owner : str or None
-            The client it belongs to (1-64 characters), for the log, job states, fair
-            shares and ``quota``.
+            The client it belongs to (1-64 characters), for the log, fair shares, ``quota``.
         policy : {"refuse", "steal-oldest", "steal-quietest"} or None
             Beyond the voice budget (None: the engine's ``voice_policy``).
         stop_count : int or None
             :attr:`stop_count` when the request arrived: if ``stop_all`` was called
             since, the job is void (accepted as ``stopped``; it never plays).
         quota : OwnerQuota or None
-            The most ``owner``'s jobs not over may hold, this one included
-            (:meth:`~phantomtouch.engine.jobs.JobTable.check_quota`); None: no bound.
+            The most ``owner``'s jobs not over may hold, this one included; None: no bound.
 
         Returns
         -------
@@ -493,13 +421,11 @@ class JobCalls:
         Raises
         ------
         ParameterError
-            The pattern cannot be planned, or an argument is out of range (a ``quota``
-            without an ``owner``).
+            The pattern cannot be planned, or an argument is out of range.
         QuotaRefused
             The job would take ``owner`` past ``quota``.
         EngineBusyError
-            ``queue_capacity`` jobs are scheduled or playing, or the voice budget is
-            full and the policy refuses (or nothing can be stolen).
+            ``queue_capacity`` jobs are scheduled or playing, or the voice budget is full.
         DeviceError
             The engine is closed, or its audio side is not running.
         """
@@ -529,7 +455,7 @@ class JobCalls:
             if stop_count is not None and stop_count != self._stop_count:
                 record.state, record.end_frame = "stopped", first
                 self._jobs.retire(record)
-                return self._job(record, resolved)
+                return record.job(resolved.summary())
             record.cost = self._admission.cost(prerendered is not None)
             victims = self._jobs.admit(
                 first,
@@ -541,10 +467,8 @@ class JobCalls:
                 policy=chosen,
                 owner=owner,
             )
-            if prerendered is None:  # nothing to render in the callback
-                now_frames = self._audio.now_frames
-                self._admission.charge_churn(now_frames)
-                first, frame = self._admission.place_start(first, frame, now_frames)
+            if prerendered is None:  # a prerendered one renders nothing in the callback
+                first, frame = self._admission.begin(first, frame, self._audio.now_frames)
                 record.requested_start_frame = first
             record.requested_start_at_s = self._audio.time_at(first)  # one value for all
             self._audio.provide(carrier)
@@ -552,10 +476,9 @@ class JobCalls:
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
                 victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames
-                fade = ReleaseJob(victim.job_id, first, self._steal_fade_frames)
-                post_release(self._audio, fade)
+                post_release(self._audio, ReleaseJob(victim.job_id, first, self._steal_fade_frames))
             self._jobs.add(record)
-        return self._job(record, resolved)
+        return record.job(resolved.summary())
 
     def _start(self, entry: HeldPlan, start: StartJob) -> None:
         """Hand the entry's plan over unless the audio side holds it, post the start, and
@@ -572,17 +495,6 @@ class JobCalls:
                 self.plans.release(old)
                 self._audio.post(DropPlan(old.handle))
 
-    @staticmethod
-    def _job(record: JobRecord, resolved: Plan) -> Job:
-        return Job(
-            job_id=record.job_id,
-            start_frame=record.requested_start_frame,
-            frames=resolved.frames,
-            duration_s=resolved.duration_s,
-            summary=resolved.summary(),
-            start_at_s=record.requested_start_at_s,
-        )
-
     async def schedule_async(self, pattern: TouchPattern | Plan, **options: Any) -> Job:
         """:meth:`schedule` for a coroutine, with its keywords (host, the event loop; it
         never waits for the audio side)."""
@@ -598,13 +510,7 @@ class JobCalls:
 
     def stop(self, job_id: str) -> bool:
         """Stop a job: it fades out over ``contact.release_s`` (or never starts); host,
-        any thread.
-
-        Returns
-        -------
-        bool
-            False if the job is unknown or already over (finished or stopped).
-        """
+        any thread. Returns False if the job is unknown or already over."""
         with self._lock:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
             if record is None or record.plan is None or record.state in ("finished", "stopped"):
