@@ -24,6 +24,7 @@ from phantomtouch.engine.core import Core
 from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, voice_costs
 from phantomtouch.engine.link import Inbox, ReportBox
 from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
+from phantomtouch.engine.messages import prepare as prepare_message
 from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.plan_memory import HeldArrays
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
@@ -63,7 +64,6 @@ class Intake:
         self.leave = threading.Event()
         device = self.core.device
         self.budget_s = INTAKE_SHARE * (device.block_frames / device.sample_rate_hz)
-        self.figures: dict[str, Any] = self.core.figures()
 
     def run(self) -> None:
         """At the start of each block (real time; see the module docstring): the host's
@@ -94,29 +94,13 @@ class Intake:
         state.loops.collect()
         events = core.events()
         events.extend(PlanReleased(handle) for handle in state.arrays.collect())
-        if state.reports:
-            events.extend(state.reports)
-            state.reports.clear()
+        if taken := len(state.reports):  # the inbox thread appends too: take what is there
+            events.extend(state.reports[:taken])
+            del state.reports[:taken]
         if events:
             self.report_box.put(events)
-        figures = self.figures  # the render loads are in shared memory: the host's to sum up
-        mixer = scheduler.mixer
-        figures.update(
-            now_frames=scheduler.frames,
-            active_voices=scheduler.active_voices,
-            underruns=core.sink.underruns,
-            late_commands=scheduler.late_commands,
-            muted_blocks=mixer.muted_blocks,
-            limited_blocks=mixer.limited_blocks,
-            peak=mixer.peak,
-            queue_depth=core.queue.depth,
-            levels=mixer.levels,
-            callback_errors=scheduler.callback_errors,
-            output_latency_s=core.clock.output_latency_s,
-            dropped_reports=self.report_box.dropped,
-            refused_commands=state.refused,
-            running=core.running,
-        )
+        figures = core.figures(loads=False)  # the render loads: the host's to sum up
+        figures.update(dropped_reports=self.report_box.dropped, refused_commands=state.refused)
         self.status.write(figures)
 
     def check_mark(self) -> None:
@@ -126,6 +110,17 @@ class Intake:
             self.handled_mark = mark
             self.core.stop_all()
             self.slots.unbind_all()
+
+    def prepare(self, framed: tuple[int, Any]) -> tuple[int, Any] | None:
+        """Prepare one ``(seq, message)`` of the host (non real time: the inbox thread;
+        :func:`~phantomtouch.engine.messages.prepare`); None: nothing left to perform."""
+        try:
+            staged = prepare_message(self.state, framed[1])
+        except Exception as exc:  # a bug, counted as in `apply`
+            self.core.scheduler.callback_errors += 1
+            self.core.scheduler.last_error = exc
+            return None
+        return None if staged is None else (framed[0], staged)
 
     def apply(self, framed: tuple[int, Any]) -> None:
         """Perform one ``(seq, message)`` of the host (real time); one sent before the
@@ -257,7 +252,7 @@ def serve(
         core.close(fade=False)
         return
     sys.setswitchinterval(0.001)
-    intake.inbox.start()
+    intake.inbox.start(intake.prepare)
     core.start()
     intake.leave.wait()
     core.close(fade=True)  # a capture sink writes its WAV as it closes

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from phantomtouch.engine.ahead import RenderAhead
 from phantomtouch.engine.board import ContactBoard
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue
@@ -86,6 +87,8 @@ class Core:
             render_loads=render_loads,
         )
         self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
+        block_s = device.block_frames / device.sample_rate_hz
+        self.ahead = RenderAhead(self.scheduler.pool, poll_s=4 * block_s)
         self.running = False
         self._jobs: dict[str, PatternVoice] = {}
 
@@ -93,6 +96,7 @@ class Core:
         """Anchor the clock and start the sink (the callback runs from now on); non real
         time."""
         self.clock.restart(self.scheduler.frames, time.monotonic())
+        self.ahead.start()
         self.sink.start(self.scheduler.render)
         self.clock.output_latency_s = max(0.0, float(self.sink.output_latency_s))
         self.running = True
@@ -109,6 +113,7 @@ class Core:
                 time.sleep(block_s)
             time.sleep(2 * block_s)  # let the last (silent) block reach the output
         self.sink.close()
+        self.ahead.stop()
 
     def widen(self, plan: Plan) -> Plan:
         """A plan sent without device and geometry (``slim``), given this core's."""
@@ -116,16 +121,12 @@ class Core:
             return plan
         return dataclasses.replace(plan, device=self.device, geometry=self.scheduler.geometry)
 
-    def start_job(
-        self,
-        job_id: str,
-        plan: Plan,
-        owner: str | None,
-        frame: int | None,
-        prerendered: Prerendered | None = None,
-    ) -> None:
-        """Play ``plan`` from ``frame`` (None: the next block); from ``prerendered``, its samples
-        rendered beforehand, when given. Real time.
+    def job_voice(
+        self, job_id: str, plan: Plan, owner: str | None, prerendered: Prerendered | None = None
+    ) -> PatternVoice:
+        """A job's voice, playing ``plan`` or ``prerendered``, its samples rendered
+        beforehand; its ring filled and kept filled (:class:`RenderAhead`). Non real time:
+        whoever hands the job to the audio side (the engine process's inbox thread).
 
         Raises
         ------
@@ -133,8 +134,19 @@ class Core:
             The plan's noise loop was not handed to this process (engine process).
         """
         voice = PatternVoice(plan, job_id, owner, self.board.release_frames, prerendered)
-        self.queue.push_start(voice, self._first_frame(frame), frame is None)
-        self._jobs[job_id] = voice
+        self.ahead.add(voice)
+        return voice
+
+    def start_job(self, voice: PatternVoice, frame: int | None) -> None:
+        """Play a voice of :meth:`job_voice` from ``frame`` (None: the next block); real
+        time. A full queue raises :class:`~phantomtouch.errors.EngineBusyError` and the
+        voice hands its ring back."""
+        try:
+            self.queue.push_start(voice, self._first_frame(frame), frame is None)
+        except BaseException:
+            voice.finish(self.scheduler.pool)
+            raise
+        self._jobs[voice.job_id] = voice
 
     def release_job(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
         """Fade a job out from ``frame`` over ``fade_frames`` (None: ``release_s``)."""
@@ -182,12 +194,12 @@ class Core:
                 out.append((Ended if kind == "end" else Cancelled)(voice.kind, voice.key, frame))
         return out
 
-    def figures(self) -> dict[str, Any]:
-        """Clock, voices, levels and counters (any thread, real time or not; a
-        consistent-enough look)."""
+    def figures(self, loads: bool = True) -> dict[str, Any]:
+        """Clock, voices, levels and counters, with the render loads' p99 and largest when
+        ``loads`` (any thread, real time or not; a consistent-enough look)."""
         scheduler = self.scheduler
         mixer = scheduler.mixer
-        load_p99, load_max = load_percentiles(scheduler.render_loads)
+        load_p99, load_max = load_percentiles(scheduler.render_loads) if loads else (0.0, 0.0)
         return {
             "now_frames": scheduler.frames,
             "active_voices": scheduler.active_voices,
@@ -203,6 +215,7 @@ class Core:
             "render_load_p99": load_p99,
             "render_load_max": load_max,
             "callback_errors": scheduler.callback_errors,
+            "inline_renders": scheduler.work.inline_renders,
         }
 
 
@@ -249,6 +262,7 @@ def measure_costs(
             clock=SampleClock(device.sample_rate_hz),
         )
         core.scheduler.clocked = False
+        core.ahead.start()
         render = core.scheduler.render
 
         def block_s(blocks: int) -> float:
@@ -261,13 +275,13 @@ def measure_costs(
         block_s(8)
         idle_s = block_s(1)
         for k in range(voices):
-            core.start_job(f"start-{k}", plan, None, None)
+            core.start_job(core.job_voice(f"start-{k}", plan, None), None)
         starting.append((block_s(1) - idle_s) / voices / period_s)
         core.stop_all()
         block_s(64)
         silent_s = block_s(timed)
         for k in range(voices):
-            core.start_job(f"cost-{k}", plan, None, None)
+            core.start_job(core.job_voice(f"cost-{k}", plan, None), None)
         block_s(warm)
         sounding.append((block_s(timed) - silent_s) / voices / period_s)
         core.stop_all()
@@ -275,11 +289,11 @@ def measure_costs(
         frames = 80 * device.block_frames  # the prerendered outlasts the blocks timed
         samples = Prerendered(np.zeros((frames, device.channels), dtype=np.float32))
         for k in range(voices):
-            core.start_job(
-                f"pre-{k}", dataclasses.replace(plan, frames=frames), None, None, samples
-            )
+            pre = dataclasses.replace(plan, frames=frames)
+            core.start_job(core.job_voice(f"pre-{k}", pre, None, samples), None)
         block_s(8)
         prerendered_voices.append((block_s(64) - silent_s) / voices / period_s)
+        core.ahead.stop()
     return (
         max(1e-4, float(np.median(sounding))),
         max(1e-4, float(np.median(starting))),

@@ -1,12 +1,7 @@
 """The pipes between the host and the engine process, used only through their
-``multiprocessing`` ``Connection``s (on Windows a ``Connection``'s ``fileno()`` is a pipe
-handle, not a file descriptor). Each side has a thread of its own that sends or receives,
-so neither side waits for the other (``docs/engine.md``, Threads and Transports):
-
-- the host: :class:`Outbox` sends its messages;
-- the engine process: :class:`Inbox` receives the host's messages and :class:`ReportBox`
-  sends the audio callback's reports, each through a bounded FIFO the callback takes from
-  or puts into without a system call, a lock it waits for, or a pickle.
+``multiprocessing`` ``Connection``s, each side sending or receiving from a thread of its
+own (:class:`Outbox` in the host; :class:`Inbox`, :class:`ReportBox` in the engine
+process), so neither waits for the other (``docs/engine.md``, Threads and Transports).
 """
 
 from __future__ import annotations
@@ -15,12 +10,13 @@ import pickle
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 
 class Inbox:
-    """The host's messages in the engine process: a thread receives and unpickles them
-    into a FIFO the audio callback takes them from.
+    """The host's messages in the engine process: a thread receives, unpickles and
+    prepares them into a FIFO the audio callback takes them from.
 
     Parameters
     ----------
@@ -41,20 +37,27 @@ class Inbox:
         self._poll_s = poll_s
         self.closed = False
         """Set once the host's end is closed (or the pipe broke): nothing more comes."""
+        self._prepare: Callable[[Any], Any] | None = None
         self._thread = threading.Thread(target=self._run, name="phantomtouch-inbox", daemon=True)
 
-    def start(self) -> None:
-        """Start receiving (non real time, the engine process's main thread)."""
+    def start(self, prepare: Callable[[Any], Any]) -> None:
+        """Start receiving; each message is passed through ``prepare`` in the inbox thread
+        and what it returns is queued, unless None (non real time, the engine process's
+        main thread)."""
+        self._prepare = prepare
         self._thread.start()
 
     def _run(self) -> None:
         """The inbox thread (non real time): receive until the host's end closes."""
-        messages = self.messages
+        messages, prepare = self.messages, self._prepare
+        assert prepare is not None
         try:
             while True:
                 while len(messages) >= self._capacity:
                     time.sleep(self._poll_s)
-                messages.append(self.connection.recv())
+                prepared = prepare(self.connection.recv())
+                if prepared is not None:
+                    messages.append(prepared)
         except (EOFError, OSError):
             pass
         finally:

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from phantomtouch.engine.noise import HeldLoops
     from phantomtouch.engine.plan_memory import HeldArrays
     from phantomtouch.engine.shared import MoveSlots
+    from phantomtouch.engine.voices import PatternVoice
 
 # -- commands, front -> audio side, each with its applier ------------------------------
 
@@ -82,21 +83,40 @@ class StartJob:
     owner: str | None
     frame: int | None
 
-    def apply(self, state: AudioState, void: bool) -> None:
-        """Real time. Start a voice of a plan held; a void or refused start is reported
-        cancelled."""
-        core = state.core
+    def prepare(self, state: AudioState) -> StartVoice:
+        """Non real time (see :func:`prepare`): build the voice of a plan held, or refuse it."""
         held = state.plans.get(self.plan_key)
-        if not void:
+        try:
             if held is None:
-                state.refuse("plan", self.job_id, f"plan {self.plan_key} was not handed over")
-            else:
-                try:
-                    core.start_job(self.job_id, held[0], self.owner, self.frame, held[1])
-                    return
-                except LookupError as exc:  # a noise loop not handed over
-                    state.refuse("noise loop", self.job_id, str(exc))
-        state.reports.append(Cancelled("job", self.job_id, core.scheduler.frames))
+                raise LookupError(f"plan {self.plan_key} was not handed over")
+            return StartVoice(self, state.core.job_voice(self.job_id, held[0], self.owner, held[1]))
+        except LookupError as exc:  # a plan or a noise loop not handed over
+            state.refuse("plan" if held is None else "noise loop", self.job_id, str(exc))
+            return StartVoice(self, None)
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Non real time: the caller's thread (the in-process engine; the engine process
+        before its sink starts) prepares and starts it at once."""
+        self.prepare(state).apply(state, void)
+
+
+@dataclass(frozen=True, slots=True)
+class StartVoice:
+    """A :class:`StartJob` prepared by :func:`prepare`: its voice built (None: refused).
+    Made by the audio side, never sent by the host."""
+
+    start: StartJob
+    voice: PatternVoice | None
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time. Start the voice; a void or refused start is reported cancelled."""
+        core, voice = state.core, self.voice
+        if voice is not None and not void:
+            core.start_job(voice, self.start.frame)
+            return
+        if voice is not None:
+            voice.finish(core.scheduler.pool)
+        state.reports.append(Cancelled("job", self.start.job_id, core.scheduler.frames))
 
 
 @dataclass(frozen=True, slots=True)
@@ -274,6 +294,7 @@ Command = (
     HoldPlan
     | DropPlan
     | StartJob
+    | StartVoice
     | ReleaseJob
     | ContactDown
     | ContactMove
@@ -388,6 +409,17 @@ APPLIERS: dict[type, Callable[[Any, AudioState, bool], None]] = {
     kind: kind.apply for kind in get_args(Command)
 }
 """Each command's applier (its ``apply``), by the command's class."""
+
+
+def prepare(state: AudioState, message: Command) -> Command | None:
+    """Do the heavy part of a command before the callback sees it, in the order the commands
+    came (non real time: the engine process's inbox thread): map what a ``HoldPlan`` or
+    ``HoldNoise`` names, build a ``StartJob``'s voice. Returns what is left to
+    :func:`perform`, None for nothing."""
+    if isinstance(message, HoldPlan | HoldNoise):
+        perform(state, message)
+        return None
+    return message.prepare(state) if isinstance(message, StartJob) else message
 
 
 def perform(state: AudioState, message: Command, *, void: bool = False) -> None:

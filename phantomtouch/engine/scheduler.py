@@ -30,12 +30,9 @@ RENDER_TIMES = 4096
 class Scheduler:
     """Applies commands and renders blocks; owned by the audio callback.
 
-    :meth:`render` fills the sink's buffer entirely and never waits on another thread: it
-    pops commands without the queue's lock (in the engine process the callback pushes
-    them too, taking that lock, which no other thread takes there), applies each at the
-    sample its frame asks for (one whose frame has passed at once, counted in
-    ``late_commands``), renders the voices and runs the mixer. It allocates only small
-    per-block temporaries, logs nothing and reports through counters and :attr:`events`.
+    :meth:`render` fills the sink's buffer, pops commands without the queue's lock and
+    applies each at the sample its frame asks for (a late one at once, counted in
+    ``late_commands``); it logs nothing and reports through counters and :attr:`events`.
 
     Parameters
     ----------
@@ -46,7 +43,8 @@ class Scheduler:
     rings : int, >= 0
         Render-ahead rings for pattern voices (see :mod:`phantomtouch.engine.voices`).
     chunk_frames : int, >= 0
-        Frames a pattern voice renders ahead at a time; 0 renders every block directly.
+        Frames a pattern voice renders ahead at a time (the render-ahead thread's,
+        :mod:`phantomtouch.engine.ahead`); 0 renders every block directly.
     clocked : bool
         Blocks are pulled at the pace of a clock (a real-time sink). Otherwise the clock
         is left at its anchor: frames map to time as if played from the start.
@@ -108,7 +106,6 @@ class Scheduler:
         self._voices: list[Voice] = []
         self._waiting: list[tuple[int, int, Voice]] = []
         self._stop_seen = 0
-        self._refill_credit = 0.0
         if render_loads is None:
             render_loads = np.empty(RENDER_TIMES)
         elif render_loads.shape != (RENDER_TIMES,) or render_loads.dtype != np.float64:
@@ -170,34 +167,12 @@ class Scheduler:
 
     def _render_voices(self, out: np.ndarray, start: int) -> None:
         keep: list[Voice] = []
-        candidates: list[tuple[int, int, Voice]] = []
-        with_ring = 0
         for voice in self._voices:
             if voice.render(out, start, self.work):
                 self._end(voice)
-                continue
-            keep.append(voice)
-            if voice.has_ring:
-                with_ring += 1
-                ahead = voice.ahead_frames
-                if ahead is not None:
-                    candidates.append((ahead, len(candidates), voice))
+            else:
+                keep.append(voice)
         self._voices = keep
-        if not candidates:
-            self._refill_credit = 0.0
-            return
-        # Refill as many chunks as the voices play per block on average, the emptiest
-        # first: the renderer's cost spreads evenly over the blocks (one refill per block
-        # for 16 voices at 256 frames). More would put two refills into some blocks and
-        # raise the worst case; a voice that runs dry all the same refills at once.
-        # Unused credit is capped, so it never comes due as a burst of refills.
-        rate = with_ring * self.block_frames / self.pool.chunk_frames
-        self._refill_credit = min(self._refill_credit + rate, rate + 1.0)
-        due = min(len(candidates), int(self._refill_credit))
-        if due:
-            self._refill_credit -= due
-            for _, _, voice in sorted(candidates)[:due]:
-                voice.refill()
 
     def _apply_commands(self, start: int, end: int) -> None:
         queue = self.queue
@@ -246,7 +221,7 @@ class Scheduler:
     def _cancel(self, voice: Voice, frame: int) -> None:
         """Void a voice that never started (its start command or its wait)."""
         if voice.state == WAITING:
-            voice.state = DONE
+            voice.finish(self.pool)  # a ring it was given goes back
             self.queue.retire()
             self.events.append(("cancel", voice, frame))
 

@@ -275,6 +275,7 @@ STATUS_FIELDS = (
     "callback_errors",
     "dropped_reports",
     "refused_commands",
+    "inline_renders",
 )
 
 

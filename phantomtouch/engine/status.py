@@ -43,6 +43,9 @@ class EngineStatus:
         Commands refused for data (a plan, a noise loop) not handed over: a host bug.
     output_latency_s : float
         Time from a block's computation to its first frame leaving the sound card, s.
+    inline_renders : int
+        Times the audio callback rendered into a voice's ring that ran dry (the
+        render-ahead thread fell behind).
     """
 
     backend: str
@@ -74,6 +77,7 @@ class EngineStatus:
     callback_errors: int
     restarts: int
     refused_commands: int = 0
+    inline_renders: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

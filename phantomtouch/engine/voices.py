@@ -1,12 +1,12 @@
 """Voices: what the audio callback renders, one block at a time (a job's here, a
 contact's in :mod:`phantomtouch.engine.contacts`; how they render ahead and fade:
-``docs/engine.md``). A voice is made where its message is performed; every method runs
-in real time, inside the audio callback, except the constructors of :class:`RingPool`
-and :class:`Workspace` (start-up).
+``docs/engine.md``). Every method runs in real time, inside the audio callback, unless
+its docstring names another thread; constructors are non real time.
 """
 
 from __future__ import annotations
 
+import threading
 from typing import Any, ClassVar
 
 import numpy as np
@@ -17,8 +17,8 @@ from phantomtouch.renderer.plan import Plan
 
 WAITING, PLAYING, DONE = "waiting", "playing", "done"
 FIRST_FRAMES = 2048
-"""Frames a voice with a ring renders when it runs dry (it just began), at most a chunk:
-less than a chunk, so that beginning costs little; the scheduler's refills follow."""
+"""Frames the callback renders into a ring that runs dry, at most a chunk (a voice whose
+ring nobody fills ahead: :mod:`phantomtouch.engine.ahead`)."""
 
 
 class Workspace:
@@ -37,6 +37,8 @@ class Workspace:
     scratch : ndarray, shape (block_frames, channels), float32
     late_commands : int
         Commands applied after their frame had passed (counted by voices and scheduler).
+    inline_renders : int
+        Times a voice's ring ran dry and the callback rendered into it.
     """
 
     def __init__(self, block_frames: int, channels: int) -> None:
@@ -49,6 +51,7 @@ class Workspace:
         self.env = np.empty(block_frames, dtype=np.float32)
         self.scratch = np.empty((block_frames, channels), dtype=np.float32)
         self.late_commands = 0
+        self.inline_renders = 0
 
 
 class Voice:
@@ -69,18 +72,11 @@ class Voice:
     release_frame : int or None
         Frame at which its release begins, once asked for.
     release_frames : int, >= 1
-    has_ring : bool
-        The voice renders ahead into a ring from the pool.
-    ahead_frames : int or None
-        After :meth:`render`: frames rendered ahead when the ring has room for another
-        chunk, else None.
     """
 
     kind: ClassVar[str]
     key: Any
     place: tuple[float, ...] = ()
-    has_ring = False
-    ahead_frames: int | None = None
 
     def __init__(self, release_frames: int) -> None:
         self.seq = 0
@@ -123,9 +119,6 @@ class Voice:
         """Hand back what the voice borrowed."""
         self.state = DONE
 
-    def refill(self) -> None:
-        """Render the next chunk ahead (only when :attr:`ahead_frames` is not None)."""
-
 
 class RingPool:
     """Preallocated render-ahead rings for pattern voices.
@@ -146,11 +139,11 @@ class RingPool:
         ]
 
     def take(self) -> np.ndarray | None:
-        """A free ring, or None when all are in use."""
+        """A free ring, or None when all are in use (any thread of the audio side)."""
         return self._free.pop() if self._free else None
 
     def give(self, ring: np.ndarray) -> None:
-        """Take back a ring from :meth:`take`."""
+        """Take back a ring from :meth:`take` (any thread of the audio side)."""
         self._free.append(ring)
 
 
@@ -165,8 +158,10 @@ def _add(dest: np.ndarray, frames: np.ndarray, gains: np.ndarray | None) -> None
 class PatternVoice(Voice):
     """A planned pattern, played from its first frame (a job).
 
-    Its frames come from the renderer in the callback, ahead into a ring when one is free
-    (else each block directly), or from its samples rendered whole beforehand. A ring
+    Its frames come from its renderer ahead into a ring when one is free (filled by the
+    render-ahead thread, :mod:`phantomtouch.engine.ahead`; by the callback only when it
+    runs dry, under :attr:`lock`), else each block directly in the callback, or from its
+    samples rendered whole beforehand. A ring
     holds whole-width frames (the renderer writes zeros on the channels it does not
     drive), so a block is one contiguous add, or two where the ring wraps; prerendered
     samples are a ring that holds every frame from the start.
@@ -206,6 +201,8 @@ class PatternVoice(Voice):
         self._chunk = 0
         self._read = 0  # voice frames added to the mix
         self._write = 0 if prerendered is None else plan.frames  # frames in the ring
+        self.lock = threading.Lock()
+        """Held while frames are rendered into the ring, or it is handed back."""
 
     @property
     def silent_from(self) -> int:
@@ -216,25 +213,51 @@ class PatternVoice(Voice):
 
     def begin(self, frame: int, pool: RingPool) -> None:
         super().begin(frame, pool)
-        if self._renderer is not None and (ring := pool.take()) is not None:
-            self._ring = ring
-            self.has_ring = True
-            self._size = ring.shape[0]
-            self._chunk = pool.chunk_frames
+        self.take_ring(pool)
+
+    def take_ring(self, pool: RingPool) -> bool:
+        """Take a ring from ``pool`` unless the voice has one or renders none; True: the
+        voice took one now (the callback, or whoever prepares the voice)."""
+        if self._renderer is None or self._ring is not None or (ring := pool.take()) is None:
+            return False
+        self._ring = ring
+        self._size = ring.shape[0]
+        self._chunk = pool.chunk_frames
+        return True
 
     def finish(self, pool: RingPool) -> None:
+        """Hand back the ring, unless the render-ahead thread writes into it now: it hands
+        it back then (:meth:`top_up`)."""
         super().finish(pool)
-        if self.has_ring and self._ring is not None:
+        if self._renderer is not None and self._ring is not None and self.lock.acquire(False):
             pool.give(self._ring)
             self._ring = None
-            self.has_ring = False
-            self.ahead_frames = None
+            self.lock.release()
 
-    def refill(self, frames: int | None = None) -> None:
-        """Render the next chunk into the ring (``frames`` of it, when given)."""
+    def top_up(self, pool: RingPool) -> bool:
+        """Render chunks into the ring while it has room for one, and hand a finished
+        voice's ring back; False once the voice needs nothing more (non real time: the
+        render-ahead thread, or whoever prepares the voice)."""
+        with self.lock:
+            if self._ring is None:
+                return False
+            if self.state == DONE:
+                pool.give(self._ring)
+                self._ring = None
+                return False
+            room = self._size - self._chunk
+            while self._write < self.silent_from - self.start_frame:  # through a fade too
+                if self._write - self._read > room:
+                    break
+                self.refill(self._chunk)
+            return True
+
+    def refill(self, frames: int) -> None:
+        """Render the next ``frames`` into the ring (at most to the plan's end; whoever
+        holds :attr:`lock`)."""
         ring, renderer = self._ring, self._renderer
         assert ring is not None and renderer is not None
-        left = min(self._chunk if frames is None else frames, self.plan.frames - self._write)
+        left = min(frames, self.plan.frames - self._write)
         while left > 0:  # two pieces where the ring wraps
             at = self._write % self._size
             piece = min(left, self._size - at)
@@ -281,16 +304,15 @@ class PatternVoice(Voice):
                 dest += scratch
             return
         read = self._read
-        if self._write - read < count:  # run dry (a voice that just began): a few frames now
-            self.refill(max(count, min(FIRST_FRAMES, self._chunk)))
+        if self._write - read < count:  # run dry: wait out a refill under way, then render
+            with self.lock:
+                if self._write - read < count:
+                    self.refill(max(count, min(FIRST_FRAMES, self._chunk)))
+                    work.inline_renders += 1
         size = self._size
         start = read % size
         head = min(count, size - start)
         _add(dest[:head], ring[start : start + head], None if gains is None else gains[:head])
         if head < count:
             _add(dest[head:], ring[: count - head], None if gains is None else gains[head:])
-        read += count
-        self._read = read
-        ahead = self._write - read
-        room = ahead <= size - self._chunk and self._write < self.plan.frames
-        self.ahead_frames = ahead if room and self.release_frame is None else None
+        self._read = read + count
