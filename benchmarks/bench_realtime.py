@@ -19,7 +19,7 @@ Scenarios (run in the order given by ``--scenarios``; default ``d,a,b,c``):
 - ``s`` soak (not in the default order): ``POST /touch`` of patterns no request repeats,
   each a 12,000-point path of about 1.5 s with noise of its own seed (a noise loop the
   engine process is handed for it alone), 5 per second (60 s); it also reports the
-  resident memory of the service and of its engine process at its start and end;
+  resident memory of the service and of its engine process every 10 s;
 - ``n`` new noise bands (not in the default order): eight 1.5 s noise touches in eight
   bands, then seven in bands the engine process does not hold yet, 0.3 s apart: each new
   band's loop is built by the host and handed over, never built in the audio callback;
@@ -263,6 +263,10 @@ def hands_and_touches(port: int, args: argparse.Namespace) -> Load:
     return run
 
 
+MEMORY_EVERY_S = 10.0
+"""How often the soak samples the resident memory of the service and its engine process."""
+
+
 def soak(port: int, server_pid: int, args: argparse.Namespace) -> Load:
     async def run(deadline: float) -> dict[str, Any]:
         pids = {"server": server_pid, "engine": load.engine_pid(server_pid)}
@@ -272,13 +276,23 @@ def soak(port: int, server_pid: int, args: argparse.Namespace) -> Load:
                 name: None if pid is None else load.rss_bytes(pid) for name, pid in pids.items()
             }
 
-        start = memory()
+        began = time.monotonic()
+        series: list[tuple[float, dict[str, int | None]]] = []
+
+        async def sample() -> None:
+            while True:
+                series.append((time.monotonic() - began, memory()))
+                await asyncio.sleep(MEMORY_EVERY_S)
+
+        sampler = asyncio.create_task(sample())
         touches = await load.paced_touches(
             port,
             args.soak_rate,
             deadline,
             lambda k: load.soak_body(k, args.soak_points),
         )
+        sampler.cancel()
+        series.append((time.monotonic() - began, memory()))
         latencies = touches["latencies_s"]
         return {
             "touches": {
@@ -287,7 +301,7 @@ def soak(port: int, server_pid: int, args: argparse.Namespace) -> Load:
                 "p50_ms": ms(load.percentile(latencies, 0.50)),
                 "p99_ms": ms(load.percentile(latencies, 0.99)),
             },
-            "rss_bytes": {"start": start, "end": memory()},
+            "rss_bytes": {"start": series[0][1], "end": series[-1][1], "series": series},
         }
 
     return run
@@ -560,14 +574,10 @@ def main() -> None:
     print(table(results))
     for key, result in results["scenarios"].items():
         if "rss_bytes" in result:
-            rss = result["rss_bytes"]
-            print(
-                f"\n({key}) resident memory, MB, start -> end: "
-                + "; ".join(
-                    f"{name} {mb(rss['start'][name])} -> {mb(rss['end'][name])}"
-                    for name in rss["start"]
-                )
-            )
+            series = result["rss_bytes"]["series"]
+            print(f"\n({key}) resident memory, MB, every {MEMORY_EVERY_S:g} s:")
+            for name in series[0][1]:
+                print(f"  {name}: " + " ".join(f"{mb(rss[name])}" for _, rss in series))
     print(
         "\ntarget: 0 underruns and 0 xruns in a, b and c; the flood's excess refused (503) or "
         "stolen; render load p99 <= 25 % of the period"
