@@ -78,7 +78,8 @@ class SharedLoops(HostBlocks[NoiseKey]):
 
 
 class HeldLoops(MappedBlocks[NoiseKey]):
-    """The noise loops the engine process was handed (engine process, real time).
+    """The noise loops the engine process was handed (engine process: held by the inbox
+    thread, dropped and collected by the audio callback).
 
     Parameters
     ----------
@@ -91,7 +92,8 @@ class HeldLoops(MappedBlocks[NoiseKey]):
         self._reports = reports
 
     def hold(self, key: NoiseKey, name: str) -> None:
-        """Map the host's block and let new voices read it (real time: no copy)."""
+        """Map the host's block and let new voices read it (non real time: the inbox
+        thread; no copy)."""
         loop = view(self.map(key, name), "<f4", (NOISE_PERIOD_FRAMES,), 0)
         loop.flags.writeable = False
         adopt_noise_loop(key, loop)

@@ -80,14 +80,15 @@ class SharedPlans(HostBlocks[int]):
 
 
 class HeldArrays(MappedBlocks[int]):
-    """The blocks of plans the engine process was handed, by handle (engine process,
-    real time)."""
+    """The blocks of plans the engine process was handed, by handle (engine process:
+    held by the inbox thread, collected by the audio callback)."""
 
     def hold(
         self, handle: int, plan: Plan, shared: SharedArrays
     ) -> tuple[Plan, Prerendered | None]:
-        """Map the host's block and give the plan its arrays back, in place (real time:
-        no copy). Raises ``FileNotFoundError`` for a block the host did not write."""
+        """Map the host's block and give the plan its arrays back, in place (non real
+        time: the inbox thread; no copy). Raises ``FileNotFoundError`` for a block the
+        host did not write."""
         block = self.map(handle, shared.name)
         arrays: dict[str, np.ndarray] = {}
         for place, dtype, shape, offset in shared.layout:

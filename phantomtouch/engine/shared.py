@@ -12,7 +12,7 @@ import multiprocessing
 import os
 import platform
 import threading
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from multiprocessing import shared_memory
@@ -434,19 +434,22 @@ class HostBlocks(Generic[K]):
 
 
 class MappedBlocks(Generic[K]):
-    """The host's blocks the engine process maps, by key (engine process, real time)."""
+    """The host's blocks the engine process maps, by key: mapped by the inbox thread,
+    dropped and unmapped by the audio callback (engine process). The blocks waiting to
+    be unmapped are a FIFO each side only appends to or pops from, so a block one side
+    retires while the other collects is never lost."""
 
     def __init__(self) -> None:
         self._held: dict[K, shared_memory.SharedMemory] = {}
-        self._retiring: list[tuple[K, shared_memory.SharedMemory]] = []
+        self._retiring: deque[tuple[K, shared_memory.SharedMemory]] = deque()
 
     def __len__(self) -> int:
         return len(self._held)
 
     def map(self, key: K, name: str) -> shared_memory.SharedMemory:
         """Map the host's block ``name`` for ``key``, retiring the block it replaces
-        (real time: no copy). Raises ``FileNotFoundError`` for a block the host did not
-        write."""
+        (non real time: the inbox thread; no copy). Raises ``FileNotFoundError`` for a
+        block the host did not write."""
         block = shared_memory.SharedMemory(name=name)
         old = self._held.pop(key, None)
         if old is not None:
@@ -466,15 +469,14 @@ class MappedBlocks(Generic[K]):
     def collect(self) -> list[K]:
         """Unmap the retired blocks no array reads any more; their keys (real time: one
         failed ``close`` per block still read)."""
-        if not self._retiring:
-            return []
-        keep, freed = [], []
-        for key, block in self._retiring:
+        retiring = self._retiring
+        freed = []
+        for _ in range(len(retiring)):  # those waiting now; the inbox thread may append
+            key, block = retiring.popleft()
             try:
                 block.close()
             except BufferError:  # a voice still reads it
-                keep.append((key, block))
+                retiring.append((key, block))
                 continue
             freed.append(key)
-        self._retiring = keep
         return freed

@@ -1,4 +1,5 @@
-"""Shared memory between the host and the engine process: the clock and move slots.
+"""Shared memory between the host and the engine process: the clock, move slots and
+mapped blocks.
 
 Every behaviour is tested with both guards: the sequence locks x86 uses and the locks
 used elsewhere (forced here with ``locked=True`` or ``PHANTOMTOUCH_SHARED_LOCKS=1``).
@@ -12,16 +13,20 @@ import sys
 import threading
 from typing import Any
 
+import numpy as np
 import pytest
 
 from phantomtouch.engine import shared as shared_module
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.shared import (
     LOCKS_VARIABLE,
+    MappedBlocks,
     MoveSlots,
     SharedBuffer,
     SharedClock,
     sequence_locks_are_safe,
+    unlink_block,
+    write_block,
 )
 
 RATE = 48000
@@ -236,3 +241,33 @@ def test_slots_run_out_and_come_back() -> None:
     assert first is not None and second is not None and slots.allocate() is None
     slots.release(first[0])
     assert slots.allocate() == (first[0], pytest.approx(3))
+
+
+def test_blocks_the_inbox_thread_retires_while_the_callback_collects_are_all_unmapped() -> None:
+    """The inbox thread maps (retiring the block a key had) while the callback collects,
+    switching threads as often as the interpreter can: every retired block is unmapped."""
+    host = [write_block([np.zeros(4)])[0] for _ in range(4)]
+    maps = 20000
+    blocks: MappedBlocks[int] = MappedBlocks()
+    freed: list[int] = []
+    done = threading.Event()
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+
+        def inbox() -> None:
+            for i in range(maps):
+                blocks.map(i % 2, host[i % 4].name)  # each map retires the block it replaces
+            done.set()
+
+        thread = threading.Thread(target=inbox)
+        thread.start()
+        while not done.is_set():
+            freed.extend(blocks.collect())
+        thread.join()
+        freed.extend(blocks.collect())
+    finally:
+        sys.setswitchinterval(interval)
+        for block in host:
+            unlink_block(block)
+    assert len(freed) == maps - 2
