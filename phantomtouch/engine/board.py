@@ -10,11 +10,11 @@ import numpy as np
 from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings, ContactVoice, Position
 from phantomtouch.engine.touchdown import contact_amplitude
-from phantomtouch.renderer.carriers import make_source
 from phantomtouch.schema.device import DeviceProfile
 
 if TYPE_CHECKING:
     from phantomtouch.engine.messages import ContactDown
+    from phantomtouch.renderer.carriers import CarrierSource
 
 
 class ContactBoard:
@@ -33,11 +33,10 @@ class ContactBoard:
         self.attack_frames = round(settings.attack_s * device.sample_rate_hz)
         self.release_frames = max(1, round(settings.release_s * device.sample_rate_hz))
 
-    def down(self, down: ContactDown, first_frame: int) -> None:
-        """Start a touchdown's voice at ``first_frame`` (``down.frame``, or the next block's
-        when that is None); a contact already sounding under its id is released. Raises
-        LookupError when the carrier's noise loop was not handed to this process."""
-        source = make_source(down.carrier, self.device.sample_rate_hz)
+    def down(self, down: ContactDown, source: CarrierSource, first_frame: int) -> None:
+        """Start a touchdown's voice playing ``source`` (its carrier's) at ``first_frame``
+        (``down.frame``, or the next block's when that is None); a contact already
+        sounding under its id is released."""
         voice = ContactVoice(
             down, next(self._serials), source, self.attack_frames, self.release_frames
         )

@@ -29,6 +29,7 @@ from phantomtouch.schema.device import DeviceProfile
 
 if TYPE_CHECKING:
     from phantomtouch.engine.messages import ContactDown
+    from phantomtouch.renderer.carriers import CarrierSource
 
 
 class Core:
@@ -154,15 +155,10 @@ class Core:
         if voice is not None and voice.state != DONE:
             self.queue.push_release(voice, frame, fade_frames=fade_frames)
 
-    def contact_down(self, down: ContactDown) -> None:
-        """Build and start a touchdown's voice; real time.
-
-        Raises
-        ------
-        LookupError
-            The carrier's noise loop was not handed to this process (engine process).
-        """
-        self.board.down(down, self._first_frame(down.frame))
+    def contact_down(self, down: ContactDown, source: CarrierSource) -> None:
+        """Build and start a touchdown's voice playing ``source`` (its carrier's, made by
+        :meth:`ContactDown.prepare`); real time."""
+        self.board.down(down, source, self._first_frame(down.frame))
 
     def _first_frame(self, frame: int | None) -> int:
         """``frame``, or for None the first frame of the next block."""

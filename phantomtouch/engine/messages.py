@@ -15,7 +15,7 @@ import numpy as np
 
 from phantomtouch.engine.plan_memory import SHARE_MIN_BYTES, SharedArrays, heavy_bytes
 from phantomtouch.engine.prerender import Prerendered
-from phantomtouch.renderer.carriers import NoiseKey
+from phantomtouch.renderer.carriers import CarrierSource, NoiseKey, make_source
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.pattern import CombinedCarrier, NoiseCarrier, SineCarrier
 
@@ -158,17 +158,39 @@ class ContactDown:
     slot: int | None = None
     generation: int = 0
 
+    def prepare(self, state: AudioState) -> StartContact:
+        """Non real time (the engine process's inbox thread, or whoever performs it): the
+        carrier's source, from the noise loops held now; a loop not handed over is
+        refused here."""
+        try:
+            source = make_source(self.carrier, state.core.device.sample_rate_hz)
+        except LookupError as exc:
+            state.refuse("noise loop", (self.owner, self.contact), str(exc))
+            return StartContact(self, None)
+        return StartContact(self, source)
+
+    def apply(self, state: AudioState, void: bool) -> None:
+        """Real time in this process. Build the contact voice from the front's parts and
+        start it."""
+        self.prepare(state).apply(state, void)
+
+
+@dataclass(frozen=True, slots=True)
+class StartContact:
+    """A :class:`ContactDown` prepared by :func:`prepare`: its carrier's source made
+    (None: refused). Made by the audio side, never sent by the host."""
+
+    down: ContactDown
+    source: CarrierSource | None
+
     def apply(self, state: AudioState, void: bool) -> None:
         """Real time. Build the contact voice from the front's parts and start it."""
-        if void:
+        down = self.down
+        if void or self.source is None:
             return
-        try:
-            state.core.contact_down(self)
-        except LookupError as exc:  # a noise loop not handed over
-            state.refuse("noise loop", (self.owner, self.contact), str(exc))
-            return
-        if state.slots is not None and self.slot is not None:
-            state.slots.bind(self.slot, self.generation, self.owner, self.contact)
+        state.core.contact_down(down, self.source)
+        if state.slots is not None and down.slot is not None:
+            state.slots.bind(down.slot, down.generation, down.owner, down.contact)
 
 
 @dataclass(frozen=True, slots=True)
@@ -237,7 +259,8 @@ class HoldNoise:
     name: str
 
     def apply(self, state: AudioState, void: bool) -> None:
-        """Real time: map the host's shared memory (no copy, nothing computed)."""
+        """Non real time (the engine process's inbox thread, :func:`prepare`): map the
+        host's shared memory (no copy, nothing computed)."""
         if state.loops is None:
             state.refuse("noise loop", self.key, "this audio side takes no shared loops")
             return
@@ -252,8 +275,9 @@ class DropNoise:
     key: NoiseKey
 
     def apply(self, state: AudioState, void: bool) -> None:
-        """Real time: stop handing the loop to new voices; it is released (and reported)
-        once no voice reads it."""
+        """Non real time (the engine process's inbox thread, :func:`prepare`, in order with
+        the holds and with the touchdowns and jobs whose sources it makes): stop handing
+        the loop to new voices; it is released (and reported) once no voice reads it."""
         if state.loops is not None:
             state.loops.drop(self.key)
 
@@ -297,6 +321,7 @@ Command = (
     | StartVoice
     | ReleaseJob
     | ContactDown
+    | StartContact
     | ContactMove
     | ContactUp
     | ReleaseOwner
@@ -414,12 +439,14 @@ APPLIERS: dict[type, Callable[[Any, AudioState, bool], None]] = {
 def prepare(state: AudioState, message: Command) -> Command | None:
     """Do the heavy part of a command before the callback sees it, in the order the commands
     came (non real time: the engine process's inbox thread): map what a ``HoldPlan`` or
-    ``HoldNoise`` names, build a ``StartJob``'s voice. Returns what is left to
-    :func:`perform`, None for nothing."""
-    if isinstance(message, HoldPlan | HoldNoise):
+    ``HoldNoise`` names and unmap what a ``DropNoise`` names (so every voice's noise loop
+    is looked up in the order the host sent them), build a ``StartJob``'s voice and a
+    ``ContactDown``'s carrier source. Returns what is left to :func:`perform`, None for
+    nothing."""
+    if isinstance(message, HoldPlan | HoldNoise | DropNoise):
         perform(state, message)
         return None
-    return message.prepare(state) if isinstance(message, StartJob) else message
+    return message.prepare(state) if isinstance(message, StartJob | ContactDown) else message
 
 
 def perform(state: AudioState, message: Command, *, void: bool = False) -> None:

@@ -22,6 +22,7 @@ from phantomtouch.engine.messages import (
     NoiseReleased,
     StartJob,
     perform,
+    prepare,
 )
 from phantomtouch.engine.noise import NOISE_LOOPS, HeldLoops, SharedLoops, loop_key
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
@@ -120,6 +121,36 @@ def test_a_dropped_loop_is_freed_only_after_the_engine_process_releases_it() -> 
     finally:
         release(held)
         shared.clear()
+
+
+def test_a_band_held_again_while_its_drop_waits_for_the_callback_is_held() -> None:
+    """Staged as the engine process stages them (its inbox thread prepares each message
+    in order, the callback performs what is left a block later), a band dropped and held
+    again before that block is held at the end, as the host believes."""
+    from phantomtouch.engine import CaptureSink, Engine
+
+    shared = SharedLoops(capacity=1)
+    first, second = loop_key(band(0), RATE), loop_key(band(1), RATE)
+    with Engine(DEVICE, CaptureSink(DEVICE)) as engine:
+        state = AudioState(engine.core)
+        held = state.loops = HeldLoops(state.reports)
+        left: list[Command] = []  # the inbox's FIFO, for the callback
+
+        def post(message: Command) -> None:
+            staged = prepare(state, message)
+            if staged is not None:
+                left.append(staged)
+
+        try:
+            for key in (first, second, first):  # the first band's drop, then its hold
+                shared.provide(key, post)
+            for message in left:
+                perform(state, message)
+            assert shared.held() == [first]
+            assert list(held._held) == [first]  # the engine process's record
+        finally:
+            release(held)
+            shared.clear()
 
 
 def test_the_disagreeing_order_builds_no_loop_in_the_engine_process() -> None:
