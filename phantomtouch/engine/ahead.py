@@ -6,7 +6,7 @@ from __future__ import annotations
 import threading
 from collections import deque
 
-from phantomtouch.engine.voices import PatternVoice, RingPool
+from phantomtouch.engine.voices import FIRST_FRAMES, PatternVoice, RingPool
 
 
 class RenderAhead:
@@ -28,10 +28,13 @@ class RenderAhead:
         self._thread: threading.Thread | None = None
 
     def add(self, voice: PatternVoice) -> None:
-        """Give ``voice`` a ring, fill it and keep it filled from now on; a voice that gets
-        no ring renders in the callback (non real time: whoever prepares the voice)."""
+        """Give ``voice`` a ring with its first frames (:data:`FIRST_FRAMES`) in it, and
+        keep it filled from now on: the rest is the thread's, so that a voice asked for as
+        soon as possible reaches the callback by the block it was promised; a voice that
+        gets no ring renders in the callback (non real time: whoever prepares the voice)."""
         if voice.take_ring(self.pool):
-            voice.top_up(self.pool)
+            with voice.lock:
+                voice.refill(min(FIRST_FRAMES, self.pool.chunk_frames))
             self._new.append(voice)
 
     def start(self) -> None:

@@ -36,6 +36,10 @@ HISTORY_JOBS = 1000
 """Jobs that are over and still answered by :meth:`Engine.job_state`."""
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
+PREPARE_BLOCKS = 1
+"""Blocks later than the next a job that renders ahead is promised when asked for as soon
+as possible: the time its voice is built and its first frames rendered outside the
+callback (``docs/engine.md``, Threads)."""
 _STEAL_ORDER: dict[str, Callable[[JobRecord], tuple[Any, ...]]] = {
     "steal-oldest": lambda record: (record.first_frame, record.job_id),
     "steal-quietest": lambda record: (record.amplitude, record.first_frame),
@@ -446,7 +450,11 @@ class JobCalls:
         with self._lock:
             self._audio.check_ready()
             next_frame = self._audio.next_block_frame()
-            first = next_frame if frame is None else frame
+            first = frame
+            if first is None:  # a voice that renders ahead is prepared first
+                first = next_frame + (
+                    PREPARE_BLOCKS * self._device.block_frames if prerendered is None else 0
+                )
             record = JobRecord.planned(resolved, job_id, owner, first)
             if owner is not None and quota is not None:
                 self._jobs.check_quota(
@@ -470,6 +478,8 @@ class JobCalls:
             if prerendered is None:  # a prerendered one renders nothing in the callback
                 first, frame = self._admission.begin(first, frame, self._audio.now_frames)
                 record.requested_start_frame = first
+            if frame is None and prerendered is None:
+                frame = first  # the promised frame, not sooner
             record.requested_start_at_s = self._audio.time_at(first)  # one value for all
             self._audio.provide(carrier)
             self._start(entry, StartJob(job_id, entry.handle, owner, frame))

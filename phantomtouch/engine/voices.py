@@ -17,8 +17,8 @@ from phantomtouch.renderer.plan import Plan
 
 WAITING, PLAYING, DONE = "waiting", "playing", "done"
 FIRST_FRAMES = 2048
-"""Frames the callback renders into a ring that runs dry, at most a chunk (a voice whose
-ring nobody fills ahead: :mod:`phantomtouch.engine.ahead`)."""
+"""Frames rendered into a voice's ring before the callback sees the voice, and by the
+callback into a ring that runs dry; at most a chunk."""
 
 
 class Workspace:
