@@ -11,6 +11,8 @@ A user's replies arrive on its own inbox prefix
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 from typing import Any
 
@@ -88,3 +90,13 @@ async def connect(settings: FleetSettings, name: str) -> Any:
     client.options["max_reconnect_attempts"] = -1  # joined: never give up from now on
     logger.info("fleet: %s connected to %s", name, _address(client))
     return client
+
+
+async def disconnect(client: Any, timeout_s: float) -> None:
+    """Drain and close ``client`` within ``timeout_s`` (s); a connection whose servers are
+    gone is closed without draining, so that no reconnect of the library outlives it."""
+    try:
+        await asyncio.wait_for(client.drain(), timeout_s)
+    except Exception:
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(client.close(), timeout_s)

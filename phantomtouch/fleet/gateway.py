@@ -34,6 +34,7 @@ from phantomtouch.errors import ParameterError, PhantomTouchError
 from phantomtouch.fleet import subjects
 from phantomtouch.fleet.auth import Grant, Grants
 from phantomtouch.fleet.client import FleetClient
+from phantomtouch.fleet.connection import disconnect
 from phantomtouch.fleet.errors import ArmbandNotFoundError, FleetJoinError, NoNodeError
 from phantomtouch.fleet.gateway_settings import GatewaySettings
 from phantomtouch.fleet.gateway_ws import GatewaySession
@@ -320,7 +321,7 @@ def create_gateway(settings: GatewaySettings, fleet: FleetSettings) -> FastAPI:
             yield
         finally:
             await view.close()
-            await nc.drain()
+            await disconnect(nc, fleet.request_timeout_s)
 
     app = FastAPI(
         title="phantomtouch gateway",

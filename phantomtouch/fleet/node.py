@@ -35,6 +35,7 @@ from pydantic import ValidationError
 from phantomtouch import __version__
 from phantomtouch.errors import ParameterError, PhantomTouchError
 from phantomtouch.fleet import subjects
+from phantomtouch.fleet.connection import disconnect
 from phantomtouch.fleet.errors import FleetJoinError
 from phantomtouch.fleet.records import (
     ArmbandRecord,
@@ -142,8 +143,7 @@ class ArmbandNode:
             return
         with contextlib.suppress(Exception):
             await asyncio.wait_for(self._kv.purge(self.armband), self.settings.request_timeout_s)
-        with contextlib.suppress(Exception):
-            await asyncio.wait_for(self._nc.drain(), self.settings.request_timeout_s)
+        await disconnect(self._nc, self.settings.request_timeout_s)
 
     # -- registry -----------------------------------------------------------------------
 
