@@ -185,15 +185,17 @@ async def measure(
         raise RuntimeError("the service did not answer GET /metrics around the scenario")
     samples.append(after)
     latencies = health["latencies_s"]
-    underruns = None
-    if before["underruns"] is not None and after["underruns"] is not None:
-        underruns = int(after["underruns"] - before["underruns"])
+    underruns, inline_renders = (
+        None if before[key] is None or after[key] is None else int(after[key] - before[key])
+        for key in ("underruns", "inline_renders")
+    )
     machine_s, ours_s = (end - start for start, end in zip(cpu_before, cpu_after, strict=True))
     return {
         "seconds": elapsed_s,
         "busy_cores": machine_s / elapsed_s,
         "busy_cores_others": max(0.0, machine_s - ours_s) / elapsed_s,
         "underruns": underruns,
+        "inline_renders": inline_renders,
         "jack_xruns": xruns_after - xruns_before,
         "jack_xrun_causes": xrun_causes(log_during, args.period_frames / SAMPLE_RATE_HZ * 1e6),
         "machine_floor": machine,

@@ -92,8 +92,9 @@ def stalls_text(result: dict[str, Any]) -> str:
 
 def table(results: dict[str, Any]) -> str:
     lines = [
-        "| scenario | s | underruns | JACK xruns (timer / slow) | render load p99 | max "
-        "| voices max | /touch answered | /health p50 / p99 ms | load | busy cores (others) "
+        "| scenario | s | underruns (inline renders) | JACK xruns (timer / slow) "
+        "| render load p99 | max | voices max | /touch answered | /health p50 / p99 ms | load "
+        "| busy cores (others) "
         "| RT probe late (max) | xruns in the probe's stalls (by chance) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -101,6 +102,7 @@ def table(results: dict[str, Any]) -> str:
         health = r["health"]
         lines.append(
             f"| ({key}) {TITLES[key]} | {r['seconds']:.0f} | {number(r['underruns'], 0)} "
+            f"({number(r.get('inline_renders'), 0)}) "
             f"| {xruns_text(r)} | {percent(r['render_load_p99'])} "
             f"| {percent(r['render_load_max'])} | {number(r['voices_max'], 0)} "
             f"| {touch_statuses(r)} | {number(health['p50_ms'])} / {number(health['p99_ms'])} "
