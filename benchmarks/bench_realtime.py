@@ -33,7 +33,10 @@ the engine, so before each scenario the service rests until that window has forg
 previous one), the most voices seen, requests answered by status (the client's count for
 ``/touch``, and the server's own counters), ``GET /health`` latency sampled at 10 Hz, and
 how many cores were busy, in all and with programs other than the benchmark's (another
-user of the machine makes every figure worse). The yardstick, measured in this process,
+user of the machine makes every figure worse), and a ``cyclictest`` probe's late wake-ups
+beside it, with each of JACK's xruns set beside what the probe saw at that moment: an
+xrun during a stall of the probe's is the machine's (``realtime_floor.in_stalls``, which
+also says how many would fall in one by chance). The yardstick, measured in this process,
 is a numpy copy of one 128 x 8 block.
 
 Run: ``python benchmarks/bench_realtime.py [--quick] [--seconds 60] [--scenarios d,a,b,c]
@@ -61,7 +64,7 @@ from typing import Any
 
 import numpy as np
 import realtime_load as load
-from realtime_floor import LatencyProbe, floor, xrun_causes
+from realtime_floor import LatencyProbe, floor, in_stalls, xrun_causes
 from realtime_report import TITLES, floor_text, number, table, xruns_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
@@ -172,6 +175,9 @@ async def measure(
         await asyncio.sleep(TAIL_S)
         after = await load.metrics(connection)
         xruns_after = xruns.xruns
+        machine["xruns_in_stalls"] = in_stalls(
+            xruns.times[xruns_before:xruns_after], machine["stalls"], elapsed_s + TAIL_S
+        )
         log_during = jack.output()[log_before:]
     finally:
         connection.close()
@@ -179,15 +185,17 @@ async def measure(
         raise RuntimeError("the service did not answer GET /metrics around the scenario")
     samples.append(after)
     latencies = health["latencies_s"]
-    underruns = None
-    if before["underruns"] is not None and after["underruns"] is not None:
-        underruns = int(after["underruns"] - before["underruns"])
+    underruns, inline_renders = (
+        None if before[key] is None or after[key] is None else int(after[key] - before[key])
+        for key in ("underruns", "inline_renders")
+    )
     machine_s, ours_s = (end - start for start, end in zip(cpu_before, cpu_after, strict=True))
     return {
         "seconds": elapsed_s,
         "busy_cores": machine_s / elapsed_s,
         "busy_cores_others": max(0.0, machine_s - ours_s) / elapsed_s,
         "underruns": underruns,
+        "inline_renders": inline_renders,
         "jack_xruns": xruns_after - xruns_before,
         "jack_xrun_causes": xrun_causes(log_during, args.period_frames / SAMPLE_RATE_HZ * 1e6),
         "machine_floor": machine,

@@ -5,17 +5,23 @@
 woke. It does no audio work, so its late wake-ups are what the machine — the kernel, a
 hypervisor, the other programs — imposes on any real-time thread, whatever the engine
 does: a thread woken more than one period late has missed its period, and so would any
-audio callback scheduled then. :func:`xrun_causes` tells JACK's own xruns apart from what
+audio callback scheduled then. An audio callback misses sooner: it must also do its work
+and hand the block back before the period ends, so a stall of well under a period is
+enough. :func:`in_stalls` therefore sets each of JACK's xruns beside the probe's own
+record of that moment: an xrun during which the probe, too, woke at least half a period
+late is the machine's. :func:`xrun_causes` tells JACK's own xruns apart from what
 ``jackd`` printed, and :func:`floor` measures both with JACK alone.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import shutil
 import signal
 import subprocess
+import threading
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -23,61 +29,125 @@ if TYPE_CHECKING:
     from tests.support.jack import JackServer, JackXrunCounter
 
 
+STALL_WINDOW_S = (0.015, 0.005)
+"""An xrun falls in a stall the probe saw when a wake-up at least half a period late
+overlaps the 15 ms before JACK reported it or the 5 ms after (the report comes from
+JACK's notification thread, a little after the cycle that overran)."""
+
+VERBOSE_LINE = re.compile(r"^\s*(\d+):\s*(\d+):\s*(\d+)\s*$")
+"""``cyclictest -v``: ``thread: cycle: latency_us``, one line per wake-up."""
+
+
 class LatencyProbe:
-    """``cyclictest -m -q -p 80 -t CORES -a -i PERIOD -h PERIOD`` while a scenario runs.
+    """``cyclictest -m -q -p 80 -t CORES -a -i PERIOD -d 0 -v`` while a scenario runs.
+
+    Every wake-up's latency is read as it comes, with when it was due, so that each of
+    JACK's xruns can be set beside what the probe saw at that moment
+    (:func:`in_stalls`).
 
     Parameters
     ----------
     period_us : int
-        The wake-up interval and the histogram's width: wake-ups at least this late are
-        the histogram's overflows.
+        The wake-up interval: wake-ups at least this late are late (a missed period).
     """
 
     def __init__(self, period_us: int) -> None:
         self.period_us = int(period_us)
         self.process: subprocess.Popen[str] | None = None
+        self._reader: threading.Thread | None = None
+        self._samples: list[tuple[int, int, int]] = []
+        self._starts: dict[int, float] = {}
+        self._other: list[str] = []
 
     @staticmethod
     def available() -> bool:
-        return shutil.which("cyclictest") is not None
+        return shutil.which("cyclictest") is not None and shutil.which("stdbuf") is not None
 
     def start(self) -> LatencyProbe:
-        executable = shutil.which("cyclictest")
-        if executable is None:
-            raise RuntimeError("cyclictest not found (Debian package rt-tests)")
+        executable, stdbuf = shutil.which("cyclictest"), shutil.which("stdbuf")
+        if executable is None or stdbuf is None:
+            raise RuntimeError("cyclictest or stdbuf not found (Debian rt-tests, coreutils)")
         cores = os.cpu_count() or 1
         period = str(self.period_us)
-        command = [executable, "-m", "-q", "-p", "80", "-t", str(cores), "-a"]
-        command += ["-i", period, "-h", period]
+        command = [stdbuf, "-oL", executable, "-m", "-q", "-p", "80", "-t", str(cores), "-a"]
+        command += ["-i", period, "-d", "0", "-v"]
         self.process = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+            command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1
         )
+        self._reader = threading.Thread(target=self._read, args=(self.process,), daemon=True)
+        self._reader.start()
         return self
 
+    def _read(self, process: subprocess.Popen[str]) -> None:
+        """Keep each wake-up; estimate when each thread's cycle 0 was due (the earliest
+        arrival of a line less its cycles and latency: a line is read after its wake-up)."""
+        assert process.stdout is not None
+        period_s = self.period_us / 1e6
+        for line in process.stdout:
+            arrived_s = time.monotonic()
+            match = VERBOSE_LINE.match(line)
+            if match is None:
+                self._other.append(line)
+                continue
+            thread, cycle, latency_us = (int(group) for group in match.groups())
+            self._samples.append((thread, cycle, latency_us))
+            due_s = arrived_s - cycle * period_s - latency_us / 1e6
+            self._starts[thread] = min(self._starts.get(thread, due_s), due_s)
+
     def stop(self) -> dict[str, Any]:
-        """Stop it; ``wakeups``, ``late_wakeups`` (at least one period late) and
-        ``max_latency_us``, over all its threads."""
+        """Stop it; ``wakeups``, ``late_wakeups`` (at least one period late),
+        ``max_latency_us``, and ``stalls``: ``[due_s, latency_us]`` (``time.monotonic()``
+        when it was due) of each wake-up at least half a period late."""
         process, self.process = self.process, None
-        if process is None:
+        if process is None or self._reader is None:
             raise RuntimeError("the probe was not started")
-        process.send_signal(signal.SIGINT)  # cyclictest prints its histogram and ends
-        output, _ = process.communicate(timeout=10)
-        return parse(output)
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=10)
+        self._reader.join(timeout=10)
+        if not self._samples:
+            raise RuntimeError(f"cyclictest printed no wake-up:\n{''.join(self._other)[-2000:]}")
+        period_s = self.period_us / 1e6
+        latencies = [latency for _, _, latency in self._samples]
+        return {
+            "wakeups": len(latencies),
+            "late_wakeups": sum(latency >= self.period_us for latency in latencies),
+            "max_latency_us": max(latencies),
+            "stalls": [
+                [self._starts[thread] + cycle * period_s, latency]
+                for thread, cycle, latency in self._samples
+                if 2 * latency >= self.period_us
+            ],
+        }
 
 
-def numbers(output: str, label: str) -> list[int]:
-    match = re.search(rf"^# {label}:((?: +\d+)+)\s*$", output, re.MULTILINE)
-    if match is None:
-        raise RuntimeError(f"cyclictest printed no '{label}' line:\n{output[-2000:]}")
-    return [int(value) for value in match.group(1).split()]
+def in_stalls(
+    xrun_times_s: list[float], stalls: list[list[float]], seconds: float
+) -> dict[str, Any]:
+    """How many xruns fall in a stall the probe saw (:data:`STALL_WINDOW_S`), and how many
+    would by chance: the share of the scenario's ``seconds`` that such windows cover,
+    times the xruns.
 
-
-def parse(output: str) -> dict[str, Any]:
-    """The figures of a ``cyclictest -h`` run's summary."""
+    Parameters
+    ----------
+    xrun_times_s : list of float
+        ``time.monotonic()`` of each xrun JACK reported.
+    stalls : list of [due_s, latency_us]
+        As :meth:`LatencyProbe.stop` returns.
+    seconds : float, > 0
+    """
+    before_s, after_s = STALL_WINDOW_S
+    spans = sorted((due - after_s, due + latency / 1e6 + before_s) for due, latency in stalls)
+    covered_s, reach_s = 0.0, -math.inf
+    for begin, end in spans:
+        covered_s += max(0.0, end - max(begin, reach_s))
+        reach_s = max(reach_s, end)
+    inside = sum(any(begin <= x <= end for begin, end in spans) for x in xrun_times_s)
+    share = min(1.0, covered_s / seconds)
     return {
-        "wakeups": sum(numbers(output, "Total")),
-        "late_wakeups": sum(numbers(output, "Histogram Overflows")),
-        "max_latency_us": max(numbers(output, "Max Latencies")),
+        "xruns": len(xrun_times_s),
+        "in_stalls": inside,
+        "by_chance": share * len(xrun_times_s),
+        "stall_share": share,
     }
 
 
@@ -109,9 +179,11 @@ def floor(
     log_before, xruns_before = len(jack.output()), xruns.xruns
     probe = LatencyProbe(round(period_us)).start()
     time.sleep(seconds)
+    machine = probe.stop()
+    machine["xruns_in_stalls"] = in_stalls(xruns.times[xruns_before:], machine["stalls"], seconds)
     return {
         "seconds": seconds,
         "jack_xruns": xruns.xruns - xruns_before,
         "jack_xrun_causes": xrun_causes(jack.output()[log_before:], period_us),
-        "machine_floor": probe.stop(),
+        "machine_floor": machine,
     }

@@ -120,13 +120,15 @@ _LABEL = re.compile(r'(\w+)="([^"]*)"')
 def parse_metrics(text: str) -> dict[str, Any]:
     """The figures the benchmark reads from Prometheus text (None where one is missing).
 
-    ``underruns`` (counter ``phantomtouch_underruns``), ``render_load_p99`` and
+    ``underruns`` (counter ``phantomtouch_underruns``), ``inline_renders`` (counter
+    ``phantomtouch_inline_renders``), ``render_load_p99`` and
     ``render_load_max`` (gauge ``phantomtouch_render_load`` at quantiles 0.99 and 1),
     ``active_voices``, and ``requests``: ``{"route status": count}`` from
     ``phantomtouch_http_requests``.
     """
     figures: dict[str, Any] = {
         "underruns": None,
+        "inline_renders": None,
         "render_load_p99": None,
         "render_load_max": None,
         "active_voices": None,
@@ -136,6 +138,8 @@ def parse_metrics(text: str) -> dict[str, Any]:
         labels = dict(_LABEL.findall(label_text or ""))
         if name in ("phantomtouch_underruns_total", "phantomtouch_underruns"):
             figures["underruns"] = float(value)
+        elif name in ("phantomtouch_inline_renders_total", "phantomtouch_inline_renders"):
+            figures["inline_renders"] = float(value)
         elif name == "phantomtouch_render_load" and labels.get("quantile") == "0.99":
             figures["render_load_p99"] = float(value)
         elif name == "phantomtouch_render_load" and labels.get("quantile") in ("1", "1.0"):

@@ -81,21 +81,32 @@ def floor_text(result: dict[str, Any]) -> str:
     )
 
 
+def stalls_text(result: dict[str, Any]) -> str:
+    """``in of all (by chance)``: JACK's xruns during a stall the probe saw
+    (``realtime_floor.in_stalls``)."""
+    seen = result.get("machine_floor", {}).get("xruns_in_stalls")
+    if seen is None:
+        return "—"
+    return f"{seen['in_stalls']} of {seen['xruns']} ({seen['by_chance']:.2f})"
+
+
 def table(results: dict[str, Any]) -> str:
     lines = [
-        "| scenario | s | underruns | JACK xruns (timer / slow) | render load p99 | max "
-        "| voices max | /touch answered | /health p50 / p99 ms | load | busy cores (others) "
-        "| RT probe late (max) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| scenario | s | underruns (inline renders) | JACK xruns (timer / slow) "
+        "| render load p99 | max | voices max | /touch answered | /health p50 / p99 ms | load "
+        "| busy cores (others) "
+        "| RT probe late (max) | xruns in the probe's stalls (by chance) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key, r in results["scenarios"].items():
         health = r["health"]
         lines.append(
             f"| ({key}) {TITLES[key]} | {r['seconds']:.0f} | {number(r['underruns'], 0)} "
+            f"({number(r.get('inline_renders'), 0)}) "
             f"| {xruns_text(r)} | {percent(r['render_load_p99'])} "
             f"| {percent(r['render_load_max'])} | {number(r['voices_max'], 0)} "
             f"| {touch_statuses(r)} | {number(health['p50_ms'])} / {number(health['p99_ms'])} "
             f"| {load_text(r)} | {r['busy_cores']:.1f} ({r['busy_cores_others']:.1f}) "
-            f"| {floor_text(r)} |"
+            f"| {floor_text(r)} | {stalls_text(r)} |"
         )
     return "\n".join(lines)

@@ -52,7 +52,7 @@ def test_the_realtime_benchmark_measures_every_figure(tmp_path: Path) -> None:
     }
     for key in ("a", "c"):
         scenario = results["scenarios"][key]
-        assert scenario["underruns"] >= 0
+        assert scenario["underruns"] >= 0 and scenario["inline_renders"] >= 0
         assert scenario["jack_xruns"] >= 0
         assert 0.0 < scenario["render_load_p99"] <= scenario["render_load_max"]
         assert scenario["health"]["samples"] > 0
@@ -60,6 +60,11 @@ def test_the_realtime_benchmark_measures_every_figure(tmp_path: Path) -> None:
         floor = scenario["machine_floor"]  # cyclictest ran beside the scenario
         assert 0 <= floor["late_wakeups"] <= floor["wakeups"]
         assert floor["wakeups"] > 0 and floor["max_latency_us"] >= 0
+        # a wake-up a period late is a stall too, and each stall was due during the run
+        assert len(floor["stalls"]) >= floor["late_wakeups"]
+        seen = floor["xruns_in_stalls"]
+        assert seen["xruns"] == scenario["jack_xruns"]
+        assert 0 <= seen["in_stalls"] <= seen["xruns"] and 0.0 <= seen["stall_share"] <= 1.0
         assert set(scenario["jack_xrun_causes"]) >= {"late_wakeup", "slow_cycle"}
     hands = results["scenarios"]["a"]
     assert hands["hands"]["count"] == 4 and hands["hands"]["moves"] > 0
@@ -72,3 +77,27 @@ def test_the_realtime_benchmark_measures_every_figure(tmp_path: Path) -> None:
     answered = sum(n for s, n in flood["statuses"].items() if not s.startswith(("2", "3")))
     assert answered == flood["non_2xx_3xx"]
     assert "| (a) " in result.stdout and "| (c) " in result.stdout
+
+
+def test_an_xrun_is_the_machines_only_within_a_stall_the_probe_saw() -> None:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from realtime_floor import STALL_WINDOW_S, in_stalls
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    before_s, after_s = STALL_WINDOW_S
+    stalls = [[10.0, 3000.0], [20.0, 2000.0]]  # due at 10 s, 3 ms late; at 20 s, 2 ms late
+    xruns = [
+        10.003 + before_s - 1e-4,  # reported just within the window after the first stall
+        10.003 + before_s + 1e-4,  # just after it
+        20.0 - after_s + 1e-4,  # just before the second stall began
+        30.0,  # far from both
+    ]
+    seen = in_stalls(xruns, stalls, seconds=100.0)
+    assert seen["xruns"] == 4 and seen["in_stalls"] == 2
+    covered_s = (0.003 + before_s + after_s) + (0.002 + before_s + after_s)
+    assert seen["stall_share"] == pytest.approx(covered_s / 100.0)
+    assert seen["by_chance"] == pytest.approx(4 * covered_s / 100.0)
+    # overlapping stalls cover their union once
+    merged = in_stalls([], [[10.0, 3000.0], [10.001, 3000.0]], seconds=1.0)
+    assert merged["stall_share"] == pytest.approx(0.004 + before_s + after_s)

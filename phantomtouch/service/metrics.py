@@ -84,6 +84,12 @@ class _EngineCollector(Collector):
             status["late_commands"],
         )
         yield CounterMetricFamily(
+            "phantomtouch_inline_renders",
+            "Times the audio callback rendered a pattern voice's samples itself because the "
+            "render-ahead thread had not kept its ring filled.",
+            status["inline_renders"],
+        )
+        yield CounterMetricFamily(
             "phantomtouch_limited_blocks",
             "Blocks the safety limiter had to scale down.",
             status["limited_blocks"],

@@ -12,6 +12,7 @@ STATUS = {
     "active_contacts": [{"owner": "ws-0", "contact": "L", "x_cm": 1.0, "y_cm": 2.0}],
     "underruns": 2,
     "late_commands": 5,
+    "inline_renders": 7,
     "limited_blocks": 0,
     "peak": 0.25,
     "queue_depth": 1,
@@ -64,6 +65,7 @@ def test_engine_figures_are_read_at_scrape_time() -> None:
     assert "phantomtouch_active_contacts 1.0" in text
     assert "phantomtouch_underruns_total 2.0" in text
     assert "phantomtouch_late_commands_total 5.0" in text
+    assert "phantomtouch_inline_renders_total 7.0" in text
     assert "phantomtouch_peak_level 0.25" in text
     assert 'phantomtouch_channel_peak_level{channel="1"} 0.25' in text
     assert 'phantomtouch_render_load{quantile="0.99"} 0.125' in text

@@ -46,6 +46,7 @@ def test_metrics(client: TestClient) -> None:
         "phantomtouch_active_voices",
         "phantomtouch_underruns_total",
         "phantomtouch_late_commands_total",
+        "phantomtouch_inline_renders_total",
         "phantomtouch_peak_level",
         "phantomtouch_http_request_duration_seconds_bucket",
     ):

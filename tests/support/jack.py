@@ -180,6 +180,7 @@ class JackRecorder:
         self.frames = start + count
 
     def _xrun(self, delay_usecs: float) -> None:
+        self.times.append(time.monotonic())
         self.xruns += 1
 
     def connect_from(self, client_name: str = "PortAudio") -> list[str]:
@@ -239,10 +240,13 @@ class JackXrunCounter:
             f"xruns-{uuid.uuid4().hex[:6]}", servername=server.name, no_start_server=True
         )
         self.xruns = 0
+        self.times: list[float] = []
+        """``time.monotonic()`` when JACK reported each xrun, s."""
         self.client.set_xrun_callback(self._xrun)
         self.client.activate()
 
     def _xrun(self, delay_usecs: float) -> None:
+        self.times.append(time.monotonic())
         self.xruns += 1
 
     def close(self) -> int:
