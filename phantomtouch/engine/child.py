@@ -1,8 +1,5 @@
-"""The engine process (:func:`serve`): one audio callback that does its Python work at
-the start of each block (:meth:`Intake.run`), beside two threads that receive the host's
-messages and send the callback's reports (:mod:`phantomtouch.engine.link`;
-``docs/engine.md``, Threads).
-"""
+"""The engine process (:func:`serve`): its audio callback does its Python work at each
+block's start (:meth:`Intake.run`; ``docs/engine.md``, Threads)."""
 
 from __future__ import annotations
 
@@ -66,8 +63,8 @@ class Intake:
         self.budget_s = INTAKE_SHARE * (device.block_frames / device.sample_rate_hz)
 
     def run(self) -> None:
-        """At the start of each block (real time; see the module docstring): the host's
-        messages come from the inbox's FIFO, without a system call or an unpickling."""
+        """At the start of each block (real time): the host's messages come from the
+        inbox's FIFO, without a system call or an unpickling."""
         began = time.perf_counter()
         self.report()
         self.check_mark()
@@ -159,10 +156,8 @@ def _wait_for_start(intake: Intake) -> bool:
             framed = intake.inbox.connection.recv()
         except (EOFError, OSError):
             return False
-        if isinstance(framed[1], StartSink):
-            return True
-        if isinstance(framed[1], Close):
-            return False
+        if isinstance(framed[1], (StartSink, Close)):
+            return isinstance(framed[1], StartSink)
         intake.apply(framed)
 
 
