@@ -1,8 +1,5 @@
-"""The chain after the voices: wearer gains, safety limiter, output stage, meters.
-
-Construction is non real time; every other method runs in real time, inside the audio
-callback, unless its docstring says otherwise.
-"""
+"""The chain after the voices: wearer gains, safety limiter, output stage, meters. Real
+time (the callback) unless a docstring says otherwise; construction is not."""
 
 from __future__ import annotations
 

@@ -1,8 +1,5 @@
-"""Voices: what the audio callback renders, one block at a time (a job's here, a
-contact's in :mod:`phantomtouch.engine.contacts`; how they render ahead and fade:
-``docs/engine.md``). Every method runs in real time, inside the audio callback, unless
-its docstring names another thread; constructors are non real time.
-"""
+"""Voices: what the audio callback renders (``docs/engine.md``, What a voice costs). Real
+time (the callback) unless a docstring names another thread; constructors are not."""
 
 from __future__ import annotations
 
@@ -148,7 +145,6 @@ class RingPool:
 
 
 def _add(dest: np.ndarray, frames: np.ndarray, gains: np.ndarray | None) -> None:
-    """``dest += frames``, times ``gains`` (shape (len(dest),)) when given."""
     if gains is None:
         dest += frames
     else:
@@ -289,8 +285,7 @@ class PatternVoice(Voice):
         return block_end >= end
 
     def _add(self, dest: np.ndarray, gains: np.ndarray | None, work: Workspace) -> None:
-        """Add the voice's next ``len(dest)`` frames into ``dest``, times ``gains`` (shape
-        (len(dest),)) when given."""
+        """Add the voice's next frames into ``dest``, times ``gains`` when given."""
         ring = self._ring
         count = dest.shape[0]
         if ring is None:
