@@ -84,9 +84,8 @@ class Intake:
     def report(self) -> None:
         """Send the last block's events, write figures and a heartbeat (real time)."""
         core = self.core
-        scheduler = core.scheduler
         state = self.state
-        self.status.beat(time.monotonic(), scheduler.frames)
+        self.status.beat(time.monotonic(), core.scheduler.frames)
         assert state.loops is not None and state.arrays is not None
         state.loops.collect()
         events = core.events()

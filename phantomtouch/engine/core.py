@@ -85,8 +85,8 @@ class Core:
             render_loads=render_loads,
         )
         self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
-        block_s = device.block_frames / device.sample_rate_hz
-        self.ahead = RenderAhead(self.scheduler.pool, poll_s=4 * block_s)
+        self._block_s = device.block_frames / device.sample_rate_hz
+        self.ahead = RenderAhead(self.scheduler.pool, poll_s=4 * self._block_s)
         self.running = False
         self._jobs: dict[str, PatternVoice] = {}
 
@@ -105,11 +105,10 @@ class Core:
         running, self.running = self.running, False
         if running and fade and self.sink.realtime:
             self.stop_all()
-            block_s = self.device.block_frames / self.device.sample_rate_hz
-            deadline = time.monotonic() + self.settings.release_s + 4 * block_s + 0.05
+            deadline = time.monotonic() + self.settings.release_s + 4 * self._block_s + 0.05
             while self.scheduler.active_voices and time.monotonic() < deadline:
-                time.sleep(block_s)
-            time.sleep(2 * block_s)  # let the last (silent) block reach the output
+                time.sleep(self._block_s)
+            time.sleep(2 * self._block_s)  # let the last (silent) block reach the output
         self.sink.close()
         self.ahead.stop()
 
