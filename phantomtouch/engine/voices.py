@@ -144,13 +144,6 @@ class RingPool:
         self._free.append(ring)
 
 
-def _add(dest: np.ndarray, frames: np.ndarray, gains: np.ndarray | None) -> None:
-    if gains is None:
-        dest += frames
-    else:
-        dest += frames * gains[:, None]
-
-
 class PatternVoice(Voice):
     """A planned pattern, played from its first frame (a job).
 
@@ -304,10 +297,14 @@ class PatternVoice(Voice):
                 if self._write - read < count:
                     self.refill(max(count, min(FIRST_FRAMES, self._chunk)))
                     work.inline_renders += 1
-        size = self._size
-        start = read % size
-        head = min(count, size - start)
-        _add(dest[:head], ring[start : start + head], None if gains is None else gains[:head])
-        if head < count:
-            _add(dest[head:], ring[: count - head], None if gains is None else gains[head:])
+        start = read % self._size
+        head = min(count, self._size - start)  # the rest from the ring's start
+        if gains is None:
+            dest[:head] += ring[start : start + head]
+            if head < count:
+                dest[head:] += ring[: count - head]
+        else:
+            dest[:head] += ring[start : start + head] * gains[:head, None]
+            if head < count:
+                dest[head:] += ring[: count - head] * gains[head:, None]
         self._read = read + count
