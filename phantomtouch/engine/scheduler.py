@@ -131,7 +131,11 @@ class Scheduler:
                 block.fill(0.0)
                 self.callback_errors += 1
                 self.last_error = exc
-                self._drop_voices(self.frames)
+                for voice in self._voices:
+                    voice.finish(self.pool)
+                    self.events.append(("end", voice, self.frames))
+                self._voices = []
+                self.active_voices = 0
                 self.frames += block.shape[0]
         playing_s = out.shape[0] / self.clock.sample_rate_hz
         self.render_loads[self._timed % RENDER_TIMES] = (time.monotonic() - began_s) / playing_s
@@ -154,8 +158,12 @@ class Scheduler:
             retarget_contacts(self.geometry, self._voices, start, end, self.work)
             keep: list[Voice] = []
             for voice in self._voices:
-                if voice.render(out, start, self.work):
-                    self._end(voice)
+                if voice.render(out, start, self.work):  # silent for good
+                    voice.finish(self.pool)
+                    silent_from = voice.silent_from
+                    self.events.append(
+                        ("end", voice, start if silent_from is None else silent_from)
+                    )
                 else:
                     keep.append(voice)
             self._voices = keep
@@ -214,11 +222,6 @@ class Scheduler:
             self.queue.retire()
             self.events.append(("cancel", voice, frame))
 
-    def _end(self, voice: Voice) -> None:
-        voice.finish(self.pool)
-        silent_from = voice.silent_from
-        self.events.append(("end", voice, self.frames if silent_from is None else silent_from))
-
     def _stop_all(self, stop_seq: int, frame: int) -> None:
         for voice in self._voices:
             if voice.seq < stop_seq:
@@ -230,13 +233,6 @@ class Scheduler:
         self._waiting = [entry for entry in self._waiting if entry[2].state == WAITING]
         heapq.heapify(self._waiting)
         self.events.append(("stop_all", frame))
-
-    def _drop_voices(self, frame: int) -> None:
-        for voice in self._voices:
-            voice.finish(self.pool)
-            self.events.append(("end", voice, frame))
-        self._voices = []
-        self.active_voices = 0
 
 
 def load_percentiles(loads: np.ndarray) -> tuple[float, float]:
