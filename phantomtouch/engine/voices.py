@@ -150,10 +150,9 @@ class PatternVoice(Voice):
     Its frames come from its renderer ahead into a ring when one is free (filled by the
     render-ahead thread, :mod:`phantomtouch.engine.ahead`; by the callback only when it
     runs dry, under :attr:`lock`), else each block directly in the callback, or from its
-    samples rendered whole beforehand. A ring
-    holds whole-width frames (the renderer writes zeros on the channels it does not
-    drive), so a block is one contiguous add, or two where the ring wraps; prerendered
-    samples are a ring that holds every frame from the start.
+    samples rendered whole beforehand. A ring holds whole-width frames (the renderer
+    writes zeros on the channels it does not drive), so a block is one contiguous add, or
+    two where the ring wraps; prerendered samples are a ring holding every frame from the start.
 
     A release fades it out linearly: the gain of frame ``f`` at or after the release frame
     ``R`` is ``(R + L - 1 - f) / L`` (``L = release_frames``), silent from ``R + L - 1``.
