@@ -126,9 +126,8 @@ class Intake:
         try:
             perform(self.state, message, void=seq < self.handled_mark)
         except Exception as exc:
-            scheduler = self.core.scheduler
-            scheduler.callback_errors += 1
-            scheduler.last_error = exc
+            self.core.scheduler.callback_errors += 1
+            self.core.scheduler.last_error = exc
         if self.state.leave:
             self.leave.set()
 
