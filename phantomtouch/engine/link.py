@@ -149,8 +149,7 @@ class Outbox:
     def _run(self) -> None:
         while True:
             with self._ready:
-                while not self._frames and not self._closed:
-                    self._ready.wait()
+                self._ready.wait_for(lambda: self._frames or self._closed)
                 if not self._frames:
                     return
                 frame = self._frames.popleft()
