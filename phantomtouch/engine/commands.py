@@ -1,7 +1,6 @@
 """Voice commands for the scheduler, and their bounded queue: the appliers of
 :mod:`phantomtouch.engine.messages` push, the audio callback pops at each block's start
-without a lock (only producers take it).
-"""
+without a lock (only producers take it)."""
 
 from __future__ import annotations
 
