@@ -1,8 +1,5 @@
-"""The engine process (:func:`serve`): one audio callback that does its Python work at
-the start of each block (:meth:`Intake.run`), beside two threads that receive the host's
-messages and send the callback's reports (:mod:`phantomtouch.engine.link`;
-``docs/engine.md``, Threads).
-"""
+"""The engine process (:func:`serve`): its audio callback does its Python work at each
+block's start (:meth:`Intake.run`; ``docs/engine.md``, Threads)."""
 
 from __future__ import annotations
 
@@ -66,8 +63,8 @@ class Intake:
         self.budget_s = INTAKE_SHARE * (device.block_frames / device.sample_rate_hz)
 
     def run(self) -> None:
-        """At the start of each block (real time; see the module docstring): the host's
-        messages come from the inbox's FIFO, without a system call or an unpickling."""
+        """At the start of each block (real time): the host's messages come from the
+        inbox's FIFO, without a system call or an unpickling."""
         began = time.perf_counter()
         self.report()
         self.check_mark()
@@ -87,9 +84,8 @@ class Intake:
     def report(self) -> None:
         """Send the last block's events, write figures and a heartbeat (real time)."""
         core = self.core
-        scheduler = core.scheduler
         state = self.state
-        self.status.beat(time.monotonic(), scheduler.frames)
+        self.status.beat(time.monotonic(), core.scheduler.frames)
         assert state.loops is not None and state.arrays is not None
         state.loops.collect()
         events = core.events()
@@ -130,9 +126,8 @@ class Intake:
         try:
             perform(self.state, message, void=seq < self.handled_mark)
         except Exception as exc:
-            scheduler = self.core.scheduler
-            scheduler.callback_errors += 1
-            scheduler.last_error = exc
+            self.core.scheduler.callback_errors += 1
+            self.core.scheduler.last_error = exc
         if self.state.leave:
             self.leave.set()
 
@@ -159,10 +154,8 @@ def _wait_for_start(intake: Intake) -> bool:
             framed = intake.inbox.connection.recv()
         except (EOFError, OSError):
             return False
-        if isinstance(framed[1], StartSink):
-            return True
-        if isinstance(framed[1], Close):
-            return False
+        if isinstance(framed[1], (StartSink, Close)):
+            return isinstance(framed[1], StartSink)
         intake.apply(framed)
 
 

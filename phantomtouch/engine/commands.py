@@ -1,11 +1,6 @@
-"""Voice commands for the scheduler, and their bounded queue (the audio side).
-
-The appliers of :mod:`phantomtouch.engine.messages` push commands; the audio callback
-pops them at the start of each block. A full queue refuses a new voice
-(:class:`~phantomtouch.errors.EngineBusyError`); releases are never refused (each ends a
-voice that was admitted), and ``stop_all`` does not queue at all: it raises a sequence
-mark the callback reads first. Only producers take the lock; popping never does.
-"""
+"""Voice commands for the scheduler, and their bounded queue: the appliers of
+:mod:`phantomtouch.engine.messages` push, the audio callback pops at each block's start
+without a lock (only producers take it)."""
 
 from __future__ import annotations
 
@@ -112,7 +107,8 @@ class CommandQueue:
         *,
         fade_frames: int | None = None,
     ) -> ReleaseCommand:
-        """Queue the release of ``voice``; never refused (threads as :meth:`push_start`)."""
+        """Queue the release of ``voice``; never refused, as each ends a voice that was
+        admitted (threads as :meth:`push_start`)."""
         with self._lock:
             self._seq += 1
             command = ReleaseCommand(self._seq, voice, frame, transient, fade_frames)
@@ -120,8 +116,8 @@ class CommandQueue:
             return command
 
     def mark_stop_all(self) -> int:
-        """Void every command pushed so far and everything playing; never refused (real
-        time)."""
+        """Void every command pushed so far and everything playing; never refused, and not
+        queued: it raises the mark the callback reads first (real time)."""
         with self._lock:
             self._seq += 1
             self.stop_all_seq = self._seq
@@ -130,10 +126,7 @@ class CommandQueue:
 
     def pop(self) -> Command | None:
         """The oldest command, or None (real time: the audio callback; never waits)."""
-        try:
-            return self._items.popleft()
-        except IndexError:
-            return None
+        return self._items.popleft() if self._items else None
 
     def retire(self) -> None:
         """One admitted start has started or was voided (real time: the audio callback)."""

@@ -1,9 +1,6 @@
-"""The audio side's core: the sink, sample clock, command queue, scheduler and voices of
-one engine (its place among the engine's parts: ``docs/engine.md``).
-
-Every method says where it runs: "real time" (inside the audio callback in the engine
-process; in the calling thread of the in-process engine) or "non real time".
-"""
+"""The audio side's core: sink, sample clock, command queue, scheduler and voices of one
+engine (``docs/engine.md``). "Real time": the callback in the engine process, the calling
+thread in the in-process engine."""
 
 from __future__ import annotations
 
@@ -88,8 +85,8 @@ class Core:
             render_loads=render_loads,
         )
         self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
-        block_s = device.block_frames / device.sample_rate_hz
-        self.ahead = RenderAhead(self.scheduler.pool, poll_s=4 * block_s)
+        self._block_s = device.block_frames / device.sample_rate_hz
+        self.ahead = RenderAhead(self.scheduler.pool, poll_s=4 * self._block_s)
         self.running = False
         self._jobs: dict[str, PatternVoice] = {}
 
@@ -108,11 +105,10 @@ class Core:
         running, self.running = self.running, False
         if running and fade and self.sink.realtime:
             self.stop_all()
-            block_s = self.device.block_frames / self.device.sample_rate_hz
-            deadline = time.monotonic() + self.settings.release_s + 4 * block_s + 0.05
+            deadline = time.monotonic() + self.settings.release_s + 4 * self._block_s + 0.05
             while self.scheduler.active_voices and time.monotonic() < deadline:
-                time.sleep(block_s)
-            time.sleep(2 * block_s)  # let the last (silent) block reach the output
+                time.sleep(self._block_s)
+            time.sleep(2 * self._block_s)  # let the last (silent) block reach the output
         self.sink.close()
         self.ahead.stop()
 
@@ -202,7 +198,7 @@ class Core:
             "levels": [float(level) for level in mixer.levels],
             "peak": float(mixer.peak),
             "underruns": int(self.sink.underruns),
-            "late_commands": scheduler.late_commands,
+            "late_commands": scheduler.work.late_commands,
             "muted_blocks": mixer.muted_blocks,
             "limited_blocks": mixer.limited_blocks,
             "output_latency_s": self.clock.output_latency_s,
@@ -246,7 +242,7 @@ def measure_costs(
     # hold each voice's refills at the rate they come
     warm = max(1, chunk_frames) // device.block_frames + 8
     timed = max(64, 2 * chunk_frames // device.block_frames)
-    sounding, starting, prerendered_voices = [], [], []
+    tries: list[tuple[float, float, float]] = []
     for _ in range(3):
         core = Core(
             device,
@@ -262,7 +258,6 @@ def measure_costs(
         render = core.scheduler.render
 
         def block_s(blocks: int) -> float:
-            """Seconds each of the next ``blocks`` blocks takes to render."""
             began = time.perf_counter()
             for _ in range(blocks):
                 render(block)  # noqa: B023 (called before the loop moves on)
@@ -272,26 +267,23 @@ def measure_costs(
         idle_s = block_s(1)
         for k in range(voices):
             core.start_job(core.job_voice(f"start-{k}", plan, None), None)
-        starting.append((block_s(1) - idle_s) / voices / period_s)
+        starting = (block_s(1) - idle_s) / voices / period_s
         core.stop_all()
         block_s(64)
         silent_s = block_s(timed)
         for k in range(voices):
             core.start_job(core.job_voice(f"cost-{k}", plan, None), None)
         block_s(warm)
-        sounding.append((block_s(timed) - silent_s) / voices / period_s)
+        sounding = (block_s(timed) - silent_s) / voices / period_s
         core.stop_all()
         block_s(64)
         frames = 80 * device.block_frames  # the prerendered outlasts the blocks timed
         samples = Prerendered(np.zeros((frames, device.channels), dtype=np.float32))
+        pre = dataclasses.replace(plan, frames=frames)
         for k in range(voices):
-            pre = dataclasses.replace(plan, frames=frames)
             core.start_job(core.job_voice(f"pre-{k}", pre, None, samples), None)
         block_s(8)
-        prerendered_voices.append((block_s(64) - silent_s) / voices / period_s)
+        tries.append((sounding, starting, (block_s(64) - silent_s) / voices / period_s))
         core.ahead.stop()
-    return (
-        max(1e-4, float(np.median(sounding))),
-        max(1e-4, float(np.median(starting))),
-        max(1e-5, float(np.median(prerendered_voices))),
-    )
+    sounding, starting, prerendered = (float(median) for median in np.median(tries, axis=0))
+    return max(1e-4, sounding), max(1e-4, starting), max(1e-5, prerendered)

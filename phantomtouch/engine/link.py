@@ -1,8 +1,5 @@
-"""The pipes between the host and the engine process, used only through their
-``multiprocessing`` ``Connection``s, each side sending or receiving from a thread of its
-own (:class:`Outbox` in the host; :class:`Inbox`, :class:`ReportBox` in the engine
-process), so neither waits for the other (``docs/engine.md``, Threads and Transports).
-"""
+"""The pipes between the host and the engine process, each end served by a thread of its
+own so neither waits for the other (``docs/engine.md``, Threads and Transports)."""
 
 from __future__ import annotations
 
@@ -37,20 +34,18 @@ class Inbox:
         self._poll_s = poll_s
         self.closed = False
         """Set once the host's end is closed (or the pipe broke): nothing more comes."""
-        self._prepare: Callable[[Any], Any] | None = None
-        self._thread = threading.Thread(target=self._run, name="phantomtouch-inbox", daemon=True)
 
     def start(self, prepare: Callable[[Any], Any]) -> None:
         """Start receiving; each message is passed through ``prepare`` in the inbox thread
         and what it returns is queued, unless None (non real time, the engine process's
         main thread)."""
-        self._prepare = prepare
-        self._thread.start()
+        threading.Thread(
+            target=self._run, args=(prepare,), name="phantomtouch-inbox", daemon=True
+        ).start()
 
-    def _run(self) -> None:
+    def _run(self, prepare: Callable[[Any], Any]) -> None:
         """The inbox thread (non real time): receive until the host's end closes."""
-        messages, prepare = self.messages, self._prepare
-        assert prepare is not None
+        messages = self.messages
         try:
             while True:
                 while len(messages) >= self._capacity:
@@ -90,12 +85,7 @@ class ReportBox:
         it (releasing never waits)."""
         self._wake.acquire()
         self.dropped = 0
-        self.broken = False
-        """Set once a send failed (the host is gone): nothing more is sent."""
-        self._thread = threading.Thread(
-            target=self._run, name="phantomtouch-report-box", daemon=True
-        )
-        self._thread.start()
+        threading.Thread(target=self._run, name="phantomtouch-report-box", daemon=True).start()
 
     def put(self, report: Any) -> None:
         """Queue a report for the host and wake the thread (real time: no system call,
@@ -115,8 +105,7 @@ class ReportBox:
             while waiting:
                 try:
                     self._connection.send(waiting[0])
-                except OSError:
-                    self.broken = True
+                except OSError:  # the host is gone: nothing more is sent
                     return
                 waiting.popleft()
 
@@ -160,8 +149,7 @@ class Outbox:
     def _run(self) -> None:
         while True:
             with self._ready:
-                while not self._frames and not self._closed:
-                    self._ready.wait()
+                self._ready.wait_for(lambda: self._frames or self._closed)
                 if not self._frames:
                     return
                 frame = self._frames.popleft()

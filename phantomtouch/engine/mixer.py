@@ -1,8 +1,5 @@
-"""The chain after the voices: wearer gains, safety limiter, output stage, meters.
-
-Construction is non real time; every other method runs in real time, inside the audio
-callback, unless its docstring says otherwise.
-"""
+"""The chain after the voices: wearer gains, safety limiter, output stage, meters. Real
+time (the callback) unless a docstring says otherwise; construction is not."""
 
 from __future__ import annotations
 
@@ -61,10 +58,7 @@ class Limiter:
         NaN) when the caller has it already.
         """
         if peak is None:
-            highest = block.max(axis=0)
-            np.maximum(highest, -block.min(axis=0), out=highest)
-            highest *= self.calibration
-            peak = float(highest.max())
+            peak = float((np.abs(block).max(axis=0) * self.calibration).max())
         if not math.isfinite(peak):
             return  # the output stage mutes the block
         if peak <= self.threshold and self.gain >= 1.0:

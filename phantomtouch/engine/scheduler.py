@@ -1,8 +1,5 @@
-"""The audio callback's side of the engine: commands in, one block out.
-
-Every method runs in real time (inside the audio callback) unless its docstring names
-another thread; construction is non real time.
-"""
+"""The audio callback's side of the engine: commands in, one block out. Real time (the
+callback) unless a docstring names another thread; construction is non real time."""
 
 from __future__ import annotations
 
@@ -114,11 +111,6 @@ class Scheduler:
         self.render_loads = render_loads
         self._timed = 0
 
-    @property
-    def late_commands(self) -> int:
-        """Commands applied after their frame had passed (any thread)."""
-        return self.work.late_commands
-
     def next_block_frame(self) -> int:
         """First frame of the next block whose commands are not taken yet (any thread)."""
         frames = self.frames
@@ -139,7 +131,11 @@ class Scheduler:
                 block.fill(0.0)
                 self.callback_errors += 1
                 self.last_error = exc
-                self._drop_voices(self.frames)
+                for voice in self._voices:
+                    voice.finish(self.pool)
+                    self.events.append(("end", voice, self.frames))
+                self._voices = []
+                self.active_voices = 0
                 self.frames += block.shape[0]
         playing_s = out.shape[0] / self.clock.sample_rate_hz
         self.render_loads[self._timed % RENDER_TIMES] = (time.monotonic() - began_s) / playing_s
@@ -160,19 +156,20 @@ class Scheduler:
         out.fill(0.0)
         if self._voices:
             retarget_contacts(self.geometry, self._voices, start, end, self.work)
-            self._render_voices(out, start)
+            keep: list[Voice] = []
+            for voice in self._voices:
+                if voice.render(out, start, self.work):  # silent for good
+                    voice.finish(self.pool)
+                    silent_from = voice.silent_from
+                    self.events.append(
+                        ("end", voice, start if silent_from is None else silent_from)
+                    )
+                else:
+                    keep.append(voice)
+            self._voices = keep
         self.mixer.finish(out)
         self.active_voices = len(self._voices)
         self.frames = end
-
-    def _render_voices(self, out: np.ndarray, start: int) -> None:
-        keep: list[Voice] = []
-        for voice in self._voices:
-            if voice.render(out, start, self.work):
-                self._end(voice)
-            else:
-                keep.append(voice)
-        self._voices = keep
 
     def _apply_commands(self, start: int, end: int) -> None:
         queue = self.queue
@@ -225,32 +222,17 @@ class Scheduler:
             self.queue.retire()
             self.events.append(("cancel", voice, frame))
 
-    def _end(self, voice: Voice) -> None:
-        voice.finish(self.pool)
-        silent_from = voice.silent_from
-        self.events.append(("end", voice, self.frames if silent_from is None else silent_from))
-
     def _stop_all(self, stop_seq: int, frame: int) -> None:
         for voice in self._voices:
             if voice.seq < stop_seq:
                 voice.release(frame)
                 self.events.append(("release", voice, frame))
-        kept = []
-        for entry in self._waiting:
-            if entry[2].seq < stop_seq:
-                self._cancel(entry[2], frame)
-            elif entry[2].state == WAITING:
-                kept.append(entry)
-        heapq.heapify(kept)
-        self._waiting = kept
+        for _, _, voice in self._waiting:
+            if voice.seq < stop_seq:
+                self._cancel(voice, frame)  # no longer waiting
+        self._waiting = [entry for entry in self._waiting if entry[2].state == WAITING]
+        heapq.heapify(self._waiting)
         self.events.append(("stop_all", frame))
-
-    def _drop_voices(self, frame: int) -> None:
-        for voice in self._voices:
-            voice.finish(self.pool)
-            self.events.append(("end", voice, frame))
-        self._voices = []
-        self.active_voices = 0
 
 
 def load_percentiles(loads: np.ndarray) -> tuple[float, float]:

@@ -1,8 +1,5 @@
-"""Voices: what the audio callback renders, one block at a time (a job's here, a
-contact's in :mod:`phantomtouch.engine.contacts`; how they render ahead and fade:
-``docs/engine.md``). Every method runs in real time, inside the audio callback, unless
-its docstring names another thread; constructors are non real time.
-"""
+"""Voices: what the audio callback renders (``docs/engine.md``, What a voice costs). Real
+time (the callback) unless a docstring names another thread; constructors are not."""
 
 from __future__ import annotations
 
@@ -147,24 +144,15 @@ class RingPool:
         self._free.append(ring)
 
 
-def _add(dest: np.ndarray, frames: np.ndarray, gains: np.ndarray | None) -> None:
-    """``dest += frames``, times ``gains`` (shape (len(dest),)) when given."""
-    if gains is None:
-        dest += frames
-    else:
-        dest += frames * gains[:, None]
-
-
 class PatternVoice(Voice):
     """A planned pattern, played from its first frame (a job).
 
     Its frames come from its renderer ahead into a ring when one is free (filled by the
     render-ahead thread, :mod:`phantomtouch.engine.ahead`; by the callback only when it
     runs dry, under :attr:`lock`), else each block directly in the callback, or from its
-    samples rendered whole beforehand. A ring
-    holds whole-width frames (the renderer writes zeros on the channels it does not
-    drive), so a block is one contiguous add, or two where the ring wraps; prerendered
-    samples are a ring that holds every frame from the start.
+    samples rendered whole beforehand. A ring holds whole-width frames (the renderer
+    writes zeros on the channels it does not drive), so a block is one contiguous add, or
+    two where the ring wraps; prerendered samples are a ring holding every frame from the start.
 
     A release fades it out linearly: the gain of frame ``f`` at or after the release frame
     ``R`` is ``(R + L - 1 - f) / L`` (``L = release_frames``), silent from ``R + L - 1``.
@@ -289,8 +277,7 @@ class PatternVoice(Voice):
         return block_end >= end
 
     def _add(self, dest: np.ndarray, gains: np.ndarray | None, work: Workspace) -> None:
-        """Add the voice's next ``len(dest)`` frames into ``dest``, times ``gains`` (shape
-        (len(dest),)) when given."""
+        """Add the voice's next frames into ``dest``, times ``gains`` when given."""
         ring = self._ring
         count = dest.shape[0]
         if ring is None:
@@ -309,10 +296,14 @@ class PatternVoice(Voice):
                 if self._write - read < count:
                     self.refill(max(count, min(FIRST_FRAMES, self._chunk)))
                     work.inline_renders += 1
-        size = self._size
-        start = read % size
-        head = min(count, size - start)
-        _add(dest[:head], ring[start : start + head], None if gains is None else gains[:head])
-        if head < count:
-            _add(dest[head:], ring[: count - head], None if gains is None else gains[head:])
+        start = read % self._size
+        head = min(count, self._size - start)  # the rest from the ring's start
+        if gains is None:
+            dest[:head] += ring[start : start + head]
+            if head < count:
+                dest[head:] += ring[: count - head]
+        else:
+            dest[:head] += ring[start : start + head] * gains[:head, None]
+            if head < count:
+                dest[head:] += ring[: count - head] * gains[head:, None]
         self._read = read + count
