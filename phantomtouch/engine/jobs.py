@@ -450,11 +450,8 @@ class JobCalls:
         with self._lock:
             self._audio.check_ready()
             next_frame = self._audio.next_block_frame()
-            first = frame
-            if first is None:  # a voice that renders ahead is prepared first
-                first = next_frame + (
-                    PREPARE_BLOCKS * self._device.block_frames if prerendered is None else 0
-                )
+            prepare = 0 if prerendered is not None else PREPARE_BLOCKS * self._device.block_frames
+            first = next_frame + prepare if frame is None else frame
             record = JobRecord.planned(resolved, job_id, owner, first)
             if owner is not None and quota is not None:
                 self._jobs.check_quota(
@@ -476,10 +473,8 @@ class JobCalls:
                 owner=owner,
             )
             if prerendered is None:  # a prerendered one renders nothing in the callback
-                first, frame = self._admission.begin(first, frame, self._audio.now_frames)
-                record.requested_start_frame = first
-            if frame is None and prerendered is None:
-                frame = first  # the promised frame, not sooner
+                first = self._admission.begin(first, frame is None, self._audio.now_frames)
+                record.requested_start_frame = frame = first  # the promised frame, not sooner
             record.requested_start_at_s = self._audio.time_at(first)  # one value for all
             self._audio.provide(carrier)
             self._start(entry, StartJob(job_id, entry.handle, owner, frame))
