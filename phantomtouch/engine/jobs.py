@@ -11,7 +11,7 @@ import uuid
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, fields
-from typing import TYPE_CHECKING, Any, Literal, get_args
+from typing import TYPE_CHECKING, Any, Literal, cast, get_args
 
 from phantomtouch.engine.admission import Admission
 from phantomtouch.engine.checks import check_ahead, check_frame, check_id
@@ -244,23 +244,19 @@ class JobTable:
             and record.last_frame > start_frame
         ]
         load = cost + sum(record.cost for record in sounding)
-        count = len(sounding) + 1
-        if _fits(load, count, budget, voices):
-            return []
         victims: list[JobRecord] = []
-        if policy != "refuse":
-            for record in _fair_victims(sounding, start_frame, owner, policy):
-                victims.append(record)
-                load -= record.cost
-                count -= 1
-                if _fits(load, count, budget, voices):
-                    return victims
-        capacity = voices if cost <= 0.0 else min(voices, int(budget / cost + 1e-9))
-        raise EngineBusyError(
-            f"{len(sounding)} pattern voices would sound at once from frame {start_frame}; "
-            f"the voice budget allows {max(1, capacity)} such voices ({budget:.0%} of a "
-            f"block's time, at most {voices}; voice policy {policy!r})"
-        )
+        steals = _fair_victims(sounding, start_frame, owner, policy)
+        while not _fits(load, len(sounding) + 1 - len(victims), budget, voices):
+            if (victim := next(steals, None)) is None:
+                capacity = voices if cost <= 0.0 else min(voices, int(budget / cost + 1e-9))
+                raise EngineBusyError(
+                    f"{len(sounding)} pattern voices would sound at once from frame "
+                    f"{start_frame}; the voice budget allows {max(1, capacity)} such voices "
+                    f"({budget:.0%} of a block's time, at most {voices}; voice policy {policy!r})"
+                )
+            victims.append(victim)
+            load -= victim.cost
+        return victims
 
     def add(self, record: JobRecord) -> None:
         self._live[record.job_id] = record
@@ -323,10 +319,9 @@ def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
 def _fair_victims(
     sounding: list[JobRecord], start_frame: int, owner: str | None, policy: Policy
 ) -> Iterator[JobRecord]:
-    """Jobs to steal, in turn, each from the largest holder of the voices left (the new
-    job counted for ``owner``, who comes first on a tie) among its jobs sounding at
-    ``start_frame``, the oldest started or the quietest; ends when the largest holders
-    have nothing to steal (the others hold less)."""
+    """Jobs to steal, in turn, max-min fair (``docs/owners.md``); none under ``refuse``."""
+    if policy == "refuse":
+        return
     held = Counter(record.owner for record in sounding)
     held[owner] += 1
     order = _STEAL_ORDER[policy]
@@ -367,10 +362,9 @@ class JobCalls:
 
     @staticmethod
     def _check_policy(policy: object) -> Policy:
-        for known in POLICIES:
-            if policy == known:
-                return known
-        raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
+        if policy not in POLICIES:
+            raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
+        return cast(Policy, policy)
 
     @property
     def voice_capacity(self) -> int:
@@ -518,7 +512,7 @@ class JobCalls:
         any thread. Returns False if the job is unknown or already over."""
         with self._lock:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
-            if record is None or record.plan is None or record.state in ("finished", "stopped"):
+            if record is None or record.state in ("finished", "stopped"):
                 return False
             post_release(self._audio, ReleaseJob(job_id, None, None))
             self._jobs.mark_stopped(record)
