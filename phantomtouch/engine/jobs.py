@@ -30,8 +30,7 @@ if TYPE_CHECKING:
 JobStateName = Literal["scheduled", "playing", "finished", "stopped"]
 Policy = Literal["refuse", "steal-oldest", "steal-quietest"]
 POLICIES: tuple[Policy, ...] = get_args(Policy)
-"""What happens to a job beyond the voice budget: refused (EngineBusyError), or the
-oldest or the quietest sounding job fades out to make room."""
+"""What happens to a job beyond the voice budget (``docs/engine.md``)."""
 HISTORY_JOBS = 1000
 """Jobs that are over and still answered by :meth:`Engine.job_state`."""
 MAX_SCHEDULE_AHEAD_S = 3600.0
@@ -480,8 +479,7 @@ class JobCalls:
         return record.job(resolved.summary())
 
     def _start(self, entry: HeldPlan, start: StartJob) -> None:
-        """Hand the entry's plan over unless the audio side holds it, post the start, and
-        release what the cache dropped (host, under the front's lock)."""
+        """Hand the plan over unless held, post ``start``, release what the cache dropped."""
         if not entry.handed:
             self._audio.post(HoldPlan(entry.handle, entry.plan, entry.prerendered))
             entry.handed = True
