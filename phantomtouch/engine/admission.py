@@ -56,9 +56,8 @@ class Admission:
         self._churn = self._churn_block = 0.0
 
     def take_costs(self, costs: tuple[float, float, float] | None) -> None:
-        """Take ``(voice_cost, start_cost, prerendered_cost)`` as
-        :func:`~phantomtouch.engine.core.measure_costs` gives them, unless None or a
-        voice's cost is known already."""
+        """Take ``(voice_cost, start_cost, prerendered_cost)`` from
+        :func:`~phantomtouch.engine.core.measure_costs`, unless None or known already."""
         if costs is not None and self.voice_cost <= 0.0:
             self.voice_cost, self.start_cost, self.prerendered_cost = map(float, costs)
 

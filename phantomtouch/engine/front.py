@@ -35,8 +35,7 @@ MAX_VOICES = 64
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
 _CASTS: dict[str, Callable[[Any], Any]] = {"int": int, "float": float, "str": str, "bool": bool}
-"""How a status field of each type is made from the audio side's figure (numpy scalars
-become Python numbers; other fields are taken as they are)."""
+"""A status field's type made of the audio side's figure (numpy scalars to Python's)."""
 
 
 @dataclass(frozen=True)
