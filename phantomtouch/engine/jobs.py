@@ -372,7 +372,8 @@ class JobCalls:
 
     @property
     def starts_per_block(self) -> int:
-        """Pattern voices that may begin in one block (:class:`Admission`; host, any thread)."""
+        """Pattern voices that may begin in one block (:class:`Admission`); host, any
+        thread."""
         return self._admission.starts_per_block
 
     @property
