@@ -56,9 +56,8 @@ class Admission:
         self._churn = self._churn_block = 0.0
 
     def take_costs(self, costs: tuple[float, float, float] | None) -> None:
-        """Take ``(voice_cost, start_cost, prerendered_cost)`` as
-        :func:`~phantomtouch.engine.core.measure_costs` gives them, unless None or a
-        voice's cost is known already."""
+        """Take ``(voice_cost, start_cost, prerendered_cost)`` from
+        :func:`~phantomtouch.engine.core.measure_costs`, unless None or known already."""
         if costs is not None and self.voice_cost <= 0.0:
             self.voice_cost, self.start_cost, self.prerendered_cost = map(float, costs)
 
@@ -82,38 +81,36 @@ class Admission:
             return 1 << 30
         return max(1, math.floor(START_SHARE / self.start_cost))
 
-    def begin(self, first: int, frame: int | None, now_frames: int) -> tuple[int, int | None]:
-        """Admit the beginning of a job that renders in the callback, or refuse it
-        (``EngineBusyError``); returns its first frame and the frame to send (None: as
-        soon as possible).
+    def begin(self, first: int, asap: bool, now_frames: int) -> int:
+        """Admit the beginning at frame ``first`` of a job that renders in the callback, or
+        refuse it (``EngineBusyError``); returns the frame it is promised.
 
         Its first block (``start_cost``) is charged to an account that drains by
         ``CHURN_SHARE`` of a block per block played and holds ``CHURN_WINDOW_S`` worth.
-        At most ``starts_per_block`` begin in a block: a job for a given ``frame`` keeps
-        it, one as soon as possible (``frame`` None) may move up to ``MAX_START_DELAY_S``.
+        At most ``starts_per_block`` begin in a block: a job for a given frame keeps it,
+        one as soon as possible (``asap``) may move up to ``MAX_START_DELAY_S`` later.
         """
+        if self.start_cost <= 0.0:
+            return first
         size = self.block_frames
-        if self.start_cost > 0.0:
-            now_block = now_frames / size
-            paid = (now_block - self._churn_block) * CHURN_SHARE
-            self._churn, self._churn_block = max(0.0, self._churn - paid), now_block
-            window = CHURN_SHARE * CHURN_WINDOW_S * self.sample_rate_hz / size
-            if self._churn + self.start_cost > max(window, self.start_cost):
-                raise EngineBusyError(
-                    "touches begin faster than the engine can render their first frames "
-                    f"(at most {CHURN_SHARE:.0%} of its time); retry later"
-                )
-            self._churn += self.start_cost
+        now_block = now_frames / size
+        paid = (now_block - self._churn_block) * CHURN_SHARE
+        self._churn, self._churn_block = max(0.0, self._churn - paid), now_block
+        window = CHURN_SHARE * CHURN_WINDOW_S * self.sample_rate_hz / size
+        if self._churn + self.start_cost > max(window, self.start_cost):
+            raise EngineBusyError(
+                "touches begin faster than the engine can render their first frames "
+                f"(at most {CHURN_SHARE:.0%} of its time); retry later"
+            )
+        self._churn += self.start_cost
         per_block = self.starts_per_block
-        if per_block >= 1 << 30:
-            return first, frame
         starts = self._starts
         for old in [b for b in starts if b < now_frames // size]:
             del starts[old]
         block = first // size
-        if frame is not None and starts[block] >= per_block:
+        if not asap and starts[block] >= per_block:
             raise EngineBusyError(
-                f"{per_block} pattern voices already begin in the block of start_frame={frame} "
+                f"{per_block} pattern voices already begin in the block of start_frame={first} "
                 "(what one block can begin at once); choose another frame"
             )
         last = block + max(1, math.ceil(MAX_START_DELAY_S * self.sample_rate_hz / size))
@@ -126,6 +123,4 @@ class Admission:
                     "retry later"
                 )
         starts[block] += 1
-        if block * size > first:
-            return block * size, block * size
-        return first, frame
+        return max(first, block * size)

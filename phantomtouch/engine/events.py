@@ -50,8 +50,7 @@ def apply_events(
 
 
 def _voice_event(jobs: JobTable, event: VoiceEvent, logged: bool) -> dict[str, Any]:
-    """Apply one voice's event to its job, if a job's; its log record (with the plan's
-    summary and pattern when ``logged``)."""
+    """Apply one voice's event to its job, if any; its log record (fuller when ``logged``)."""
     record: dict[str, Any] = {"event": _NAMES[type(event)], "kind": event.kind}
     if event.kind != "job":
         record["owner"], record["contact"] = event.key

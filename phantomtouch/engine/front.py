@@ -1,10 +1,5 @@
-"""The engine's front: its API and every fact the host keeps, over one audio side.
-
-:class:`EngineFront` checks every argument, decides, and posts one typed message
-(:mod:`~phantomtouch.engine.messages`) to its audio side, never waiting for it. Every
-public method runs in the host, on any of the caller's threads (the front's lock makes
-them safe to call at once); ``docs/engine.md`` tells the rest.
-"""
+"""The engine's front: its API and every fact the host keeps, over one audio side
+(``docs/engine.md``)."""
 
 from __future__ import annotations
 
@@ -40,8 +35,7 @@ MAX_VOICES = 64
 STEAL_FADE_S = 0.005
 """Fade-out of a stolen job, s."""
 _CASTS: dict[str, Callable[[Any], Any]] = {"int": int, "float": float, "str": str, "bool": bool}
-"""How a status field of each type is made from the audio side's figure (numpy scalars
-become Python numbers; other fields are taken as they are)."""
+"""A status field's type made of the audio side's figure (numpy scalars to Python's)."""
 
 
 @dataclass(frozen=True)
@@ -136,10 +130,9 @@ class EngineFront(JobCalls, ContactCalls):
         self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
         self._log = StimulusLog(log_path) if log_path is not None else None
-        links = Links(
-            self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost
+        self._audio: LocalAudio | ChildAudio = audio(
+            Links(self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost)
         )
-        self._audio: LocalAudio | ChildAudio = audio(links)
         self._admission.take_costs(self._audio.costs)
 
     def start(self) -> None:
@@ -178,8 +171,7 @@ class EngineFront(JobCalls, ContactCalls):
         return self._audio.time_at(check_int("frame", frame, -(1 << 62), 1 << 62))
 
     def _lost(self, state: str) -> None:
-        """The audio side is gone or stalled: every job and contact is over, each contact
-        published as ``released`` with reason ``engine <state>`` (host, the watchdog)."""
+        """The audio side is gone or stalled: all it played is over (host, the watchdog)."""
         with self._lock:
             self._jobs.drop_all(self.now_frames, fault=state)
             self.plans.unhand_all()

@@ -11,7 +11,7 @@ import uuid
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, fields
-from typing import TYPE_CHECKING, Any, Literal, get_args
+from typing import TYPE_CHECKING, Any, Literal, cast, get_args
 
 from phantomtouch.engine.admission import Admission
 from phantomtouch.engine.checks import check_ahead, check_frame, check_id
@@ -30,8 +30,7 @@ if TYPE_CHECKING:
 JobStateName = Literal["scheduled", "playing", "finished", "stopped"]
 Policy = Literal["refuse", "steal-oldest", "steal-quietest"]
 POLICIES: tuple[Policy, ...] = get_args(Policy)
-"""What happens to a job beyond the voice budget: refused (EngineBusyError), or the
-oldest or the quietest sounding job fades out to make room."""
+"""What happens to a job beyond the voice budget (``docs/engine.md``)."""
 HISTORY_JOBS = 1000
 """Jobs that are over and still answered by :meth:`Engine.job_state`."""
 MAX_SCHEDULE_AHEAD_S = 3600.0
@@ -244,23 +243,19 @@ class JobTable:
             and record.last_frame > start_frame
         ]
         load = cost + sum(record.cost for record in sounding)
-        count = len(sounding) + 1
-        if _fits(load, count, budget, voices):
-            return []
         victims: list[JobRecord] = []
-        if policy != "refuse":
-            for record in _fair_victims(sounding, start_frame, owner, policy):
-                victims.append(record)
-                load -= record.cost
-                count -= 1
-                if _fits(load, count, budget, voices):
-                    return victims
-        capacity = voices if cost <= 0.0 else min(voices, int(budget / cost + 1e-9))
-        raise EngineBusyError(
-            f"{len(sounding)} pattern voices would sound at once from frame {start_frame}; "
-            f"the voice budget allows {max(1, capacity)} such voices ({budget:.0%} of a "
-            f"block's time, at most {voices}; voice policy {policy!r})"
-        )
+        steals = _fair_victims(sounding, start_frame, owner, policy)
+        while not _fits(load, len(sounding) + 1 - len(victims), budget, voices):
+            if (victim := next(steals, None)) is None:
+                capacity = voices if cost <= 0.0 else min(voices, int(budget / cost + 1e-9))
+                raise EngineBusyError(
+                    f"{len(sounding)} pattern voices would sound at once from frame "
+                    f"{start_frame}; the voice budget allows {max(1, capacity)} such voices "
+                    f"({budget:.0%} of a block's time, at most {voices}; voice policy {policy!r})"
+                )
+            victims.append(victim)
+            load -= victim.cost
+        return victims
 
     def add(self, record: JobRecord) -> None:
         self._live[record.job_id] = record
@@ -323,10 +318,9 @@ def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
 def _fair_victims(
     sounding: list[JobRecord], start_frame: int, owner: str | None, policy: Policy
 ) -> Iterator[JobRecord]:
-    """Jobs to steal, in turn, each from the largest holder of the voices left (the new
-    job counted for ``owner``, who comes first on a tie) among its jobs sounding at
-    ``start_frame``, the oldest started or the quietest; ends when the largest holders
-    have nothing to steal (the others hold less)."""
+    """Jobs to steal, in turn, max-min fair (``docs/owners.md``); none under ``refuse``."""
+    if policy == "refuse":
+        return
     held = Counter(record.owner for record in sounding)
     held[owner] += 1
     order = _STEAL_ORDER[policy]
@@ -367,10 +361,9 @@ class JobCalls:
 
     @staticmethod
     def _check_policy(policy: object) -> Policy:
-        for known in POLICIES:
-            if policy == known:
-                return known
-        raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
+        if policy not in POLICIES:
+            raise ParameterError(f"voice_policy={policy!r} must be one of {list(POLICIES)}")
+        return cast(Policy, policy)
 
     @property
     def voice_capacity(self) -> int:
@@ -450,11 +443,8 @@ class JobCalls:
         with self._lock:
             self._audio.check_ready()
             next_frame = self._audio.next_block_frame()
-            first = frame
-            if first is None:  # a voice that renders ahead is prepared first
-                first = next_frame + (
-                    PREPARE_BLOCKS * self._device.block_frames if prerendered is None else 0
-                )
+            prepare = 0 if prerendered is not None else PREPARE_BLOCKS * self._device.block_frames
+            first = next_frame + prepare if frame is None else frame
             record = JobRecord.planned(resolved, job_id, owner, first)
             if owner is not None and quota is not None:
                 self._jobs.check_quota(
@@ -476,10 +466,8 @@ class JobCalls:
                 owner=owner,
             )
             if prerendered is None:  # a prerendered one renders nothing in the callback
-                first, frame = self._admission.begin(first, frame, self._audio.now_frames)
-                record.requested_start_frame = first
-            if frame is None and prerendered is None:
-                frame = first  # the promised frame, not sooner
+                first = self._admission.begin(first, frame is None, self._audio.now_frames)
+                record.requested_start_frame = frame = first  # the promised frame, not sooner
             record.requested_start_at_s = self._audio.time_at(first)  # one value for all
             self._audio.provide(carrier)
             self._start(entry, StartJob(job_id, entry.handle, owner, frame))
@@ -491,8 +479,7 @@ class JobCalls:
         return record.job(resolved.summary())
 
     def _start(self, entry: HeldPlan, start: StartJob) -> None:
-        """Hand the entry's plan over unless the audio side holds it, post the start, and
-        release what the cache dropped (host, under the front's lock)."""
+        """Hand the plan over unless held, post ``start``, release what the cache dropped."""
         if not entry.handed:
             self._audio.post(HoldPlan(entry.handle, entry.plan, entry.prerendered))
             entry.handed = True
@@ -523,7 +510,7 @@ class JobCalls:
         any thread. Returns False if the job is unknown or already over."""
         with self._lock:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
-            if record is None or record.plan is None or record.state in ("finished", "stopped"):
+            if record is None or record.state in ("finished", "stopped"):
                 return False
             post_release(self._audio, ReleaseJob(job_id, None, None))
             self._jobs.mark_stopped(record)
