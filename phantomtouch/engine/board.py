@@ -22,8 +22,8 @@ class ContactBoard:
     by posted positions, released into ``queue`` (a :class:`CommandQueue`); it checks
     nothing. Every method runs where the messages are performed: real time in the engine
     process's audio callback, or the calling thread of the in-process engine (under the
-    front's lock). ``attack_frames`` and ``release_frames`` (>= 1) are the settings'
-    ``attack_s`` and ``release_s`` in frames."""
+    front's lock). ``attack_frames`` (>= 0) and ``release_frames`` (>= 1) are the
+    settings' ``attack_s`` and ``release_s`` in frames."""
 
     def __init__(self, device: DeviceProfile, settings: ContactSettings, queue: CommandQueue):
         self.device = device
@@ -41,9 +41,8 @@ class ContactBoard:
             down, next(self._serials), source, self.attack_frames, self.release_frames
         )
         key = (down.owner, down.contact)
-        old = self._contacts.get(key)
         self._queue.push_start(voice, first_frame, down.frame is None)
-        if old is not None:
+        if (old := self._contacts.get(key)) is not None:
             self._queue.push_release(old, down.frame)
         self._contacts[key] = voice
 

@@ -198,11 +198,7 @@ class ContactVoice(Voice):
             np.add(work.index[:count], np.float32(first - release + 1), out=fade)
             fade *= np.float32(-1.0 / self.release_frames)
             fade += np.float32(level)
-            if env is None:
-                env = fade
-                np.minimum(env, np.float32(1.0), out=env)
-            else:
-                np.minimum(env, fade, out=env)
+            env = np.minimum(fade, np.float32(1.0) if env is None else env, out=fade)
             np.maximum(env, np.float32(0.0), out=env)
         return env
 

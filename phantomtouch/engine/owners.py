@@ -1,7 +1,5 @@
 """Contacts by owner: which are down, whose they are, until when, and fair shares of the
-slots (``docs/owners.md``). Every method of :class:`OwnerTable` is called with the front's
-lock held.
-"""
+slots (``docs/owners.md``)."""
 
 from __future__ import annotations
 
@@ -33,9 +31,8 @@ RETRY_S = 0.05
 
 ReleasedListener = Callable[[str, tuple[str, ...], str], None]
 """``listener(owner, contacts, reason)``: the front let go of ``contacts`` of ``owner``
-without an ``up`` (the reasons: ``docs/owners.md``). It runs in the thread that released
-them (a request's, the deadline thread, the engine's watchdog thread), so it must return at
-once and must not call the front back (it hands the event to its own thread or loop)."""
+without an ``up``; it runs in the releasing thread, so it must return at once and must not
+call the front back (the reasons and threads: ``docs/owners.md``)."""
 
 Released = tuple[str, tuple[str, ...], str]
 """``(owner, contacts, reason)`` of one ``released`` event."""
@@ -72,9 +69,8 @@ class Listeners:
             self._entries.append(entry)
 
         def unsubscribe() -> None:
-            with self._lock:
-                if entry in self._entries:
-                    self._entries.remove(entry)
+            with self._lock, contextlib.suppress(ValueError):
+                self._entries.remove(entry)
 
         return unsubscribe
 
@@ -111,7 +107,7 @@ class ContactRecord:
 
 class OwnerTable:
     """Contacts by owner, oldest first: at most ``max_contacts`` (>= 1, the engine's contact
-    slots) down at once over every owner."""
+    slots) down at once over every owner; every method is called with the front's lock held."""
 
     def __init__(self, max_contacts: int) -> None:
         self.max_contacts = max_contacts
@@ -144,8 +140,7 @@ class OwnerTable:
         if count < self.max_contacts:
             return None
         mine = len(self.held(owner))
-        largest = max(self._owners, key=lambda o: len(self._owners[o]))
-        held = self._owners[largest]
+        largest, held = max(self._owners.items(), key=lambda item: len(item[1]))
         if len(held) < mine + 2:
             raise EngineBusyError(
                 f"{count} contacts are down; at most max_contacts={self.max_contacts}, "
@@ -193,8 +188,7 @@ class OwnerTable:
 
 
 class DeadlineThread:
-    """The thread that releases contacts past their deadline (``phantomtouch-deadlines``,
-    never the audio callback), while some contact has one: it calls ``expire(now_s)``
+    """The front's deadline thread (``docs/owners.md``): it calls ``expire(now_s)``
     (``time.monotonic()`` clock), which releases what is due and returns the next deadline
     or None, then sleeps until that deadline or a :meth:`wake`, and ends on None."""
 
@@ -251,8 +245,6 @@ class ContactCalls:
         a band and seed), so that a later ``contact_down`` with it does not wait for it.
         Host, meant for a worker thread; a carrier the device cannot play is left to
         ``contact_down`` to refuse."""
-        if carrier is None:
-            return
         with contextlib.suppress(ParameterError):
             self._audio.prepare(check_contact_carrier(self._device, carrier))
 
@@ -402,12 +394,12 @@ class ContactCalls:
         any thread. Never refused; unknown owners are ignored."""
         with self._lock:
             held = self._contacts.pop_owner(owner)
+            if not held:
+                return
             for record in held.values():
                 self._audio.free_slot(record.slot)
-            if held:
-                post_release(self._audio, ReleaseOwner(owner))
-        if held:
-            self._listeners.publish([(owner, tuple(held), reason)])
+            post_release(self._audio, ReleaseOwner(owner))
+        self._listeners.publish([(owner, tuple(held), reason)])
 
     def renew_owner(self, owner: str, now_s: float | None = None) -> None:
         """Push the deadline of every contact of ``owner`` on (its input is alive); ``now_s``
@@ -444,10 +436,10 @@ class ContactCalls:
         (:data:`ReleasedListener`). Any thread; returns the function that unsubscribes it."""
         return self._listeners.subscribe(listener, owner)
 
-    def release_expired(self, now_s: float | None = None, prefix: str = "") -> list[str]:
+    def release_expired(self, now_s: float | None = None, prefix: str = "") -> None:
         """Release every contact whose deadline is at or before ``now_s`` (None: now)
-        of owners whose name starts with ``prefix``; returns those owners. Any thread:
-        the front's deadline thread does this on its own, an input may ask sooner."""
+        of owners whose name starts with ``prefix``. Any thread: the front's deadline
+        thread does this on its own, an input may ask sooner."""
         now_s = time.monotonic() if now_s is None else now_s
         with self._lock:
             due = self._contacts.expired(now_s, prefix)
@@ -455,7 +447,6 @@ class ContactCalls:
                 for contact, record in held.items():
                     self._lift(record, ContactUp(owner, contact, None, None))
         self._listeners.publish([(owner, tuple(held), "watchdog") for owner, held in due.items()])
-        return list(due)
 
     def _expire_deadlines(self, now_s: float) -> float | None:
         """The deadline thread's step: release what is due, return the next deadline."""

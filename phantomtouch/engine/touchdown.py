@@ -1,5 +1,5 @@
 """A touchdown's checks and computations, done once, by the front, outside real time: a
-bad carrier, intensity or position raises ParameterError naming it; the audio side only
+bad carrier, intensity or velocity raises ParameterError naming it; the audio side only
 builds the voice from the gains, amplitude and transient computed here."""
 
 from __future__ import annotations
