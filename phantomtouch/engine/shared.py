@@ -285,8 +285,7 @@ class StatusBlock:
     """
 
     def __init__(self, channels: int, raw: Any = None) -> None:
-        self.channels = int(channels)
-        size = len(STATUS_FIELDS) + self.channels
+        size = len(STATUS_FIELDS) + int(channels)
         self.raw = raw if raw is not None else SharedBuffer.allocate(size, False).values
         self._values = np.frombuffer(self.raw, dtype=np.float64)
 
