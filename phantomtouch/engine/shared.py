@@ -438,7 +438,7 @@ class MappedBlocks(Generic[K]):
         (non real time: the inbox thread; no copy). Raises ``FileNotFoundError`` for a
         block the host did not write."""
         block = shared_memory.SharedMemory(name=name)
-        MappedBlocks.drop(self, key)  # not a subclass's: the key is held again at once
+        MappedBlocks.drop(self, key)  # only the old block is retired: the key stays held
         self._held[key] = block
         return block
 
