@@ -67,8 +67,7 @@ class DropPlan:
     handle: int
 
     def apply(self, state: AudioState, void: bool) -> None:
-        """Real time. Forget the plan; sounding voices keep their reference, and its block
-        is released (and reported) once none reads it."""
+        """Real time. Forget the plan; its block is released once no voice reads it."""
         state.plans.pop(self.handle, None)
         if state.arrays is None or not state.arrays.drop(self.handle):
             state.reports.append(PlanReleased(self.handle))
@@ -163,15 +162,13 @@ class ContactDown:
         carrier's source, from the noise loops held now; a loop not handed over is
         refused here."""
         try:
-            source = make_source(self.carrier, state.core.device.sample_rate_hz)
+            return StartContact(self, make_source(self.carrier, state.core.device.sample_rate_hz))
         except LookupError as exc:
             state.refuse("noise loop", (self.owner, self.contact), str(exc))
             return StartContact(self, None)
-        return StartContact(self, source)
 
     def apply(self, state: AudioState, void: bool) -> None:
-        """Real time in this process. Build the contact voice from the front's parts and
-        start it."""
+        """Real time in this process: prepared and started at once."""
         self.prepare(state).apply(state, void)
 
 
@@ -184,7 +181,7 @@ class StartContact:
     source: CarrierSource | None
 
     def apply(self, state: AudioState, void: bool) -> None:
-        """Real time. Build the contact voice from the front's parts and start it."""
+        """Real time."""
         down = self.down
         if void or self.source is None:
             return
@@ -276,8 +273,7 @@ class DropNoise:
 
     def apply(self, state: AudioState, void: bool) -> None:
         """Non real time (the engine process's inbox thread, :func:`prepare`, in order with
-        the holds and with the touchdowns and jobs whose sources it makes): stop handing
-        the loop to new voices; it is released (and reported) once no voice reads it."""
+        the holds and the sources it makes)."""
         if state.loops is not None:
             state.loops.drop(self.key)
 
@@ -438,11 +434,8 @@ APPLIERS: dict[type, Callable[[Any, AudioState, bool], None]] = {
 
 def prepare(state: AudioState, message: Command) -> Command | None:
     """Do the heavy part of a command before the callback sees it, in the order the commands
-    came (non real time: the engine process's inbox thread): map what a ``HoldPlan`` or
-    ``HoldNoise`` names and unmap what a ``DropNoise`` names (so every voice's noise loop
-    is looked up in the order the host sent them), build a ``StartJob``'s voice and a
-    ``ContactDown``'s carrier source. Returns what is left to :func:`perform`, None for
-    nothing."""
+    came (non real time: the engine process's inbox thread; docs/engine.md, Threads).
+    Returns what is left to :func:`perform`, None for nothing."""
     if isinstance(message, HoldPlan | HoldNoise | DropNoise):
         perform(state, message)
         return None

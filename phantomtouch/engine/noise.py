@@ -94,9 +94,7 @@ class HeldLoops(MappedBlocks[NoiseKey]):
     def hold(self, key: NoiseKey, name: str) -> None:
         """Map the host's block and let new voices read it (non real time: the inbox
         thread; no copy)."""
-        loop = view(self.map(key, name), "<f4", (NOISE_PERIOD_FRAMES,), 0)
-        loop.flags.writeable = False
-        adopt_noise_loop(key, loop)
+        adopt_noise_loop(key, view(self.map(key, name), "<f4", (NOISE_PERIOD_FRAMES,), 0))
 
     def drop(self, key: NoiseKey) -> bool:
         """New voices no longer get the loop; it is released once none reads it; False:

@@ -90,10 +90,7 @@ class HeldArrays(MappedBlocks[int]):
         time: the inbox thread; no copy). Raises ``FileNotFoundError`` for a block the
         host did not write."""
         block = self.map(handle, shared.name)
-        arrays: dict[str, np.ndarray] = {}
-        for place, dtype, shape, offset in shared.layout:
-            arrays[place] = view(block, dtype, shape, offset)
-            arrays[place].flags.writeable = False
+        arrays = {place: view(block, dtype, shape, at) for place, dtype, shape, at in shared.layout}
         samples = arrays.pop("samples", None)
         prerendered = None if samples is None else Prerendered(samples=samples)
         return _with_arrays(plan, arrays), prerendered

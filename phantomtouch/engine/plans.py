@@ -121,10 +121,6 @@ class PlanCache:
             known_key = given.pattern.model_dump_json()
         return self._entry(known_key, lambda: given, render=True)
 
-    def prerendered(self, resolved: Plan) -> Prerendered | None:
-        """The samples of a plan, rendered once; None for a plan too long."""
-        return self.entry(resolved).prerendered
-
     def take_dropped(self) -> list[HeldPlan]:
         """Entries the audio side held when they were dropped, since the last call (the
         front releases them)."""

@@ -73,8 +73,7 @@ class _Rows:
     raw : SharedBuffer, or None
         The shared memory (as passed to the child); None: allocate it.
     locked : bool or None
-        When allocating: guard it with a lock (True) or sequence locks (False); None: a
-        lock off x86 or with ``PHANTOMTOUCH_SHARED_LOCKS=1``.
+        When allocating: as for :meth:`SharedBuffer.allocate`.
     """
 
     def __init__(self, rows: int, fields: int, raw: SharedBuffer | None, locked: bool | None):
@@ -88,8 +87,7 @@ class _Rows:
         return self._lock is not None
 
     def _store(self, row: int, values: tuple[float, ...], wait: bool) -> bool:
-        """Write a row between two steps of its sequence number, under the lock if any;
-        False: the lock was held and ``wait`` False, nothing written."""
+        """Write a row between two steps of its sequence number; False: lock held, not written."""
         lock = self._lock
         if lock is not None and not lock.acquire(wait):
             return False
@@ -104,8 +102,7 @@ class _Rows:
         return True
 
     def _read(self, wait: bool) -> np.ndarray | None:
-        """With a lock, a copy of the rows taken under it (None: the lock was held and
-        ``wait`` False); else the shared rows themselves, read through :meth:`_row`."""
+        """The rows (with a lock: a copy; None: lock held), each read through :meth:`_row`."""
         lock = self._lock
         if lock is None:
             return self._rows
@@ -118,8 +115,7 @@ class _Rows:
 
     @staticmethod
     def _row(rows: np.ndarray, index: int) -> np.ndarray | None:
-        """A copy of row ``index`` of ``rows``; None: caught mid-write (its sequence
-        number odd, or changed while copied)."""
+        """A copy of row ``index``; None: caught mid-write (sequence number odd or changed)."""
         row = rows[index].copy()
         return row if row[0] % 2.0 == 0.0 and rows[index, 0] == row[0] else None
 
@@ -195,10 +191,7 @@ class MoveSlots(_Rows):
 
     def allocate(self) -> tuple[int, int] | None:
         """A free slot and its new generation, or None when all are taken."""
-        if not self._free:
-            return None
-        self._generation += 1
-        return self._free.pop(), self._generation
+        return (self._free.pop(), self.renew()) if self._free else None
 
     def renew(self) -> int:
         """A new generation for a slot that changes hands (a contact touching down again)."""
@@ -292,8 +285,7 @@ class StatusBlock:
     """
 
     def __init__(self, channels: int, raw: Any = None) -> None:
-        self.channels = int(channels)
-        size = len(STATUS_FIELDS) + self.channels
+        size = len(STATUS_FIELDS) + int(channels)
         self.raw = raw if raw is not None else SharedBuffer.allocate(size, False).values
         self._values = np.frombuffer(self.raw, dtype=np.float64)
 
@@ -335,18 +327,19 @@ def write_block(arrays: Sequence[np.ndarray]) -> tuple[shared_memory.SharedMemor
         size += -(-array.nbytes // _ALIGN) * _ALIGN
     block = shared_memory.SharedMemory(create=True, size=max(size, 1))
     for array, offset in zip(arrays, offsets, strict=True):
-        view(block, array.dtype.str, array.shape, offset)[...] = array
+        np.frombuffer(block.buf, array.dtype, array.size, offset)[:] = array.ravel()  # type: ignore[arg-type]
     return block, offsets
 
 
 def view(
     block: shared_memory.SharedMemory, dtype: str, shape: tuple[int, ...], offset: int
 ) -> np.ndarray:
-    """An array over part of a block, without a copy; while it lives the block cannot be
-    unmapped (``close`` raises ``BufferError``)."""
+    """A read-only array over part of a block, without a copy; while it lives the block
+    cannot be unmapped (``close`` raises ``BufferError``)."""
     count = int(np.prod(shape, dtype=np.int64))
-    flat = np.frombuffer(block.buf, dtype=dtype, count=count, offset=offset)  # type: ignore[arg-type]
-    return flat.reshape(shape)
+    array = np.frombuffer(block.buf, dtype=dtype, count=count, offset=offset)  # type: ignore[arg-type]
+    array.flags.writeable = False
+    return array.reshape(shape)
 
 
 def unlink_block(block: shared_memory.SharedMemory) -> None:
@@ -358,14 +351,9 @@ def unlink_block(block: shared_memory.SharedMemory) -> None:
 
 
 class HostBlocks(Generic[K]):
-    """The blocks the host wrote for the engine process, by key; each is freed only once
-    the engine process reports it released it, or is gone (any host thread; a lock
-    guards the records).
-
-    A key has at most one live block, kept in least recently used order; a live block
-    the engine process was told to drop is retired, oldest first, until it reports the
-    release.
-    """
+    """The blocks the host wrote for the engine process, by key, at most one live block
+    a key (any host thread; a lock guards the records); docs/engine.md (Heavy work is
+    staged) says when each is freed."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -435,9 +423,8 @@ class HostBlocks(Generic[K]):
 
 class MappedBlocks(Generic[K]):
     """The host's blocks the engine process maps, by key: mapped by the inbox thread,
-    dropped and unmapped by the audio callback (engine process). The blocks waiting to
-    be unmapped are a FIFO each side only appends to or pops from, so a block one side
-    retires while the other collects is never lost."""
+    dropped and unmapped by the audio callback. Each side only appends to or pops from
+    the FIFO of blocks waiting to be unmapped, so none is lost between them."""
 
     def __init__(self) -> None:
         self._held: dict[K, shared_memory.SharedMemory] = {}
@@ -451,9 +438,7 @@ class MappedBlocks(Generic[K]):
         (non real time: the inbox thread; no copy). Raises ``FileNotFoundError`` for a
         block the host did not write."""
         block = shared_memory.SharedMemory(name=name)
-        old = self._held.pop(key, None)
-        if old is not None:
-            self._retiring.append((key, old))
+        MappedBlocks.drop(self, key)  # only the old block is retired: the key stays held
         self._held[key] = block
         return block
 

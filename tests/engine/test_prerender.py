@@ -86,13 +86,13 @@ def test_the_cache_renders_a_plan_once_keeps_its_bound_and_skips_long_plans() ->
     short = [plan(tap(intensity=0.2 + 0.1 * k), DEVICE) for k in range(4)]  # same channels
     one = prerender(short[0]).samples.nbytes
     cache = PlanCache(DEVICE, max_bytes=2 * one, prerender_max_s=1.0)
-    first = cache.prerendered(short[0])
-    assert first is not None and cache.prerendered(short[0]) is first
+    first = cache.entry(short[0]).prerendered
+    assert first is not None and cache.entry(short[0]).prerendered is first
     for resolved in short[1:]:
-        cache.prerendered(resolved)
+        cache.entry(resolved)
     assert cache.bytes <= 2 * one
-    assert cache.prerendered(short[0]) is not first  # dropped as least recently used
-    assert cache.prerendered(plan(tap(duration_s=1.5), DEVICE)) is None
+    assert cache.entry(short[0]).prerendered is not first  # dropped as least recently used
+    assert cache.entry(plan(tap(duration_s=1.5), DEVICE)).prerendered is None
 
 
 def test_prerendered_touches_are_not_charged_for_first_frames() -> None:
