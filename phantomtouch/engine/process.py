@@ -45,8 +45,7 @@ RESTART_TIMEOUT_S = 10.0
 has just lost a client may hang a new one for a while): then it is tried again."""
 RETRY_FIRST_S = 0.5
 RETRY_MAX_S = 5.0
-"""A restart that fails (the sound card is gone) is tried again after 0.5 s, then after
-twice as long each time, at most every 5 s."""
+"""Waits before a failed restart is tried again, s: doubled each time (docs/engine.md)."""
 REALTIME_PRIORITY = 1
 """SCHED_FIFO priority of the engine process's threads (above every ordinary thread)."""
 
