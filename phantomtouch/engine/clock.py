@@ -21,9 +21,7 @@ LATENCY_FOLLOW = 1.0 / 16.0
 
 
 class FrameMapping(abc.ABC):
-    """Maps frames of the engine's output to seconds on the server clock and back: a
-    frame leaves the sound card when its block was computed, plus its offset in the
-    block over ``sample_rate_hz``, plus the sink's output latency."""
+    """Maps frames of the engine's output to seconds on the server clock and back."""
 
     sample_rate_hz: int
 

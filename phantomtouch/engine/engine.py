@@ -13,7 +13,6 @@ from typing import Any
 from phantomtouch.engine.checks import check_int
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core, measure_costs
-from phantomtouch.engine.front import MAX_VOICES as MAX_VOICES  # re-exported
 from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import AudioState, Command, ContactMove, Event, perform
 from phantomtouch.engine.sinks import NullSink, Sink
@@ -80,7 +79,6 @@ class LocalAudio:
             if self.costs is None and self.core.sink.realtime:
                 self.costs = voice_costs(self.core)
             self.core.start()
-            self._halt.clear()
             self._housekeeper = threading.Thread(
                 target=self._housekeep, name="phantomtouch-engine-housekeeping", daemon=True
             )

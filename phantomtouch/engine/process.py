@@ -45,8 +45,7 @@ RESTART_TIMEOUT_S = 10.0
 has just lost a client may hang a new one for a while): then it is tried again."""
 RETRY_FIRST_S = 0.5
 RETRY_MAX_S = 5.0
-"""A restart that fails (the sound card is gone) is tried again after 0.5 s, then after
-twice as long each time, at most every 5 s."""
+"""Waits before a failed restart is tried again, s: doubled each time (docs/engine.md)."""
 REALTIME_PRIORITY = 1
 """SCHED_FIFO priority of the engine process's threads (above every ordinary thread)."""
 
@@ -60,7 +59,6 @@ class ChildAudio:
         device: DeviceProfile,
         spec: SinkSpec,
         links: Links,
-        render_ahead_frames: int,
         priority: int | None,
         on_fault: Callable[[str], None] | None,
     ) -> None:
@@ -70,7 +68,7 @@ class ChildAudio:
             "queue_capacity": links.queue_capacity,
             "max_voices": links.max_voices,
             "contact": links.settings,
-            "render_ahead_frames": render_ahead_frames,
+            "render_ahead_frames": RENDER_AHEAD_FRAMES,
             "costs": links.costs,
             "contact_slots": links.settings.max_contacts,
         }
@@ -88,7 +86,7 @@ class ChildAudio:
         self._shared_plans = SharedPlans()
         self._seq = 0
         self._child = self._spawn(START_TIMEOUT_S)
-        self.costs: tuple[float, float, float] | None = self._child.costs
+        self.costs = self._options["costs"] = self._child.costs  # a restart measures nothing
         self.backend = self._child.backend
         self.output_device = self._child.output_device
         self._watchdog = threading.Thread(
@@ -105,8 +103,7 @@ class ChildAudio:
     # -- the engine process ---------------------------------------------------------------
 
     def _read_reports(self, child: ChildProcess) -> None:
-        """Host, the reports thread: free released loops and plans' blocks, hand the rest
-        to the front."""
+        """Host, the reports thread: free what was released, hand every event to the front."""
         while True:
             try:
                 events = child.reports.recv()
@@ -217,7 +214,6 @@ class ChildAudio:
             except Exception:
                 logger.exception("on_fault failed")
         self._child.end(kill=True)
-        self._options["costs"] = self.costs
         delay_s = RETRY_FIRST_S
         while self._set_state("restarting"):
             try:
@@ -342,7 +338,6 @@ class ProcessEngine(EngineFront):
     device : DeviceProfile
     sink : SinkSpec or None
         The sink the engine process opens; None: ``SinkSpec("default")``.
-    render_ahead_frames : int, >= 0
     realtime_priority : int or None, 1 <= realtime_priority <= 99
         SCHED_FIFO priority of the engine process's threads; None, or no permission for
         it: ordinary scheduling.
@@ -373,17 +368,14 @@ class ProcessEngine(EngineFront):
         *,
         realtime_priority: int | None = REALTIME_PRIORITY,
         on_fault: Callable[[str], None] | None = None,
-        render_ahead_frames: int = RENDER_AHEAD_FRAMES,
         **options: Any,
     ) -> None:
         if realtime_priority is not None:
             check_int("realtime_priority", realtime_priority, 1, 99)
-        check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
-        spec = sink if sink is not None else SinkSpec()
         super().__init__(
             device,
             lambda links: ChildAudio(
-                device, spec, links, render_ahead_frames, realtime_priority, on_fault
+                device, sink if sink is not None else SinkSpec(), links, realtime_priority, on_fault
             ),
             **options,
         )

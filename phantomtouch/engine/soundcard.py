@@ -91,9 +91,7 @@ def split_host_api(output: str, host_apis: Sequence[str]) -> tuple[str | None, s
     wanted = _squeezed(prefix)
     matches = [api for api in host_apis if wanted in _squeezed(api)]
     chosen = [api for api in matches if _squeezed(api) == wanted] or matches
-    if len(chosen) != 1:
-        return None, output
-    return chosen[0], name.strip()
+    return (chosen[0], name.strip()) if len(chosen) == 1 else (None, output)
 
 
 def find_output_device(output: int | str | None, channels: int) -> dict[str, Any]:
@@ -260,8 +258,7 @@ class SoundDeviceSink:
         return self._dac_delay_s
 
     def _callback(self, outdata: np.ndarray, frames: int, time_info: Any, status: Any) -> None:
-        """PortAudio's callback (real time): fill ``outdata``, float32, shape (frames,
-        stream channels), entirely; count output underflows."""
+        """PortAudio's callback (real time): fill ``outdata``, (frames, stream channels)."""
         self._dac_delay_s = time_info.outputBufferDacTime - time_info.currentTime
         if status.output_underflow:
             self.underruns += 1
@@ -339,8 +336,7 @@ class SinkSpec:
     Parameters
     ----------
     backend : {"default", "sounddevice", "null", "capture"}
-        ``"default"``: :func:`open_default_sink` (the sound card with enough outputs, else
-        the null sink).
+        ``"default"``: :func:`open_default_sink`.
     output, channel_map, latency, exclusive
         As for :class:`SoundDeviceSink` (``output`` and ``exclusive`` also for "default").
     wav_path : str or None

@@ -17,7 +17,7 @@ import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, gains_at, render
 from phantomtouch.engine import Engine, SoundDeviceSink
-from phantomtouch.engine.engine import MAX_VOICES
+from phantomtouch.engine.front import MAX_VOICES
 from phantomtouch.engine.prerender import PRERENDER_MAX_S
 from phantomtouch.renderer.carriers import SineSource
 from phantomtouch.renderer.levels import amplitude_for_level
