@@ -64,7 +64,7 @@ from typing import Any
 
 import numpy as np
 import realtime_load as load
-from realtime_floor import LatencyProbe, floor, in_stalls, xrun_causes
+from realtime_floor import LatencyProbe, floor, in_stalls, xrun_causes, xrun_kinds
 from realtime_report import TITLES, floor_text, number, table, xruns_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
@@ -175,10 +175,13 @@ async def measure(
         await asyncio.sleep(TAIL_S)
         after = await load.metrics(connection)
         xruns_after = xruns.xruns
-        machine["xruns_in_stalls"] = in_stalls(
-            xruns.times[xruns_before:xruns_after], machine["stalls"], elapsed_s + TAIL_S
-        )
         log_during = jack.output()[log_before:]
+        machine["xruns_in_stalls"] = in_stalls(
+            xruns.times[xruns_before:xruns_after],
+            machine["stalls"],
+            elapsed_s + TAIL_S,
+            xrun_kinds(log_during, args.period_frames / SAMPLE_RATE_HZ * 1e6),
+        )
     finally:
         connection.close()
     if before is None or after is None:

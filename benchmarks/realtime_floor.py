@@ -121,19 +121,32 @@ class LatencyProbe:
 
 
 def in_stalls(
-    xrun_times_s: list[float], stalls: list[list[float]], seconds: float
+    xrun_times_s: list[float],
+    stalls: list[list[float]],
+    seconds: float,
+    kinds: list[str] | None = None,
 ) -> dict[str, Any]:
-    """How many xruns fall in a stall the probe saw (:data:`STALL_WINDOW_S`), and how many
-    would by chance: the share of the scenario's ``seconds`` that such windows cover,
-    times the xruns.
+    """How many xruns fall in a stall the probe saw (:data:`STALL_WINDOW_S`), how many
+    would by chance (the share of the scenario's ``seconds`` such windows cover, times the
+    xruns), and how many are beyond the machine.
 
     Parameters
     ----------
     xrun_times_s : list of float
-        ``time.monotonic()`` of each xrun JACK reported.
+        ``time.monotonic()`` of each xrun JACK reported, in order.
     stalls : list of [due_s, latency_us]
         As :meth:`LatencyProbe.stop` returns.
     seconds : float, > 0
+    kinds : list of str, optional
+        Each xrun's cause in the same order (:func:`xrun_kinds`). When given for every
+        xrun, an xrun of the dummy driver's own late timer (``late_wakeup``: no client
+        was slow) is the machine's too.
+
+    Returns
+    -------
+    dict
+        ``xruns``, ``in_stalls``, ``by_chance``, ``stall_share`` and ``beyond_machine``:
+        the xruns neither in a stall nor (with ``kinds``) a late wake-up of JACK's timer.
     """
     before_s, after_s = STALL_WINDOW_S
     spans = sorted((due - after_s, due + latency / 1e6 + before_s) for due, latency in stalls)
@@ -141,14 +154,28 @@ def in_stalls(
     for begin, end in spans:
         covered_s += max(0.0, end - max(begin, reach_s))
         reach_s = max(reach_s, end)
-    inside = sum(any(begin <= x <= end for begin, end in spans) for x in xrun_times_s)
+    inside = [any(begin <= x <= end for begin, end in spans) for x in xrun_times_s]
+    if kinds is None or len(kinds) != len(inside):
+        kinds = ["slow_cycle"] * len(inside)
     share = min(1.0, covered_s / seconds)
     return {
-        "xruns": len(xrun_times_s),
-        "in_stalls": inside,
-        "by_chance": share * len(xrun_times_s),
+        "xruns": len(inside),
+        "in_stalls": sum(inside),
+        "by_chance": share * len(inside),
         "stall_share": share,
+        "beyond_machine": sum(
+            not seen and kind != "late_wakeup" for seen, kind in zip(inside, kinds, strict=True)
+        ),
     }
+
+
+def xrun_kinds(log: str, period_us: float) -> list[str]:
+    """Each xrun the dummy driver reported, in order: ``late_wakeup`` or ``slow_cycle``
+    (:func:`xrun_causes`)."""
+    return [
+        "late_wakeup" if int(usec) < period_us / 2 else "slow_cycle"
+        for usec in re.findall(r"JackTimedDriver::Process XRun = (\d+) usec", log)
+    ]
 
 
 def xrun_causes(log: str, period_us: float) -> dict[str, int]:
@@ -163,8 +190,8 @@ def xrun_causes(log: str, period_us: float) -> dict[str, int]:
     had not finished its cycle in time.
     """
     causes: dict[str, int] = {"late_wakeup": 0, "slow_cycle": 0}
-    for usec in re.findall(r"JackTimedDriver::Process XRun = (\d+) usec", log):
-        causes["late_wakeup" if int(usec) < period_us / 2 else "slow_cycle"] += 1
+    for kind in xrun_kinds(log, period_us):
+        causes[kind] += 1
     late = re.findall(r"client = (\S+) was not finished|client (\S+) finished after current", log)
     for names in late:
         key = f"client_late:{names[0] or names[1]}"
@@ -180,10 +207,13 @@ def floor(
     probe = LatencyProbe(round(period_us)).start()
     time.sleep(seconds)
     machine = probe.stop()
-    machine["xruns_in_stalls"] = in_stalls(xruns.times[xruns_before:], machine["stalls"], seconds)
+    log = jack.output()[log_before:]
+    machine["xruns_in_stalls"] = in_stalls(
+        xruns.times[xruns_before:], machine["stalls"], seconds, xrun_kinds(log, period_us)
+    )
     return {
         "seconds": seconds,
         "jack_xruns": xruns.xruns - xruns_before,
-        "jack_xrun_causes": xrun_causes(jack.output()[log_before:], period_us),
+        "jack_xrun_causes": xrun_causes(log, period_us),
         "machine_floor": machine,
     }

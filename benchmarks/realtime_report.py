@@ -82,12 +82,15 @@ def floor_text(result: dict[str, Any]) -> str:
 
 
 def stalls_text(result: dict[str, Any]) -> str:
-    """``in of all (by chance)``: JACK's xruns during a stall the probe saw
-    (``realtime_floor.in_stalls``)."""
+    """``in of all (by chance); N beyond``: JACK's xruns during a stall the probe saw, and
+    those beyond the machine (``realtime_floor.in_stalls``)."""
     seen = result.get("machine_floor", {}).get("xruns_in_stalls")
     if seen is None:
         return "—"
-    return f"{seen['in_stalls']} of {seen['xruns']} ({seen['by_chance']:.2f})"
+    return (
+        f"{seen['in_stalls']} of {seen['xruns']} ({seen['by_chance']:.2f}); "
+        f"{seen['beyond_machine']} beyond"
+    )
 
 
 def table(results: dict[str, Any]) -> str:
@@ -95,7 +98,7 @@ def table(results: dict[str, Any]) -> str:
         "| scenario | s | underruns (inline renders) | JACK xruns (timer / slow) "
         "| render load p99 | max | voices max | /touch answered | /health p50 / p99 ms | load "
         "| busy cores (others) "
-        "| RT probe late (max) | xruns in the probe's stalls (by chance) |",
+        "| RT probe late (max) | xruns in the probe's stalls (by chance); beyond the machine |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key, r in results["scenarios"].items():
