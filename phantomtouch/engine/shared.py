@@ -438,7 +438,9 @@ class MappedBlocks(Generic[K]):
         (non real time: the inbox thread; no copy). Raises ``FileNotFoundError`` for a
         block the host did not write."""
         block = shared_memory.SharedMemory(name=name)
-        MappedBlocks.drop(self, key)  # only the old block is retired: the key stays held
+        old = self._held.pop(key, None)
+        if old is not None:
+            self._retiring.append((key, old))
         self._held[key] = block
         return block
 
