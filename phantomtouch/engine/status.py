@@ -33,8 +33,9 @@ class EngineStatus:
         p99 and largest time the callback took for a block over the last 4096 blocks, as
         a share of the block's playing time (1.0: the output underruns).
     state, running, restarts
-        ``"running"``, ``"starting"``, ``"stalled"``, ``"gone"`` (both until a restart),
-        ``"closed"``; times the engine process was restarted after it died or stalled.
+        ``"running"``, ``"starting"``, ``"stalled"`` or ``"gone"`` (until a restart),
+        ``"restarting"`` (a new engine process is opening its sink), ``"closed"``; times
+        the engine process was restarted after it died or stalled.
     voice_capacity, voice_cost, start_cost, starts_per_block, render_budget
         Admission by budget (``docs/engine.md``): pattern voices admitted at once, the
         measured load of one and what one adds to the block it begins in, starts per
