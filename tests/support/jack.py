@@ -180,7 +180,6 @@ class JackRecorder:
         self.frames = start + count
 
     def _xrun(self, delay_usecs: float) -> None:
-        self.times.append(time.monotonic())
         self.xruns += 1
 
     def connect_from(self, client_name: str = "PortAudio") -> list[str]:
