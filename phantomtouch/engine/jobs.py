@@ -107,7 +107,8 @@ class JobState:
 @dataclass
 class JobRecord:
     """The front's mutable view of one job (under its lock); ``plan`` is dropped once the
-    job is over, and a ``stolen`` one no longer counts against the voice budget."""
+    job is over, a ``stolen`` one no longer counts against the voice budget, and one asked
+    for as soon as possible (``asap``) counts against its owner's quota from its start."""
 
     plan: Plan | None
     job_id: str
@@ -125,6 +126,7 @@ class JobRecord:
     stolen: bool = False
     requested_start_at_s: float | None = None
     reason: str | None = None
+    asap: bool = False
 
     @classmethod
     def planned(cls, plan: Plan, job_id: str, owner: str | None, first_frame: int) -> JobRecord:
@@ -202,9 +204,14 @@ class JobTable:
         """Raise :class:`QuotaRefused` if a job of ``owner`` of ``frames`` from
         ``start_frame`` would take it past ``quota``: the owner's jobs scheduled or playing
         count by their frames after ``next_frame`` (the next block's first), the new one by
-        its frames from then or ``start_frame``, if later, at ``rate_hz``."""
-        ends = [r.last_frame for r in self._live.values() if r.owner == owner]
-        ahead = [end - next_frame for end in ends if end > next_frame]
+        its frames from then or ``start_frame``, if later, at ``rate_hz``. A job asked for
+        as soon as possible counts from its start: the blocks the engine takes to begin it
+        are not its owner's."""
+        ahead = [
+            r.last_frame - max(next_frame, r.first_frame if r.asap else next_frame)
+            for r in self._live.values()
+            if r.owner == owner and r.last_frame > next_frame
+        ]
         held_s = sum(ahead) / rate_hz
         ahead_s = (max(start_frame, next_frame) + frames - next_frame) / rate_hz
         if len(ahead) + 1 > quota.voices:
@@ -446,9 +453,11 @@ class JobCalls:
             prepare = 0 if prerendered is not None else PREPARE_BLOCKS * self._device.block_frames
             first = next_frame + prepare if frame is None else frame
             record = JobRecord.planned(resolved, job_id, owner, first)
+            record.asap = frame is None
             if owner is not None and quota is not None:
+                asked = next_frame if record.asap else first
                 self._jobs.check_quota(
-                    owner, quota, first, record.frames, next_frame=next_frame, rate_hz=rate_hz
+                    owner, quota, asked, record.frames, next_frame=next_frame, rate_hz=rate_hz
                 )
             if stop_count is not None and stop_count != self._stop_count:
                 record.state, record.end_frame = "stopped", first

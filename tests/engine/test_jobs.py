@@ -112,3 +112,20 @@ def test_the_front_counts_an_owners_quota_in_its_job_table() -> None:
         engine.schedule(one_second, owner="a", quota=quota)
         with pytest.raises(ParameterError, match="owner"):
             engine.schedule(one_second, quota=quota)
+
+
+def test_touches_as_soon_as_possible_fill_a_quota_of_their_durations() -> None:
+    """Two 2 h touches fill an owner's 4 h, asked for at the same frame: the block the
+    engine takes to begin a touch it renders in the callback is not counted against them."""
+    device = DeviceProfile.default()
+    hours = TouchPattern.model_validate(
+        {"path": {"kind": "polyline", "points_cm": [[1, 1], [2, 2]]}, "duration_s": 7200.0}
+    )
+    quota = OwnerQuota(voices=10, seconds=14_400.0)
+    with Engine(device, CaptureSink(device), voice_cost=1e-4) as engine:
+        first = engine.schedule(hours, owner="a", quota=quota)
+        assert first.start_frame > 0, "a touch rendered in the callback begins a block later"
+        engine.schedule(hours, owner="a", quota=quota)
+        with pytest.raises(QuotaRefused) as refused:
+            engine.schedule(hours, owner="a", quota=quota)
+        assert refused.value.held_s == pytest.approx(14_400.0)
