@@ -154,16 +154,6 @@ class Mixer:
         # channels first: a max along each row is far cheaper than one down the columns
         self._magnitude = np.empty((device.channels, device.block_frames), dtype=np.float32)
 
-    @property
-    def muted_blocks(self) -> int:
-        """Blocks replaced by silence because they carried NaN or Inf."""
-        return self.stage.muted_blocks
-
-    @property
-    def limited_blocks(self) -> int:
-        """Blocks the limiter turned down."""
-        return self.limiter.limited_blocks
-
     def finish(self, block: np.ndarray) -> None:
         """Fit to the wearer, limit, calibrate and clip the mixed ``block`` in place,
         then meter it.

@@ -79,13 +79,13 @@ def test_a_block_with_nan_or_inf_is_muted_and_counted(rng: np.random.Generator, 
     block[17, 3] = bad
     mixer.finish(block)
     assert not np.any(block)
-    assert mixer.muted_blocks == 1
+    assert mixer.stage.muted_blocks == 1
     assert mixer.limiter.gain == 1.0  # the limiter's state is not poisoned
     good = block_with_peak(rng, 0.5)
     expected = good.copy()
     mixer.finish(good)
     np.testing.assert_array_equal(good, expected)
-    assert mixer.muted_blocks == 1
+    assert mixer.stage.muted_blocks == 1
 
 
 def test_the_meters_report_the_output_peaks(rng: np.random.Generator) -> None:
@@ -171,7 +171,7 @@ def test_the_mixer_gives_the_whole_chains_samples_and_levels_for_every_block(
         np.testing.assert_array_equal(mixer.levels.view(np.uint32), levels.view(np.uint32))
         assert mixer.peak == peak
         assert mixer.limiter.gain == limiter.gain
-        assert (mixer.limited_blocks, mixer.muted_blocks) == (
+        assert (mixer.limiter.limited_blocks, mixer.stage.muted_blocks) == (
             limiter.limited_blocks,
             stage.muted_blocks,
         )
