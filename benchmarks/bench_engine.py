@@ -68,9 +68,6 @@ class TimedSink:
     def start(self, render: RenderFn) -> None:
         self._render = render
 
-    def stop(self) -> None:
-        self._render = None
-
     def close(self) -> None:
         self._render = None
 
@@ -192,9 +189,6 @@ class ProbedSink:
     def start(self, render: RenderFn) -> None:
         self.probe = CallbackProbe(render, self._capacity)
         self._inner.start(self.probe)
-
-    def stop(self) -> None:
-        self._inner.stop()
 
     def close(self) -> None:
         self._inner.close()

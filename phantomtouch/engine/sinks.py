@@ -46,11 +46,9 @@ class Sink(Protocol):
     def start(self, render: RenderFn) -> None:
         """Begin pulling blocks from ``render`` (non real time)."""
 
-    def stop(self) -> None:
-        """Stop pulling blocks; the output falls silent (non real time)."""
-
     def close(self) -> None:
-        """Release the output; the sink cannot be started again (non real time)."""
+        """Stop pulling blocks and release the output; the sink cannot be started again
+        (non real time)."""
 
 
 class NullSink:

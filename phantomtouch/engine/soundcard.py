@@ -285,13 +285,6 @@ class SoundDeviceSink:
             self._render = None
             raise
 
-    def stop(self) -> None:
-        """Stop the stream (non real time)."""
-        try:
-            self._portaudio("stop")
-        finally:
-            self._render = None
-
     def close(self) -> None:
         """Close the stream (non real time)."""
         self._portaudio("close")
