@@ -119,7 +119,7 @@ class Core:
         return dataclasses.replace(plan, device=self.device, geometry=self.scheduler.geometry)
 
     def job_voice(
-        self, job_id: str, plan: Plan, owner: str | None, prerendered: Prerendered | None = None
+        self, job_id: str, plan: Plan, prerendered: Prerendered | None = None
     ) -> PatternVoice:
         """A job's voice, playing ``plan`` or ``prerendered``, its samples rendered
         beforehand; its ring filled and kept filled (:class:`RenderAhead`). Non real time:
@@ -130,7 +130,7 @@ class Core:
         LookupError
             The plan's noise loop was not handed to this process (engine process).
         """
-        voice = PatternVoice(plan, job_id, owner, self.board.release_frames, prerendered)
+        voice = PatternVoice(plan, job_id, self.board.release_frames, prerendered)
         self.ahead.add(voice)
         return voice
 
@@ -266,13 +266,13 @@ def measure_costs(
         block_s(8)
         idle_s = block_s(1)
         for k in range(voices):
-            core.start_job(core.job_voice(f"start-{k}", plan, None), None)
+            core.start_job(core.job_voice(f"start-{k}", plan), None)
         starting = (block_s(1) - idle_s) / voices / period_s
         core.stop_all()
         block_s(64)
         silent_s = block_s(timed)
         for k in range(voices):
-            core.start_job(core.job_voice(f"cost-{k}", plan, None), None)
+            core.start_job(core.job_voice(f"cost-{k}", plan), None)
         block_s(warm)
         sounding = (block_s(timed) - silent_s) / voices / period_s
         core.stop_all()
@@ -281,7 +281,7 @@ def measure_costs(
         samples = Prerendered(np.zeros((frames, device.channels), dtype=np.float32))
         pre = dataclasses.replace(plan, frames=frames)
         for k in range(voices):
-            core.start_job(core.job_voice(f"pre-{k}", pre, None, samples), None)
+            core.start_job(core.job_voice(f"pre-{k}", pre, samples), None)
         block_s(8)
         tries.append((sounding, starting, (block_s(64) - silent_s) / voices / period_s))
         core.ahead.stop()

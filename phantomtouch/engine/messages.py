@@ -88,7 +88,7 @@ class StartJob:
         try:
             if held is None:
                 raise LookupError(f"plan {self.plan_key} was not handed over")
-            return StartVoice(self, state.core.job_voice(self.job_id, held[0], self.owner, held[1]))
+            return StartVoice(self, state.core.job_voice(self.job_id, held[0], held[1]))
         except LookupError as exc:  # a plan or a noise loop not handed over
             state.refuse("plan" if held is None else "noise loop", self.job_id, str(exc))
             return StartVoice(self, None)

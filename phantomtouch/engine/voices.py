@@ -161,7 +161,6 @@ class PatternVoice(Voice):
     ----------
     plan : Plan
     job_id : str
-    owner : str or None
     release_frames : int, >= 1
         Fade-out length when stopped early.
     prerendered : Prerendered or None
@@ -175,14 +174,12 @@ class PatternVoice(Voice):
         self,
         plan: Plan,
         job_id: str,
-        owner: str | None,
         release_frames: int,
         prerendered: Prerendered | None = None,
     ) -> None:
         super().__init__(release_frames)
         self.plan = plan
         self.job_id = self.key = job_id
-        self.owner = owner
         self._renderer = PatternRenderer(plan) if prerendered is None else None
         self._ring = None if prerendered is None else prerendered.samples
         self._size = 0 if prerendered is None else prerendered.samples.shape[0]
