@@ -33,15 +33,14 @@ class ContactBoard:
         self.attack_frames = round(settings.attack_s * device.sample_rate_hz)
         self.release_frames = max(1, round(settings.release_s * device.sample_rate_hz))
 
-    def down(self, down: ContactDown, source: CarrierSource, first_frame: int) -> None:
-        """Start a touchdown's voice playing ``source`` (its carrier's) at ``first_frame``
-        (``down.frame``, or the next block's when that is None); a contact already
-        sounding under its id is released."""
+    def down(self, down: ContactDown, source: CarrierSource) -> None:
+        """Start a touchdown's voice playing ``source`` (its carrier's) at ``down.frame``
+        (None: the next block); a contact already sounding under its id is released."""
         voice = ContactVoice(
             down, next(self._serials), source, self.attack_frames, self.release_frames
         )
         key = (down.owner, down.contact)
-        self._queue.push_start(voice, first_frame, down.frame is None)
+        self._queue.push_start(voice, down.frame or 0, down.frame is None)
         if (old := self._contacts.get(key)) is not None:
             self._queue.push_release(old, down.frame)
         self._contacts[key] = voice

@@ -139,7 +139,7 @@ class Core:
         time. A full queue raises :class:`~phantomtouch.errors.EngineBusyError` and the
         voice hands its ring back."""
         try:
-            self.queue.push_start(voice, self._first_frame(frame), frame is None)
+            self.queue.push_start(voice, frame or 0, frame is None)  # as soon as possible: 0 unread
         except BaseException:
             voice.finish(self.scheduler.pool)
             raise
@@ -154,11 +154,7 @@ class Core:
     def contact_down(self, down: ContactDown, source: CarrierSource) -> None:
         """Build and start a touchdown's voice playing ``source`` (its carrier's, made by
         :meth:`ContactDown.prepare`); real time."""
-        self.board.down(down, source, self._first_frame(down.frame))
-
-    def _first_frame(self, frame: int | None) -> int:
-        """``frame``, or for None the first frame of the next block."""
-        return self.scheduler.next_block_frame() if frame is None else frame
+        self.board.down(down, source)
 
     def stop_all(self) -> None:
         """Void every command so far; everything that sounds fades out (real time)."""
