@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -23,10 +23,6 @@ from phantomtouch.engine.voices import DONE, PatternVoice
 from phantomtouch.errors import DeviceError
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
-
-if TYPE_CHECKING:
-    from phantomtouch.engine.messages import ContactDown
-    from phantomtouch.renderer.carriers import CarrierSource
 
 
 class Core:
@@ -150,11 +146,6 @@ class Core:
         voice = self._jobs.get(job_id)
         if voice is not None and voice.state != DONE:
             self.queue.push_release(voice, frame, fade_frames=fade_frames)
-
-    def contact_down(self, down: ContactDown, source: CarrierSource) -> None:
-        """Build and start a touchdown's voice playing ``source`` (its carrier's, made by
-        :meth:`ContactDown.prepare`); real time."""
-        self.board.down(down, source)
 
     def stop_all(self) -> None:
         """Void every command so far; everything that sounds fades out (real time)."""

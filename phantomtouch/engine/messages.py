@@ -185,7 +185,7 @@ class StartContact:
         down = self.down
         if void or self.source is None:
             return
-        state.core.contact_down(down, self.source)
+        state.core.board.down(down, self.source)
         if state.slots is not None and down.slot is not None:
             state.slots.bind(down.slot, down.generation, down.owner, down.contact)
 
