@@ -77,10 +77,14 @@ class NullSink:
         self._buffer = np.zeros((device.block_frames, device.channels), dtype=np.float32)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._render: RenderFn | None = None
 
     def start(self, render: RenderFn) -> None:
         if self._thread is not None:
             raise DeviceError(f"the {self.backend} sink is already running")
+        self._render = render
+        if not self.realtime:  # a capture sink pulled by hand
+            return
         self._stop.clear()
         self._thread = threading.Thread(
             target=self._run, args=(render,), name=f"phantomtouch-{self.backend}-sink", daemon=True
@@ -89,6 +93,7 @@ class NullSink:
 
     def stop(self) -> None:
         thread, self._thread = self._thread, None
+        self._render = None
         if thread is not None:
             self._stop.set()
             thread.join()
@@ -119,7 +124,6 @@ class CaptureSink(NullSink):
 
     Parameters
     ----------
-    device : DeviceProfile
     realtime : bool, default False
         False: blocks are pulled only by :meth:`pull`. True: a thread pulls them at
         real-time pace, like :class:`NullSink`.
@@ -153,16 +157,6 @@ class CaptureSink(NullSink):
         self._blocks: list[np.ndarray] = []
         self.frames = 0
         self._lock = threading.Lock()  # the pacer's thread records, any thread reads
-        self._render: RenderFn | None = None
-
-    def start(self, render: RenderFn) -> None:
-        self._render = render
-        if self.realtime:
-            super().start(render)
-
-    def stop(self) -> None:
-        super().stop()
-        self._render = None
 
     def close(self) -> None:
         """Stop; with ``wav_path``, write the recording there."""
