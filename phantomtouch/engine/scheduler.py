@@ -16,7 +16,6 @@ from phantomtouch.engine.commands import CommandQueue, StartCommand
 from phantomtouch.engine.contacts import retarget_contacts
 from phantomtouch.engine.mixer import Mixer
 from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
-from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.schema.device import DeviceProfile
 
@@ -33,8 +32,6 @@ class Scheduler:
 
     Parameters
     ----------
-    device : DeviceProfile
-    queue : CommandQueue
     clock : SampleClock
         Told when each block is computed, if ``clocked``.
     rings : int, >= 0
@@ -50,10 +47,9 @@ class Scheduler:
     ----------
     frames : int
         Frames rendered so far: the first frame of the next block (``now_frames``).
-    active_voices : int
     callback_errors : int
-        Blocks replaced by silence because rendering raised (the voices are dropped).
-    last_error : BaseException or None
+        Blocks replaced by silence because rendering raised (the voices are dropped);
+        ``last_error`` is the last such exception.
     events : deque of tuple
         Reports the control side drains: ``("start", voice, frame, late)``,
         ``("release", voice, frame)``, ``("end", voice, frame)`` (silent from ``frame``),
@@ -105,8 +101,6 @@ class Scheduler:
         self._stop_seen = 0
         if render_loads is None:
             render_loads = np.empty(RENDER_TIMES)
-        elif render_loads.shape != (RENDER_TIMES,) or render_loads.dtype != np.float64:
-            raise ParameterError(f"render_loads must be float64 of shape ({RENDER_TIMES},)")
         render_loads.fill(np.nan)
         self.render_loads = render_loads
         self._timed = 0
@@ -216,11 +210,10 @@ class Scheduler:
         self.events.append(("start", voice, frame, late))
 
     def _cancel(self, voice: Voice, frame: int) -> None:
-        """Void a voice that never started (its start command or its wait)."""
-        if voice.state == WAITING:
-            voice.finish(self.pool)  # a ring it was given goes back
-            self.queue.retire()
-            self.events.append(("cancel", voice, frame))
+        """Void a waiting voice (its start command or its wait)."""
+        voice.finish(self.pool)  # a ring it was given goes back
+        self.queue.retire()
+        self.events.append(("cancel", voice, frame))
 
     def _stop_all(self, stop_seq: int, frame: int) -> None:
         for voice in self._voices:
@@ -228,8 +221,8 @@ class Scheduler:
                 voice.release(frame)
                 self.events.append(("release", voice, frame))
         for _, _, voice in self._waiting:
-            if voice.seq < stop_seq:
-                self._cancel(voice, frame)  # no longer waiting
+            if voice.seq < stop_seq and voice.state == WAITING:  # not cancelled already
+                self._cancel(voice, frame)
         self._waiting = [entry for entry in self._waiting if entry[2].state == WAITING]
         heapq.heapify(self._waiting)
         self.events.append(("stop_all", frame))
