@@ -18,7 +18,7 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.scheduler import Scheduler, load_percentiles
-from phantomtouch.engine.sinks import NullSink, Sink
+from phantomtouch.engine.sinks import CaptureSink, Sink
 from phantomtouch.engine.voices import DONE, PatternVoice
 from phantomtouch.errors import DeviceError
 from phantomtouch.renderer.plan import Plan
@@ -30,7 +30,6 @@ class Core:
 
     Parameters
     ----------
-    device : DeviceProfile
     sink : Sink
         Owned from now on (closed by :meth:`close`); its sample rate, block size and
         channels must be the device's.
@@ -135,7 +134,7 @@ class Core:
         time. A full queue raises :class:`~phantomtouch.errors.EngineBusyError` and the
         voice hands its ring back."""
         try:
-            self.queue.push_start(voice, frame or 0, frame is None)  # as soon as possible: 0 unread
+            self.queue.push_start(voice, frame or 0, frame is None)  # None: the 0 is not read
         except BaseException:
             voice.finish(self.scheduler.pool)
             raise
@@ -207,7 +206,6 @@ def measure_costs(
 
     Parameters
     ----------
-    device : DeviceProfile
     plan : Plan
         The pattern timed (on ``device``).
     chunk_frames : int, >= 0
@@ -233,14 +231,13 @@ def measure_costs(
     for _ in range(3):
         core = Core(
             device,
-            NullSink(device),
+            CaptureSink(device),  # pulled by hand: the clock stays at its anchor
             settings=ContactSettings(),
             queue_capacity=2 * voices + 1,
             rings=2 * voices,
             chunk_frames=chunk_frames,
             clock=SampleClock(device.sample_rate_hz),
         )
-        core.scheduler.clocked = False
         core.ahead.start()
         render = core.scheduler.render
 
