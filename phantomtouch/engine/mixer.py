@@ -27,10 +27,6 @@ class Limiter:
     climbs by at most ``frames / (RELEASE_S * sample_rate_hz)`` per block. At gain 1 and
     a peak within the threshold the block is not touched at all.
 
-    Parameters
-    ----------
-    device : DeviceProfile
-
     Attributes
     ----------
     gain : float, 0 < gain <= 1
@@ -83,10 +79,6 @@ class WearerGains:
     not at all while every gain is 1, by the gains while they hold, and in the block where
     they change by a line from the old gains to the new, reached on the block's last
     frame (sample ``n`` of ``frames`` gets ``old + (new - old) * (n + 1) / frames``).
-
-    Parameters
-    ----------
-    device : DeviceProfile
 
     Attributes
     ----------

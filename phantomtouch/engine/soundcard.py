@@ -307,7 +307,6 @@ def open_default_sink(
 
     Parameters
     ----------
-    device : DeviceProfile
     output, exclusive
         As for :class:`SoundDeviceSink`: a device asked for opens or raises
         :class:`DeviceError`; with None, no device with enough outputs (or no PortAudio)

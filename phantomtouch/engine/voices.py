@@ -145,22 +145,16 @@ class RingPool:
 
 
 class PatternVoice(Voice):
-    """A planned pattern, played from its first frame (a job).
-
-    Its frames come from its renderer ahead into a ring when one is free (filled by the
-    render-ahead thread, :mod:`phantomtouch.engine.ahead`; by the callback only when it
-    runs dry, under :attr:`lock`), else each block directly in the callback, or from its
-    samples rendered whole beforehand. A ring holds whole-width frames (the renderer
+    """A planned pattern, played from its first frame (a job); where its frames come from:
+    ``docs/engine.md``, What a voice costs. A ring holds whole-width frames (the renderer
     writes zeros on the channels it does not drive), so a block is one contiguous add, or
-    two where the ring wraps; prerendered samples are a ring holding every frame from the start.
+    two where the ring wraps.
 
     A release fades it out linearly: the gain of frame ``f`` at or after the release frame
     ``R`` is ``(R + L - 1 - f) / L`` (``L = release_frames``), silent from ``R + L - 1``.
 
     Parameters
     ----------
-    plan : Plan
-    job_id : str
     release_frames : int, >= 1
         Fade-out length when stopped early.
     prerendered : Prerendered or None
