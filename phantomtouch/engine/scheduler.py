@@ -56,13 +56,11 @@ class Scheduler:
         ``("cancel", voice, frame)`` (voided before it started), ``("stop_all", frame)``.
     render_loads : ndarray, shape (RENDER_TIMES,), float64
         Wall time of each of the last calls of :meth:`render` over the playing time of
-        the frames it rendered (a ring; NaN where no call was timed yet). The engine
-        process passes one in shared memory, so that the host computes its percentiles
-        (:func:`load_percentiles`) and the callback never does.
+        the frames it rendered (a ring; NaN where no call was timed yet; in the engine
+        process, shared memory the host reads).
     intake : callable or None
-        Called at the start of every block, before its commands apply: the engine
-        process takes its messages and contact positions here (set before the sink
-        starts).
+        Called at the start of every block, before its commands apply (the engine
+        process's ``Intake.run``; set before the sink starts).
     dac_delay : callable or None
         Returns the time from now until the block being rendered reaches the sound
         card's converter, s, when the sink knows it (None otherwise).
