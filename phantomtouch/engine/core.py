@@ -1,6 +1,5 @@
-"""The audio side's core: sink, sample clock, command queue, scheduler and voices of one
-engine (``docs/engine.md``). "Real time": the callback in the engine process, the calling
-thread in the in-process engine."""
+"""The audio side's core (``docs/engine.md``). "Real time": the callback in the engine
+process, the calling thread in the in-process engine."""
 
 from __future__ import annotations
 
