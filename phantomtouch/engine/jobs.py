@@ -405,8 +405,8 @@ class JobCalls:
             A plan must be made for this engine's device.
         start_frame : int or None
             Frame of its first sample, at most ``MAX_SCHEDULE_AHEAD_S`` ahead; one passed
-            when the command arrives starts at once (``late_commands``). None: at the next
-            block.
+            when the command arrives starts at once (``late_commands``). None: as soon as
+            possible (:data:`PREPARE_BLOCKS`).
         owner : str or None
             The client it belongs to (1-64 characters), for the log, fair shares, ``quota``.
         policy : {"refuse", "steal-oldest", "steal-quietest"} or None
