@@ -155,8 +155,7 @@ class ContactDown:
 
     def prepare(self, state: AudioState) -> StartContact:
         """Non real time (the engine process's inbox thread, or whoever performs it): the
-        carrier's source, from the noise loops held now; a loop not handed over is
-        refused here."""
+        carrier's source from the noise loops held now, or refused (a loop not handed)."""
         try:
             return StartContact(self, make_source(self.carrier, state.core.device.sample_rate_hz))
         except LookupError as exc:
