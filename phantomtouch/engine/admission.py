@@ -28,7 +28,6 @@ class Admission:
 
     Parameters
     ----------
-    device : DeviceProfile
     max_voices : int, >= 1
     render_budget : float, 0 < render_budget <= 1
 
@@ -83,13 +82,9 @@ class Admission:
 
     def begin(self, first: int, asap: bool, now_frames: int) -> int:
         """Admit the beginning at frame ``first`` of a job that renders in the callback, or
-        refuse it (``EngineBusyError``); returns the frame it is promised.
-
-        Its first block (``start_cost``) is charged to an account that drains by
-        ``CHURN_SHARE`` of a block per block played and holds ``CHURN_WINDOW_S`` worth.
-        At most ``starts_per_block`` begin in a block: a job for a given frame keeps it,
-        one as soon as possible (``asap``) may move up to ``MAX_START_DELAY_S`` later.
-        """
+        refuse it (``EngineBusyError``), ``now_frames`` being the sample clock; returns the
+        frame it is promised: ``first``, or up to ``MAX_START_DELAY_S`` later for a job
+        asked for as soon as possible (``asap``); the churn account: ``docs/engine.md``."""
         if self.start_cost <= 0.0:
             return first
         size = self.block_frames

@@ -41,9 +41,6 @@ class ReleaseCommand:
     fade_frames: int | None = None
 
 
-Command = StartCommand | ReleaseCommand
-
-
 class CommandQueue:
     """A bounded FIFO of commands with a sequence number and a stop-all mark.
 
@@ -62,7 +59,7 @@ class CommandQueue:
     def __init__(self, capacity: int) -> None:
         self.capacity = int(capacity)
         self.stop_all_seq = 0
-        self._items: deque[Command] = deque()
+        self._items: deque[StartCommand | ReleaseCommand] = deque()
         self._lock = threading.Lock()
         self._seq = 0
         self._admitted = 0  # start commands accepted (producers, under the lock)
@@ -71,10 +68,8 @@ class CommandQueue:
 
     @property
     def depth(self) -> int:
-        """Voices accepted but not yet started or voided.
-
-        Those accepted before the last ``stop_all`` no longer count: they will never start.
-        """
+        """Voices accepted but not yet started or voided (those accepted before the last
+        ``stop_all`` never start)."""
         return self._admitted - max(self._retired, self._admitted_before_stop)
 
     def push_start(self, voice: Voice, frame: int, asap: bool) -> StartCommand:
@@ -106,14 +101,12 @@ class CommandQueue:
         transient: object | None = None,
         *,
         fade_frames: int | None = None,
-    ) -> ReleaseCommand:
+    ) -> None:
         """Queue the release of ``voice``; never refused, as each ends a voice that was
         admitted (threads as :meth:`push_start`)."""
         with self._lock:
             self._seq += 1
-            command = ReleaseCommand(self._seq, voice, frame, transient, fade_frames)
-            self._items.append(command)
-            return command
+            self._items.append(ReleaseCommand(self._seq, voice, frame, transient, fade_frames))
 
     def mark_stop_all(self) -> int:
         """Void every command pushed so far and everything playing; never refused, and not
@@ -124,7 +117,7 @@ class CommandQueue:
             self._admitted_before_stop = self._admitted
             return self._seq
 
-    def pop(self) -> Command | None:
+    def pop(self) -> StartCommand | ReleaseCommand | None:
         """The oldest command, or None (real time: the audio callback; never waits)."""
         return self._items.popleft() if self._items else None
 

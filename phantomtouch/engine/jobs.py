@@ -36,9 +36,8 @@ HISTORY_JOBS = 1000
 MAX_SCHEDULE_AHEAD_S = 3600.0
 """Latest start a job may ask for, s after the current frame."""
 PREPARE_BLOCKS = 1
-"""Blocks later than the next a job that renders ahead is promised when asked for as soon
-as possible: the time its voice is built and its first frames rendered outside the
-callback (``docs/engine.md``, Threads)."""
+"""Blocks after the next that a job asked for as soon as possible and not prerendered is
+promised: its voice is prepared outside the callback meanwhile (``docs/engine.md``)."""
 _STEAL_ORDER: dict[str, Callable[[JobRecord], tuple[Any, ...]]] = {
     "steal-oldest": lambda record: (record.first_frame, record.job_id),
     "steal-quietest": lambda record: (record.amplitude, record.first_frame),
@@ -281,7 +280,7 @@ class JobTable:
         for record in list(self._live.values()):
             self.mark_stopped(record)
 
-    def drop_all(self, frame: int, *, fault: str = "gone") -> None:
+    def drop_all(self, frame: int, fault: str) -> None:
         """Every job not over is over from ``frame`` (the engine that played them is
         ``fault``: gone or stalled); each says so in its ``reason``."""
         for record in [*self._live.values(), *self._stopping.values()]:
@@ -406,8 +405,8 @@ class JobCalls:
             A plan must be made for this engine's device.
         start_frame : int or None
             Frame of its first sample, at most ``MAX_SCHEDULE_AHEAD_S`` ahead; one passed
-            when the command arrives starts at once (``late_commands``). None: at the next
-            block.
+            when the command arrives starts at once (``late_commands``). None: as soon as
+            possible (:data:`PREPARE_BLOCKS`).
         owner : str or None
             The client it belongs to (1-64 characters), for the log, fair shares, ``quota``.
         policy : {"refuse", "steal-oldest", "steal-quietest"} or None

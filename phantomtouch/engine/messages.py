@@ -1,9 +1,5 @@
-"""Every command the audio side takes and every event it reports, each one typed.
-
-A command is a frozen, slotted dataclass whose ``apply`` is its one applier (real time in
-the engine process's callback; the caller's thread in the in-process engine), computing
-nothing heavy: what was not handed over is refused, never built (docs/engine.md, Messages).
-"""
+"""Every command the audio side takes, each with its one applier (``apply``), and every
+event it reports, each one typed (docs/engine.md, Messages)."""
 
 from __future__ import annotations
 
@@ -159,8 +155,7 @@ class ContactDown:
 
     def prepare(self, state: AudioState) -> StartContact:
         """Non real time (the engine process's inbox thread, or whoever performs it): the
-        carrier's source, from the noise loops held now; a loop not handed over is
-        refused here."""
+        carrier's source from the noise loops held now, or refused (a loop not handed)."""
         try:
             return StartContact(self, make_source(self.carrier, state.core.device.sample_rate_hz))
         except LookupError as exc:
@@ -297,8 +292,8 @@ class StartSink:
     """Start playing (engine process, before its first block)."""
 
     def apply(self, state: AudioState, void: bool) -> None:
-        """Non real time (before the first block)."""
-        state.start_sink = True
+        """Non real time, and nothing to do: the engine process's main thread takes it
+        before its first block and starts the sink (``child._wait_for_start``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -418,7 +413,6 @@ class AudioState:
     reports: list[Event] = field(default_factory=list)
     refused: int = 0
     leave: bool = False
-    start_sink: bool = False
 
     def refuse(self, what: str, key: Any, reason: str) -> None:
         """Count and report a refusal (real time)."""

@@ -39,7 +39,6 @@ class HeldPlan:
     ----------
     handle : int
         The plan's name on the audio side, minted once with the entry (> 0).
-    plan : Plan
     prerendered : Prerendered or None
         Its samples rendered whole (a plan at most ``prerender_max_s`` long), rendered
         once with the entry; None: rendered by its voice.
@@ -64,9 +63,8 @@ class PlanCache:
 
     Parameters
     ----------
-    device : DeviceProfile
-    max_bytes : int or None
-        Bound of the kept plans and samples, bytes (None: :data:`MAX_BYTES`).
+    max_bytes : int
+        Bound of the kept plans and samples, bytes.
     prerender_max_s : float
         Longest plan rendered whole, s; 0 renders none.
     """
@@ -74,12 +72,12 @@ class PlanCache:
     def __init__(
         self,
         device: DeviceProfile,
-        max_bytes: int | None = None,
+        max_bytes: int = MAX_BYTES,
         *,
         prerender_max_s: float = PRERENDER_MAX_S,
     ) -> None:
         self.device = device
-        self.max_bytes = MAX_BYTES if max_bytes is None else int(max_bytes)
+        self.max_bytes = max_bytes
         self.max_frames = round(prerender_max_s * device.sample_rate_hz)
         self.bytes = 0
         """Bytes of the plans and samples kept now."""
@@ -114,12 +112,10 @@ class PlanCache:
             return self._entry(key, lambda: plan(pattern, self.device), render=True)
         given = resolve_plan(pattern, self.device)
         with self._lock:
-            made = self._made.get(id(given))
-        if made is not None and made[0]() is given:
-            known_key = made[1]
-        else:  # a plan made elsewhere: keyed by its pattern, like the cache's own
-            known_key = given.pattern.model_dump_json()
-        return self._entry(known_key, lambda: given, render=True)
+            made, key = self._made.get(id(given), (None, ""))
+        if made is None or made() is not given:  # made elsewhere: keyed by its pattern's text
+            key = given.pattern.model_dump_json()
+        return self._entry(key, lambda: given, render=True)
 
     def take_dropped(self) -> list[HeldPlan]:
         """Entries the audio side held when they were dropped, since the last call (the
@@ -150,9 +146,8 @@ class PlanCache:
 
     def _entry(self, key: str, make: Callable[[], Plan], *, render: bool) -> HeldPlan:
         """The entry of ``key``, made by ``make()`` if need be (outside the lock)."""
-        too_large = PATTERN_BYTES_PER_CHAR * len(key) > self.max_bytes // 8
         with self._lock:
-            known = None if too_large else self._entries.get(key)
+            known = self._entries.get(key)
             if known is not None:
                 self._entries.move_to_end(key)
                 if not render or known.prerendered is not None:
@@ -164,12 +159,12 @@ class PlanCache:
         size = plan_bytes(resolved, len(key))
         samples = 0 if prerendered is None else prerendered.samples.nbytes
         with self._lock:
-            known = None if too_large else self._entries.get(key)
+            known = self._entries.get(key)
             if known is not None and (prerendered is None or known.prerendered is not None):
                 return known
             if known is None:
                 known = HeldPlan(next(self._handles), resolved, prerendered, size + samples)
-                if too_large or size > self.max_bytes // 8:
+                if size > self.max_bytes // 8:
                     known.kept = False  # the front releases it after its one job
                     return known
                 self._entries[key] = known

@@ -17,12 +17,8 @@ PRERENDER_MAX_S = 1.0
 
 @dataclass(frozen=True)
 class Prerendered:
-    """A plan's whole output.
-
-    Attributes
-    ----------
-    samples : ndarray, shape (frames, channels), float32, C-contiguous, read-only
-    """
+    """A plan's whole output: ``samples``, shape (frames, channels), float32,
+    C-contiguous, read-only."""
 
     samples: np.ndarray
 
