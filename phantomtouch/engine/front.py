@@ -17,7 +17,7 @@ from phantomtouch.engine.events import apply_events
 from phantomtouch.engine.jobs import JobCalls, JobTable, Policy
 from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.messages import Event, PlanReleased, SetWearerGains
-from phantomtouch.engine.owners import ContactCalls, DeadlineThread, Listeners, OwnerTable
+from phantomtouch.engine.owners import ContactCalls, DeadlineThread, OwnerTable
 from phantomtouch.engine.plans import PlanCache
 from phantomtouch.engine.prerender import PRERENDER_MAX_S
 from phantomtouch.engine.status import EngineStatus
@@ -126,7 +126,7 @@ class EngineFront(JobCalls, ContactCalls):
         self._lock = threading.RLock()
         self._jobs = JobTable()
         self._contacts = OwnerTable(self._settings.max_contacts)
-        self._listeners = Listeners()
+        self._listeners = []
         self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
         self._log = StimulusLog(log_path) if log_path is not None else None
@@ -177,7 +177,7 @@ class EngineFront(JobCalls, ContactCalls):
             self.plans.unhand_all()
             owners = self._contacts.pop_all()
             self._admission.forget_starts()
-        self._listeners.publish([(o, tuple(held), f"engine {state}") for o, held in owners.items()])
+        self._publish(owners, f"engine {state}")
 
     def server_time_s(self) -> float:
         """The server clock, s (``time.monotonic()``, the same in every process; host,
@@ -197,7 +197,7 @@ class EngineFront(JobCalls, ContactCalls):
                 for record in held.values():
                     self._audio.free_slot(record.slot)
             self._audio.stop_all()
-        self._listeners.publish([(owner, tuple(held), "stop") for owner, held in owners.items()])
+        self._publish(owners, "stop")
 
     def _apply_events(self, events: list[Event]) -> None:
         """Apply the audio side's events, then write the log records due (host: the
