@@ -3,19 +3,19 @@
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Self
+from typing import IO, TYPE_CHECKING, Any, Self
 
 from phantomtouch.engine.admission import RENDER_BUDGET, Admission
 from phantomtouch.engine.checks import check_channel_gains, check_int, check_range, check_seconds
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.events import apply_events
 from phantomtouch.engine.jobs import JobCalls, JobTable, Policy
-from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.messages import Event, PlanReleased, SetWearerGains
 from phantomtouch.engine.owners import ContactCalls, DeadlineThread, OwnerTable
 from phantomtouch.engine.plans import PlanCache
@@ -52,6 +52,46 @@ class Links:
     lost: Callable[[str], None]
 
 
+class StimulusLog:
+    """Appends the stimulus log's JSON lines (``docs/engine.md``) to a file (host, any
+    thread; never the audio callback).
+
+    Parameters
+    ----------
+    path : str or Path
+        Created if missing; appended to otherwise.
+
+    Raises
+    ------
+    ParameterError
+        The file cannot be opened for appending.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        try:
+            self._file: IO[str] | None = self.path.open("a", encoding="utf-8")
+        except OSError as exc:
+            raise ParameterError(
+                f"log_path={str(path)!r} cannot be opened for appending: {exc.strerror}"
+            ) from exc
+        self._lock = threading.Lock()
+
+    def write(self, records: list[dict[str, Any]]) -> None:
+        """Append records, one line each, and flush; nothing once closed."""
+        text = "".join(json.dumps(record, separators=(",", ":")) + "\n" for record in records)
+        with self._lock:
+            if self._file is not None and text:
+                self._file.write(text)
+                self._file.flush()
+
+    def close(self) -> None:
+        with self._lock:
+            if self._file is not None:
+                self._file.close()
+                self._file = None
+
+
 class EngineFront(JobCalls, ContactCalls):
     """The engine's API and the host's state, over one audio side.
 
@@ -67,7 +107,7 @@ class EngineFront(JobCalls, ContactCalls):
         Most pattern voices that may sound at once, whatever the budget allows.
     contact : ContactSettings or None
     log_path : str, Path or None
-        Append the stimulus log (JSON lines, :mod:`phantomtouch.engine.log`) here.
+        Append the stimulus log (JSON lines, :class:`StimulusLog`) here.
     render_budget : float, 0 < render_budget <= 1
         Share of a block's playing time pattern voices may take (``RENDER_BUDGET``).
     voice_policy : {"refuse", "steal-oldest", "steal-quietest"}
@@ -110,9 +150,9 @@ class EngineFront(JobCalls, ContactCalls):
         costs = None  # measured by the audio side, unless given
         if voice_cost is not None or start_cost is not None:
             costs = (voice_cost or 0.0, start_cost or 0.0, voice_cost or 0.0)
-        self._device = device
+        self.device = device
+        """The device profile, and its figures below (host, any thread)."""
         self.sample_rate_hz = device.sample_rate_hz
-        """The device's figures (host, any thread)."""
         self.block_frames = device.block_frames
         self.channels = device.channels
         self._settings = contact or ContactSettings()
@@ -226,7 +266,6 @@ class EngineFront(JobCalls, ContactCalls):
             block_frames=self.block_frames,
             channels=self.channels,
             active_contacts=contacts,
-            levels=[float(level) for level in figures["levels"]],
             queue_capacity=self._queue_capacity,
             voice_capacity=self.voice_capacity,
             voice_cost=admission.voice_cost,
@@ -259,7 +298,7 @@ class EngineFront(JobCalls, ContactCalls):
         EngineBusyError
             The engine process is not taking commands.
         """
-        checked = check_channel_gains("gains", gains, self._device.channels)
+        checked = check_channel_gains("gains", gains, self.channels)
         with self._lock:
             self._audio.post(SetWearerGains(checked))
 
@@ -269,8 +308,3 @@ class EngineFront(JobCalls, ContactCalls):
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
-
-    @property
-    def device(self) -> DeviceProfile:
-        """The device profile (host, any thread)."""
-        return self._device

@@ -194,7 +194,7 @@ class ContactCalls:
     """The contact methods of :class:`~phantomtouch.engine.front.EngineFront`, which
     makes the state below; every method runs in the host, on any thread."""
 
-    _device: DeviceProfile
+    device: DeviceProfile
     _lock: threading.RLock
     _audio: LocalAudio | ChildAudio
     _touchdowns: Touchdowns
@@ -208,7 +208,7 @@ class ContactCalls:
         Host, meant for a worker thread; a carrier the device cannot play is left to
         ``contact_down`` to refuse."""
         with contextlib.suppress(ParameterError):
-            self._audio.prepare(check_contact_carrier(self._device, carrier))
+            self._audio.prepare(check_contact_carrier(self.device, carrier))
 
     def contact_down(
         self, owner: str, contact: str, x_cm: float, y_cm: float, **options: Unpack[DownOptions]
@@ -254,8 +254,8 @@ class ContactCalls:
         check_id("owner", owner)
         check_id("contact", contact)
         law = check_law(options.get("law", "power"))
-        checked = check_contact_carrier(self._device, options.get("carrier"))
-        amplitude = contact_amplitude(self._device, options.get("intensity"), checked)
+        checked = check_contact_carrier(self.device, options.get("carrier"))
+        amplitude = contact_amplitude(self.device, options.get("intensity"), checked)
         x, y = _check_position(x_cm, y_cm)
         burst = self._touchdowns.burst(options.get("normal_velocity_m_s"))
         frame = check_frame("at_frame", options.get("at_frame"))
