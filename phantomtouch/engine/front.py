@@ -155,23 +155,23 @@ class EngineFront(JobCalls, ContactCalls):
         self.sample_rate_hz = device.sample_rate_hz
         self.block_frames = device.block_frames
         self.channels = device.channels
-        self._settings = contact or ContactSettings()
+        settings = contact or ContactSettings()
         self._queue_capacity = queue_capacity
         self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
         self._policy = self._check_policy(voice_policy)
         self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
         self.plans = PlanCache(device, prerender_max_s=prerender_max_s)
         """The one plan cache (host, any thread): the service plans through it."""
-        self._touchdowns = Touchdowns(device, self._settings)
+        self._touchdowns = Touchdowns(device, settings)
         self._lock = threading.RLock()
         self._jobs = JobTable()
-        self._contacts = OwnerTable(self._settings.max_contacts)
+        self._contacts = OwnerTable(settings.max_contacts)
         self._listeners = []
         self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
         self._log = StimulusLog(log_path) if log_path is not None else None
         self._audio: LocalAudio | ChildAudio = audio(
-            Links(self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost)
+            Links(settings, queue_capacity, max_voices, costs, self._apply_events, self._lost)
         )
         self._admission.take_costs(self._audio.costs)
 
@@ -259,7 +259,6 @@ class EngineFront(JobCalls, ContactCalls):
                 {"owner": owner, "contact": contact, "x_cm": r.x_cm, "y_cm": r.y_cm}
                 for owner, contact, r in self._contacts.items()
             ]
-        admission = self._admission
         values: dict[str, Any] = {"restarts": 0, **figures}
         values.update(
             sample_rate_hz=self.sample_rate_hz,
@@ -268,10 +267,10 @@ class EngineFront(JobCalls, ContactCalls):
             active_contacts=contacts,
             queue_capacity=self._queue_capacity,
             voice_capacity=self.voice_capacity,
-            voice_cost=admission.voice_cost,
-            start_cost=admission.start_cost,
+            voice_cost=self._admission.voice_cost,
+            start_cost=self._admission.start_cost,
             starts_per_block=min(self.starts_per_block, 1 << 20),
-            render_budget=admission.render_budget,
+            render_budget=self._admission.render_budget,
         )
         return EngineStatus(
             **{
