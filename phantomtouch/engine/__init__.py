@@ -7,7 +7,7 @@ imports the renderer and the schema, never the server.
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.engine import Engine
 from phantomtouch.engine.front import EngineFront
-from phantomtouch.engine.jobs import POLICIES, Job, JobState, Policy
+from phantomtouch.engine.jobs import Job
 from phantomtouch.engine.process import ProcessEngine
 from phantomtouch.engine.sinks import CaptureSink, NullSink, Sink
 from phantomtouch.engine.soundcard import (
@@ -16,19 +16,14 @@ from phantomtouch.engine.soundcard import (
     list_output_devices,
     open_default_sink,
 )
-from phantomtouch.engine.status import EngineStatus
 
 __all__ = [
-    "POLICIES",
     "CaptureSink",
     "ContactSettings",
     "Engine",
     "EngineFront",
-    "EngineStatus",
     "Job",
-    "JobState",
     "NullSink",
-    "Policy",
     "ProcessEngine",
     "Sink",
     "SinkSpec",

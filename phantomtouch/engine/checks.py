@@ -32,9 +32,9 @@ def check_int(name: str, value: object, lo: int, hi: int) -> int:
 
 def check_seconds(name: str, value: object) -> float:
     """A finite number of seconds."""
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-        raise ParameterError(f"{name}={value!r} must be a finite number of seconds")
-    if not math.isfinite(value):
+    if isinstance(value, bool) or not (
+        isinstance(value, int | float | np.floating) and math.isfinite(value)
+    ):
         raise ParameterError(f"{name}={value!r} must be a finite number of seconds")
     return float(value)
 

@@ -3,21 +3,21 @@
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Self
+from typing import IO, TYPE_CHECKING, Any, Self
 
 from phantomtouch.engine.admission import RENDER_BUDGET, Admission
 from phantomtouch.engine.checks import check_channel_gains, check_int, check_range, check_seconds
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.events import apply_events
 from phantomtouch.engine.jobs import JobCalls, JobTable, Policy
-from phantomtouch.engine.log import StimulusLog
 from phantomtouch.engine.messages import Event, PlanReleased, SetWearerGains
-from phantomtouch.engine.owners import ContactCalls, DeadlineThread, Listeners, OwnerTable
+from phantomtouch.engine.owners import ContactCalls, DeadlineThread, OwnerTable
 from phantomtouch.engine.plans import PlanCache
 from phantomtouch.engine.prerender import PRERENDER_MAX_S
 from phantomtouch.engine.status import EngineStatus
@@ -52,6 +52,46 @@ class Links:
     lost: Callable[[str], None]
 
 
+class StimulusLog:
+    """Appends the stimulus log's JSON lines (``docs/engine.md``) to a file (host, any
+    thread; never the audio callback).
+
+    Parameters
+    ----------
+    path : str or Path
+        Created if missing; appended to otherwise.
+
+    Raises
+    ------
+    ParameterError
+        The file cannot be opened for appending.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        try:
+            self._file: IO[str] | None = self.path.open("a", encoding="utf-8")
+        except OSError as exc:
+            raise ParameterError(
+                f"log_path={str(path)!r} cannot be opened for appending: {exc.strerror}"
+            ) from exc
+        self._lock = threading.Lock()
+
+    def write(self, records: list[dict[str, Any]]) -> None:
+        """Append records, one line each, and flush; nothing once closed."""
+        text = "".join(json.dumps(record, separators=(",", ":")) + "\n" for record in records)
+        with self._lock:
+            if self._file is not None and text:
+                self._file.write(text)
+                self._file.flush()
+
+    def close(self) -> None:
+        with self._lock:
+            if self._file is not None:
+                self._file.close()
+                self._file = None
+
+
 class EngineFront(JobCalls, ContactCalls):
     """The engine's API and the host's state, over one audio side.
 
@@ -67,7 +107,7 @@ class EngineFront(JobCalls, ContactCalls):
         Most pattern voices that may sound at once, whatever the budget allows.
     contact : ContactSettings or None
     log_path : str, Path or None
-        Append the stimulus log (JSON lines, :mod:`phantomtouch.engine.log`) here.
+        Append the stimulus log (JSON lines, :class:`StimulusLog`) here.
     render_budget : float, 0 < render_budget <= 1
         Share of a block's playing time pattern voices may take (``RENDER_BUDGET``).
     voice_policy : {"refuse", "steal-oldest", "steal-quietest"}
@@ -110,28 +150,28 @@ class EngineFront(JobCalls, ContactCalls):
         costs = None  # measured by the audio side, unless given
         if voice_cost is not None or start_cost is not None:
             costs = (voice_cost or 0.0, start_cost or 0.0, voice_cost or 0.0)
-        self._device = device
+        self.device = device
+        """The device profile, and its figures below (host, any thread)."""
         self.sample_rate_hz = device.sample_rate_hz
-        """The device's figures (host, any thread)."""
         self.block_frames = device.block_frames
         self.channels = device.channels
-        self._settings = contact or ContactSettings()
+        settings = contact or ContactSettings()
         self._queue_capacity = queue_capacity
         self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
         self._policy = self._check_policy(voice_policy)
         self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
         self.plans = PlanCache(device, prerender_max_s=prerender_max_s)
         """The one plan cache (host, any thread): the service plans through it."""
-        self._touchdowns = Touchdowns(device, self._settings)
+        self._touchdowns = Touchdowns(device, settings)
         self._lock = threading.RLock()
         self._jobs = JobTable()
-        self._contacts = OwnerTable(self._settings.max_contacts)
-        self._listeners = Listeners()
+        self._contacts = OwnerTable(settings.max_contacts)
+        self._listeners = []
         self._deadlines = DeadlineThread(self._expire_deadlines)
         self._stop_count = 0
         self._log = StimulusLog(log_path) if log_path is not None else None
         self._audio: LocalAudio | ChildAudio = audio(
-            Links(self._settings, queue_capacity, max_voices, costs, self._apply_events, self._lost)
+            Links(settings, queue_capacity, max_voices, costs, self._apply_events, self._lost)
         )
         self._admission.take_costs(self._audio.costs)
 
@@ -177,7 +217,7 @@ class EngineFront(JobCalls, ContactCalls):
             self.plans.unhand_all()
             owners = self._contacts.pop_all()
             self._admission.forget_starts()
-        self._listeners.publish([(o, tuple(held), f"engine {state}") for o, held in owners.items()])
+        self._publish(owners, f"engine {state}")
 
     def server_time_s(self) -> float:
         """The server clock, s (``time.monotonic()``, the same in every process; host,
@@ -197,7 +237,7 @@ class EngineFront(JobCalls, ContactCalls):
                 for record in held.values():
                     self._audio.free_slot(record.slot)
             self._audio.stop_all()
-        self._listeners.publish([(owner, tuple(held), "stop") for owner, held in owners.items()])
+        self._publish(owners, "stop")
 
     def _apply_events(self, events: list[Event]) -> None:
         """Apply the audio side's events, then write the log records due (host: the
@@ -219,20 +259,18 @@ class EngineFront(JobCalls, ContactCalls):
                 {"owner": owner, "contact": contact, "x_cm": r.x_cm, "y_cm": r.y_cm}
                 for owner, contact, r in self._contacts.items()
             ]
-        admission = self._admission
         values: dict[str, Any] = {"restarts": 0, **figures}
         values.update(
             sample_rate_hz=self.sample_rate_hz,
             block_frames=self.block_frames,
             channels=self.channels,
             active_contacts=contacts,
-            levels=[float(level) for level in figures["levels"]],
             queue_capacity=self._queue_capacity,
             voice_capacity=self.voice_capacity,
-            voice_cost=admission.voice_cost,
-            start_cost=admission.start_cost,
+            voice_cost=self._admission.voice_cost,
+            start_cost=self._admission.start_cost,
             starts_per_block=min(self.starts_per_block, 1 << 20),
-            render_budget=admission.render_budget,
+            render_budget=self._admission.render_budget,
         )
         return EngineStatus(
             **{
@@ -259,7 +297,7 @@ class EngineFront(JobCalls, ContactCalls):
         EngineBusyError
             The engine process is not taking commands.
         """
-        checked = check_channel_gains("gains", gains, self._device.channels)
+        checked = check_channel_gains("gains", gains, self.channels)
         with self._lock:
             self._audio.post(SetWearerGains(checked))
 
@@ -269,8 +307,3 @@ class EngineFront(JobCalls, ContactCalls):
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
-
-    @property
-    def device(self) -> DeviceProfile:
-        """The device profile (host, any thread)."""
-        return self._device

@@ -355,7 +355,7 @@ class JobCalls:
     the state below; every method runs in the host, on any thread."""
 
     plans: PlanCache
-    _device: DeviceProfile
+    device: DeviceProfile
     _lock: threading.RLock
     _audio: LocalAudio | ChildAudio
     _jobs: JobTable
@@ -440,7 +440,7 @@ class JobCalls:
         elif quota is not None:
             raise ParameterError("quota counts the jobs of an owner: give owner")
         chosen = self._policy if policy is None else self._check_policy(policy)
-        rate_hz = self._device.sample_rate_hz
+        rate_hz = self.device.sample_rate_hz
         if frame is not None:
             check_ahead(frame, self._audio.now_frames, rate_hz, MAX_SCHEDULE_AHEAD_S)
         job_id = uuid.uuid4().hex
@@ -449,7 +449,7 @@ class JobCalls:
         with self._lock:
             self._audio.check_ready()
             next_frame = self._audio.next_block_frame()
-            prepare = 0 if prerendered is not None else PREPARE_BLOCKS * self._device.block_frames
+            prepare = 0 if prerendered is not None else PREPARE_BLOCKS * self.device.block_frames
             first = next_frame + prepare if frame is None else frame
             record = JobRecord.planned(resolved, job_id, owner, first)
             record.asap = frame is None

@@ -8,7 +8,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypedDict, Unpack
 
@@ -34,9 +34,6 @@ ReleasedListener = Callable[[str, tuple[str, ...], str], None]
 without an ``up``; it runs in the releasing thread, so it must return at once and must not
 call the front back (the reasons and threads: ``docs/owners.md``)."""
 
-Released = tuple[str, tuple[str, ...], str]
-"""``(owner, contacts, reason)`` of one ``released`` event."""
-
 
 class MoveOptions(TypedDict, total=False):
     """Keywords of :meth:`ContactCalls.contact_move`, which ``contact_down`` takes too."""
@@ -52,40 +49,6 @@ class DownOptions(MoveOptions, total=False):
     law: str
     normal_velocity_m_s: float | None
     deadline_s: float | None
-
-
-class Listeners:
-    """The ``released`` listeners, of one owner or of every owner (any thread)."""
-
-    def __init__(self) -> None:
-        self._entries: list[tuple[str | None, ReleasedListener]] = []
-        self._lock = threading.Lock()
-
-    def subscribe(self, listener: ReleasedListener, owner: str | None) -> Callable[[], None]:
-        """Add ``listener`` for ``owner`` (None: every owner); returns the function that
-        removes it."""
-        entry = (owner, listener)
-        with self._lock:
-            self._entries.append(entry)
-
-        def unsubscribe() -> None:
-            with self._lock, contextlib.suppress(ValueError):
-                self._entries.remove(entry)
-
-        return unsubscribe
-
-    def publish(self, events: list[Released]) -> None:
-        """Tell the listeners of each event's owner, then those of every owner; a
-        listener that fails is logged and the others are still told."""
-        with self._lock:  # an owner's own listeners first, each kind in subscription order
-            entries = sorted(self._entries, key=lambda entry: entry[0] is None)
-        for owner, contacts, reason in events:
-            for mine, listener in entries:
-                if mine in (owner, None):
-                    try:
-                        listener(owner, contacts, reason)
-                    except Exception:
-                        logger.exception("a released listener failed")
 
 
 @dataclass
@@ -181,18 +144,17 @@ class OwnerTable:
                 self.pop(owner, contact)
         return due
 
-    def next_deadline(self) -> float | None:
-        """The earliest deadline of a contact down, or None if none has one."""
-        earliest = min((r.deadline_s for _, _, r in self.items()), default=math.inf)
-        return None if earliest == math.inf else earliest
+    def next_deadline(self) -> float:
+        """The earliest deadline of a contact down (``math.inf``: none has one)."""
+        return min((r.deadline_s for _, _, r in self.items()), default=math.inf)
 
 
 class DeadlineThread:
     """The front's deadline thread (``docs/owners.md``): it calls ``expire(now_s)``
-    (``time.monotonic()`` clock), which releases what is due and returns the next deadline
-    or None, then sleeps until that deadline or a :meth:`wake`, and ends on None."""
+    (``time.monotonic()`` clock), which releases what is due and returns the next deadline,
+    then sleeps until that deadline or a :meth:`wake`; it ends when none is left (``inf``)."""
 
-    def __init__(self, expire: Callable[[float], float | None]) -> None:
+    def __init__(self, expire: Callable[[float], float]) -> None:
         self._expire = expire
         self._cond = threading.Condition()
         self._thread: threading.Thread | None = None
@@ -222,7 +184,7 @@ class DeadlineThread:
             with self._cond:
                 if self._dirty:
                     continue
-                if next_s is None:
+                if next_s == math.inf:
                     self._thread = None
                     return
                 self._cond.wait(max(0.0, next_s - time.monotonic()))
@@ -232,12 +194,12 @@ class ContactCalls:
     """The contact methods of :class:`~phantomtouch.engine.front.EngineFront`, which
     makes the state below; every method runs in the host, on any thread."""
 
-    _device: DeviceProfile
+    device: DeviceProfile
     _lock: threading.RLock
     _audio: LocalAudio | ChildAudio
     _touchdowns: Touchdowns
     _contacts: OwnerTable
-    _listeners: Listeners
+    _listeners: list[tuple[str | None, ReleasedListener]]
     _deadlines: DeadlineThread
 
     def prepare_carrier(self, carrier: Carrier | None) -> None:
@@ -246,7 +208,7 @@ class ContactCalls:
         Host, meant for a worker thread; a carrier the device cannot play is left to
         ``contact_down`` to refuse."""
         with contextlib.suppress(ParameterError):
-            self._audio.prepare(check_contact_carrier(self._device, carrier))
+            self._audio.prepare(check_contact_carrier(self.device, carrier))
 
     def contact_down(
         self, owner: str, contact: str, x_cm: float, y_cm: float, **options: Unpack[DownOptions]
@@ -292,8 +254,8 @@ class ContactCalls:
         check_id("owner", owner)
         check_id("contact", contact)
         law = check_law(options.get("law", "power"))
-        checked = check_contact_carrier(self._device, options.get("carrier"))
-        amplitude = contact_amplitude(self._device, options.get("intensity"), checked)
+        checked = check_contact_carrier(self.device, options.get("carrier"))
+        amplitude = contact_amplitude(self.device, options.get("intensity"), checked)
         x, y = _check_position(x_cm, y_cm)
         burst = self._touchdowns.burst(options.get("normal_velocity_m_s"))
         frame = check_frame("at_frame", options.get("at_frame"))
@@ -302,13 +264,13 @@ class ContactCalls:
         if (deadline_s := options.get("deadline_s")) is not None:
             term_s = check_range("deadline_s", deadline_s, 1e-3, 3600.0, "s")
         self._audio.prepare(checked)
-        taken: list[Released] = []
+        taken: dict[str, tuple[str]] = {}
         with self._lock:
             self._audio.check_ready()
             held = self._contacts.held(owner).get(contact)
             if held is None and (victim := self._contacts.make_room(owner)) is not None:
                 self._lift(victim[2], ContactUp(victim[0], victim[1], None, None))
-                taken.append((victim[0], (victim[1],), "quota"))
+                taken[victim[0]] = (victim[1],)
             slot = self._audio.claim_slot(None if held is None else held.slot)
             bound = () if slot is None else slot  # the move slot it reads, if any
             down = ContactDown(
@@ -325,7 +287,7 @@ class ContactCalls:
             self._contacts.put(owner, contact, record)
         if term_s != math.inf:
             self._deadlines.wake()
-        self._listeners.publish(taken)
+        self._publish(taken, "quota")
 
     def contact_move(
         self, owner: str, contact: str, x_cm: float, y_cm: float, **options: Unpack[MoveOptions]
@@ -399,7 +361,7 @@ class ContactCalls:
             for record in held.values():
                 self._audio.free_slot(record.slot)
             post_release(self._audio, ReleaseOwner(owner))
-        self._listeners.publish([(owner, tuple(held), reason)])
+        self._publish({owner: held}, reason)
 
     def renew_owner(self, owner: str, now_s: float | None = None) -> None:
         """Push the deadline of every contact of ``owner`` on (its input is alive); ``now_s``
@@ -434,7 +396,30 @@ class ContactCalls:
         """Call ``listener(owner, contacts, reason)`` whenever the front lets go of contacts
         without an ``up`` (of ``owner`` only, or of any owner), in the releasing thread
         (:data:`ReleasedListener`). Any thread; returns the function that unsubscribes it."""
-        return self._listeners.subscribe(listener, owner)
+        entry = (owner, listener)
+        with self._lock:
+            self._listeners.append(entry)
+
+        def unsubscribe() -> None:
+            with self._lock, contextlib.suppress(ValueError):
+                self._listeners.remove(entry)
+
+        return unsubscribe
+
+    def _publish(self, released: Mapping[str, Iterable[str]], reason: str) -> None:
+        """Tell the listeners of each owner in ``released`` that its contacts there were let
+        go of for ``reason``, then those of every owner (without the lock); a listener that
+        fails is logged and the others are still told."""
+        with self._lock:  # an owner's own listeners first, each kind in subscription order
+            entries = sorted(self._listeners, key=lambda entry: entry[0] is None)
+        for owner, held in released.items():
+            contacts = tuple(held)
+            for mine, listener in entries:
+                if mine in (owner, None):
+                    try:
+                        listener(owner, contacts, reason)
+                    except Exception:
+                        logger.exception("a released listener failed")
 
     def release_expired(self, now_s: float | None = None, prefix: str = "") -> None:
         """Release every contact whose deadline is at or before ``now_s`` (None: now)
@@ -446,9 +431,9 @@ class ContactCalls:
             for owner, held in due.items():
                 for contact, record in held.items():
                     self._lift(record, ContactUp(owner, contact, None, None))
-        self._listeners.publish([(owner, tuple(held), "watchdog") for owner, held in due.items()])
+        self._publish(due, "watchdog")
 
-    def _expire_deadlines(self, now_s: float) -> float | None:
+    def _expire_deadlines(self, now_s: float) -> float:
         """The deadline thread's step: release what is due, return the next deadline."""
         self.release_expired(now_s)
         with self._lock:
