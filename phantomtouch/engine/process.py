@@ -14,7 +14,6 @@ from collections.abc import Callable
 from typing import Any
 
 from phantomtouch.engine.checks import check_int
-from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import (
     RELEASES,
@@ -33,6 +32,7 @@ from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim
 from phantomtouch.errors import DeviceError, EngineBusyError
+from phantomtouch.renderer.carriers import noise_loop
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger("phantomtouch.engine")
@@ -68,9 +68,7 @@ class ChildAudio:
             "queue_capacity": links.queue_capacity,
             "max_voices": links.max_voices,
             "contact": links.settings,
-            "render_ahead_frames": RENDER_AHEAD_FRAMES,
             "costs": links.costs,
-            "contact_slots": links.settings.max_contacts,
         }
         self._spawn = functools.partial(
             ChildProcess, device, spec, self._options, priority, self._read_reports
@@ -144,8 +142,11 @@ class ChildAudio:
             )
 
     def prepare(self, carrier: object) -> None:
-        """Compute a carrier's noise loop ahead (host, outside the front's lock)."""
-        self._loops.prepare(loop_key(carrier, self._device.sample_rate_hz))
+        """Compute a carrier's noise loop ahead, cached by the renderer (host, outside the
+        front's lock)."""
+        key = loop_key(carrier, self._device.sample_rate_hz)
+        if key is not None:
+            noise_loop(*key)
 
     def provide(self, carrier: object) -> None:
         """Hand the engine process the carrier's noise loop unless it holds it (host,
