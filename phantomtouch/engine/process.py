@@ -30,7 +30,7 @@ from phantomtouch.engine.noise import SharedLoops, loop_key
 from phantomtouch.engine.plan_memory import SharedPlans
 from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
-from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim
+from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess
 from phantomtouch.errors import DeviceError, EngineBusyError
 from phantomtouch.renderer.carriers import noise_loop
 from phantomtouch.schema.device import DeviceProfile
@@ -121,7 +121,7 @@ class ChildAudio:
 
     def post(self, message: Command) -> None:
         """Queue a message for the engine process (host, under the front's lock); a
-        plan handed over crosses without what the engine process has (``slim``).
+        plan handed over crosses as :meth:`SharedPlans.share` makes it.
 
         Raises
         ------
@@ -130,9 +130,7 @@ class ChildAudio:
             (``RELEASES``), which only a closed or broken pipe refuses.
         """
         if isinstance(message, HoldPlan):
-            shared = self._shared_plans.share(
-                message.handle, slim(message.plan), message.prerendered
-            )
+            shared = self._shared_plans.share(message.handle, message.plan, message.prerendered)
             message = HoldPlan(message.handle, *shared)
         if isinstance(message, SetWearerGains):
             self._wearer = message  # a restarted engine process gets it again
