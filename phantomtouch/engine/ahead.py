@@ -39,7 +39,6 @@ class RenderAhead:
 
     def start(self) -> None:
         """Start the thread (non real time; the sink's starter)."""
-        self._halt.clear()
         self._thread = threading.Thread(target=self._run, name="phantomtouch-ahead", daemon=True)
         self._thread.start()
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core
-from phantomtouch.engine.engine import RENDER_AHEAD_RINGS, voice_costs
+from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES, RENDER_AHEAD_RINGS, voice_costs
 from phantomtouch.engine.link import Inbox, ReportBox
 from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
 from phantomtouch.engine.messages import prepare as prepare_message
@@ -35,10 +35,6 @@ INTAKE_SHARE = 0.15
 """Share of a block's playing time the callback spends on the host's messages."""
 MESSAGES_PER_BLOCK = 256
 """Most of the host's messages the callback performs per block."""
-INBOX_MESSAGES = 4096
-"""Most of the host's messages received and waiting for the callback."""
-REPORTS_WAITING = 1024
-"""Most blocks' reports waiting to be sent to the host (more are dropped and counted)."""
 
 
 @dataclasses.dataclass
@@ -55,8 +51,8 @@ class Intake:
 
     def __post_init__(self) -> None:
         self.state = AudioState(self.core, slots=self.slots)
-        self.state.loops = HeldLoops(self.state.reports)
-        self.state.arrays = HeldArrays()
+        self.loops = self.state.loops = HeldLoops(self.state.reports)
+        self.arrays = self.state.arrays = HeldArrays()
         self.handled_mark = 0
         self.leave = threading.Event()
         device = self.core.device
@@ -86,10 +82,9 @@ class Intake:
         core = self.core
         state = self.state
         self.status.beat(time.monotonic(), core.scheduler.frames)
-        assert state.loops is not None and state.arrays is not None
-        state.loops.collect()
+        self.loops.collect()
         events = core.events()
-        events.extend(PlanReleased(handle) for handle in state.arrays.collect())
+        events.extend(PlanReleased(handle) for handle in self.arrays.collect())
         if taken := len(state.reports):  # the inbox thread appends too: take what is there
             events.extend(state.reports[:taken])
             del state.reports[:taken]
@@ -186,9 +181,9 @@ def serve(
         The device profile as JSON.
     spec : SinkSpec
     options : dict
-        ``queue_capacity``, ``max_voices``, ``contact``, ``render_ahead_frames``,
-        ``costs`` (``(voice_cost, start_cost, prerendered_cost)``; None: measure them),
-        ``contact_slots``.
+        ``queue_capacity``, ``max_voices``, ``contact`` (one move slot per
+        ``contact.max_contacts``) and ``costs`` (``(voice_cost, start_cost,
+        prerendered_cost)``; None: measure them).
     mark : multiprocessing.Value
         Sequence number of the host's last ``stop_all``.
     priority : int or None
@@ -209,7 +204,7 @@ def serve(
             device.sample_rate_hz,
             publish=SharedClock(device.sample_rate_hz, shared["clock"]).publish,
         )
-        slots = MoveSlots(options["contact_slots"], shared["slots"])
+        slots = MoveSlots(options["contact"].max_contacts, shared["slots"])
         status = StatusBlock(device.channels, shared["status"])
         sink = spec.open(device)
         core = Core(
@@ -217,9 +212,9 @@ def serve(
             sink,
             settings=options["contact"],
             # admission is the host's: the queue only bounds what it let through
-            queue_capacity=options["queue_capacity"] + 2 * options["contact_slots"] + 1,
+            queue_capacity=options["queue_capacity"] + 2 * slots.capacity + 1,
             rings=min(options["max_voices"], RENDER_AHEAD_RINGS),
-            chunk_frames=options["render_ahead_frames"],
+            chunk_frames=RENDER_AHEAD_FRAMES,
             clock=clock,
             render_loads=np.frombuffer(shared["loads"], dtype=np.float64),
         )
@@ -233,8 +228,8 @@ def serve(
     reports.send(("ready", costs, sink.backend, sink.output_device))
     intake = Intake(
         core,
-        Inbox(commands, INBOX_MESSAGES, poll_s=device.block_frames / device.sample_rate_hz),
-        ReportBox(reports, REPORTS_WAITING),
+        Inbox(commands, poll_s=device.block_frames / device.sample_rate_hz),
+        ReportBox(reports),
         mark,
         slots,
         status,

@@ -10,6 +10,14 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+INBOX_MESSAGES = 4096
+"""Most of the host's messages received and waiting for the callback; while that many
+wait the inbox thread stops receiving, so the pipe and then the host's :class:`Outbox` fill."""
+REPORTS_WAITING = 1024
+"""Most blocks' reports waiting to be sent to the host (more are dropped and counted)."""
+OUTBOX_BYTES = 64 << 20
+"""Most bytes of the host's messages waiting in its :class:`Outbox` (more are refused)."""
+
 
 class Inbox:
     """The host's messages in the engine process: a thread receives, unpickles and
@@ -19,18 +27,15 @@ class Inbox:
     ----------
     connection : multiprocessing.connection.Connection
         The read end of the host's pipe (blocking).
-    capacity : int, >= 1
-        Most messages waiting; while that many wait the thread stops receiving, so the
-        pipe and then the host's :class:`Outbox` fill.
     poll_s : float, > 0
-        How often a thread that stopped receiving looks again (seconds; about a block).
+        How often a thread that stopped receiving (:data:`INBOX_MESSAGES`) looks again
+        (seconds; about a block).
     """
 
-    def __init__(self, connection: Any, capacity: int, poll_s: float) -> None:
+    def __init__(self, connection: Any, poll_s: float) -> None:
         self.connection = connection
         self.messages: deque[Any] = deque()
         """The messages received, oldest first (the callback pops from the left)."""
-        self._capacity = capacity
         self._poll_s = poll_s
         self.closed = False
         """Set once the host's end is closed (or the pipe broke): nothing more comes."""
@@ -48,7 +53,7 @@ class Inbox:
         messages = self.messages
         try:
             while True:
-                while len(messages) >= self._capacity:
+                while len(messages) >= INBOX_MESSAGES:
                     time.sleep(self._poll_s)
                 prepared = prepare(self.connection.recv())
                 if prepared is not None:
@@ -65,21 +70,18 @@ class Inbox:
 
 
 class ReportBox:
-    """The audio callback's reports, sent to the host by a thread of their own.
+    """The audio callback's reports, sent to the host by a thread of their own; beyond
+    :data:`REPORTS_WAITING` new ones are dropped (counted in :attr:`dropped`).
 
     Parameters
     ----------
     connection : multiprocessing.connection.Connection
         The write end of the reports' pipe (blocking).
-    capacity : int, >= 1
-        Most reports waiting; more are dropped (counted in :attr:`dropped`), those
-        waiting keep their order.
     """
 
-    def __init__(self, connection: Any, capacity: int) -> None:
+    def __init__(self, connection: Any) -> None:
         self._connection = connection
         self._waiting: deque[Any] = deque()
-        self._capacity = capacity
         self._wake = threading.Lock()
         """Held while nothing waits: the thread waits to acquire it, :meth:`put` releases
         it (releasing never waits)."""
@@ -90,7 +92,7 @@ class ReportBox:
     def put(self, report: Any) -> None:
         """Queue a report for the host and wake the thread (real time: no system call,
         no pickle; only this method releases the wake lock, so it is held when released)."""
-        if len(self._waiting) >= self._capacity:
+        if len(self._waiting) >= REPORTS_WAITING:
             self.dropped += 1
             return
         self._waiting.append(report)
@@ -117,13 +119,11 @@ class Outbox:
     ----------
     connection : multiprocessing.connection.Connection
         The write end of the pipe (blocking).
-    max_bytes : int
-        Most bytes waiting; :meth:`put` refuses more.
     """
 
-    def __init__(self, connection: Any, max_bytes: int = 64 << 20) -> None:
+    def __init__(self, connection: Any) -> None:
         self._connection = connection
-        self._max = max_bytes
+        self._max = OUTBOX_BYTES
         self._frames: deque[bytes] = deque()
         self._bytes = 0
         self._ready = threading.Condition()

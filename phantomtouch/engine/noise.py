@@ -43,13 +43,6 @@ class SharedLoops(HostBlocks[NoiseKey]):
         super().__init__()
         self.capacity = capacity
 
-    @staticmethod
-    def prepare(key: NoiseKey | None) -> None:
-        """Compute a loop ahead, outside every lock (non real time, any host thread; cached
-        by the renderer)."""
-        if key is not None:
-            noise_loop(*key)
-
     def provide(self, key: NoiseKey | None, post: Callable[[HoldNoise | DropNoise], None]) -> None:
         """Make sure the engine process holds ``key`` before the next message, and drop
         the least recently used loop beyond ``capacity`` (host, under the front's lock:

@@ -14,6 +14,7 @@ import numpy as np
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.shared import HostBlocks, MappedBlocks, view, write_block
 from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema.pattern import PolylinePath
 
 SHARE_MIN_BYTES = 128 << 10
 """A plan whose arrays (samples and timelines) hold this many bytes or more crosses by
@@ -21,6 +22,7 @@ shared memory."""
 _PLACES = tuple(itertools.product(("forward", "backward"), ("times_s", "points_cm", "intensity")))
 """A timeline's arrays, by side of the plan and name."""
 _EMPTY = np.zeros(0, dtype=np.float64)
+_BLANK_PATH = PolylinePath(points_cm=[(0.0, 0.0)])
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,6 +37,13 @@ class SharedArrays:
 def heavy_bytes(plan: Plan, prerendered: Prerendered | None) -> int:
     """Bytes of a plan's arrays: its samples and its timelines."""
     return sum(array.nbytes for _, array in _arrays(plan, prerendered))
+
+
+def slim(plan: Plan) -> Plan:
+    """The plan without what the engine process has already: device, geometry, and the
+    pattern's path (the timelines carry the resolved path)."""
+    pattern = plan.pattern.model_copy(update={"path": _BLANK_PATH})
+    return dataclasses.replace(plan, pattern=pattern, device=None, geometry=None)  # type: ignore[arg-type]
 
 
 def _arrays(plan: Plan, prerendered: Prerendered | None) -> list[tuple[str, np.ndarray]]:
@@ -63,9 +72,10 @@ class SharedPlans(HostBlocks[int]):
     def share(
         self, handle: int, plan: Plan, prerendered: Prerendered | None
     ) -> tuple[Plan, Prerendered | None, SharedArrays | None]:
-        """What crosses the pipe for a plan: the plan without its heavy arrays, and the
-        block they were written into (None and the plan unchanged below
-        :data:`SHARE_MIN_BYTES`). Host, under the front's lock."""
+        """What crosses the pipe for a plan: the plan without what the engine process has
+        (:func:`slim`) nor its heavy arrays, and the block they were written into (None, and
+        the arrays left in, below :data:`SHARE_MIN_BYTES`). Host, under the front's lock."""
+        plan = slim(plan)
         arrays = _arrays(plan, prerendered)
         if sum(array.nbytes for _, array in arrays) < SHARE_MIN_BYTES:
             return plan, prerendered, None

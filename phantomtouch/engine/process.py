@@ -14,7 +14,6 @@ from collections.abc import Callable
 from typing import Any
 
 from phantomtouch.engine.checks import check_int
-from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import (
     RELEASES,
@@ -31,8 +30,9 @@ from phantomtouch.engine.noise import SharedLoops, loop_key
 from phantomtouch.engine.plan_memory import SharedPlans
 from phantomtouch.engine.scheduler import load_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
-from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess, slim
+from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess
 from phantomtouch.errors import DeviceError, EngineBusyError
+from phantomtouch.renderer.carriers import noise_loop
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger("phantomtouch.engine")
@@ -68,9 +68,7 @@ class ChildAudio:
             "queue_capacity": links.queue_capacity,
             "max_voices": links.max_voices,
             "contact": links.settings,
-            "render_ahead_frames": RENDER_AHEAD_FRAMES,
             "costs": links.costs,
-            "contact_slots": links.settings.max_contacts,
         }
         self._spawn = functools.partial(
             ChildProcess, device, spec, self._options, priority, self._read_reports
@@ -123,7 +121,7 @@ class ChildAudio:
 
     def post(self, message: Command) -> None:
         """Queue a message for the engine process (host, under the front's lock); a
-        plan handed over crosses without what the engine process has (``slim``).
+        plan handed over crosses as :meth:`SharedPlans.share` makes it.
 
         Raises
         ------
@@ -132,9 +130,7 @@ class ChildAudio:
             (``RELEASES``), which only a closed or broken pipe refuses.
         """
         if isinstance(message, HoldPlan):
-            shared = self._shared_plans.share(
-                message.handle, slim(message.plan), message.prerendered
-            )
+            shared = self._shared_plans.share(message.handle, message.plan, message.prerendered)
             message = HoldPlan(message.handle, *shared)
         if isinstance(message, SetWearerGains):
             self._wearer = message  # a restarted engine process gets it again
@@ -144,8 +140,11 @@ class ChildAudio:
             )
 
     def prepare(self, carrier: object) -> None:
-        """Compute a carrier's noise loop ahead (host, outside the front's lock)."""
-        self._loops.prepare(loop_key(carrier, self._device.sample_rate_hz))
+        """Compute a carrier's noise loop ahead, cached by the renderer (host, outside the
+        front's lock)."""
+        key = loop_key(carrier, self._device.sample_rate_hz)
+        if key is not None:
+            noise_loop(*key)
 
     def provide(self, carrier: object) -> None:
         """Hand the engine process the carrier's noise loop unless it holds it (host,

@@ -41,15 +41,9 @@ def sequence_locks_are_safe(machine: str | None = None) -> bool:
 
 @dataclass(frozen=True)
 class SharedBuffer:
-    """Float64 values in shared memory and, where sequence locks are unsafe, their lock,
-    both inherited by the engine process as it starts.
-
-    Attributes
-    ----------
-    values : multiprocessing RawArray of float64
-    lock : multiprocessing Lock, or None
-        None: the values are guarded by a sequence lock.
-    """
+    """Float64 ``values`` in shared memory (a multiprocessing RawArray) and, where sequence
+    locks are unsafe, their multiprocessing ``lock`` (None: a sequence lock guards them),
+    both inherited by the engine process as it starts."""
 
     values: Any
     lock: Any
@@ -65,16 +59,9 @@ class SharedBuffer:
 
 
 class _Rows:
-    """Rows of float64 values in a :class:`SharedBuffer`, each led by its sequence number.
-
-    Parameters
-    ----------
-    rows, fields : int, >= 1
-    raw : SharedBuffer, or None
-        The shared memory (as passed to the child); None: allocate it.
-    locked : bool or None
-        When allocating: as for :meth:`SharedBuffer.allocate`.
-    """
+    """``rows`` of ``fields`` float64 values in a :class:`SharedBuffer`, each led by its
+    sequence number: ``raw`` as passed to the child, or None to allocate it (``locked`` as
+    for :meth:`SharedBuffer.allocate`)."""
 
     def __init__(self, rows: int, fields: int, raw: SharedBuffer | None, locked: bool | None):
         self.raw = raw if raw is not None else SharedBuffer.allocate(rows * fields, locked)

@@ -5,7 +5,6 @@ Host, non real time.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import multiprocessing
 import threading
 from collections.abc import Callable
@@ -20,22 +19,11 @@ from phantomtouch.engine.scheduler import RENDER_TIMES
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.errors import DeviceError
-from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
-from phantomtouch.schema.pattern import PolylinePath
 
 START_TIMEOUT_S = 60.0
 """Longest wait for the child to import, open its sink and answer."""
 CLOSE_TIMEOUT_S = 10.0
-
-_BLANK_PATH = PolylinePath(points_cm=[(0.0, 0.0)])
-
-
-def slim(plan: Plan) -> Plan:
-    """The plan without what the engine process has already: device, geometry, and the
-    pattern's path (the timelines carry the resolved path)."""
-    pattern = plan.pattern.model_copy(update={"path": _BLANK_PATH})
-    return dataclasses.replace(plan, pattern=pattern, device=None, geometry=None)  # type: ignore[arg-type]
 
 
 class ChildProcess:
@@ -70,7 +58,7 @@ class ChildProcess:
     ) -> None:
         context = multiprocessing.get_context("spawn")
         self.clock = SharedClock(device.sample_rate_hz)
-        self.slots = MoveSlots(options["contact_slots"])
+        self.slots = MoveSlots(options["contact"].max_contacts)
         self.status = StatusBlock(device.channels)
         self.mark = context.Value("q", 0, lock=False)
         loads = context.RawArray("d", RENDER_TIMES)
