@@ -251,14 +251,19 @@ def test_blocks_the_inbox_thread_retires_while_the_callback_collects_are_all_unm
     blocks: MappedBlocks[int] = MappedBlocks()
     freed: list[int] = []
     done = threading.Event()
+    errors: list[BaseException] = []
     interval = sys.getswitchinterval()
     sys.setswitchinterval(1e-6)
     try:
 
         def inbox() -> None:
-            for i in range(maps):
-                blocks.map(i % 2, host[i % 4].name)  # each map retires the block it replaces
-            done.set()
+            try:
+                for i in range(maps):
+                    blocks.map(i % 2, host[i % 4].name)  # each map retires the block it replaces
+            except BaseException as exc:  # the test fails on it, not waits for it forever
+                errors.append(exc)
+            finally:
+                done.set()
 
         thread = threading.Thread(target=inbox)
         thread.start()
@@ -270,4 +275,5 @@ def test_blocks_the_inbox_thread_retires_while_the_callback_collects_are_all_unm
         sys.setswitchinterval(interval)
         for block in host:
             unlink_block(block)
+    assert not errors, f"the inbox thread failed: {errors[0]!r}"
     assert len(freed) == maps - 2
