@@ -478,7 +478,7 @@ class JobCalls:
                 record.requested_start_frame = frame = first  # the promised frame, not sooner
             record.requested_start_at_s = self._audio.time_at(first)  # one value for all
             self._audio.provide(carrier)
-            self._start(entry, StartJob(job_id, entry.handle, owner, frame))
+            self._start(entry, StartJob(job_id, entry.handle, frame))
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
                 victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames

@@ -75,7 +75,6 @@ class StartJob:
 
     job_id: str
     plan_key: int
-    owner: str | None
     frame: int | None
 
     def prepare(self, state: AudioState) -> StartVoice:

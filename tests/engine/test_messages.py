@@ -74,8 +74,8 @@ def test_a_command_is_applied_through_the_table_and_a_void_one_plays_nothing() -
         state = AudioState(engine.core)
         resolved = plan(STROKE, DEVICE)
         perform(state, HoldPlan(1, resolved, None), void=True)
-        perform(state, StartJob("void", 1, None, 0), void=True)
-        perform(state, StartJob("played", 1, None, 0))
+        perform(state, StartJob("void", 1, 0), void=True)
+        perform(state, StartJob("played", 1, 0))
         perform(state, ReleaseJob("played", 4 * DEVICE.block_frames, None))
         sink.pull(40)
         events = engine.core.events() + state.reports
@@ -91,7 +91,7 @@ def test_a_command_is_applied_through_the_table_and_a_void_one_plays_nothing() -
 def test_the_audio_side_refuses_a_plan_it_was_not_handed() -> None:
     with Engine(DEVICE, CaptureSink(DEVICE)) as engine:
         state = AudioState(engine.core)
-        perform(state, StartJob("orphan", 4242, None, None))
+        perform(state, StartJob("orphan", 4242, None))
     assert state.refused == 1
     assert [type(e) for e in state.reports] == [Refused, Cancelled]
     assert state.reports[0].what == "plan"
