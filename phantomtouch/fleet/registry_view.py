@@ -90,6 +90,12 @@ class RegistryView:
     async def start(self, who: str, deadline: Deadline) -> None:
         """Watch the bucket and read every record in it before returning.
 
+        The first read is done when the watch says it has caught up, or when it delivers
+        the bucket's last revision as of just before the watch began (or a later one): the
+        watch delivers in revision order, so every record there was has been read by then.
+        It does not wait for the watch's "caught up" marker alone, which a watch may never
+        give while records keep arriving (the nodes' heartbeats).
+
         Raises
         ------
         FleetJoinError
@@ -99,12 +105,24 @@ class RegistryView:
         self._task = asyncio.create_task(self._follow())
 
     async def _first_watch(self) -> None:
+        status = await self.kv.status()
+        last_revision = status.stream_info.state.last_seq
         await self._rewatch()
+        records = 0
         while True:
-            entry = await self._watcher.updates(timeout=FIRST_READ_S)
+            try:
+                entry = await self._watcher.updates(timeout=FIRST_READ_S)
+            except TimeoutError:
+                raise TimeoutError(
+                    f"the registry watch delivered nothing for {FIRST_READ_S:g} s after "
+                    f"{records} records, short of revision {last_revision}"
+                ) from None
             if entry is None:
                 return
             self._apply(entry)
+            records += 1
+            if entry.revision >= last_revision:
+                return
 
     async def _rewatch(self) -> None:
         old, self._watcher = self._watcher, None
