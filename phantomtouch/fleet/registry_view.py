@@ -41,6 +41,9 @@ FIRST_READ_S = 2.0
 """How long the first read of the bucket waits for each record before it starts over, s."""
 REWATCH_PAUSE_S = 0.25
 """Pause between attempts to start the watch again while NATS refuses, s."""
+CANCEL_AGAIN_S = 0.05
+"""How long :meth:`RegistryView.close` waits for the follower to end before it cancels
+it again, s."""
 
 
 @dataclass
@@ -61,6 +64,7 @@ class RegistryView:
         self._newest_received_s = time.monotonic()
         self._watcher: Any = None
         self._task: asyncio.Task[None] | None = None
+        self._closing = False
         self.rewatches = 0
 
     # -- reads ----------------------------------------------------------------------------
@@ -138,7 +142,7 @@ class RegistryView:
     async def _follow(self) -> None:
         import nats.errors
 
-        while True:
+        while not self._closing:
             try:
                 if self._watcher is None:
                     self.rewatches += 1
@@ -168,11 +172,21 @@ class RegistryView:
             self._entries[entry.key] = _Entry(record, created_s, entry.revision)
 
     async def close(self) -> None:
-        """Stop following the bucket."""
+        """Stop following the bucket.
+
+        The follower is cancelled again until it has ended: ``asyncio.wait_for`` (which
+        the watch's ``updates`` uses) on Python 3.11 swallows a cancel that arrives just as
+        an update does and returns the update, so a single cancel left the follower
+        running under a stream of heartbeats, and this call waiting on it for ever.
+        """
+        self._closing = True
         if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+            while not self._task.done():
+                self._task.cancel()
+                await asyncio.wait({self._task}, timeout=CANCEL_AGAIN_S)
+            if not self._task.cancelled():
+                with contextlib.suppress(Exception):
+                    self._task.result()
         if self._watcher is not None:
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(self._watcher.stop(), 1.0)
