@@ -41,6 +41,9 @@ FIRST_READ_S = 2.0
 """How long the first read of the bucket waits for each record before it starts over, s."""
 REWATCH_PAUSE_S = 0.25
 """Pause between attempts to start the watch again while NATS refuses, s."""
+CANCEL_AGAIN_S = 0.05
+"""How long :meth:`RegistryView.close` waits for the follower to end before it cancels
+it again, s."""
 
 
 @dataclass
@@ -61,6 +64,7 @@ class RegistryView:
         self._newest_received_s = time.monotonic()
         self._watcher: Any = None
         self._task: asyncio.Task[None] | None = None
+        self._closing = False
         self.rewatches = 0
 
     # -- reads ----------------------------------------------------------------------------
@@ -90,6 +94,12 @@ class RegistryView:
     async def start(self, who: str, deadline: Deadline) -> None:
         """Watch the bucket and read every record in it before returning.
 
+        The first read is done when the watch says it has caught up, or when it delivers
+        the bucket's last revision as of just before the watch began (or a later one): the
+        watch delivers in revision order, so every record there was has been read by then.
+        It does not wait for the watch's "caught up" marker alone, which a watch may never
+        give while records keep arriving (the nodes' heartbeats).
+
         Raises
         ------
         FleetJoinError
@@ -99,12 +109,24 @@ class RegistryView:
         self._task = asyncio.create_task(self._follow())
 
     async def _first_watch(self) -> None:
+        status = await self.kv.status()
+        last_revision = status.stream_info.state.last_seq
         await self._rewatch()
+        records = 0
         while True:
-            entry = await self._watcher.updates(timeout=FIRST_READ_S)
+            try:
+                entry = await self._watcher.updates(timeout=FIRST_READ_S)
+            except TimeoutError:
+                raise TimeoutError(
+                    f"the registry watch delivered nothing for {FIRST_READ_S:g} s after "
+                    f"{records} records, short of revision {last_revision}"
+                ) from None
             if entry is None:
                 return
             self._apply(entry)
+            records += 1
+            if entry.revision >= last_revision:
+                return
 
     async def _rewatch(self) -> None:
         old, self._watcher = self._watcher, None
@@ -120,7 +142,7 @@ class RegistryView:
     async def _follow(self) -> None:
         import nats.errors
 
-        while True:
+        while not self._closing:
             try:
                 if self._watcher is None:
                     self.rewatches += 1
@@ -150,11 +172,21 @@ class RegistryView:
             self._entries[entry.key] = _Entry(record, created_s, entry.revision)
 
     async def close(self) -> None:
-        """Stop following the bucket."""
+        """Stop following the bucket.
+
+        The follower is cancelled again until it has ended: ``asyncio.wait_for`` (which
+        the watch's ``updates`` uses) on Python 3.11 swallows a cancel that arrives just as
+        an update does and returns the update, so a single cancel left the follower
+        running under a stream of heartbeats, and this call waiting on it for ever.
+        """
+        self._closing = True
         if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+            while not self._task.done():
+                self._task.cancel()
+                await asyncio.wait({self._task}, timeout=CANCEL_AGAIN_S)
+            if not self._task.cancelled():
+                with contextlib.suppress(Exception):
+                    self._task.result()
         if self._watcher is not None:
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(self._watcher.stop(), 1.0)

@@ -8,7 +8,9 @@ again after 0.05 s, 0.1 s, 0.2 s … (doubling, at most :data:`MAX_DELAY_S`, wit
 the racers spread out) until it succeeds or the start deadline
 (``PHANTOMTOUCH_FLEET_START_DEADLINE_S``, default 20 s) has passed; then
 :class:`~phantomtouch.fleet.errors.FleetJoinError` says in one line what could not be done
-and the last reason NATS gave.
+and the last reason NATS gave. No single attempt outlasts the deadline either: one still
+waiting when it passes (a server that stopped answering, a request timeout longer than the
+deadline) is cancelled, and the error says the step was still waiting.
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ T = TypeVar("T")
 
 FIRST_DELAY_S = 0.05
 MAX_DELAY_S = 1.0
+CANCEL_WAIT_S = 1.0
+"""How long an attempt cancelled at the deadline may take to unwind, s."""
 EXIT_JOIN_FAILED = 1
 """The exit status of a node or gateway that could not join the fleet."""
 
@@ -53,8 +57,43 @@ def _transient(exc: BaseException) -> bool:
     return isinstance(exc, nats.errors.Error | TimeoutError | asyncio.TimeoutError)
 
 
+class _AttemptOutlasted(Exception):
+    """An attempt still waiting when the time it was given ran out."""
+
+    def __init__(self, waited_s: float) -> None:
+        super().__init__(waited_s)
+        self.waited_s = waited_s
+
+
+async def _within(call: Callable[[], Awaitable[T]], limit_s: float) -> T:
+    """``await call()``, cancelled after ``limit_s`` seconds.
+
+    Raises
+    ------
+    _AttemptOutlasted
+        The call had not finished after ``limit_s`` (it is cancelled, and given at most
+        :data:`CANCEL_WAIT_S` to unwind).
+    """
+    attempt = asyncio.ensure_future(call())
+    try:
+        done, _ = await asyncio.wait({attempt}, timeout=limit_s)
+    except asyncio.CancelledError:
+        attempt.cancel()
+        raise
+    if not done:
+        attempt.cancel()
+        await asyncio.wait({attempt}, timeout=CANCEL_WAIT_S)
+        if attempt.done() and not attempt.cancelled():
+            attempt.exception()  # retrieved: the attempt failed while being cancelled
+        raise _AttemptOutlasted(limit_s)
+    return attempt.result()
+
+
 async def retried(who: str, what: str, call: Callable[[], Awaitable[T]], deadline: Deadline) -> T:
     """``await call()``, retried with backoff on NATS errors until ``deadline``.
+
+    Each attempt may take at most the time left until ``deadline``; one still waiting then
+    is cancelled.
 
     Parameters
     ----------
@@ -70,14 +109,19 @@ async def retried(who: str, what: str, call: Callable[[], Awaitable[T]], deadlin
     Raises
     ------
     FleetJoinError
-        The step still failed when the deadline passed.
+        The step still failed, or its attempt was still waiting, when the deadline passed.
     """
     delay_s = FIRST_DELAY_S
     attempts = 0
     while True:
         attempts += 1
         try:
-            return await call()
+            return await _within(call, deadline.remaining_s())
+        except _AttemptOutlasted as exc:
+            raise FleetJoinError(
+                f"fleet: {who} could not {what} within {deadline.limit_s:g} s "
+                f"({attempts} attempts; the last was still waiting after {exc.waited_s:.1f} s)"
+            ) from None
         except Exception as exc:
             if not _transient(exc):
                 raise
