@@ -48,6 +48,7 @@ from phantomtouch.fleet.records import (
 from phantomtouch.fleet.remote_contacts import RemoteContacts, drop_reason
 from phantomtouch.fleet.settings import FleetSettings
 from phantomtouch.fleet.startup import Deadline, announce, exit_join_failed, open_registry
+from phantomtouch.fleet.tasks import cancel_until_done
 from phantomtouch.service import scheduling
 from phantomtouch.service.engine_access import describe_output
 from phantomtouch.service.errors import (
@@ -134,9 +135,10 @@ class ArmbandNode:
         )
 
     async def close(self) -> None:
-        """Leave the registry at once, release remote contacts, disconnect."""
+        """Leave the registry at once, release remote contacts, disconnect (the
+        heartbeat, time stamp and watchdog loops have ended when it returns)."""
         for task in self._loops:
-            task.cancel()
+            await cancel_until_done(task)
         self.contacts.release_all()
         self.contacts.close()
         if self._nc is None:
@@ -184,7 +186,7 @@ class ArmbandNode:
         while True:
             await asyncio.sleep(self.settings.heartbeat_s)
             try:
-                await self._beat()
+                await asyncio.wait_for(self._beat(), self.settings.beat_timeout_s)
             except Exception as exc:
                 if not self._beat_failing:
                     logger.warning("fleet: heartbeat of %r failed (%s)", self.armband, exc)

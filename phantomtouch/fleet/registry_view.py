@@ -30,6 +30,7 @@ from typing import Any
 from phantomtouch.fleet.records import ArmbandRecord
 from phantomtouch.fleet.registry import read_record
 from phantomtouch.fleet.startup import Deadline, retried
+from phantomtouch.fleet.tasks import cancel_until_done
 
 logger = logging.getLogger("phantomtouch.fleet")
 
@@ -41,9 +42,6 @@ FIRST_READ_S = 2.0
 """How long the first read of the bucket waits for each record before it starts over, s."""
 REWATCH_PAUSE_S = 0.25
 """Pause between attempts to start the watch again while NATS refuses, s."""
-CANCEL_AGAIN_S = 0.05
-"""How long :meth:`RegistryView.close` waits for the follower to end before it cancels
-it again, s."""
 
 
 @dataclass
@@ -174,19 +172,13 @@ class RegistryView:
     async def close(self) -> None:
         """Stop following the bucket.
 
-        The follower is cancelled again until it has ended: ``asyncio.wait_for`` (which
-        the watch's ``updates`` uses) on Python 3.11 swallows a cancel that arrives just as
-        an update does and returns the update, so a single cancel left the follower
-        running under a stream of heartbeats, and this call waiting on it for ever.
+        The follower is cancelled until it has ended (:func:`cancel_until_done`): a
+        single cancel left it running under a stream of heartbeats, and this call waiting
+        on it for ever.
         """
         self._closing = True
         if self._task is not None:
-            while not self._task.done():
-                self._task.cancel()
-                await asyncio.wait({self._task}, timeout=CANCEL_AGAIN_S)
-            if not self._task.cancelled():
-                with contextlib.suppress(Exception):
-                    self._task.result()
+            await cancel_until_done(self._task)
         if self._watcher is not None:
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(self._watcher.stop(), 1.0)

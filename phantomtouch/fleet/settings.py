@@ -61,6 +61,18 @@ class FleetSettings(BaseSettings):
     token: SecretStr | None = None
     creds: Path | None = Field(default=None, description="NATS credentials file (.creds).")
 
+    @property
+    def beat_timeout_s(self) -> float:
+        """How long one heartbeat may wait for the registry's answer, s.
+
+        At most ``request_timeout_s``, and short enough that a heartbeat lost with its
+        server (its reply never comes, even after the node has reconnected elsewhere) and
+        the next one after it still land within ``ttl_s``: ``(ttl_s - heartbeat_s) / 2``,
+        but never below ``heartbeat_s``. The defaults (1 s, 5 s) give 2 s.
+        """
+        half_slack_s = (self.ttl_s - self.heartbeat_s) / 2
+        return min(self.request_timeout_s, max(self.heartbeat_s, half_slack_s))
+
     @field_validator("servers", mode="before")
     @classmethod
     def _split(cls, value: object) -> object:

@@ -38,7 +38,8 @@ each node (three engine processes more would only load the machine's two cores).
 
 
 class ArmbandNode(LiveServer):
-    """``phantomtouch serve --fleet ... --armband ID --site SITE`` with a stimulus log."""
+    """``phantomtouch serve --fleet ... --armband ID --site SITE`` with a stimulus log
+    (``servers``: the ``--fleet`` URLs, when not every server of the cluster)."""
 
     def __init__(
         self,
@@ -48,6 +49,7 @@ class ArmbandNode(LiveServer):
         site: str,
         env: dict[str, str] | None = None,
         output: str = "null",
+        servers: str | None = None,
     ) -> None:
         self.armband = armband
         self.site = site
@@ -62,7 +64,10 @@ class ArmbandNode(LiveServer):
                 "PHANTOMTOUCH_ENGINE_LOG_PATH": str(self.stimulus_log),
                 **(env or {}),
             },
-            args=("--fleet", cluster.servers, "--armband", armband, "--site", site, *insecure),
+            args=(
+                *("--fleet", servers or cluster.servers),
+                *("--armband", armband, "--site", site, *insecure),
+            ),
             output=output,
         )
 
@@ -101,7 +106,8 @@ class ArmbandNode(LiveServer):
 
 
 class Gateway:
-    """``phantomtouch gateway --fleet ...`` on a free port."""
+    """``phantomtouch gateway --fleet ...`` on a free port (``servers`` as for
+    :class:`ArmbandNode`)."""
 
     def __init__(
         self,
@@ -109,9 +115,11 @@ class Gateway:
         cluster: NatsCluster,
         env: dict[str, str] | None = None,
         name: str = "gateway",
+        servers: str | None = None,
     ):
         self.port = free_port()
         self.cluster = cluster
+        self.servers = servers or cluster.servers
         self.log_path = folder / f"gateway-{self.port}.log"
         access = cluster.credentials(name) if cluster.secured else {}
         self.env = {**access, **(env or {})}
@@ -128,7 +136,7 @@ class Gateway:
     def launch(self) -> subprocess.Popen[bytes]:
         """Start the process without waiting for it (:meth:`start` waits until healthy)."""
         command = [sys.executable, "-m", "phantomtouch", "gateway", "--fleet"]
-        command += [self.cluster.servers, "--port", str(self.port)]
+        command += [self.servers, "--port", str(self.port)]
         if not self.cluster.secured:
             command.append("--insecure-nats")
         with self.log_path.open("ab") as log:
