@@ -16,7 +16,6 @@ import queue
 import shutil
 import subprocess
 import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
@@ -25,6 +24,7 @@ import httpx
 import pytest
 
 from tests.support.live_server import LiveServer
+from tests.support.waiting import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 T = TypeVar("T")
@@ -52,20 +52,6 @@ def require_tool(name: str) -> str:
 
 def server_available() -> bool:
     return importlib.util.find_spec("phantomtouch.server") is not None
-
-
-def wait_until(
-    condition: Callable[[], T], *, timeout_s: float, what: str, interval_s: float = 0.02
-) -> T:
-    """Poll ``condition`` until it returns something truthy; fail naming ``what``."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(interval_s)
 
 
 @contextlib.contextmanager

@@ -4,8 +4,6 @@ the output stays the offline render when the render-ahead thread falls behind.""
 from __future__ import annotations
 
 import threading
-import time
-from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -15,6 +13,7 @@ from phantomtouch.engine import CaptureSink, Engine, SoundDeviceSink
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.renderer import PatternRenderer
 from tests.support.jack import JackRecorder, JackServer
+from tests.support.waiting import wait_until
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames
@@ -31,13 +30,6 @@ def long_stroke(seed: int) -> TouchPattern:
             "carrier": {"kind": "noise", "seed": seed},
         }
     )
-
-
-def wait_until(condition: Callable[[], bool], timeout_s: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "timed out waiting for the engine"
-        time.sleep(0.01)
 
 
 def first_sound(samples: np.ndarray) -> int:

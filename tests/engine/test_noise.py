@@ -7,9 +7,6 @@ handed rather than compute one (2^20 frames, about 60 ms) inside the audio callb
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern
@@ -29,6 +26,7 @@ from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.renderer import plan
 from phantomtouch.renderer.carriers import NoiseSource
 from phantomtouch.schema.pattern import NoiseCarrier
+from tests.support.waiting import wait_until
 
 DEVICE = DeviceProfile.default()
 RATE = DEVICE.sample_rate_hz
@@ -59,13 +57,6 @@ def release(held: HeldLoops) -> None:
     for key in list(held._held):
         held.drop(key)
     held.collect()
-
-
-def wait_until(condition: Callable[[], bool], timeout_s: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "timed out waiting for the engine process"
-        time.sleep(0.01)
 
 
 def test_what_the_host_believes_held_is_what_is_held_in_the_disagreeing_order() -> None:

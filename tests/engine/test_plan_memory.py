@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -16,6 +14,7 @@ from phantomtouch.engine.plan_memory import SHARE_MIN_BYTES, SharedArrays, heavy
 from phantomtouch.engine.prerender import prerender
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.renderer import plan
+from tests.support.waiting import wait_until
 
 DEVICE = DeviceProfile.default()
 
@@ -31,13 +30,6 @@ def tap(intensity: float) -> TouchPattern:
             "intensity": intensity,
         }
     )
-
-
-def wait_until(condition: Callable[[], bool], timeout_s: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.01)
 
 
 def spy_on_pipe(engine: Any, monkeypatch: pytest.MonkeyPatch) -> list[object]:

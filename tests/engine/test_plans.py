@@ -4,9 +4,7 @@ kept; the audio side holds a plan by its handle from its hand-over to its releas
 from __future__ import annotations
 
 import gc
-import time
 import tracemalloc
-from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -17,6 +15,7 @@ from phantomtouch.engine.messages import DropPlan, HoldPlan, StartJob
 from phantomtouch.engine.plans import PlanCache, plan_bytes
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.renderer import plan
+from tests.support.waiting import wait_until
 
 
 def line(points: int, offset_cm: float) -> TouchPattern:
@@ -87,13 +86,6 @@ def spy_on_posts(engine: Any, monkeypatch: pytest.MonkeyPatch) -> list[object]:
 
     monkeypatch.setattr(engine._audio, "post", spy)
     return posted
-
-
-def wait_until(condition: Callable[[], bool], timeout_s: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.01)
 
 
 def test_one_cache_by_content_one_handle_handed_once(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -10,7 +10,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +30,7 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.errors import DeviceError
 from tests.support.jack import JackRecorder, JackServer
+from tests.support.waiting import wait_until
 from tests.support.yardstick import WakeUpLag
 
 DEVICE = DeviceProfile.default()
@@ -44,15 +44,8 @@ STROKE = TouchPattern.model_validate(
 )
 
 
-def wait_until(condition: Callable[[], bool], timeout_s: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "timed out waiting for the engine process"
-        time.sleep(0.01)
-
-
 def wait_for_state(engine: ProcessEngine, job_id: str, state: str) -> None:
-    wait_until(lambda: engine.job_state(job_id).state == state)  # type: ignore[union-attr]
+    wait_until(lambda: engine.job_state(job_id).state == state, 10.0)  # type: ignore[union-attr]
 
 
 def test_a_pattern_played_by_the_engine_process_is_the_offline_render(tmp_path: Path) -> None:
@@ -83,7 +76,7 @@ def test_the_engine_process_answers_like_the_engine() -> None:
             engine.schedule(STROKE, start_frame=-3)
         assert engine.stop(waiting.job_id) is True
         assert engine.stop("no-such-job") is False
-        wait_until(lambda: engine.status().queue_depth == 0)  # freed at the next block
+        wait_until(lambda: engine.status().queue_depth == 0, 10.0)  # freed at the next block
         engine.contact_down("client", "finger", 1.0, 2.0, intensity=0.4)
         with pytest.raises(ProtocolError, match="expected down, got move"):
             engine.contact_move("client", "thumb", 1.0, 2.0)
@@ -97,7 +90,7 @@ def test_the_engine_process_answers_like_the_engine() -> None:
             {"owner": "client", "contact": "finger", "x_cm": 1.5, "y_cm": 3.0}
         ]
         engine.release_owner("client")
-        wait_until(lambda: engine.status().active_voices == 0)
+        wait_until(lambda: engine.status().active_voices == 0, 10.0)
     finally:
         engine.close()
         engine.close()
@@ -215,7 +208,8 @@ def test_contacts_get_slots_up_to_max_contacts() -> None:
             lambda: (
                 sorted((c["owner"], c["y_cm"]) for c in engine.status().active_contacts)
                 == [("c", 5.0), ("d", 6.0)]
-            )
+            ),
+            10.0,
         )
 
 
@@ -296,7 +290,7 @@ def test_an_engine_process_killed_is_noticed_refused_and_restarted() -> None:
         with WakeUpLag() as lag:  # 1 s and 0.1 s on a quiet machine, more on a busy one
             os.kill(old_pid, signal.SIGKILL)
             began = time.monotonic()
-            wait_until(lambda: engine.state != "running")
+            wait_until(lambda: engine.state != "running", 10.0)
             noticed_s = time.monotonic() - began
             assert faults == ["gone"]
             assert engine.job_state(job.job_id).state == "stopped"  # type: ignore[union-attr]
@@ -312,7 +306,7 @@ def test_an_engine_process_killed_is_noticed_refused_and_restarted() -> None:
         wait_until(lambda: engine.state == "running", timeout_s=30.0)
         assert engine.pid != old_pid and engine.status().restarts == 1
         again = engine.schedule(STROKE)
-        wait_until(lambda: engine.job_state(again.job_id).state == "playing")  # type: ignore[union-attr]
+        wait_until(lambda: engine.job_state(again.job_id).state == "playing", 10.0)  # type: ignore[union-attr]
     finally:
         engine.close()
 
@@ -332,7 +326,7 @@ def test_an_engine_process_stopped_is_noticed_and_replaced() -> None:
                 engine.stop_all()
                 status = engine.status()  # answered at once from shared memory
                 answered_s = time.monotonic() - began
-                wait_until(lambda: engine.state != "running")
+                wait_until(lambda: engine.state != "running", 10.0)
                 noticed_s = time.monotonic() - began
             assert answered_s < 0.1 + 10 * lag.worst_s and status.state == "running"
             assert noticed_s < 1.5 + 10 * lag.worst_s, (noticed_s, lag.worst_s)
@@ -373,9 +367,9 @@ def test_a_release_gets_through_a_full_outbox() -> None:
     ends (before, the release was dropped and the contact kept sounding)."""
     with ProcessEngine(DEVICE, SinkSpec("null")) as engine:
         engine.contact_down("a", "1", 1.0, 2.0)
-        wait_until(lambda: engine.status().active_voices == 1)
+        wait_until(lambda: engine.status().active_voices == 1, 10.0)
         engine._audio._child.outbox._max = 0  # as if the engine process fell that far behind
         with pytest.raises(EngineBusyError, match="pipe is full"):
             engine.contact_down("b", "1", 3.0, 9.0)
         engine.contact_up("a", "1")
-        wait_until(lambda: engine.status().active_voices == 0)
+        wait_until(lambda: engine.status().active_voices == 0, 10.0)

@@ -13,9 +13,10 @@ from websockets.sync.client import connect
 
 from phantomtouch.fleet.settings import FleetSettings
 from tests.fleet.conftest import Fleet
-from tests.support.fleet import ArmbandNode, Gateway, wait_until
+from tests.support.fleet import ArmbandNode, Gateway
 from tests.support.nats_cluster import NatsCluster
 from tests.support.service import LONG, STROKE
+from tests.support.waiting import wait_until
 
 ALICE = "alice-token-0123456789"
 OPS = "operator-token-0123456789"

@@ -23,9 +23,10 @@ import httpx
 import pytest
 
 from phantomtouch.fleet.subjects import REGISTRY_BUCKET
-from tests.support.fleet import HEARTBEAT_S, TTL_S, ArmbandNode, Gateway, wait_until
+from tests.support.fleet import HEARTBEAT_S, TTL_S, ArmbandNode, Gateway
 from tests.support.live_server import HOST
 from tests.support.nats_cluster import NatsCluster
+from tests.support.waiting import wait_until
 
 PAUSED_S = 2 * HEARTBEAT_S
 """How long the server stays paused before it is killed: a heartbeat is sent into it."""

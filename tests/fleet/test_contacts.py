@@ -9,7 +9,8 @@ from typing import Any
 from websockets.sync.client import ClientConnection, connect
 
 from tests.fleet.conftest import Fleet
-from tests.support.fleet import WATCHDOG_S, Gateway, wait_until
+from tests.support.fleet import WATCHDOG_S, Gateway
+from tests.support.waiting import wait_until
 from tests.support.yardstick import WakeUpLag
 
 

@@ -11,8 +11,9 @@ import nats
 
 from phantomtouch.fleet.nats_config import inbox_prefix
 from tests.fleet.conftest import CLIENT, Fleet
-from tests.support.fleet import TTL_S, ArmbandNode, wait_until
+from tests.support.fleet import TTL_S, ArmbandNode
 from tests.support.service import STROKE
+from tests.support.waiting import wait_until
 from tests.support.yardstick import WakeUpLag
 
 

@@ -14,8 +14,8 @@ import httpx
 import pytest
 
 from tests.fleet.conftest import SITES, Fleet
-from tests.support.fleet import wait_until
 from tests.support.service import LONG, STROKE
+from tests.support.waiting import wait_until
 
 
 def test_the_registry_lists_every_armband_with_its_device(fleet: Fleet) -> None:

@@ -14,9 +14,10 @@ from collections.abc import Iterator
 import httpx
 import pytest
 
-from tests.support.fleet import ArmbandNode, Gateway, wait_until
+from tests.support.fleet import ArmbandNode, Gateway
 from tests.support.live_server import HOST
 from tests.support.nats_cluster import NatsCluster
+from tests.support.waiting import wait_until
 
 LISTINGS = 50
 PAUSE_S = 0.1

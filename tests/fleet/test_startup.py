@@ -17,10 +17,11 @@ from pathlib import Path
 
 import httpx
 
-from tests.support.fleet import ArmbandNode, Gateway, wait_until
+from tests.support.fleet import ArmbandNode, Gateway
 from tests.support.fleet_startup import run_rounds
 from tests.support.live_server import HOST, free_port
 from tests.support.nats_cluster import NatsCluster
+from tests.support.waiting import wait_until
 
 ROUNDS = 20
 

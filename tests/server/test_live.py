@@ -21,6 +21,7 @@ from websockets.asyncio.client import ClientConnection, connect
 
 from tests.support.live_server import LiveServer
 from tests.support.service import LONG, STROKE
+from tests.support.waiting import wait_until
 from tests.support.yardstick import WakeUpLag
 
 
@@ -29,15 +30,6 @@ def metric(live: LiveServer, name: str) -> float:
     match = re.search(rf"^{name} (\S+)$", text, re.MULTILINE)
     assert match, f"{name} not in /metrics"
     return float(match.group(1))
-
-
-def wait_until(condition: Any, timeout_s: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.02)
-    return bool(condition())
 
 
 async def ask(ws: ClientConnection, message: dict[str, Any]) -> dict[str, Any]:
@@ -72,9 +64,11 @@ def test_rest_round_trip(live: LiveServer) -> None:
         assert client.get("/patterns/live-stroke").json()["speed_cm_s"] == 5.0
         job = client.post("/patterns/live-stroke/play", json={"start_in_ms": 100}).json()
         assert client.get(f"/jobs/{job['job_id']}").json()["state"] == "scheduled"
-        assert wait_until(
-            lambda: client.get(f"/jobs/{job['job_id']}").json()["state"] == "playing"
-        ), "the audio thread starts it"
+        wait_until(
+            lambda: client.get(f"/jobs/{job['job_id']}").json()["state"] == "playing",
+            5.0,
+            "the audio thread starts it",
+        )
         assert client.delete(f"/jobs/{job['job_id']}").json()["state"] == "stopped"
         wav = client.post("/render", json={"preset": "vr/tap"})
         assert (wav.status_code, wav.headers["content-type"]) == (200, "audio/wav")
@@ -175,7 +169,7 @@ def test_stop_under_load(live: LiveServer) -> None:
     threads = [threading.Thread(target=hammer) for _ in range(clients)]
     for thread in threads:
         thread.start()
-    assert wait_until(lambda: len(statuses) >= 100, budget_s / 2), "load is running"
+    wait_until(lambda: len(statuses) >= 100, budget_s / 2, "load is running")
     with httpx.Client(base_url=live.url, timeout=10) as client:
         stop_sent.set()
         started = time.monotonic()
@@ -194,7 +188,7 @@ def test_stop_under_load(live: LiveServer) -> None:
         assert states == {"stopped"}
         for job in in_flight:
             client.delete(f"/jobs/{job}")
-    assert wait_until(lambda: metric(live, "phantomtouch_active_voices") == 0.0, 5.0)
+    wait_until(lambda: metric(live, "phantomtouch_active_voices") == 0.0, 5.0, "silence")
     print(
         f"stop under load: {len(statuses)} touches, {len(before)} before the stop, "
         f"{len(in_flight)} in flight; POST /stop answered in {stop_s * 1e3:.1f} ms"

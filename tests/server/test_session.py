@@ -20,18 +20,10 @@ from phantomtouch.service.errors import (
     WS_CLOSE_UNSUPPORTED_DATA,
 )
 from tests.support.service import LONG, make_settings
+from tests.support.waiting import wait_until
 from tests.support.yardstick import WakeUpLag
 
 TOKEN = "s3cret-token-0123456789"
-
-
-def wait_until(condition: Callable[[], bool], timeout_s: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.01)
-    return condition()
 
 
 def contacts(client: TestClient) -> list[dict[str, Any]]:
@@ -103,7 +95,7 @@ def test_watchdog_releases_a_silent_client(app_client: Callable[..., TestClient]
         assert released == {"type": "released", "reason": "watchdog", "contacts": ["L"]}
         assert contacts(client) == []
         engine = client.app.state.service.engine  # type: ignore[attr-defined]
-        assert wait_until(lambda: max(engine.status().levels) == 0.0), "silent after release"
+        wait_until(lambda: max(engine.status().levels) == 0.0, 5.0, "silent after release")
         late = ask(ws, {"type": "move", "contact": "L", "x_cm": 1, "y_cm": 1, "id": 2})
         assert "released by up, the watchdog or stop" in late["message"]
 
@@ -128,7 +120,7 @@ def test_disconnect_releases_at_once(client: TestClient) -> None:
         ask(ws, {"type": "down", "contact": "L", "x_cm": 1.9, "y_cm": 7.2, "id": 1})
         ask(ws, {"type": "down", "contact": "R", "x_cm": 0.5, "y_cm": 3.0, "id": 2})
         assert len(contacts(client)) == 2
-    assert wait_until(lambda: contacts(client) == [])
+    wait_until(lambda: contacts(client) == [], 5.0, "no contact left")
 
 
 def test_global_stop_tells_each_connection(client: TestClient) -> None:
@@ -193,7 +185,7 @@ def test_message_over_the_limit_closes_1009(app_client: Callable[..., TestClient
         ask(ws, {"type": "down", "contact": "L", "x_cm": 1.9, "y_cm": 7.2, "id": 1})
         ws.send_text('{"type": "ping", "pad": "' + "x" * 2000 + '"}')
         assert _closed_with(ws) == WS_CLOSE_MESSAGE_TOO_BIG
-        assert wait_until(lambda: contacts(client) == [])
+        wait_until(lambda: contacts(client) == [], 5.0, "no contact left")
 
 
 def test_a_flood_is_answered_once_then_closed_1008(app_client: Callable[..., TestClient]) -> None:

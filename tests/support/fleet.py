@@ -174,12 +174,3 @@ class Gateway:
                 self.process.wait(10)
             except subprocess.TimeoutExpired:
                 self.kill()
-
-
-def wait_until(predicate: Any, timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"not within {timeout_s} s: {what}")
