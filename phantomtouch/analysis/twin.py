@@ -46,13 +46,6 @@ DEFAULT_REF_HZ = 100.0
 """Frequency at which a model's ``level_db`` is met (the paper's main carrier)."""
 
 
-def level_db_of(rms_m_s2: np.ndarray | float) -> np.ndarray:
-    """Acceleration level, dB re 1 µm/s², of an RMS acceleration in m/s² (-inf at 0)."""
-    rms = np.asarray(rms_m_s2, dtype=np.float64)
-    with np.errstate(divide="ignore"):
-        return np.asarray(20.0 * np.log10(rms / MICRO_M_S2))
-
-
 def amplitude_m_s2(level_db: float) -> float:
     """Peak of a sine, m/s², whose RMS has ``level_db`` (dB re 1 µm/s²)."""
     return math.sqrt(2.0) * MICRO_M_S2 * 10.0 ** (level_db / 20.0)

@@ -63,7 +63,6 @@ class RegistryView:
         self._watcher: Any = None
         self._task: asyncio.Task[None] | None = None
         self._closing = False
-        self.rewatches = 0
 
     # -- reads ----------------------------------------------------------------------------
 
@@ -143,7 +142,6 @@ class RegistryView:
         while not self._closing:
             try:
                 if self._watcher is None:
-                    self.rewatches += 1
                     await self._rewatch()
                 entry = await self._watcher.updates(timeout=self._silence_s())
             except (nats.errors.Error, TimeoutError) as exc:

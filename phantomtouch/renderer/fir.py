@@ -108,7 +108,6 @@ class PartitionedFir:
         self._present_top = np.ascontiguousarray(present[:, :half, :half])
         self._present_bottom = np.ascontiguousarray(present[:, half:, :])
         tail = min(TAIL_FRAMES, size)
-        self._tail_frames = tail
         # The tail: y[r] += sum_{i > r} h[Q + r - i] x'[i], x' the last Q frames of j - 1,
         # for the first Q = ``tail`` rows of partition j.
         lag = np.arange(tail)[:, None] - np.arange(tail)[None, :]
