@@ -1,4 +1,4 @@
-"""The contacts that sound on the audio side, keyed by ``(owner, contact)``."""
+"""The contacts that sound on the audio side, keyed by the front's integer for each."""
 
 from __future__ import annotations
 
@@ -28,35 +28,29 @@ class ContactBoard:
     def __init__(self, device: DeviceProfile, settings: ContactSettings, queue: CommandQueue):
         self.device = device
         self._queue = queue
-        self._contacts: dict[tuple[str, str], ContactVoice] = {}
+        self._contacts: dict[int, ContactVoice] = {}
         self._serials = itertools.count(1)
         self.attack_frames = round(settings.attack_s * device.sample_rate_hz)
         self.release_frames = max(1, round(settings.release_s * device.sample_rate_hz))
 
     def down(self, down: ContactDown, source: CarrierSource) -> None:
         """Start a touchdown's voice playing ``source`` (its carrier's) at ``down.frame``
-        (None: the next block); a contact already sounding under its id is released."""
+        (None: the next block); a contact already sounding under its integer is released."""
         voice = ContactVoice(
             down, next(self._serials), source, self.attack_frames, self.release_frames
         )
-        key = (down.owner, down.contact)
+        key = down.contact
         self._queue.push_start(voice, down.frame or 0, down.frame is None)
         if (old := self._contacts.get(key)) is not None:
             self._queue.push_release(old, down.frame)
         self._contacts[key] = voice
 
     def post_checked(
-        self,
-        owner: str,
-        contact: str,
-        x_cm: float,
-        y_cm: float,
-        intensity: float | None,
-        frame: int | None,
+        self, contact: int, x_cm: float, y_cm: float, intensity: float | None, frame: int | None
     ) -> None:
         """Post a position checked by the front into the voice's mailbox (None intensity:
         the amplitude is unchanged); a contact not sounding is ignored."""
-        voice = self._contacts.get((owner, contact))
+        voice = self._contacts.get(contact)
         if voice is None:
             return
         amplitude = voice.mailbox.amplitude
@@ -64,16 +58,11 @@ class ContactBoard:
             amplitude = contact_amplitude(self.device, intensity, None)
         voice.mailbox = Position(next(self._serials), x_cm, y_cm, amplitude, frame)
 
-    def up(self, owner: str, contact: str, burst: np.ndarray | None, frame: int | None) -> None:
+    def up(self, contact: int, burst: np.ndarray | None, frame: int | None) -> None:
         """Release a contact with an optional transient (ignored when it is not sounding)."""
-        voice = self._contacts.pop((owner, contact), None)
+        voice = self._contacts.pop(contact, None)
         if voice is not None:
             self._queue.push_release(voice, frame, burst)
-
-    def release_owner(self, owner: str) -> None:
-        """Release every contact of ``owner``."""
-        for key in [key for key in self._contacts if key[0] == owner]:
-            self._queue.push_release(self._contacts.pop(key), None)
 
     def clear(self) -> None:
         """Forget every contact (a ``stop_all`` fades their voices out)."""

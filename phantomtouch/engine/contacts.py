@@ -95,7 +95,7 @@ class ContactVoice(Voice):
         release_frames: int,
     ) -> None:
         super().__init__(release_frames)
-        self.key = (down.owner, down.contact)
+        self.key = down.contact
         self.place = (down.x_cm, down.y_cm, down.amplitude)
         self.law = down.law
         self.mailbox = Position(serial, down.x_cm, down.y_cm, down.amplitude, down.frame)

@@ -82,7 +82,7 @@ class Core:
         self._block_s = device.block_frames / device.sample_rate_hz
         self.ahead = RenderAhead(self.scheduler.pool, poll_s=4 * self._block_s)
         self.running = False
-        self._jobs: dict[str, PatternVoice] = {}
+        self._jobs: dict[int, PatternVoice] = {}
 
     def start(self) -> None:
         """Anchor the clock and start the sink (the callback runs from now on); non real
@@ -113,18 +113,18 @@ class Core:
         return dataclasses.replace(plan, device=self.device, geometry=self.scheduler.geometry)
 
     def job_voice(
-        self, job_id: str, plan: Plan, prerendered: Prerendered | None = None
+        self, job: int, plan: Plan, prerendered: Prerendered | None = None
     ) -> PatternVoice:
-        """A job's voice, playing ``plan`` or ``prerendered``, its samples rendered
-        beforehand; its ring filled and kept filled (:class:`RenderAhead`). Non real time:
-        whoever hands the job to the audio side (the engine process's inbox thread).
+        """The voice of ``job`` (an integer), playing ``plan`` or ``prerendered``, its samples
+        rendered beforehand; its ring filled and kept filled (:class:`RenderAhead`). Non real
+        time: whoever hands the job to the audio side (the engine process's inbox thread).
 
         Raises
         ------
         LookupError
             The plan's noise loop was not handed to this process (engine process).
         """
-        voice = PatternVoice(plan, job_id, self.board.release_frames, prerendered)
+        voice = PatternVoice(plan, job, self.board.release_frames, prerendered)
         self.ahead.add(voice)
         return voice
 
@@ -137,11 +137,11 @@ class Core:
         except BaseException:
             voice.finish(self.scheduler.pool)
             raise
-        self._jobs[voice.job_id] = voice
+        self._jobs[voice.key] = voice
 
-    def release_job(self, job_id: str, frame: int | None, fade_frames: int | None) -> None:
+    def release_job(self, job: int, frame: int | None, fade_frames: int | None) -> None:
         """Fade a job out from ``frame`` over ``fade_frames`` (None: ``release_s``)."""
-        voice = self._jobs.get(job_id)
+        voice = self._jobs.get(job)
         if voice is not None and voice.state != DONE:
             self.queue.push_release(voice, frame, fade_frames=fade_frames)
 
@@ -167,7 +167,7 @@ class Core:
                 out.append(Released(voice.kind, voice.key, frame, voice.silent_from))
             else:
                 if isinstance(voice, PatternVoice):
-                    self._jobs.pop(voice.job_id, None)
+                    self._jobs.pop(voice.key, None)
                 out.append((Ended if kind == "end" else Cancelled)(voice.kind, voice.key, frame))
         return out
 
@@ -249,13 +249,13 @@ def measure_costs(
         block_s(8)
         idle_s = block_s(1)
         for k in range(voices):
-            core.start_job(core.job_voice(f"start-{k}", plan), None)
+            core.start_job(core.job_voice(k, plan), None)
         starting = (block_s(1) - idle_s) / voices / period_s
         core.stop_all()
         block_s(64)
         silent_s = block_s(timed)
         for k in range(voices):
-            core.start_job(core.job_voice(f"cost-{k}", plan), None)
+            core.start_job(core.job_voice(voices + k, plan), None)
         block_s(warm)
         sounding = (block_s(timed) - silent_s) / voices / period_s
         core.stop_all()
@@ -264,7 +264,7 @@ def measure_costs(
         samples = Prerendered(np.zeros((frames, device.channels), dtype=np.float32))
         pre = dataclasses.replace(plan, frames=frames)
         for k in range(voices):
-            core.start_job(core.job_voice(f"pre-{k}", pre, samples), None)
+            core.start_job(core.job_voice(2 * voices + k, pre, samples), None)
         block_s(8)
         tries.append((sounding, starting, (block_s(64) - silent_s) / voices / period_s))
         core.ahead.stop()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from phantomtouch.engine.jobs import JobTable
@@ -24,10 +24,14 @@ _NAMES: dict[type, str] = {Started: "start", Released: "release", Ended: "end", 
 
 
 def apply_events(
-    jobs: JobTable, events: Iterable[Event], time_at: Callable[[int], float] | None
+    jobs: JobTable,
+    names: Mapping[int, tuple[str, str]],
+    events: Iterable[Event],
+    time_at: Callable[[int], float] | None,
 ) -> list[dict[str, Any]]:
     """Apply the audio side's events to ``jobs`` (host, under the front's lock) and
-    return their stimulus-log records, to be written outside it.
+    return their stimulus-log records, to be written outside it; ``jobs`` and ``names`` (a
+    contact's ``(owner, contact)``) map an event's integer back to its job or contact.
 
     ``time_at(frame)`` is the server time, s, of a frame leaving the sound card (None: no
     log is kept, no records are made). Events about anything but voices (a noise loop
@@ -36,7 +40,7 @@ def apply_events(
     records: list[dict[str, Any]] = []
     for event in events:
         if isinstance(event, VoiceEvent):
-            record = _voice_event(jobs, event, time_at is not None)
+            record = _voice_event(jobs, names, event, time_at is not None)
         elif isinstance(event, StoppedAll):
             record = {"event": "stop_all"}
         else:
@@ -49,16 +53,18 @@ def apply_events(
     return records
 
 
-def _voice_event(jobs: JobTable, event: VoiceEvent, logged: bool) -> dict[str, Any]:
+def _voice_event(
+    jobs: JobTable, names: Mapping[int, tuple[str, str]], event: VoiceEvent, logged: bool
+) -> dict[str, Any]:
     """Apply one voice's event to its job, if any; its log record (fuller when ``logged``)."""
     record: dict[str, Any] = {"event": _NAMES[type(event)], "kind": event.kind}
     if event.kind != "job":
-        record["owner"], record["contact"] = event.key
+        record["owner"], record["contact"] = names.get(event.key, (None, None))
         if isinstance(event, Started):
             record.update(x_cm=event.x_cm, y_cm=event.y_cm, amplitude=event.amplitude)
         return record
-    job = jobs.get(event.key)
-    record.update(job_id=event.key, owner=None if job is None else job.owner)
+    job = jobs.handles.get(event.key)
+    record.update(job_id=job and job.job_id, owner=job and job.owner)
     if job is None:
         return record
     if isinstance(event, Started):

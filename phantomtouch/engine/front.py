@@ -246,7 +246,9 @@ class EngineFront(JobCalls, ContactCalls):
             for event in events:
                 if isinstance(event, PlanReleased):
                     self.plans.released(event.handle)
-            records = apply_events(self._jobs, events, self.time_at if self._log else None)
+            records = apply_events(
+                self._jobs, self._contacts.names, events, self.time_at if self._log else None
+            )
         if self._log is not None:
             self._log.write(records)
 

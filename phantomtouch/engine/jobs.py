@@ -6,6 +6,7 @@ asked for (it fades out over the release); admission and fair shares: ``docs/eng
 
 from __future__ import annotations
 
+import itertools
 import threading
 import uuid
 from collections import Counter, OrderedDict
@@ -126,6 +127,8 @@ class JobRecord:
     requested_start_at_s: float | None = None
     reason: str | None = None
     asap: bool = False
+    handle: int = field(default_factory=itertools.count(1).__next__)
+    """The job's integer on the audio side, never reused."""
 
     @classmethod
     def planned(cls, plan: Plan, job_id: str, owner: str | None, first_frame: int) -> JobRecord:
@@ -178,13 +181,15 @@ class QuotaRefused(PhantomTouchError):
 
 class JobTable:
     """Jobs by id: those scheduled or playing, those asked to stop (the callback has yet to
-    silence them), and the last ``history`` (>= 0) that are over."""
+    silence them), and the last ``history`` (>= 0) that are over; ``handles``: the same by
+    their integer on the audio side."""
 
     def __init__(self, history: int = HISTORY_JOBS) -> None:
         self.history = history
         self._live: dict[str, JobRecord] = {}
         self._stopping: dict[str, JobRecord] = {}
         self._over: OrderedDict[str, JobRecord] = OrderedDict()
+        self.handles: dict[int, JobRecord] = {}
 
     def __len__(self) -> int:
         """Jobs scheduled or playing (not stopping, not over)."""
@@ -265,6 +270,7 @@ class JobTable:
 
     def add(self, record: JobRecord) -> None:
         self._live[record.job_id] = record
+        self.handles[record.handle] = record
 
     def get(self, job_id: str) -> JobRecord | None:
         return self._live.get(job_id) or self._stopping.get(job_id) or self._over.get(job_id)
@@ -298,7 +304,7 @@ class JobTable:
         self._stopping.pop(record.job_id, None)
         self._over[record.job_id] = record
         while len(self._over) > self.history:
-            self._over.popitem(last=False)
+            self.handles.pop(self._over.popitem(last=False)[1].handle, None)
 
 
 def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
@@ -478,11 +484,11 @@ class JobCalls:
                 record.requested_start_frame = frame = first  # the promised frame, not sooner
             record.requested_start_at_s = self._audio.time_at(first)  # one value for all
             self._audio.provide(carrier)
-            self._start(entry, StartJob(job_id, entry.handle, frame))
+            self._start(entry, StartJob(record.handle, entry.handle, frame))
             for victim in victims:
                 self._jobs.mark_stopped(victim, stolen=True)
                 victim.end_frame = max(first, victim.first_frame) + self._steal_fade_frames
-                post_release(self._audio, ReleaseJob(victim.job_id, first, self._steal_fade_frames))
+                post_release(self._audio, ReleaseJob(victim.handle, first, self._steal_fade_frames))
             self._jobs.add(record)
         return record.job(resolved.summary())
 
@@ -520,6 +526,6 @@ class JobCalls:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
             if record is None or record.state in ("finished", "stopped"):
                 return False
-            post_release(self._audio, ReleaseJob(job_id, None, None))
+            post_release(self._audio, ReleaseJob(record.handle, None, None))
             self._jobs.mark_stopped(record)
             return True

@@ -71,9 +71,10 @@ class DropPlan:
 
 @dataclass(frozen=True, slots=True)
 class StartJob:
-    """Play the plan held under ``plan_key`` from ``frame`` (None: the next block)."""
+    """Play the plan held under ``plan_key`` as ``job`` (the front's integer for the job)
+    from ``frame`` (None: the next block)."""
 
-    job_id: str
+    job: int
     plan_key: int
     frame: int | None
 
@@ -83,9 +84,9 @@ class StartJob:
         try:
             if held is None:
                 raise LookupError(f"plan {self.plan_key} was not handed over")
-            return StartVoice(self, state.core.job_voice(self.job_id, held[0], held[1]))
+            return StartVoice(self, state.core.job_voice(self.job, held[0], held[1]))
         except LookupError as exc:  # a plan or a noise loop not handed over
-            state.refuse("plan" if held is None else "noise loop", self.job_id, str(exc))
+            state.refuse("plan" if held is None else "noise loop", self.job, str(exc))
             return StartVoice(self, None)
 
     def apply(self, state: AudioState, void: bool) -> None:
@@ -110,7 +111,7 @@ class StartVoice:
             return
         if voice is not None:
             voice.finish(core.scheduler.pool)
-        state.reports.append(Cancelled("job", self.start.job_id, core.scheduler.frames))
+        state.reports.append(Cancelled("job", self.start.job, core.scheduler.frames))
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,14 +119,14 @@ class ReleaseJob:
     """Fade a job out from ``frame`` (None: the next block) over ``fade_frames`` (None:
     the contact settings' ``release_s``)."""
 
-    job_id: str
+    job: int
     frame: int | None
     fade_frames: int | None
 
     def apply(self, state: AudioState, void: bool) -> None:
         """Real time."""
         if not void:
-            state.core.release_job(self.job_id, self.frame, self.fade_frames)
+            state.core.release_job(self.job, self.frame, self.fade_frames)
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,14 +134,13 @@ class ContactDown:
     """A touchdown, checked and computed by the front: the audio side only builds the
     voice from these parts.
 
-    ``unit_gains`` (shape (channels,), float32) are the phantom gains of the position
-    (projected onto the layout), ``amplitude`` the voice's linear amplitude, ``burst``
-    the impact transient's samples (or None); ``slot`` and ``generation`` name the
-    shared-memory move slot of the engine process (None in this process).
+    ``contact`` is the front's integer for the contact; ``unit_gains`` (shape (channels,),
+    float32) are the phantom gains of the position (projected onto the layout), ``amplitude``
+    the voice's linear amplitude, ``burst`` the impact transient's samples (or None); ``slot``
+    and ``generation`` name the engine process's shared-memory move slot (None here).
     """
 
-    owner: str
-    contact: str
+    contact: int
     x_cm: float
     y_cm: float
     unit_gains: np.ndarray
@@ -158,7 +158,7 @@ class ContactDown:
         try:
             return StartContact(self, make_source(self.carrier, state.core.device.sample_rate_hz))
         except LookupError as exc:
-            state.refuse("noise loop", (self.owner, self.contact), str(exc))
+            state.refuse("noise loop", self.contact, str(exc))
             return StartContact(self, None)
 
     def apply(self, state: AudioState, void: bool) -> None:
@@ -181,7 +181,7 @@ class StartContact:
             return
         state.core.board.down(down, self.source)
         if state.slots is not None and down.slot is not None:
-            state.slots.bind(down.slot, down.generation, down.owner, down.contact)
+            state.slots.bind(down.slot, down.generation, down.contact)
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,8 +189,7 @@ class ContactMove:
     """A contact's newest position, checked by the front (in-process engine only: the
     engine process takes moves from shared memory)."""
 
-    owner: str
-    contact: str
+    contact: int
     x_cm: float
     y_cm: float
     intensity: float | None
@@ -200,16 +199,16 @@ class ContactMove:
         """Real time."""
         if not void:
             state.core.board.post_checked(
-                self.owner, self.contact, self.x_cm, self.y_cm, self.intensity, self.frame
+                self.contact, self.x_cm, self.y_cm, self.intensity, self.frame
             )
 
 
 @dataclass(frozen=True, slots=True)
 class ContactUp:
-    """Lift-off from ``frame`` (None: the next block), with a transient ``burst`` or None."""
+    """Lift-off of ``contacts`` (the front's integers: one contact, or every contact of an
+    owner) from ``frame`` (None: the next block), each with a transient ``burst`` or None."""
 
-    owner: str
-    contact: str
+    contacts: tuple[int, ...]
     burst: np.ndarray | None
     frame: int | None
 
@@ -218,26 +217,12 @@ class ContactUp:
         if void:
             return
         if state.slots is not None:
-            state.slots.unbind(self.owner, self.contact)
-        state.core.board.up(self.owner, self.contact, self.burst, self.frame)
+            state.slots.unbind(self.contacts)
+        for contact in self.contacts:
+            state.core.board.up(contact, self.burst, self.frame)
 
 
-@dataclass(frozen=True, slots=True)
-class ReleaseOwner:
-    """Release every contact of ``owner``."""
-
-    owner: str
-
-    def apply(self, state: AudioState, void: bool) -> None:
-        """Real time."""
-        if void:
-            return
-        if state.slots is not None:
-            state.slots.unbind(self.owner)
-        state.core.board.release_owner(self.owner)
-
-
-RELEASES = (ReleaseJob, ContactUp, ReleaseOwner)
+RELEASES = (ReleaseJob, ContactUp)
 """Commands that end a sound: never refused for room (``link.Outbox.put``)."""
 
 
@@ -314,7 +299,6 @@ Command = (
     | StartContact
     | ContactMove
     | ContactUp
-    | ReleaseOwner
     | HoldNoise
     | DropNoise
     | SetWearerGains
@@ -327,11 +311,11 @@ Command = (
 
 @dataclass(frozen=True, slots=True)
 class VoiceEvent:
-    """What a voice did at ``frame``: ``kind`` "job" (``key`` its job id) or "contact"
-    (``key`` its ``(owner, contact)``)."""
+    """What a voice did at ``frame``: ``kind`` "job" or "contact", ``key`` the integer the
+    front minted for it (the front alone maps it back to a job id or an owner's contact)."""
 
     kind: str
-    key: Any
+    key: int
     frame: int
 
 
@@ -387,7 +371,7 @@ class PlanReleased:
 @dataclass(frozen=True, slots=True)
 class Refused:
     """The audio side refused a command whose data it was not handed (``what``: "plan",
-    "noise loop"), or that failed; ``key`` names the job or contact."""
+    "noise loop"), or that failed; ``key``: the plan, job or contact's integer, or the loop's."""
 
     what: str
     key: Any

@@ -4,6 +4,7 @@ slots (``docs/owners.md``)."""
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import math
 import threading
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypedDict, Unpack
 
 from phantomtouch.engine.checks import check_frame, check_id, check_law, check_range
-from phantomtouch.engine.messages import Command, ContactDown, ContactMove, ContactUp, ReleaseOwner
+from phantomtouch.engine.messages import Command, ContactDown, ContactMove, ContactUp
 from phantomtouch.engine.touchdown import Touchdowns, check_contact_carrier, contact_amplitude
 from phantomtouch.errors import EngineBusyError, ParameterError, ProtocolError
 from phantomtouch.schema import limits
@@ -28,6 +29,9 @@ logger = logging.getLogger("phantomtouch.engine")
 
 RETRY_S = 0.05
 """How soon the deadline thread looks again after ``expire`` failed, s."""
+NAMES_KEPT = 1000
+"""The owner table answers the names of the last contacts put down, at least this many, and
+of every contact down (for their voices' events, which may come after the contact is up)."""
 
 ReleasedListener = Callable[[str, tuple[str, ...], str], None]
 """``listener(owner, contacts, reason)``: the front let go of ``contacts`` of ``owner``
@@ -53,10 +57,11 @@ class DownOptions(MoveOptions, total=False):
 
 @dataclass
 class ContactRecord:
-    """A contact that is down: its newest position, the move slot its moves go to, how long
-    it stays down unrenewed (``term_s``, s) and its deadline (``deadline_s``, on the
-    ``time.monotonic()`` clock); ``math.inf``: until ``up``."""
+    """A contact that is down: its integer on the audio side, its newest position, the move
+    slot its moves go to, how long it stays down unrenewed (``term_s``, s) and its deadline
+    (``deadline_s``, on the ``time.monotonic()`` clock); ``math.inf``: until ``up``."""
 
+    handle: int
     x_cm: float
     y_cm: float
     slot: tuple[int, int] | None = None
@@ -70,11 +75,15 @@ class ContactRecord:
 
 class OwnerTable:
     """Contacts by owner, oldest first: at most ``max_contacts`` (>= 1, the engine's contact
-    slots) down at once over every owner; every method is called with the front's lock held."""
+    slots) down at once over every owner; every method is called with the front's lock held.
+    It mints each contact's integer for the audio side (``handles``, never reused); ``names``
+    maps it back to ``(owner, contact)`` (:data:`NAMES_KEPT`)."""
 
     def __init__(self, max_contacts: int) -> None:
         self.max_contacts = max_contacts
         self._owners: dict[str, dict[str, ContactRecord]] = {}
+        self.handles = itertools.count(1)
+        self.names: dict[int, tuple[str, str]] = {}
 
     def __len__(self) -> int:
         """Contacts down, over every owner."""
@@ -116,6 +125,10 @@ class OwnerTable:
     def put(self, owner: str, contact: str, record: ContactRecord) -> None:
         """Hold ``contact`` of ``owner`` down (a contact down again keeps its age)."""
         self._owners.setdefault(owner, {})[contact] = record
+        self.names[record.handle] = (owner, contact)
+        if len(self.names) > len(self) + 2 * NAMES_KEPT:  # forget the oldest let go of
+            kept = list(self.names.items())[-NAMES_KEPT:]
+            self.names = dict(kept) | {r.handle: (o, c) for o, c, r in self.items()}
 
     def pop(self, owner: str, contact: str) -> ContactRecord | None:
         """Take ``contact`` of ``owner`` out of the table (None: it was not down)."""
@@ -269,12 +282,13 @@ class ContactCalls:
             self._audio.check_ready()
             held = self._contacts.held(owner).get(contact)
             if held is None and (victim := self._contacts.make_room(owner)) is not None:
-                self._lift(victim[2], ContactUp(victim[0], victim[1], None, None))
+                self._lift(victim[2], ContactUp((victim[2].handle,), None, None))
                 taken[victim[0]] = (victim[1],)
             slot = self._audio.claim_slot(None if held is None else held.slot)
             bound = () if slot is None else slot  # the move slot it reads, if any
+            handle = next(self._contacts.handles) if held is None else held.handle
             down = ContactDown(
-                owner, contact, x, y, unit_gains, amplitude, checked, law, burst, frame, *bound
+                handle, x, y, unit_gains, amplitude, checked, law, burst, frame, *bound
             )
             try:
                 self._audio.provide(checked)
@@ -283,7 +297,7 @@ class ContactCalls:
                 if held is None:
                     self._audio.free_slot(slot)
                 raise
-            record = ContactRecord(x, y, slot, term_s, time.monotonic() + term_s)
+            record = ContactRecord(handle, x, y, slot, term_s, time.monotonic() + term_s)
             self._contacts.put(owner, contact, record)
         if term_s != math.inf:
             self._deadlines.wake()
@@ -321,7 +335,7 @@ class ContactCalls:
                 )
             record.x_cm, record.y_cm = x, y
             record.renew(time.monotonic())
-            self._audio.move(record.slot, ContactMove(owner, contact, x, y, intensity, frame))
+            self._audio.move(record.slot, ContactMove(record.handle, x, y, intensity, frame))
 
     def contact_up(
         self,
@@ -348,7 +362,7 @@ class ContactCalls:
         with self._lock:
             record = self._contacts.pop(owner, contact)
             if record is not None:
-                self._lift(record, ContactUp(owner, contact, burst, frame))
+                self._lift(record, ContactUp((record.handle,), burst, frame))
 
     def release_owner(self, owner: str, reason: str = "released") -> None:
         """Release every contact of ``owner`` (with the release ramp) and publish them as
@@ -360,7 +374,7 @@ class ContactCalls:
                 return
             for record in held.values():
                 self._audio.free_slot(record.slot)
-            post_release(self._audio, ReleaseOwner(owner))
+            post_release(self._audio, ContactUp(tuple(r.handle for r in held.values()), None, None))
         self._publish({owner: held}, reason)
 
     def renew_owner(self, owner: str, now_s: float | None = None) -> None:
@@ -428,9 +442,9 @@ class ContactCalls:
         now_s = time.monotonic() if now_s is None else now_s
         with self._lock:
             due = self._contacts.expired(now_s, prefix)
-            for owner, held in due.items():
-                for contact, record in held.items():
-                    self._lift(record, ContactUp(owner, contact, None, None))
+            for held in due.values():
+                for record in held.values():
+                    self._lift(record, ContactUp((record.handle,), None, None))
         self._publish(due, "watchdog")
 
     def _expire_deadlines(self, now_s: float) -> float:

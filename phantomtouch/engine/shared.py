@@ -172,7 +172,7 @@ class MoveSlots(_Rows):
         self._generation = 0
         # the engine process's side
         self._seen = np.zeros(self.capacity)
-        self._bound: list[tuple[str, str, float] | None] = [None] * self.capacity
+        self._bound: list[tuple[int, float] | None] = [None] * self.capacity
 
     # -- the host ---------------------------------------------------------------------
 
@@ -204,24 +204,23 @@ class MoveSlots(_Rows):
 
     # -- the engine process -----------------------------------------------------------
 
-    def bind(self, slot: int, generation: int, owner: str, contact: str) -> None:
-        """The contact is down in the engine: apply what the host writes for it."""
-        self._bound[slot] = (owner, contact, float(generation))
+    def bind(self, slot: int, generation: int, contact: int) -> None:
+        """The contact (the front's integer for it) is down in the engine: apply what the
+        host writes for it."""
+        self._bound[slot] = (contact, float(generation))
 
-    def unbind(self, owner: str, contact: str | None = None) -> None:
-        """Stop applying the slots of a contact (or of every contact of ``owner``)."""
+    def unbind(self, contacts: tuple[int, ...]) -> None:
+        """Stop applying the slots of ``contacts`` (the front's integers)."""
         for slot, bound in enumerate(self._bound):
-            if bound is not None and bound[0] == owner and contact in (None, bound[1]):
+            if bound is not None and bound[0] in contacts:
                 self._bound[slot] = None
 
     def unbind_all(self) -> None:
         """Stop applying every slot (the engine process)."""
         self._bound = [None] * self.capacity
 
-    def drain(
-        self, post: Callable[[str, str, float, float, float | None, int | None], None]
-    ) -> None:
-        """Hand every new position to ``post(owner, contact, x, y, intensity, frame)``
+    def drain(self, post: Callable[[int, float, float, float | None, int | None], None]) -> None:
+        """Hand every new position to ``post(contact, x, y, intensity, frame)``
         (real time, the audio callback). A row caught mid-write, or every row while the
         host holds the lock, waits for the next block."""
         rows = self._read(wait=False)
@@ -233,11 +232,11 @@ class MoveSlots(_Rows):
                 continue
             self._seen[slot] = row[0]
             bound = self._bound[slot]
-            if bound is None or bound[2] != row[1]:
+            if bound is None or bound[1] != row[1]:
                 continue
             intensity = None if math.isnan(row[4]) else float(row[4])
             frame = None if math.isnan(row[5]) else int(row[5])
-            post(bound[0], bound[1], float(row[2]), float(row[3]), intensity, frame)
+            post(bound[0], float(row[2]), float(row[3]), intensity, frame)
 
 
 STATUS_FIELDS = (

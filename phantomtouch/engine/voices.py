@@ -4,7 +4,7 @@ time (the callback) unless a docstring names another thread; constructors are no
 from __future__ import annotations
 
 import threading
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
@@ -57,8 +57,8 @@ class Voice:
     Attributes
     ----------
     kind : {"job", "contact"}
-    key : object
-        What its events name: a job's id, a contact's ``(owner, contact)``.
+    key : int
+        What its events name: the front's integer for its job or contact.
     place : tuple
         What its ``Started`` event carries beyond the key (a contact's position).
     seq : int
@@ -72,7 +72,7 @@ class Voice:
     """
 
     kind: ClassVar[str]
-    key: Any
+    key: int
     place: tuple[float, ...] = ()
 
     def __init__(self, release_frames: int) -> None:
@@ -155,6 +155,8 @@ class PatternVoice(Voice):
 
     Parameters
     ----------
+    job : int
+        The front's integer for the job (:attr:`Voice.key`).
     release_frames : int, >= 1
         Fade-out length when stopped early.
     prerendered : Prerendered or None
@@ -167,13 +169,13 @@ class PatternVoice(Voice):
     def __init__(
         self,
         plan: Plan,
-        job_id: str,
+        job: int,
         release_frames: int,
         prerendered: Prerendered | None = None,
     ) -> None:
         super().__init__(release_frames)
         self.plan = plan
-        self.job_id = self.key = job_id
+        self.key = job
         self._renderer = PatternRenderer(plan) if prerendered is None else None
         self._ring = None if prerendered is None else prerendered.samples
         self._size = 0 if prerendered is None else prerendered.samples.shape[0]

@@ -20,7 +20,7 @@ PLAN = plan(
 
 
 def voice() -> PatternVoice:
-    return PatternVoice(PLAN, job_id="j", release_frames=10)
+    return PatternVoice(PLAN, job=1, release_frames=10)
 
 
 def test_a_full_queue_raises_engine_busy_and_never_drops_silently() -> None:

@@ -33,6 +33,8 @@ DEVICE = DeviceProfile.default()
 STROKE = TouchPattern.model_validate(
     {"path": {"kind": "polyline", "points_cm": [[1.9, 12.0], [1.9, 2.4]]}, "speed_cm_s": 40.0}
 )
+VOID, PLAYED = 1, 2
+"""The integers of two jobs started on the audio side by hand."""
 
 
 def _classes(union: object) -> set[type]:
@@ -50,18 +52,18 @@ def test_every_command_has_exactly_one_applier_and_is_a_frozen_slotted_dataclass
 
 def test_messages_and_events_cross_a_pickle_unchanged() -> None:
     unit = np.linspace(0.0, 1.0, DEVICE.channels, dtype=np.float32)
-    down = ContactDown("o", "c", 1.0, 2.0, unit, 0.5, SineCarrier(), "power", None, 96, 3, 7)
+    down = ContactDown(5, 1.0, 2.0, unit, 0.5, SineCarrier(), "power", None, 96, 3, 7)
     back = pickle.loads(pickle.dumps(down, protocol=pickle.HIGHEST_PROTOCOL))
-    assert (back.owner, back.slot, back.generation, back.frame) == ("o", 3, 7, 96)
+    assert (back.contact, back.slot, back.generation, back.frame) == (5, 3, 7, 96)
     np.testing.assert_array_equal(back.unit_gains, unit)
     for event in (
-        Started("contact", ("o", "c"), 5, False, 1.0, 2.0, 0.5),
-        Released("job", "j", 7, 9),
-        Ended("job", "j", 9),
-        Cancelled("job", "j", 3),
+        Started("contact", 5, 5, False, 1.0, 2.0, 0.5),
+        Released("job", 1, 7, 9),
+        Ended("job", 1, 9),
+        Cancelled("job", 1, 3),
         StoppedAll(11),
         NoiseReleased((20.0, 400.0, 1, 48000)),
-        Refused("plan", "j", "not handed over"),
+        Refused("plan", 1, "not handed over"),
     ):
         assert pickle.loads(pickle.dumps(event)) == event
 
@@ -74,24 +76,24 @@ def test_a_command_is_applied_through_the_table_and_a_void_one_plays_nothing() -
         state = AudioState(engine.core)
         resolved = plan(STROKE, DEVICE)
         perform(state, HoldPlan(1, resolved, None), void=True)
-        perform(state, StartJob("void", 1, 0), void=True)
-        perform(state, StartJob("played", 1, 0))
-        perform(state, ReleaseJob("played", 4 * DEVICE.block_frames, None))
+        perform(state, StartJob(VOID, 1, 0), void=True)
+        perform(state, StartJob(PLAYED, 1, 0))
+        perform(state, ReleaseJob(PLAYED, 4 * DEVICE.block_frames, None))
         sink.pull(40)
         events = engine.core.events() + state.reports
     finally:
         engine.close()
-    assert Cancelled("job", "void", 0) in events
+    assert Cancelled("job", VOID, 0) in events
     started = [e for e in events if isinstance(e, Started)]
-    assert [(e.key, e.frame) for e in started] == [("played", 0)]
+    assert [(e.key, e.frame) for e in started] == [(PLAYED, 0)]
     released = [e for e in events if isinstance(e, Released)]
-    assert [(e.key, e.frame) for e in released] == [("played", 4 * DEVICE.block_frames)]
+    assert [(e.key, e.frame) for e in released] == [(PLAYED, 4 * DEVICE.block_frames)]
 
 
 def test_the_audio_side_refuses_a_plan_it_was_not_handed() -> None:
     with Engine(DEVICE, CaptureSink(DEVICE)) as engine:
         state = AudioState(engine.core)
-        perform(state, StartJob("orphan", 4242, None))
+        perform(state, StartJob(1, 4242, None))
     assert state.refused == 1
     assert [type(e) for e in state.reports] == [Refused, Cancelled]
     assert state.reports[0].what == "plan"
@@ -100,7 +102,7 @@ def test_the_audio_side_refuses_a_plan_it_was_not_handed() -> None:
 def test_an_up_for_a_contact_that_is_not_sounding_is_ignored() -> None:
     with Engine(DEVICE, CaptureSink(DEVICE)) as engine:
         state = AudioState(engine.core)
-        perform(state, ContactUp("o", "nobody", None, None))
+        perform(state, ContactUp((99,), None, None))
         assert engine.core.queue.depth == 0 and not state.reports
 
 
@@ -131,7 +133,7 @@ def test_a_touchdown_sounds_with_the_gains_the_front_computed_not_recomputed() -
     sink = CaptureSink(DEVICE)
     with Engine(DEVICE, sink, contact=None) as engine:
         state = AudioState(engine.core)
-        perform(state, ContactDown("o", "c", 0.0, 0.0, unit, 0.25, SineCarrier(), "power", None, 0))
+        perform(state, ContactDown(1, 0.0, 0.0, unit, 0.25, SineCarrier(), "power", None, 0))
         recording = sink.pull(20)
     silent = [k for k in range(DEVICE.channels) if k != channel]
     assert not np.any(recording[:, silent])

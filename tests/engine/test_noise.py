@@ -166,7 +166,7 @@ def test_the_engine_process_refuses_a_loop_it_was_not_handed() -> None:
     resolved = plan(noise_touch(NOISE_LOOPS + 3), DEVICE)
     with ProcessEngine(DEVICE, SinkSpec("null"), prerender_max_s=0.0) as engine:
         engine._audio.post(HoldPlan(1 << 40, resolved, None))
-        engine._audio.post(StartJob("unhanded", 1 << 40, None))
+        engine._audio.post(StartJob(-1, 1 << 40, None))
         wait_until(lambda: engine.status().refused_commands == 1)
         engine.contact_down("o", "c", 1.9, 7.0, carrier=band(1))  # handed over: played
         wait_until(lambda: engine.status().active_voices == 1)

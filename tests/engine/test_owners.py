@@ -99,7 +99,7 @@ def test_a_full_table_takes_the_oldest_contact_of_the_largest_holder() -> None:
 def test_one_owner_may_not_take_from_an_owner_holding_one_fewer() -> None:
     table = OwnerTable(max_contacts=3)
     for owner, contact in (("a", "1"), ("a", "2"), ("b", "1")):
-        table.put(owner, contact, ContactRecord(0.0, 0.0))
+        table.put(owner, contact, ContactRecord(0, 0.0, 0.0))
     with pytest.raises(EngineBusyError):
         table.make_room("b")
     taken = table.make_room("c")
@@ -162,7 +162,7 @@ def test_an_owner_with_nothing_to_steal_at_the_start_is_refused() -> None:
 
 
 def test_a_renewal_never_brings_a_deadline_forward() -> None:
-    record = ContactRecord(0.0, 0.0, term_s=1.0, deadline_s=10.0)
+    record = ContactRecord(0, 0.0, 0.0, term_s=1.0, deadline_s=10.0)
     record.renew(5.0)  # a message stamped with an older time than the touchdown's
     assert record.deadline_s == 10.0
     record.renew(9.5)

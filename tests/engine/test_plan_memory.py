@@ -75,11 +75,11 @@ def test_the_engine_process_refuses_heavy_data_inline_and_blocks_it_was_not_hand
     with ProcessEngine(DEVICE, SinkSpec("null"), voice_cost=1e-4) as engine:
         audio = engine._audio
         audio._write(audio._child, HoldPlan(1 << 40, resolved, samples))  # 460 KB inline
-        audio._write(audio._child, StartJob("inline", 1 << 40, None))
+        audio._write(audio._child, StartJob(-1, 1 << 40, None))
         wait_until(lambda: engine.status().refused_commands == 2)
         unknown = SharedArrays("no-such-block", (("samples", "<f4", (4, 8), 0),))
         audio._write(audio._child, HoldPlan(1 << 41, resolved, None, unknown))
-        audio._write(audio._child, StartJob("unknown", 1 << 41, None))
+        audio._write(audio._child, StartJob(-2, 1 << 41, None))
         wait_until(lambda: engine.status().refused_commands == 4)
         job = engine.schedule(tap(0.5))  # handed over by the front: played
         wait_until(lambda: engine.job_state(job.job_id).state == "finished")  # type: ignore[union-attr]

@@ -59,7 +59,7 @@ def test_readers_never_see_half_a_write(locked: bool) -> None:
     shared = SharedClock(RATE, locked=locked)
     slots = MoveSlots(1, locked=locked)
     slot, generation = slots.allocate() or (0, 0)
-    slots.bind(slot, generation, "c", "1")
+    slots.bind(slot, generation, 1)
     done = threading.Event()
 
     def writer() -> None:
@@ -76,7 +76,7 @@ def test_readers_never_see_half_a_write(locked: bool) -> None:
             frame, anchor_s, latency_s = shared.anchor()
             assert (anchor_s, latency_s) == (frame * 0.5, frame * 0.25)
             clocks += 1
-            slots.drain(lambda owner, contact, x, y, intensity, at: moves.append((x, y)))
+            slots.drain(lambda contact, x, y, intensity, at: moves.append((x, y)))
         thread.join()
     finally:
         sys.setswitchinterval(interval_s)
@@ -96,47 +96,47 @@ def test_only_the_newest_position_of_a_bound_slot_is_posted_once(locked: bool) -
     slot, generation = taken
     slots.write(slot, generation, 1.0, 2.0, None, None)
     assert posted(slots) == []  # not bound yet: the touchdown is not through
-    slots.bind(slot, generation, "client", "finger")
+    slots.bind(slot, generation, 7)
     slots.write(slot, generation, 1.5, 2.5, 0.5, None)
     slots.write(slot, generation, 1.7, 2.7, None, 4800)
-    assert posted(slots) == [("client", "finger", 1.7, 2.7, None, 4800)]
+    assert posted(slots) == [(7, 1.7, 2.7, None, 4800)]
     assert posted(slots) == []  # applied once
 
 
 def test_a_slot_that_changes_hands_never_posts_what_it_held_before(locked: bool) -> None:
     slots = MoveSlots(1, locked=locked)
     slot, old = slots.allocate() or (0, 0)
-    slots.bind(slot, old, "a", "1")
+    slots.bind(slot, old, 1)
     slots.write(slot, old, 1.0, 1.0, None, None)
-    slots.unbind("a", "1")
+    slots.unbind((1,))
     slots.release(slot)
     assert posted(slots) == []
     again = slots.allocate()
     assert again is not None and again[0] == slot and again[1] != old
     slots.write(slot, old, 3.0, 3.0, None, None)  # late from the earlier contact
-    slots.bind(slot, again[1], "b", "1")
+    slots.bind(slot, again[1], 2)
     assert posted(slots) == []
     slots.write(slot, again[1], 2.0, 9.0, None, None)
-    assert posted(slots) == [("b", "1", 2.0, 9.0, None, None)]
+    assert posted(slots) == [(2, 2.0, 9.0, None, None)]
 
 
 def test_a_row_caught_mid_write_waits_for_the_next_block() -> None:
     slots = MoveSlots(2, locked=False)
     slot, generation = slots.allocate() or (0, 0)
-    slots.bind(slot, generation, "c", "1")
+    slots.bind(slot, generation, 1)
     row = slots._rows[slot]
     row[0] += 1.0  # the host has begun to write
     row[2], row[3], row[4], row[5] = 1.0, 2.0, math.nan, math.nan
     assert posted(slots) == []
     row[1] = generation
     row[0] += 1.0
-    assert posted(slots) == [("c", "1", 1.0, 2.0, None, None)]
+    assert posted(slots) == [(1, 1.0, 2.0, None, None)]
 
 
 def test_with_a_lock_the_callback_skips_a_block_while_the_host_writes() -> None:
     slots = MoveSlots(2, locked=True)
     slot, generation = slots.allocate() or (0, 0)
-    slots.bind(slot, generation, "c", "1")
+    slots.bind(slot, generation, 1)
     slots.write(slot, generation, 1.0, 2.0, None, None)
     lock = slots.raw.lock
     assert lock.acquire(False)  # the host is in the middle of a write
@@ -144,7 +144,7 @@ def test_with_a_lock_the_callback_skips_a_block_while_the_host_writes() -> None:
         assert posted(slots) == []  # did not wait: nothing this block
     finally:
         lock.release()
-    assert posted(slots) == [("c", "1", 1.0, 2.0, None, None)]
+    assert posted(slots) == [(1, 1.0, 2.0, None, None)]
 
 
 def test_with_a_lock_the_engine_drops_an_anchor_while_the_host_reads() -> None:
@@ -208,7 +208,7 @@ def engine_side(clock_raw: SharedBuffer, slots_raw: SharedBuffer, count: int, re
 def test_another_process_is_never_seen_half_written(locked: bool) -> None:
     clock = SharedClock(RATE, locked=locked)
     slots = MoveSlots(1, locked=locked)
-    slots.bind(0, 1, "c", "1")
+    slots.bind(0, 1, 1)
     count = 100_000
     context = multiprocessing.get_context("spawn")
     ready = context.Event()
@@ -222,11 +222,11 @@ def test_another_process_is_never_seen_half_written(locked: bool) -> None:
             frame, anchor_s, latency_s = clock.anchor()
             assert (anchor_s, latency_s) == (frame * 0.5, frame * 0.25)
             anchors.add(frame)
-            slots.drain(lambda owner, contact, x, y, intensity, at: moves.append((x, y)))
+            slots.drain(lambda contact, x, y, intensity, at: moves.append((x, y)))
     finally:
         process.join(timeout=60)
     assert process.exitcode == 0
-    slots.drain(lambda owner, contact, x, y, intensity, at: moves.append((x, y)))
+    slots.drain(lambda contact, x, y, intensity, at: moves.append((x, y)))
     # read while the other process wrote, never a mix of two writes
     assert len(anchors) > 1 and len(moves) > 1
     assert all(y == 2.0 * x for x, y in moves)

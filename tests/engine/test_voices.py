@@ -67,7 +67,7 @@ def test_a_voice_rendered_block_by_block_touches_only_the_channels_its_gains_dri
     still = TouchPattern.model_validate(
         {"path": {"kind": "polyline", "points_cm": [[0.0, 4.8]]}, "duration_s": 1.3}
     )
-    voice = PatternVoice(plan(still, DEVICE), job_id="j", release_frames=100)
+    voice = PatternVoice(plan(still, DEVICE), job=1, release_frames=100)
     voice.begin(0, RingPool(1, 0, DEVICE.channels))
     work = Workspace(BLOCK, DEVICE.channels)
     mix = np.full((BLOCK, DEVICE.channels), -0.0, dtype=np.float32)  # -0.0 + 0.0 is +0.0
@@ -90,7 +90,7 @@ def test_a_voice_adds_exactly_its_samples_to_what_the_mix_holds(rng: np.random.G
         }
     )
     reference = render(stroke, DEVICE)  # the default device: no calibration, no clipping
-    voice = PatternVoice(plan(stroke, DEVICE), job_id="j", release_frames=100)
+    voice = PatternVoice(plan(stroke, DEVICE), job=1, release_frames=100)
     voice.begin(0, RingPool(1, 4096, DEVICE.channels))
     work = Workspace(BLOCK, DEVICE.channels)
     blocks = len(reference) // BLOCK
