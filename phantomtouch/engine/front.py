@@ -15,7 +15,8 @@ from phantomtouch.engine.admission import RENDER_BUDGET, Admission
 from phantomtouch.engine.checks import check_channel_gains, check_int, check_range, check_seconds
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.events import apply_events
-from phantomtouch.engine.jobs import JobCalls, JobTable, Policy
+from phantomtouch.engine.job_calls import JobCalls
+from phantomtouch.engine.jobs import JobTable, Policy
 from phantomtouch.engine.messages import Event, PlanReleased, SetWearerGains
 from phantomtouch.engine.owners import ContactCalls, DeadlineThread, OwnerTable
 from phantomtouch.engine.plans import PlanCache

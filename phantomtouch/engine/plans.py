@@ -12,7 +12,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from phantomtouch.engine.jobs import resolve_plan
+from phantomtouch.engine.job_calls import resolve_plan
 from phantomtouch.engine.plan_memory import heavy_bytes
 from phantomtouch.engine.prerender import PRERENDER_MAX_S, Prerendered, prerender
 from phantomtouch.renderer import plan

@@ -6,7 +6,8 @@ import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, TouchPattern
 from phantomtouch.engine import CaptureSink, Engine
-from phantomtouch.engine.jobs import JobRecord, JobTable, OwnerQuota, QuotaRefused, resolve_plan
+from phantomtouch.engine.job_calls import resolve_plan
+from phantomtouch.engine.jobs import JobRecord, JobTable, OwnerQuota, QuotaRefused
 from phantomtouch.renderer import plan
 
 
