@@ -31,12 +31,14 @@ from pydantic import ValidationError
 from tqdm import tqdm
 
 from phantomtouch import __version__
-from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
+from phantomtouch.calibrate_command import add_calibrate_command
+from phantomtouch.device_arg import load_device
+from phantomtouch.errors import ParameterError, PhantomTouchError
 from phantomtouch.import_command import add_import_command
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
-from phantomtouch.schema import DeviceProfile, TouchPattern, describe_validation_error, limits
+from phantomtouch.schema import TouchPattern, describe_validation_error, limits
 from phantomtouch.serve_command import EXIT_FAILURE, add_serve_commands
 
 """The command could not do its work (``serve``: the pattern library cannot be opened)."""
@@ -44,14 +46,6 @@ EXIT_USAGE = 2
 _BLOCK_FRAMES = 1 << 15
 _WAV_HEADER_BYTES = 4096
 """Room for a WAV file's header chunks, bytes (generous: libsndfile writes ~150)."""
-
-
-def _load_device(path: str | None) -> DeviceProfile:
-    """The profile at ``path`` (None: the paper's); a bad file is bad input (exit 2)."""
-    try:
-        return DeviceProfile.load(path) if path else DeviceProfile.default()
-    except DeviceError as exc:
-        raise ParameterError(str(exc)) from exc
 
 
 def _load_pattern(path: str) -> TouchPattern:
@@ -165,7 +159,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         _check_plot_path(args.plot)
     pattern = preset(args.preset) if args.preset else _load_pattern(args.pattern)
     pattern = _with_library_clip(pattern, args.db)
-    plan = plan_at(pattern, _load_device(args.device), sample_rate_hz=args.sample_rate)
+    plan = plan_at(pattern, load_device(args.device), sample_rate_hz=args.sample_rate)
     clipped_fraction = write_wav(plan, args.output, plot_path=args.plot)
     if args.json:
         summary = {**plan.summary(), "clipped_fraction": clipped_fraction}
@@ -212,7 +206,7 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
 
     names = [n for n in preset_names() if n.startswith(f"{args.set}/")]
     out_dir = Path(args.output)
-    device = _load_device(args.device)
+    device = load_device(args.device)
     plans = {name: plan_at(preset(name), device) for name in names}
     needed = sum(wav_bytes(plan) for plan in plans.values())
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -241,7 +235,7 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
 def _cmd_devices(args: argparse.Namespace) -> int:
     from phantomtouch.engine import list_output_devices
 
-    needed = _load_device(args.device).channels
+    needed = load_device(args.device).channels
     devices = [
         {**d, "enough_outputs": d["max_output_channels"] >= needed} for d in list_output_devices()
     ]
@@ -289,119 +283,13 @@ def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
         report = run_accuracy(
             strokes,
             settings,
-            device=_load_device(args.device),
+            device=load_device(args.device),
             repeats=args.repeats,
             progress=lambda label: (bar.set_postfix_str(label), bar.update(1)),
         )
     if args.plot:
         save_plot(report, args.plot)
     print(json.dumps(report.to_dict(), indent=2) if args.json else format_table(report))
-    return 0
-
-
-def _sound_device(name: str | None) -> int | str | None:
-    return int(name) if name is not None and name.isdigit() else name
-
-
-def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from phantomtouch.analysis import calibration as cal
-    from phantomtouch.analysis.sound_input import input_scale, sounddevice_loop
-
-    device = _load_device(args.device)
-    settings = cal.CalibrationSettings(
-        excitation_s=args.excitation_s, drive_rms=args.drive_rms, taps=args.taps
-    )
-    scale_given = args.input_reference_db is not None or args.sensitivity_v_per_m_s2 is not None
-    play_record: cal.PlayRecord
-    before: Callable[[int], None]
-    if args.simulate:
-        from phantomtouch.analysis.twin import simulated_loop
-
-        reference = args.input_reference_db
-        if not scale_given:
-            reference = device.calibration.reference_level_db + 10.0
-        scale = input_scale(
-            sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2,
-            input_full_scale_v=args.input_full_scale_v,
-            input_reference_level_db=reference,
-        )
-        loop = simulated_loop(device, input_scale_m_s2=scale, seed=args.seed)
-        play_record = loop
-        total = len(args.channels or device.actuators)
-        done = [0]
-
-        def before(channel: int) -> None:
-            # every channel is measured, then every channel is verified
-            step = "measuring" if done[0] < total else "verifying"
-            print(
-                f"calibrate: {step} channel {channel} ({done[0] % total + 1} of {total})",
-                file=sys.stderr,
-            )
-            done[0] += 1
-            loop.place_sensor(channel)
-
-    else:
-        scale = input_scale(
-            sensitivity_v_per_m_s2=args.sensitivity_v_per_m_s2,
-            input_full_scale_v=args.input_full_scale_v,
-            input_reference_level_db=args.input_reference_db,
-        )
-        play_record = sounddevice_loop(
-            sample_rate_hz=device.sample_rate_hz,
-            output_device=_sound_device(args.output_device),
-            input_device=_sound_device(args.input_device),
-            input_channel=args.input_channel,
-        )
-
-        def before(channel: int) -> None:
-            if not args.yes:
-                print(
-                    f"Put the accelerometer on actuator {channel} and press Enter.",
-                    file=sys.stderr,
-                )
-                sys.stdin.readline()
-
-    result = cal.calibrate(
-        device,
-        play_record,
-        input_scale_m_s2=scale,
-        channels=args.channels,
-        settings=settings,
-        before_channel=before,
-    )
-    from phantomtouch.analysis.profile_file import write_profile
-
-    write_profile(result.profile, args.output)
-    if args.json:
-        print(json.dumps({**result.to_dict(), "output": str(args.output)}, indent=2))
-        return 0
-    freqs = [f"{f:g} Hz" for f in cal.VERIFY_FREQS_HZ]
-    print(
-        f"{'ch':>2}  {'level dB':>8}  {'spread dB':>9}  {'coherence':>9}  {'FIR max dB':>10}  "
-        f"{'max level dB':>12}  " + "  ".join(f"{f:>7}" for f in freqs) + "  band err"
-    )
-    checks = {c.channel: c for c in result.checks}
-    for m in result.measurements:
-        check = checks[m.channel]
-        errors = "  ".join(f"{e:+7.2f}" for e in check.sine_errors_db.values())
-        print(
-            f"{m.channel:>2}  {m.level_db:8.2f}  {m.spread_db:9.2f}  {m.coherence_min:9.3f}  "
-            f"{m.fir_max_gain_db:10.2f}  {m.max_level_db:12.1f}  {errors}  "
-            f"{check.band_error_db:+8.2f}"
-        )
-    worst = max((c.worst_db for c in result.checks), default=0.0)
-    print(
-        f"level: full-scale sine at {settings.reference_hz:g} Hz, dB re 1 µm/s²; errors: "
-        f"measured minus requested after calibration (worst {worst:.2f} dB)"
-    )
-    weakest = min(result.measurements, key=lambda m: m.max_level_db)
-    if weakest.max_level_db < device.safety.max_level_db:
-        print(
-            f"note: channel {weakest.channel} reaches only {weakest.max_level_db:.1f} dB "
-            f"somewhere in {cal.BAND_HZ[0]:g}-{cal.BAND_HZ[1]:g} Hz before its drive hits the "
-            f"ceiling (max level column); safety.max_level_db is {device.safety.max_level_db:g}"
-        )
-    print(f"calibrated profile written to {args.output}")
     return 0
 
 
@@ -414,6 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_serve_commands(sub)
     add_import_command(sub)
+    add_calibrate_command(sub)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
     render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")
@@ -464,47 +353,6 @@ def build_parser() -> argparse.ArgumentParser:
     accuracy.add_argument("--device", help="device profile (TOML or JSON)")
     accuracy.set_defaults(func=_cmd_bench_accuracy)
 
-    calibrate = sub.add_parser(
-        "calibrate", help="measure each actuator with an accelerometer, write a corrected profile"
-    )
-    calibrate.add_argument("-o", "--output", required=True, help="profile to write (.toml/.json)")
-    calibrate.add_argument("--device", help="profile to start from (default: the paper's)")
-    calibrate.add_argument("--channels", type=int, nargs="+", help="only these output channels")
-    calibrate.add_argument("--output-device", help="sound-card output (index or name)")
-    calibrate.add_argument("--input-device", help="sound-card input (index or name)")
-    calibrate.add_argument(
-        "--input-channel", type=int, default=1, help="input the accelerometer is on (1-based)"
-    )
-    calibrate.add_argument(
-        "--sensitivity-v-per-m-s2", type=float, help="accelerometer sensitivity, V per m/s²"
-    )
-    calibrate.add_argument(
-        "--input-full-scale-v", type=float, help="volts that read as digital full scale"
-    )
-    calibrate.add_argument(
-        "--input-reference-db",
-        type=float,
-        help="instead of the two above: level, dB re 1 µm/s², of a full-scale sine at the input",
-    )
-    calibrate.add_argument("--excitation-s", type=float, default=8.0, help="noise per channel, s")
-    calibrate.add_argument(
-        "--drive-rms", type=float, default=0.1, help="RMS of the excitation (full scale = 1)"
-    )
-    calibrate.add_argument(
-        "--taps",
-        type=int,
-        default=4096,
-        help="FIR taps per channel (fewer: less exact below 60 Hz)",
-    )
-    calibrate.add_argument("--yes", action="store_true", help="do not wait for Enter per channel")
-    calibrate.add_argument("--json", action="store_true", help="print the results as JSON")
-    calibrate.add_argument(
-        "--simulate",
-        action="store_true",
-        help="calibrate the digital twin (actuators with random resonances) instead of a card",
-    )
-    calibrate.add_argument("--seed", type=int, default=0, help="seed of --simulate")
-    calibrate.set_defaults(func=_cmd_calibrate)
     return parser
 
 
