@@ -7,6 +7,7 @@ Everything it is sent stays on the loopback interface.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -24,10 +25,22 @@ START_TIMEOUT_S = 120.0
 (a busy machine takes many times the second or two of a quiet one)."""
 
 
+def free_ports(count: int) -> list[int]:
+    """``count`` distinct free ports on :data:`HOST`: every socket stays bound until all are
+    chosen, so the system cannot hand out one port twice (a port closed at once may come
+    back from the next bind, and a server given it twice fails to listen)."""
+    with contextlib.ExitStack() as stack:
+        socks = [
+            stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_STREAM))
+            for _ in range(count)
+        ]
+        for sock in socks:
+            sock.bind((HOST, 0))
+        return [int(sock.getsockname()[1]) for sock in socks]
+
+
 def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind((HOST, 0))
-        return int(sock.getsockname()[1])
+    return free_ports(1)[0]
 
 
 class LiveServer:

@@ -20,7 +20,7 @@ import httpx
 import pytest
 
 from phantomtouch.fleet.nats_config import FleetUser, authorization
-from tests.support.live_server import HOST, free_port
+from tests.support.live_server import HOST, free_ports
 
 START_TIMEOUT_S = 20.0
 
@@ -62,9 +62,10 @@ class NatsCluster:
         self.users = {user.name: user for user in users or []}
         self.user = user
         self.password = password
-        self.client_ports = [free_port() for _ in range(size)]
-        self.cluster_ports = [free_port() for _ in range(size)]
-        self.monitor_ports = [free_port() for _ in range(size)]
+        ports = free_ports(3 * size)
+        self.client_ports = ports[:size]
+        self.cluster_ports = ports[size : 2 * size]
+        self.monitor_ports = ports[2 * size :]
         self.processes: list[subprocess.Popen[bytes] | None] = [None] * size
         folder.mkdir(parents=True, exist_ok=True)
 
