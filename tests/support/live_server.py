@@ -25,21 +25,32 @@ START_TIMEOUT_S = 120.0
 (a busy machine takes many times the second or two of a quiet one)."""
 
 
+_GIVEN: set[int] = set()
+"""Every port this process has handed out: never handed out twice."""
+
+
 def free_ports(count: int) -> list[int]:
-    """``count`` distinct free ports on :data:`HOST`: every socket stays bound until all are
-    chosen, so the system cannot hand out one port twice (a port closed at once may come
-    back from the next bind, and a server given it twice fails to listen)."""
+    """``count`` free ports on :data:`HOST`, distinct from each other and from every port
+    this process handed out before. Every socket stays bound until all are chosen, so the
+    system cannot hand out one port twice meanwhile (a port closed at once may come back
+    from the next bind, and a server given it twice fails to listen); a port handed out
+    before is skipped, since its server may not have bound it yet."""
+    chosen: list[int] = []
     with contextlib.ExitStack() as stack:
-        socks = [
-            stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_STREAM))
-            for _ in range(count)
-        ]
-        for sock in socks:
+        for _ in range(count + 10_000):
+            sock = stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_STREAM))
             sock.bind((HOST, 0))
-        return [int(sock.getsockname()[1]) for sock in socks]
+            port = int(sock.getsockname()[1])
+            if port not in _GIVEN:
+                _GIVEN.add(port)
+                chosen.append(port)
+                if len(chosen) == count:
+                    return chosen
+    raise RuntimeError(f"no {count} free ports on {HOST} not handed out before")
 
 
 def free_port() -> int:
+    """One port, as :func:`free_ports` chooses them."""
     return free_ports(1)[0]
 
 
