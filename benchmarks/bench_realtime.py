@@ -44,7 +44,8 @@ Run: ``python benchmarks/bench_realtime.py [--quick] [--seconds 60] [--scenarios
 short rests, so its render load figures overlap). Needs ``jackd`` (Debian ``jackd2``),
 ``wrk`` for scenario c, and JACK-Client. Nothing is asserted: the figures depend on the
 machine and on what else it runs (see the load average printed with them). The loads are
-in ``realtime_load.py``, the table in ``realtime_report.py``.
+in ``realtime_load.py`` (the service read over HTTP in ``realtime_http.py``, CPU time and
+memory in ``realtime_usage.py``), the table in ``realtime_report.py``.
 """
 
 from __future__ import annotations
@@ -65,7 +66,17 @@ from typing import Any
 import numpy as np
 import realtime_load as load
 from realtime_floor import LatencyProbe, floor, in_stalls, xrun_causes, xrun_kinds
+from realtime_http import (
+    REQUEST_TIMEOUT_S,
+    HttpConnection,
+    metrics,
+    render_load_window_s,
+    sample_health,
+    sample_metrics,
+    timed_request,
+)
 from realtime_report import TITLES, floor_text, number, table, xruns_text
+from realtime_usage import cpu_seconds, engine_pid, rss_bytes
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
 
@@ -119,12 +130,12 @@ def block_copy_us(frames: int, copies: int = 50_000) -> float:
 
 async def rest(port: int, seconds: float) -> None:
     """``POST /stop``, wait (10 s at most) until no voice plays, then ``seconds`` more."""
-    connection = load.HttpConnection(port)
+    connection = HttpConnection(port)
     try:
-        await load.timed_request(connection, "POST", "/stop")
+        await timed_request(connection, "POST", "/stop")
         deadline = time.monotonic() + 10.0
         while time.monotonic() < deadline:
-            figures = await load.metrics(connection)
+            figures = await metrics(connection)
             if figures is None or not figures["active_voices"]:
                 break
             await asyncio.sleep(0.1)
@@ -155,25 +166,25 @@ async def measure(
 ) -> dict[str, Any]:
     """Rest, then run ``make_load`` for ``seconds`` while sampling ``/health`` and ``/metrics``."""
     await rest(port, args.rest_seconds)
-    connection = load.HttpConnection(port)
+    connection = HttpConnection(port)
     try:
-        before = await load.metrics(connection)
+        before = await metrics(connection)
         xruns_before = xruns.xruns
         log_before = len(jack.output())
         probe = LatencyProbe(round(args.period_frames / SAMPLE_RATE_HZ * 1e6)).start()
-        cpu_before = load.cpu_seconds()
+        cpu_before = cpu_seconds()
         started = time.monotonic()
         deadline = started + seconds
         done, health, samples = await asyncio.gather(
             make_load(deadline),
-            load.sample_health(port, deadline, 1.0 / args.health_hz),
-            load.sample_metrics(port, deadline, 1.0),
+            sample_health(port, deadline, 1.0 / args.health_hz),
+            sample_metrics(port, deadline, 1.0),
         )
         elapsed_s = time.monotonic() - started
-        cpu_after = load.cpu_seconds()
+        cpu_after = cpu_seconds()
         machine = probe.stop()
         await asyncio.sleep(TAIL_S)
-        after = await load.metrics(connection)
+        after = await metrics(connection)
         xruns_after = xruns.xruns
         log_during = jack.output()[log_before:]
         machine["xruns_in_stalls"] = in_stalls(
@@ -209,8 +220,8 @@ async def measure(
         "health": {
             "samples": len(latencies),
             "statuses": health["statuses"],
-            "p50_ms": ms(load.percentile(latencies, 0.50)),
-            "p99_ms": ms(load.percentile(latencies, 0.99)),
+            "p50_ms": ms(percentile(latencies, 0.50)),
+            "p99_ms": ms(percentile(latencies, 0.99)),
             "max_ms": ms(max(latencies, default=None)),
         },
         **done,
@@ -219,6 +230,14 @@ async def measure(
 
 def mb(size: int | None) -> str:
     return "—" if size is None else f"{size / 1e6:.0f}"
+
+
+def percentile(values: list[float], q: float) -> float | None:
+    """The ``q`` quantile (nearest rank) of ``values``; None without values."""
+    if not values:
+        return None
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 def ms(seconds: float | None) -> float | None:
@@ -258,8 +277,8 @@ def hands_and_touches(port: int, args: argparse.Namespace) -> Load:
                 "sent": len(latencies),
                 "per_s": len(latencies) / seconds,
                 "statuses": statuses,
-                "p50_ms": ms(load.percentile(latencies, 0.50)),
-                "p99_ms": ms(load.percentile(latencies, 0.99)),
+                "p50_ms": ms(percentile(latencies, 0.50)),
+                "p99_ms": ms(percentile(latencies, 0.99)),
             },
             "hands": {
                 "count": len(moved),
@@ -280,12 +299,10 @@ MEMORY_EVERY_S = 10.0
 
 def soak(port: int, server_pid: int, args: argparse.Namespace) -> Load:
     async def run(deadline: float) -> dict[str, Any]:
-        pids = {"server": server_pid, "engine": load.engine_pid(server_pid)}
+        pids = {"server": server_pid, "engine": engine_pid(server_pid)}
 
         def memory() -> dict[str, int | None]:
-            return {
-                name: None if pid is None else load.rss_bytes(pid) for name, pid in pids.items()
-            }
+            return {name: None if pid is None else rss_bytes(pid) for name, pid in pids.items()}
 
         began = time.monotonic()
         series: list[tuple[float, dict[str, int | None]]] = []
@@ -309,8 +326,8 @@ def soak(port: int, server_pid: int, args: argparse.Namespace) -> Load:
             "touches": {
                 "sent": len(latencies),
                 "statuses": touches["statuses"],
-                "p50_ms": ms(load.percentile(latencies, 0.50)),
-                "p99_ms": ms(load.percentile(latencies, 0.99)),
+                "p50_ms": ms(percentile(latencies, 0.50)),
+                "p99_ms": ms(percentile(latencies, 0.99)),
             },
             "rss_bytes": {"start": series[0][1], "end": series[-1][1], "series": series},
         }
@@ -499,7 +516,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
         port = service.port
         results["jack_server"] = jack.name
         results["device"] = check_device(port, args.period_frames)
-        window_s = load.render_load_window_s(metrics_text(port), block_s)
+        window_s = render_load_window_s(metrics_text(port), block_s)
         results["render_load_window_s"] = window_s
         if args.rest_seconds is None:
             args.rest_seconds = (window_s or 11.0) + 1.0
@@ -537,7 +554,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
 def metrics_text(port: int) -> str:
     import httpx
 
-    return httpx.get(f"http://{HOST}:{port}/metrics", timeout=load.REQUEST_TIMEOUT_S).text
+    return httpx.get(f"http://{HOST}:{port}/metrics", timeout=REQUEST_TIMEOUT_S).text
 
 
 def check_device(port: int, period_frames: int) -> dict[str, Any]:
