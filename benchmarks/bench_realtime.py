@@ -43,8 +43,11 @@ Run: ``python benchmarks/bench_realtime.py [--quick] [--seconds 60] [--scenarios
 [--json PATH]`` (about 4 minutes with the defaults; ``--quick``: well under a minute, with
 short rests, so its render load figures overlap). Needs ``jackd`` (Debian ``jackd2``),
 ``wrk`` for scenario c, and JACK-Client. Nothing is asserted: the figures depend on the
-machine and on what else it runs (see the load average printed with them). The loads are
-in ``realtime_load.py``, the table in ``realtime_report.py``.
+machine and on what else it runs (see the load average printed with them). Each
+scenario's load is in ``realtime_scenarios.py`` (its users and programs in
+``realtime_load.py``), how one is measured in ``realtime_measure.py`` (the service read
+over HTTP in ``realtime_http.py``, CPU time and memory in ``realtime_usage.py``), and what
+is printed in ``realtime_report.py``.
 """
 
 from __future__ import annotations
@@ -58,14 +61,17 @@ import signal
 import sys
 import tempfile
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import realtime_load as load
-from realtime_floor import LatencyProbe, floor, in_stalls, xrun_causes, xrun_kinds
-from realtime_report import TITLES, floor_text, number, table, xruns_text
+from realtime_floor import LatencyProbe, floor
+from realtime_http import REQUEST_TIMEOUT_S, render_load_window_s
+from realtime_load import stop
+from realtime_measure import measure
+from realtime_report import TITLES, print_report
+from realtime_scenarios import MEMORY_EVERY_S, scenario_loads
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
 
@@ -75,11 +81,6 @@ from tests.support.live_server import HOST, LiveServer
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_RATE_HZ = 48000
 CHANNELS = 8
-TAIL_S = 0.5
-"""After the load, the engine's counters are read once more this much later."""
-
-Load = Callable[[float], Awaitable[dict[str, Any]]]
-"""A load: given the deadline (monotonic clock), what it did."""
 
 
 class Service(LiveServer):
@@ -112,252 +113,6 @@ def block_copy_us(frames: int, copies: int = 50_000) -> float:
         block.copy()
         times[k] = time.perf_counter() - started
     return float(np.median(times) * 1e6)
-
-
-# -- one scenario ----------------------------------------------------------------------
-
-
-async def rest(port: int, seconds: float) -> None:
-    """``POST /stop``, wait (10 s at most) until no voice plays, then ``seconds`` more."""
-    connection = load.HttpConnection(port)
-    try:
-        await load.timed_request(connection, "POST", "/stop")
-        deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline:
-            figures = await load.metrics(connection)
-            if figures is None or not figures["active_voices"]:
-                break
-            await asyncio.sleep(0.1)
-    finally:
-        connection.close()
-    await asyncio.sleep(seconds)
-
-
-def counter_delta(before: dict[str, int], after: dict[str, int]) -> dict[str, int]:
-    keys = sorted(set(before) | set(after))
-    return {
-        k: after.get(k, 0) - before.get(k, 0) for k in keys if after.get(k, 0) > before.get(k, 0)
-    }
-
-
-def highest(samples: list[dict[str, Any]], key: str) -> float | None:
-    values = [s[key] for s in samples if s[key] is not None]
-    return max(values) if values else None
-
-
-async def measure(
-    port: int,
-    xruns: JackXrunCounter,
-    jack: JackServer,
-    seconds: float,
-    make_load: Load,
-    args: argparse.Namespace,
-) -> dict[str, Any]:
-    """Rest, then run ``make_load`` for ``seconds`` while sampling ``/health`` and ``/metrics``."""
-    await rest(port, args.rest_seconds)
-    connection = load.HttpConnection(port)
-    try:
-        before = await load.metrics(connection)
-        xruns_before = xruns.xruns
-        log_before = len(jack.output())
-        probe = LatencyProbe(round(args.period_frames / SAMPLE_RATE_HZ * 1e6)).start()
-        cpu_before = load.cpu_seconds()
-        started = time.monotonic()
-        deadline = started + seconds
-        done, health, samples = await asyncio.gather(
-            make_load(deadline),
-            load.sample_health(port, deadline, 1.0 / args.health_hz),
-            load.sample_metrics(port, deadline, 1.0),
-        )
-        elapsed_s = time.monotonic() - started
-        cpu_after = load.cpu_seconds()
-        machine = probe.stop()
-        await asyncio.sleep(TAIL_S)
-        after = await load.metrics(connection)
-        xruns_after = xruns.xruns
-        log_during = jack.output()[log_before:]
-        machine["xruns_in_stalls"] = in_stalls(
-            xruns.times[xruns_before:xruns_after],
-            machine["stalls"],
-            elapsed_s + TAIL_S,
-            xrun_kinds(log_during, args.period_frames / SAMPLE_RATE_HZ * 1e6),
-        )
-    finally:
-        connection.close()
-    if before is None or after is None:
-        raise RuntimeError("the service did not answer GET /metrics around the scenario")
-    samples.append(after)
-    latencies = health["latencies_s"]
-    underruns, inline_renders = (
-        None if before[key] is None or after[key] is None else int(after[key] - before[key])
-        for key in ("underruns", "inline_renders")
-    )
-    machine_s, ours_s = (end - start for start, end in zip(cpu_before, cpu_after, strict=True))
-    return {
-        "seconds": elapsed_s,
-        "busy_cores": machine_s / elapsed_s,
-        "busy_cores_others": max(0.0, machine_s - ours_s) / elapsed_s,
-        "underruns": underruns,
-        "inline_renders": inline_renders,
-        "jack_xruns": xruns_after - xruns_before,
-        "jack_xrun_causes": xrun_causes(log_during, args.period_frames / SAMPLE_RATE_HZ * 1e6),
-        "machine_floor": machine,
-        "render_load_p99": highest(samples, "render_load_p99"),
-        "render_load_max": highest(samples, "render_load_max"),
-        "voices_max": highest(samples, "active_voices"),
-        "server_requests": counter_delta(before["requests"], after["requests"]),
-        "health": {
-            "samples": len(latencies),
-            "statuses": health["statuses"],
-            "p50_ms": ms(load.percentile(latencies, 0.50)),
-            "p99_ms": ms(load.percentile(latencies, 0.99)),
-            "max_ms": ms(max(latencies, default=None)),
-        },
-        **done,
-    }
-
-
-def mb(size: int | None) -> str:
-    return "—" if size is None else f"{size / 1e6:.0f}"
-
-
-def ms(seconds: float | None) -> float | None:
-    return None if seconds is None else seconds * 1e3
-
-
-# -- the loads -------------------------------------------------------------------------
-
-
-def idle() -> Load:
-    async def run(deadline: float) -> dict[str, Any]:
-        await asyncio.sleep(max(0.0, deadline - time.monotonic()))
-        return {}
-
-    return run
-
-
-def hands_and_touches(port: int, args: argparse.Namespace) -> Load:
-    async def run(deadline: float) -> dict[str, Any]:
-        per_connection = args.touch_rate / args.touch_connections
-        touchers = [
-            load.paced_touches(port, per_connection, deadline)
-            for _ in range(args.touch_connections)
-        ]
-        hands = [load.hand(port, k, args.move_hz, deadline) for k in range(args.hands)]
-        results = await asyncio.gather(*touchers, *hands)
-        touches, moved = results[: len(touchers)], results[len(touchers) :]
-        statuses: dict[str, int] = {}
-        for t in touches:
-            for status, n in t["statuses"].items():
-                statuses[status] = statuses.get(status, 0) + n
-        latencies = [s for t in touches for s in t["latencies_s"]]
-        seconds = max(h["seconds"] for h in moved)
-        errors = [e for h in moved for e in h["errors"]]
-        return {
-            "touches": {
-                "sent": len(latencies),
-                "per_s": len(latencies) / seconds,
-                "statuses": statuses,
-                "p50_ms": ms(load.percentile(latencies, 0.50)),
-                "p99_ms": ms(load.percentile(latencies, 0.99)),
-            },
-            "hands": {
-                "count": len(moved),
-                "moves": sum(h["moves"] for h in moved),
-                "moves_per_s_per_hand": sum(h["moves"] for h in moved) / seconds / len(moved),
-                "skipped_frames": sum(h["skipped"] for h in moved),
-                "errors": len(errors),
-                "first_error": errors[0] if errors else None,
-            },
-        }
-
-    return run
-
-
-MEMORY_EVERY_S = 10.0
-"""How often the soak samples the resident memory of the service and its engine process."""
-
-
-def soak(port: int, server_pid: int, args: argparse.Namespace) -> Load:
-    async def run(deadline: float) -> dict[str, Any]:
-        pids = {"server": server_pid, "engine": load.engine_pid(server_pid)}
-
-        def memory() -> dict[str, int | None]:
-            return {
-                name: None if pid is None else load.rss_bytes(pid) for name, pid in pids.items()
-            }
-
-        began = time.monotonic()
-        series: list[tuple[float, dict[str, int | None]]] = []
-
-        async def sample() -> None:
-            while True:
-                series.append((time.monotonic() - began, memory()))
-                await asyncio.sleep(MEMORY_EVERY_S)
-
-        sampler = asyncio.create_task(sample())
-        touches = await load.paced_touches(
-            port,
-            args.soak_rate,
-            deadline,
-            lambda k: load.soak_body(k, args.soak_points),
-        )
-        sampler.cancel()
-        series.append((time.monotonic() - began, memory()))
-        latencies = touches["latencies_s"]
-        return {
-            "touches": {
-                "sent": len(latencies),
-                "statuses": touches["statuses"],
-                "p50_ms": ms(load.percentile(latencies, 0.50)),
-                "p99_ms": ms(load.percentile(latencies, 0.99)),
-            },
-            "rss_bytes": {"start": series[0][1], "end": series[-1][1], "series": series},
-        }
-
-    return run
-
-
-def bands(port: int, order: str, seed: int, args: argparse.Namespace) -> Load:
-    async def run(deadline: float) -> dict[str, Any]:
-        touched = await load.band_touches(port, order, seed, args.band_gap_seconds)
-        await asyncio.sleep(max(0.0, deadline - time.monotonic()))
-        return {"bands": {"order": order, **touched}}
-
-    return run
-
-
-def with_hogs(inner: Load, hogs: list[Any], count: int) -> Load:
-    async def run(deadline: float) -> dict[str, Any]:
-        hogs.extend(load.start_hogs(count, deadline - time.monotonic() + 5.0))
-        try:
-            return {"cpu_hogs": count, **await inner(deadline)}
-        finally:
-            load.stop(hogs)
-            hogs.clear()
-
-    return run
-
-
-def wrk_flood(wrk: str, port: int, folder: Path, args: argparse.Namespace) -> Load:
-    async def run(deadline: float) -> dict[str, Any]:
-        seconds = deadline - time.monotonic()
-        return {
-            "wrk": await load.flood(
-                wrk, port, folder, connections=args.flood_connections, seconds=seconds
-            )
-        }
-
-    return run
-
-
-# -- main ------------------------------------------------------------------------------
-
-
-def band_seconds(order: str, args: argparse.Namespace) -> float:
-    """A band scenario's length: its touches ``--band-gap-seconds`` apart, then the last
-    one's 1.5 s and a second more."""
-    return len(load.BAND_ORDERS[order]) * args.band_gap_seconds + 2.5
 
 
 def within(kind: Callable[[str], float], low: float, high: float) -> Callable[[str], Any]:
@@ -499,20 +254,12 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
         port = service.port
         results["jack_server"] = jack.name
         results["device"] = check_device(port, args.period_frames)
-        window_s = load.render_load_window_s(metrics_text(port), block_s)
+        window_s = render_load_window_s(metrics_text(port), block_s)
         results["render_load_window_s"] = window_s
         if args.rest_seconds is None:
             args.rest_seconds = (window_s or 11.0) + 1.0
         results["config"]["rest_seconds"] = args.rest_seconds
-        loads = {
-            "d": (args.quiet_seconds, idle()),
-            "a": (args.seconds, hands_and_touches(port, args)),
-            "b": (args.seconds, with_hogs(hands_and_touches(port, args), hogs, args.hogs)),
-            "c": (args.flood_seconds, wrk_flood(wrk or "wrk", port, folder, args)),
-            "s": (args.seconds, soak(port, service.process.pid, args)),
-            "n": (band_seconds("new", args), bands(port, "new", 1_001, args)),
-            "o": (band_seconds("disagreeing", args), bands(port, "disagreeing", 1_002, args)),
-        }
+        loads = scenario_loads(port, service.process.pid, wrk or "wrk", folder, hogs, args)
         for key in args.scenarios:
             seconds, make_load = loads[key]
             print(f"({key}) {TITLES[key]}: {seconds:g} s ...", file=sys.stderr, flush=True)
@@ -525,7 +272,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
             print(service.log()[-3000:], file=sys.stderr)
         raise
     finally:
-        load.stop(hogs)
+        stop(hogs)
         if service is not None:
             service.stop()
         if xruns is not None:
@@ -537,7 +284,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
 def metrics_text(port: int) -> str:
     import httpx
 
-    return httpx.get(f"http://{HOST}:{port}/metrics", timeout=load.REQUEST_TIMEOUT_S).text
+    return httpx.get(f"http://{HOST}:{port}/metrics", timeout=REQUEST_TIMEOUT_S).text
 
 
 def check_device(port: int, period_frames: int) -> dict[str, Any]:
@@ -566,33 +313,7 @@ def main() -> None:
         ) from None
     if args.json:
         args.json.write_text(json.dumps(results, indent=2), encoding="utf-8")
-    print(
-        f"machine: {results['cpus']} cpus, load average {results['load_avg_1min']:.2f} -> "
-        f"{results['load_avg_1min_after']:.2f}; JACK dummy {SAMPLE_RATE_HZ} Hz, "
-        f"{args.period_frames}-frame periods ({args.period_frames / SAMPLE_RATE_HZ * 1e3:.2f} ms)"
-    )
-    print(
-        f"yardstick: numpy copy of one {args.period_frames} x {CHANNELS} block "
-        f"{results['block_copy_us']:.2f} µs; render load window "
-        f"{number(results['render_load_window_s'])} s, rest {args.rest_seconds:g} s\n"
-    )
-    base = results["floor"]
-    print(
-        f"floor: JACK alone for {base['seconds']:g} s: {xruns_text(base)} xruns "
-        "(timer: the dummy driver woke late; slow: a cycle, that is a client, took too long); "
-        f"a do-nothing SCHED_FIFO thread: {floor_text(base)} wake-ups a period or more late\n"
-    )
-    print(table(results))
-    for key, result in results["scenarios"].items():
-        if "rss_bytes" in result:
-            series = result["rss_bytes"]["series"]
-            print(f"\n({key}) resident memory, MB, every {MEMORY_EVERY_S:g} s:")
-            for name in series[0][1]:
-                print(f"  {name}: " + " ".join(f"{mb(rss[name])}" for _, rss in series))
-    print(
-        "\ntarget: 0 underruns and 0 xruns in a, b and c; the flood's excess refused (503) or "
-        "stolen; render load p99 <= 25 % of the period"
-    )
+    print_report(results, CHANNELS, MEMORY_EVERY_S)
 
 
 if __name__ == "__main__":

@@ -1,19 +1,14 @@
-"""Load generators and probes of ``bench_realtime.py``: loopback HTTP and WebSocket only.
+"""The loads of ``bench_realtime.py``: users of the service, and programs beside it.
 
-Each piece speaks only the service's public protocol (``docs/protocol.md``) and its
-``/metrics`` text; nothing here knows how the engine works inside. Every loop stops at a
-deadline and every request has a timeout.
+Each user speaks only the service's public protocol (``docs/protocol.md``) over loopback
+(``realtime_http.py``); every loop stops at a deadline and every request has a timeout.
 
-- :class:`HttpConnection`: one keep-alive HTTP/1.1 connection (a request at a time);
 - :func:`hand`: a WebSocket client moving one contact along an ellipse at a fixed rate;
 - :func:`paced_touches`: ``POST /touch`` at a fixed rate over one connection (the same
   preset, or with :func:`soak_body` a distinct long pattern with a distinct noise seed);
-- :func:`sample_health`, :func:`sample_metrics`: what the service answers during the load;
+- :func:`band_touches`: noise touches in bands the engine process may not hold yet;
 - :func:`flood`: ``wrk`` posting touches as fast as 16 connections can;
-- :func:`start_hogs`: processes that keep every core busy at normal priority;
-- :func:`cpu_seconds`: CPU time of the whole machine and of this process tree, to tell how
-  much of it other programs took during a scenario;
-- :func:`rss_bytes`, :func:`engine_pid`: the memory of the service and its engine process.
+- :func:`start_hogs`: processes that keep every core busy at normal priority.
 """
 
 from __future__ import annotations
@@ -21,7 +16,6 @@ from __future__ import annotations
 import asyncio
 import json
 import math
-import os
 import re
 import subprocess
 import sys
@@ -30,174 +24,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-HOST = "127.0.0.1"
-REQUEST_TIMEOUT_S = 5.0
-"""A request not answered within this counts as a timeout (status ``"timeout"``)."""
-
-IDLE_REOPEN_S = 2.0
-"""A connection idle this long is reopened first (the server may have closed it)."""
+from realtime_http import HOST, REQUEST_TIMEOUT_S, HttpConnection, count, timed_request
 
 TOUCH_BODY = b'{"preset": "vr/tap"}'
 """The touch every load sends: the 150 ms ``vr/tap`` preset (a collision in a VR scene)."""
 
 
-def percentile(values: list[float], q: float) -> float | None:
-    """The ``q`` quantile (nearest rank) of ``values``; None without values."""
-    if not values:
-        return None
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
-
-
-def count(statuses: dict[str, int], status: int | str) -> None:
-    statuses[str(status)] = statuses.get(str(status), 0) + 1
-
-
-# -- HTTP ------------------------------------------------------------------------------
-
-
-class HttpConnection:
-    """One keep-alive connection to the service; reconnects after an error, a timeout, or
-    :data:`IDLE_REOPEN_S` without a request."""
-
-    def __init__(self, port: int) -> None:
-        self.port = port
-        self._streams: tuple[asyncio.StreamReader, asyncio.StreamWriter] | None = None
-        self._used_at = 0.0
-
-    async def request(self, method: str, path: str, body: bytes = b"") -> tuple[int, bytes]:
-        """Status and body; raises ``TimeoutError`` or ``OSError`` (the connection is reset)."""
-        try:
-            return await asyncio.wait_for(self._exchange(method, path, body), REQUEST_TIMEOUT_S)
-        except (TimeoutError, OSError, asyncio.IncompleteReadError) as exc:
-            self.close()
-            if isinstance(exc, asyncio.IncompleteReadError):
-                raise ConnectionResetError("the server closed the connection") from exc
-            raise
-
-    async def _exchange(self, method: str, path: str, body: bytes) -> tuple[int, bytes]:
-        if time.monotonic() - self._used_at > IDLE_REOPEN_S:
-            self.close()
-        self._used_at = time.monotonic()
-        if self._streams is None:
-            self._streams = await asyncio.open_connection(HOST, self.port)
-        reader, writer = self._streams
-        head = f"{method} {path} HTTP/1.1\r\nHost: {HOST}:{self.port}\r\n"
-        if body:
-            head += f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n"
-        writer.write((head + "\r\n").encode() + body)
-        answer = await reader.readuntil(b"\r\n\r\n")
-        length = re.search(rb"(?i)\r\ncontent-length: *(\d+)", answer)
-        content = await reader.readexactly(int(length.group(1))) if length else b""
-        return int(answer[9:12]), content
-
-    def close(self) -> None:
-        if self._streams is not None:
-            self._streams[1].close()
-            self._streams = None
-
-
-async def timed_request(
-    connection: HttpConnection, method: str, path: str, body: bytes = b""
-) -> tuple[int | str, float, bytes]:
-    """Status (or ``"timeout"`` / ``"error"``), seconds until the answer, and its body."""
-    started = time.perf_counter()
-    try:
-        status, content = await connection.request(method, path, body)
-    except TimeoutError:
-        return "timeout", time.perf_counter() - started, b""
-    except OSError:
-        return "error", time.perf_counter() - started, b""
-    return status, time.perf_counter() - started, content
-
-
-# -- the service's /metrics ------------------------------------------------------------
-
-_SAMPLE = re.compile(r"^([a-zA-Z_:][\w:]*)(?:\{([^}]*)\})? (\S+)$", re.MULTILINE)
-_LABEL = re.compile(r'(\w+)="([^"]*)"')
-
-
-def parse_metrics(text: str) -> dict[str, Any]:
-    """The figures the benchmark reads from Prometheus text (None where one is missing).
-
-    ``underruns`` (counter ``phantomtouch_underruns``), ``inline_renders`` (counter
-    ``phantomtouch_inline_renders``), ``render_load_p99`` and
-    ``render_load_max`` (gauge ``phantomtouch_render_load`` at quantiles 0.99 and 1),
-    ``active_voices``, and ``requests``: ``{"route status": count}`` from
-    ``phantomtouch_http_requests``.
-    """
-    figures: dict[str, Any] = {
-        "underruns": None,
-        "inline_renders": None,
-        "render_load_p99": None,
-        "render_load_max": None,
-        "active_voices": None,
-        "requests": {},
-    }
-    for name, label_text, value in _SAMPLE.findall(text):
-        labels = dict(_LABEL.findall(label_text or ""))
-        if name in ("phantomtouch_underruns_total", "phantomtouch_underruns"):
-            figures["underruns"] = float(value)
-        elif name in ("phantomtouch_inline_renders_total", "phantomtouch_inline_renders"):
-            figures["inline_renders"] = float(value)
-        elif name == "phantomtouch_render_load" and labels.get("quantile") == "0.99":
-            figures["render_load_p99"] = float(value)
-        elif name == "phantomtouch_render_load" and labels.get("quantile") in ("1", "1.0"):
-            figures["render_load_max"] = float(value)
-        elif name == "phantomtouch_active_voices":
-            figures["active_voices"] = float(value)
-        elif name == "phantomtouch_http_requests_total":
-            key = f"{labels.get('method', '?')} {labels.get('route', '?')} {labels['status']}"
-            figures["requests"][key] = figures["requests"].get(key, 0) + int(float(value))
-    return figures
-
-
-def render_load_window_s(text: str, block_s: float) -> float | None:
-    """How far back the render load quantiles look, if the metric's help text says so."""
-    match = re.search(r"# HELP phantomtouch_render_load .*?last (\d+) blocks", text)
-    return int(match.group(1)) * block_s if match else None
-
-
-async def metrics(connection: HttpConnection) -> dict[str, Any] | None:
-    status, _, content = await timed_request(connection, "GET", "/metrics")
-    return parse_metrics(content.decode("utf-8", "replace")) if status == 200 else None
-
-
-async def sample_metrics(port: int, deadline: float, interval_s: float) -> list[dict[str, Any]]:
-    """``/metrics`` every ``interval_s`` until ``deadline`` (monotonic clock)."""
-    connection = HttpConnection(port)
-    samples = []
-    try:
-        while time.monotonic() < deadline:
-            due = time.monotonic() + interval_s
-            sample = await metrics(connection)
-            if sample is not None:
-                samples.append(sample)
-            await asyncio.sleep(max(0.0, min(due, deadline) - time.monotonic()))
-    finally:
-        connection.close()
-    return samples
-
-
-async def sample_health(port: int, deadline: float, interval_s: float) -> dict[str, Any]:
-    """``GET /health`` every ``interval_s``: latencies of the answers, statuses of all."""
-    connection = HttpConnection(port)
-    latencies: list[float] = []
-    statuses: dict[str, int] = {}
-    try:
-        while time.monotonic() < deadline:
-            due = time.monotonic() + interval_s
-            status, seconds, _ = await timed_request(connection, "GET", "/health")
-            count(statuses, status)
-            if isinstance(status, int):
-                latencies.append(seconds)
-            await asyncio.sleep(max(0.0, min(due, deadline) - time.monotonic()))
-    finally:
-        connection.close()
-    return {"latencies_s": latencies, "statuses": statuses}
-
-
-# -- load ------------------------------------------------------------------------------
+# -- touches and hands -----------------------------------------------------------------
 
 
 def soak_body(index: int, points: int) -> bytes:
@@ -449,65 +282,3 @@ def stop(processes: list[subprocess.Popen[bytes]]) -> None:
         if process.poll() is None:
             process.kill()
         process.wait()
-
-
-# -- the machine -----------------------------------------------------------------------
-
-
-def cpu_seconds() -> tuple[float, float]:
-    """CPU seconds spent so far by the whole machine and by this process and its descendants.
-
-    The machine's figure is every core's busy time (``/proc/stat`` without idle and
-    iowait); the tree's counts live descendants (the service, its engine process, JACK)
-    and, through ``cutime``/``cstime``, the children already waited for (hogs, wrk).
-    """
-    tick_s = 1.0 / os.sysconf("SC_CLK_TCK")
-    ticks = [int(t) for t in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
-    machine_s = (sum(ticks) - ticks[3] - ticks[4]) * tick_s
-    parents: dict[int, int] = {}
-    spent: dict[int, int] = {}
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        pid = int(entry.name)
-        parents[pid] = int(fields[1])
-        spent[pid] = sum(int(f) for f in fields[11:15])  # utime stime cutime cstime
-    tree, frontier = set(), [os.getpid()]
-    while frontier:
-        pid = frontier.pop()
-        tree.add(pid)
-        frontier += [child for child, parent in parents.items() if parent == pid]
-    return machine_s, sum(spent.get(pid, 0) for pid in tree) * tick_s
-
-
-def rss_bytes(pid: int) -> int | None:
-    """Resident memory of a process, bytes (``VmRSS``), or None when it is gone."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        return None
-    return None
-
-
-def engine_pid(server_pid: int) -> int | None:
-    """The engine process of a service: its child started by ``multiprocessing`` spawn
-    (not the resource tracker, its other child), or None."""
-    for task in Path(f"/proc/{server_pid}/task").glob("*"):
-        try:
-            children = [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            continue
-        for child in children:
-            try:
-                command = Path(f"/proc/{child}/cmdline").read_bytes()
-            except OSError:
-                continue
-            if b"spawn_main" in command:
-                return child
-    return None

@@ -1,5 +1,6 @@
-"""The Markdown table of ``bench_realtime.py``: one row per scenario, ``—`` where a figure
-is missing (a service that does not report it)."""
+"""What ``bench_realtime.py`` prints: the machine, JACK's own floor, then a Markdown table
+with one row per scenario (``—`` where a figure is missing: a service that does not report
+it), and the soak's resident memory."""
 
 from __future__ import annotations
 
@@ -14,6 +15,10 @@ TITLES = {
     "n": "noise bands the engine does not hold yet",
     "o": "noise bands in the disagreeing order",
 }
+
+
+def mb(size: int | None) -> str:
+    return "—" if size is None else f"{size / 1e6:.0f}"
 
 
 def percent(fraction: float | None) -> str:
@@ -64,7 +69,7 @@ def load_text(result: dict[str, Any]) -> str:
 
 
 def xruns_text(result: dict[str, Any]) -> str:
-    """``total (late wake-ups / slow cycles or late clients)``: ``bench_realtime.xrun_causes``."""
+    """``total (late wake-ups / slow cycles or late clients)``: ``realtime_floor.xrun_causes``."""
     causes = result.get("jack_xrun_causes", {})
     slow = sum(n for key, n in causes.items() if key != "late_wakeup")
     return f"{result['jack_xruns']} ({causes.get('late_wakeup', 0)} / {slow})"
@@ -113,3 +118,37 @@ def table(results: dict[str, Any]) -> str:
             f"| {floor_text(r)} | {stalls_text(r)} |"
         )
     return "\n".join(lines)
+
+
+def print_report(results: dict[str, Any], channels: int, memory_every_s: float) -> None:
+    """Print the results of a run: ``channels`` is the width of the yardstick's block,
+    ``memory_every_s`` how often the soak sampled resident memory."""
+    period_frames, sample_rate_hz = results["period_frames"], results["sample_rate_hz"]
+    print(
+        f"machine: {results['cpus']} cpus, load average {results['load_avg_1min']:.2f} -> "
+        f"{results['load_avg_1min_after']:.2f}; JACK dummy {sample_rate_hz} Hz, "
+        f"{period_frames}-frame periods ({period_frames / sample_rate_hz * 1e3:.2f} ms)"
+    )
+    print(
+        f"yardstick: numpy copy of one {period_frames} x {channels} block "
+        f"{results['block_copy_us']:.2f} µs; render load window "
+        f"{number(results['render_load_window_s'])} s, "
+        f"rest {results['config']['rest_seconds']:g} s\n"
+    )
+    base = results["floor"]
+    print(
+        f"floor: JACK alone for {base['seconds']:g} s: {xruns_text(base)} xruns "
+        "(timer: the dummy driver woke late; slow: a cycle, that is a client, took too long); "
+        f"a do-nothing SCHED_FIFO thread: {floor_text(base)} wake-ups a period or more late\n"
+    )
+    print(table(results))
+    for key, result in results["scenarios"].items():
+        if "rss_bytes" in result:
+            series = result["rss_bytes"]["series"]
+            print(f"\n({key}) resident memory, MB, every {memory_every_s:g} s:")
+            for name in series[0][1]:
+                print(f"  {name}: " + " ".join(f"{mb(rss[name])}" for _, rss in series))
+    print(
+        "\ntarget: 0 underruns and 0 xruns in a, b and c; the flood's excess refused (503) or "
+        "stolen; render load p99 <= 25 % of the period"
+    )
