@@ -44,7 +44,7 @@ import phantomtouch as pt
 from phantomtouch.engine import Engine
 from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import MAX_VOICES
-from phantomtouch.engine.sinks import RenderFn
+from phantomtouch.engine.sinks import RenderFn, Sink
 
 PATTERN_PRESETS = [n for n in pt.preset_names() if n.startswith("exp1/") and "-v3" in n][::2]
 
@@ -167,12 +167,15 @@ class CallbackProbe:
 class ProbedSink:
     """A sink wrapped so that every callback is timed by a :class:`CallbackProbe`."""
 
-    def __init__(self, inner: Any, capacity: int) -> None:
+    def __init__(self, inner: Sink, capacity: int) -> None:
         self._inner = inner
         self._capacity = capacity
         self.probe = CallbackProbe(lambda out: None, 0)
-        for name in ("backend", "realtime", "sample_rate_hz", "block_frames", "channels"):
-            setattr(self, name, getattr(inner, name))
+        self.backend = inner.backend
+        self.realtime = inner.realtime
+        self.sample_rate_hz = inner.sample_rate_hz
+        self.block_frames = inner.block_frames
+        self.channels = inner.channels
 
     @property
     def output_device(self) -> str | None:

@@ -21,9 +21,11 @@ partitioned form >= 8x cheaper, equal within 1e-6 of full scale.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 from scipy import signal
@@ -35,17 +37,19 @@ FS = 48000
 CHANNELS = 8
 
 
-def cpu_s(fn) -> float:
+def cpu_s(fn: Callable[[], object]) -> float:
     start = time.process_time()
     fn()
     return time.process_time() - start
 
 
-def best_of(fn, repeats: int) -> float:
+def best_of(fn: Callable[[], object], repeats: int) -> float:
     return min(cpu_s(fn) for _ in range(repeats))
 
 
-def best_of_alternating(first, second, repeats: int) -> tuple[float, float]:
+def best_of_alternating(
+    first: Callable[[], object], second: Callable[[], object], repeats: int
+) -> tuple[float, float]:
     """Best CPU time of each of two functions, run in turns."""
     best = [math.inf, math.inf]
     for _ in range(repeats):
@@ -91,8 +95,8 @@ def main() -> None:
         fast = partitioned(taps, x, block)
         slow = direct(taps, x, block)
         fast_s, slow_s = best_of_alternating(
-            lambda b=block: partitioned(taps, x, b),
-            lambda b=block: direct(taps, x, b),
+            functools.partial(partitioned, taps, x, block),
+            functools.partial(direct, taps, x, block),
             args.repeats,
         )
         rows.append(

@@ -48,8 +48,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import fleet_failures
 import fleet_fanout
 
-from tests.support.fleet import ArmbandNode, Gateway, wait_until
+from tests.support.fleet import ArmbandNode, Gateway
 from tests.support.nats_cluster import NatsCluster
+from tests.support.waiting import wait_until
 
 TIME_BUDGET_S = 10.0
 """No single measurement runs longer than this."""
@@ -313,9 +314,8 @@ def run(quick: bool, concurrency: int) -> dict[str, Any]:
                 contact_moves(gateway, nodes[0], 2000 if quick else 10000)
             )
             progress("measuring listings across a server loss ...")
-            armbands = {n.armband for n in nodes}
             results["listings"] = fleet_failures.listings_across_loss(
-                cluster, gateway, armbands, listings
+                cluster, gateway, {n.armband for n in nodes}, listings
             )
             progress("measuring refusal latency ...")
             results["refusals"] = fleet_failures.refusals(cluster, gateway, nodes[-1], nodes[0])

@@ -259,6 +259,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
         if args.rest_seconds is None:
             args.rest_seconds = (window_s or 11.0) + 1.0
         results["config"]["rest_seconds"] = args.rest_seconds
+        assert service.process is not None
         loads = scenario_loads(port, service.process.pid, wrk or "wrk", folder, hogs, args)
         for key in args.scenarios:
             seconds, make_load = loads[key]

@@ -15,6 +15,7 @@ import argparse
 import json
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -25,7 +26,7 @@ from phantomtouch.renderer.trajectory import envelope_at, positions_at
 PATTERNS = ("exp2/curved", "exp1/sine100-low-v3", "exp1/sine100-high-v10-am", "exp1/noise-low-v18")
 
 
-def best_of(fn, repeats: int) -> float:
+def best_of(fn: Callable[[], object], repeats: int) -> float:
     best = math.inf
     for _ in range(repeats):
         start = time.process_time()

@@ -19,10 +19,11 @@ from typing import Any
 
 import httpx
 
-from tests.support.fleet import ArmbandNode, Gateway, wait_until
+from tests.support.fleet import ArmbandNode, Gateway
 from tests.support.fleet_startup import run_rounds
 from tests.support.live_server import HOST
 from tests.support.nats_cluster import NatsCluster
+from tests.support.waiting import wait_until
 
 TAP = {"preset": "vr/tap"}
 ONE_ATTEMPT_S = 1e-3

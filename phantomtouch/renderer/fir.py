@@ -83,13 +83,16 @@ class PartitionedFir:
 
     Parameters
     ----------
-    taps : sequence of sequences of float, one per channel, each non-empty
-        Shorter rows are zero-padded to the longest.
+    taps : sequence of sequences of float, or array of shape (channels, taps)
+        One row per channel, each non-empty; shorter rows are zero-padded to the longest.
     partition_frames : int, >= 1
     """
 
     def __init__(
-        self, taps: Sequence[Sequence[float]], *, partition_frames: int = PARTITION_FRAMES
+        self,
+        taps: Sequence[Sequence[float]] | np.ndarray,
+        *,
+        partition_frames: int = PARTITION_FRAMES,
     ) -> None:
         rows = [np.asarray(t, dtype=np.float64).ravel() for t in taps]
         size = partition_frames
