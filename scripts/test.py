@@ -40,6 +40,16 @@ def checks(python: str) -> list[list[str]]:
             ".mypy_cache/win32",
         ],
         [python, "-m", "mypy", "--platform", "darwin", "--cache-dir", ".mypy_cache/darwin"],
+        [
+            python,
+            "-m",
+            "mypy",
+            "--platform",
+            "linux",
+            "--cache-dir",
+            ".mypy_cache/benchmarks",
+            "benchmarks",
+        ],
         [python, "-m", "ruff", "format", "--check", *client],
         [python, "-m", "ruff", "check", *client],
     ]
