@@ -1,4 +1,4 @@
-"""Fixtures of the client tests: the real service, started as a subprocess."""
+"""Fixtures of the client tests: the real service, started as a subprocess, and a client."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from phantomtouch_client import Client
 
 from tests.clients.live import Observer, running
 from tests.support.live_server import LiveServer
@@ -16,6 +17,13 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     """One service for the tests that do not restart it."""
     with running(tmp_path_factory.mktemp("live-server")) as live:
         yield live
+
+
+@pytest.fixture
+def client(server: LiveServer) -> Iterator[Client]:
+    """A blocking Python client of the shared service, closed after the test."""
+    with Client(server.url) as pt:
+        yield pt
 
 
 @pytest.fixture

@@ -19,6 +19,7 @@
 neither the service nor numpy); errors derive from :class:`ClientError`.
 """
 
+from phantomtouch_client.async_rest import AsyncClient
 from phantomtouch_client.connection import Backoff, SessionState
 from phantomtouch_client.contact import Contact
 from phantomtouch_client.errors import (
@@ -63,7 +64,8 @@ from phantomtouch_client.models import (
     touch_request,
 )
 from phantomtouch_client.pattern import HapticClip, TouchPattern
-from phantomtouch_client.rest import AsyncClient, Client, ws_url
+from phantomtouch_client.rest import Client
+from phantomtouch_client.rest_base import ws_url
 from phantomtouch_client.session import AsyncSession
 from phantomtouch_client.sync_session import Session, SyncContact
 

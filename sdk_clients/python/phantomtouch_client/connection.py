@@ -24,7 +24,7 @@ from websockets.frames import CloseCode
 
 from phantomtouch_client.errors import ApiError, TransportError, api_error, error_from_response
 from phantomtouch_client.models import Welcome
-from phantomtouch_client.rest import auth_headers
+from phantomtouch_client.rest_base import auth_headers
 
 DEFAULT_WS_URL = "ws://127.0.0.1:8000/ws"
 PROTOCOL = 1

@@ -1,23 +1,20 @@
-"""REST clients: :class:`Client` (blocking) and :class:`AsyncClient` (asyncio), over httpx.
+"""The blocking REST client, :class:`Client`, over httpx.
 
-Both cover every route of the service with the same method names and answers; the routes
-themselves are described once, in :mod:`phantomtouch_client._calls`.
+It covers every route of the service; the routes themselves are described once, in
+:mod:`phantomtouch_client._calls`, and what it shares with its asyncio twin
+(:class:`~phantomtouch_client.AsyncClient`) is in :mod:`phantomtouch_client.rest_base`.
 """
 
 from __future__ import annotations
 
-import asyncio
 import time
 from collections.abc import Mapping
-from datetime import UTC, datetime
-from email.utils import parsedate_to_datetime
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 import httpx
 
 from phantomtouch_client import _calls
-from phantomtouch_client.errors import ParameterError, ReplyTimeout, TransportError
 from phantomtouch_client.models import (
     ActiveWearer,
     ClipSummary,
@@ -33,95 +30,18 @@ from phantomtouch_client.models import (
     Summary,
     Wearer,
     WearerSummary,
-    fleet_touch_request,
     touch_request,
 )
 from phantomtouch_client.pattern import HapticClip, TouchPattern
+from phantomtouch_client.rest_base import DEFAULT_URL, ClientBase, auth_headers, ws_url
 
 if TYPE_CHECKING:
-    from phantomtouch_client.session import AsyncSession
     from phantomtouch_client.sync_session import Session
 
 T = TypeVar("T")
 
-DEFAULT_URL = "http://127.0.0.1:8000"
 
-
-def ws_url(base_url: str) -> str:
-    """The WebSocket address ``/ws`` of a service at ``base_url`` (http -> ws, https -> wss)."""
-    url = httpx.URL(base_url)
-    scheme = {"http": "ws", "https": "wss"}.get(url.scheme, url.scheme)
-    return str(url.copy_with(scheme=scheme, path=url.path.rstrip("/") + "/ws"))
-
-
-def auth_headers(token: str | None) -> dict[str, str]:
-    """The header that carries the service token, if there is one."""
-    return {"Authorization": f"Bearer {token}"} if token else {}
-
-
-RETRY_STATUSES = frozenset({429, 503})
-"""Refusals that say "not now": too many requests, the engine busy (not accepted)."""
-
-
-def retry_after_s(response: httpx.Response) -> float | None:
-    """Seconds ``Retry-After`` asks to wait (a number or an HTTP date), None without one."""
-    value = response.headers.get("Retry-After")
-    if value is None:
-        return None
-    try:
-        return max(0.0, float(value))
-    except ValueError:
-        pass
-    try:
-        when = parsedate_to_datetime(value)
-    except (TypeError, ValueError):
-        return None
-    return max(0.0, (when - datetime.now(UTC)).total_seconds())
-
-
-class _Base:
-    def __init__(
-        self,
-        base_url: str,
-        token: str | None,
-        timeout_s: float,
-        retries: int,
-        max_retry_wait_s: float,
-    ) -> None:
-        if retries < 0 or max_retry_wait_s < 0:
-            raise ParameterError(
-                f"retries={retries!r} and max_retry_wait_s={max_retry_wait_s!r} must be >= 0"
-            )
-        self.base_url = base_url.rstrip("/")
-        self.token = token
-        self.timeout_s = timeout_s
-        self.retries = retries
-        self.max_retry_wait_s = max_retry_wait_s
-
-    def _retry_wait_s(self, response: httpx.Response, attempt: int) -> float | None:
-        """How long to wait before retrying ``response``, or None to give up."""
-        if response.status_code not in RETRY_STATUSES or attempt >= self.retries:
-            return None
-        wait_s = retry_after_s(response)
-        if wait_s is None or wait_s > self.max_retry_wait_s:
-            return None
-        return wait_s
-
-    def _request_args(self, call: _calls.Call[Any]) -> dict[str, Any]:
-        args: dict[str, Any] = {"headers": {"Accept": call.accept}}
-        if call.body is not None:
-            args["json"] = call.body
-        return args
-
-    @staticmethod
-    def _failed(call: _calls.Call[Any], exc: httpx.HTTPError) -> Exception:
-        what = f"{call.method} {call.path}"
-        if isinstance(exc, httpx.TimeoutException):
-            return ReplyTimeout(f"{what}: no answer in time ({exc})")
-        return TransportError(f"{what}: {exc}")
-
-
-class Client(_Base):
+class Client(ClientBase):
     """A blocking client of the REST API.
 
     >>> with Client("http://127.0.0.1:8000") as pt:          # doctest: +SKIP
@@ -208,18 +128,17 @@ class Client(_Base):
         wall-clock time (the same instant on every armband sent it); the answer then also
         carries ``armband``, ``site`` and ``start_at_unix_s``.
         """
-        body = fleet_touch_request(
-            touch_request(
-                pattern,
-                preset=preset,
-                stored=stored,
-                overrides=overrides,
-                start_in_ms=start_in_ms,
-                start_at_s=start_at_s,
-            ),
-            start_at_unix_s,
+        call = self._touch_call(
+            pattern,
+            preset=preset,
+            stored=stored,
+            overrides=overrides,
+            start_in_ms=start_in_ms,
+            start_at_s=start_at_s,
+            armband=armband,
+            start_at_unix_s=start_at_unix_s,
         )
-        return self._run(_calls.touch(body, armband))
+        return self._run(call)
 
     def render(
         self,
@@ -354,230 +273,3 @@ class Client(_Base):
     def metrics(self) -> str:
         """``GET /metrics``: Prometheus text."""
         return self._run(_calls.metrics())
-
-
-class AsyncClient(_Base):
-    """The asyncio twin of :class:`Client`: the same methods, awaited.
-
-    >>> async with AsyncClient() as pt:                        # doctest: +SKIP
-    ...     job = await pt.touch(preset="exp2/curved")
-    """
-
-    def __init__(
-        self,
-        base_url: str = DEFAULT_URL,
-        *,
-        token: str | None = None,
-        timeout_s: float = 10.0,
-        retries: int = 2,
-        max_retry_wait_s: float = 5.0,
-        transport: httpx.AsyncBaseTransport | None = None,
-    ) -> None:
-        super().__init__(base_url, token, timeout_s, retries, max_retry_wait_s)
-        self._http = httpx.AsyncClient(
-            base_url=self.base_url,
-            headers=auth_headers(token),
-            timeout=timeout_s,
-            transport=transport,
-        )
-
-    async def __aenter__(self) -> Self:
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        await self.aclose()
-
-    async def aclose(self) -> None:
-        await self._http.aclose()
-
-    async def _run(self, call: _calls.Call[T]) -> T:
-        attempt = 0
-        while True:
-            try:
-                response = await self._http.request(
-                    call.method, call.path, **self._request_args(call)
-                )
-            except httpx.HTTPError as exc:
-                raise self._failed(call, exc) from exc
-            wait_s = self._retry_wait_s(response, attempt)
-            if wait_s is None:
-                return call.parse(response)
-            attempt += 1
-            await asyncio.sleep(wait_s)
-
-    def session(self, **options: Any) -> AsyncSession:
-        """A WebSocket session with this client's address and token (not yet connected).
-
-        ``options`` are those of :class:`~phantomtouch_client.AsyncSession`.
-        """
-        from phantomtouch_client.session import AsyncSession
-
-        return AsyncSession(ws_url(self.base_url), token=self.token, **options)
-
-    async def touch(
-        self,
-        pattern: PatternArg = None,
-        *,
-        preset: str | None = None,
-        stored: str | None = None,
-        overrides: Mapping[str, Any] | None = None,
-        start_in_ms: float | None = None,
-        start_at_s: float | None = None,
-        armband: str | None = None,
-        start_at_unix_s: float | None = None,
-    ) -> Job:
-        """``POST /touch``: schedule a touch; see :func:`~phantomtouch_client.touch_request`.
-
-        Through a fleet gateway, ``armband`` addresses one armband
-        (``POST /armbands/{armband}/touch``) and ``start_at_unix_s`` starts it at that
-        wall-clock time (the same instant on every armband sent it); the answer then also
-        carries ``armband``, ``site`` and ``start_at_unix_s``.
-        """
-        body = fleet_touch_request(
-            touch_request(
-                pattern,
-                preset=preset,
-                stored=stored,
-                overrides=overrides,
-                start_in_ms=start_in_ms,
-                start_at_s=start_at_s,
-            ),
-            start_at_unix_s,
-        )
-        return await self._run(_calls.touch(body, armband))
-
-    async def render(
-        self,
-        pattern: PatternArg = None,
-        *,
-        preset: str | None = None,
-        stored: str | None = None,
-        overrides: Mapping[str, Any] | None = None,
-    ) -> bytes:
-        """``POST /render``: the touch as a WAV file (float32, one channel per actuator)."""
-        body = touch_request(pattern, preset=preset, stored=stored, overrides=overrides)
-        return await self._run(_calls.render_wav(body))
-
-    async def render_plan(
-        self,
-        pattern: PatternArg = None,
-        *,
-        preset: str | None = None,
-        stored: str | None = None,
-        overrides: Mapping[str, Any] | None = None,
-    ) -> RenderPlan:
-        """``POST /render`` as JSON: the plan and its curves (times, positions, gains)."""
-        body = touch_request(pattern, preset=preset, stored=stored, overrides=overrides)
-        return await self._run(_calls.render_plan(body))
-
-    async def job(self, job_id: JobId) -> JobStatus:
-        """``GET /jobs/{id}``."""
-        return await self._run(_calls.job(job_id))
-
-    async def cancel_job(self, job_id: JobId) -> JobStatus:
-        """``DELETE /jobs/{id}``: stop that job with its release ramp."""
-        return await self._run(_calls.cancel_job(job_id))
-
-    async def armbands(self) -> list[dict[str, Any]]:
-        """``GET /armbands`` of a fleet gateway: the armbands online, with their devices."""
-        return await self._run(_calls.armbands())
-
-    async def stop(self) -> StopAnswer:
-        """``POST /stop``: every job and contact of every client off at once."""
-        return await self._run(_calls.stop())
-
-    async def patterns(self) -> list[Summary]:
-        """``GET /patterns``: the stored patterns."""
-        return await self._run(_calls.patterns())
-
-    async def get_pattern(self, name: str) -> TouchPattern:
-        """``GET /patterns/{name}``."""
-        return await self._run(_calls.get_pattern(name))
-
-    async def put_pattern(self, name: str, pattern: TouchPattern | Mapping[str, Any]) -> Summary:
-        """``PUT /patterns/{name}``: store (or replace) a pattern under ``name``."""
-        return await self._run(_calls.put_pattern(name, pattern))
-
-    async def delete_pattern(self, name: str) -> None:
-        """``DELETE /patterns/{name}``."""
-        await self._run(_calls.delete_pattern(name))
-
-    async def play_pattern(
-        self, name: str, *, start_in_ms: float | None = None, start_at_s: float | None = None
-    ) -> Job:
-        """``POST /patterns/{name}/play``."""
-        return await self._run(
-            _calls.play_pattern(name, start_in_ms=start_in_ms, start_at_s=start_at_s)
-        )
-
-    async def clips(self) -> list[ClipSummary]:
-        """``GET /clips``: the stored haptic clips."""
-        return await self._run(_calls.clips())
-
-    async def get_clip(self, name: str) -> HapticClip:
-        """``GET /clips/{name}``."""
-        return await self._run(_calls.get_clip(name))
-
-    async def put_clip(self, name: str, clip: HapticClip | Mapping[str, Any]) -> ClipSummary:
-        """``PUT /clips/{name}``: store (or replace) a clip."""
-        return await self._run(_calls.put_clip(name, clip))
-
-    async def delete_clip(self, name: str) -> None:
-        """``DELETE /clips/{name}``."""
-        await self._run(_calls.delete_clip(name))
-
-    async def wearers(self) -> list[WearerSummary]:
-        """``GET /wearers``: the stored wearer profiles."""
-        return await self._run(_calls.wearers())
-
-    async def get_wearer(self, name: str) -> Wearer:
-        """``GET /wearers/{name}``."""
-        return await self._run(_calls.get_wearer(name))
-
-    async def put_wearer(
-        self, name: str, offsets_db: Mapping[str, Mapping[int | str, float]], note: str = ""
-    ) -> Wearer:
-        """``PUT /wearers/{name}``: offsets in dB per band and actuator, within ±20 dB."""
-        return await self._run(_calls.put_wearer(name, offsets_db, note))
-
-    async def delete_wearer(self, name: str) -> None:
-        """``DELETE /wearers/{name}``."""
-        await self._run(_calls.delete_wearer(name))
-
-    async def wearer(self) -> ActiveWearer:
-        """``GET /wearer``: the wearer the output stage is fitted to now."""
-        return await self._run(_calls.active_wearer())
-
-    async def use_wearer(self, name: str, band: str = "sine_100hz") -> ActiveWearer:
-        """``PUT /wearer``: fit the output stage to the stored profile ``name`` (its
-        ``band``) from the next block on, until another is chosen."""
-        return await self._run(_calls.use_wearer(name, band))
-
-    async def no_wearer(self) -> None:
-        """``DELETE /wearer``: the device's calibration alone from the next block on."""
-        await self._run(_calls.no_wearer())
-
-    async def device(self) -> DeviceInfo:
-        """``GET /device``."""
-        return await self._run(_calls.device())
-
-    async def presets(self) -> list[Summary]:
-        """``GET /presets``."""
-        return await self._run(_calls.presets())
-
-    async def clock(self) -> Clock:
-        """``GET /clock``: the server clock, for ``start_at_s``."""
-        return await self._run(_calls.clock())
-
-    async def health(self) -> Health:
-        """``GET /health``."""
-        return await self._run(_calls.health())
-
-    async def metrics(self) -> str:
-        """``GET /metrics``: Prometheus text."""
-        return await self._run(_calls.metrics())
