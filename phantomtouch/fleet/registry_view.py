@@ -7,11 +7,14 @@ the view shows what it last knew until the watch delivers again.
 Expiry follows the registry's own clock. A record is online while its NATS time stamp
 plus its ``ttl_s`` lies ahead of the newest time stamp the view has seen (any node's
 heartbeat moves that clock on), so a node that stopped beating drops out when the others'
-heartbeats show its TTL ran out, whatever the gateway's own clock says. While nothing at
-all arrives (the registry is failing over, or every node is gone) the clock stands still
-for :data:`STALL_S`, then runs on with the gateway's monotonic clock: records are kept
-through a failover, and the last ones expire ``STALL_S`` after their TTL when all nodes
-have died.
+heartbeats show its TTL ran out, whatever the gateway's own clock says. That clock counts
+only time in which the registry took writes: once the view follows the bucket, a rise of
+the newest time stamp by more than a heartbeat (the registry took no write meanwhile: its
+stream was electing a leader) counts as one heartbeat, so the first nodes whose heartbeats
+land after a failover do not make the others look expired. While nothing at all arrives
+(the registry is failing over, or every node is gone) the clock stands still for
+:data:`STALL_S`, then runs on with the gateway's monotonic clock: records are kept through
+a failover, and the last ones expire ``STALL_S`` after their TTL when all nodes have died.
 
 The watch is started again when it has been silent for :data:`SILENT_HEARTBEATS`
 heartbeats (its consumer may have lived on the server that died; with no record at all,
@@ -47,7 +50,8 @@ REWATCH_PAUSE_S = 0.25
 @dataclass
 class _Entry:
     record: ArmbandRecord
-    created_s: float
+    clock_s: float
+    """Its NATS time stamp on the registry's clock: less the silences counted before it."""
     revision: int
 
 
@@ -60,6 +64,9 @@ class RegistryView:
         self._entries: dict[str, _Entry] = {}
         self._newest_created_s = 0.0
         self._newest_received_s = time.monotonic()
+        self._skipped_s = 0.0
+        """Time stamps' rises the registry's clock does not count (its silences), s."""
+        self._following = False
         self._watcher: Any = None
         self._task: asyncio.Task[None] | None = None
         self._closing = False
@@ -68,12 +75,12 @@ class RegistryView:
 
     def _registry_time_s(self) -> float:
         silent_s = time.monotonic() - self._newest_received_s
-        return self._newest_created_s + max(0.0, silent_s - STALL_S)
+        return self._newest_created_s - self._skipped_s + max(0.0, silent_s - STALL_S)
 
     def lookup(self, armband: str) -> ArmbandRecord | None:
         """The armband's record, or None when it is not online."""
         entry = self._entries.get(armband)
-        if entry is None or entry.created_s + entry.record.ttl_s <= self._registry_time_s():
+        if entry is None or entry.clock_s + entry.record.ttl_s <= self._registry_time_s():
             return None
         return entry.record
 
@@ -83,7 +90,7 @@ class RegistryView:
         return [
             entry.record
             for _, entry in sorted(self._entries.items())
-            if entry.created_s + entry.record.ttl_s > now_s
+            if entry.clock_s + entry.record.ttl_s > now_s
         ]
 
     # -- the watch ------------------------------------------------------------------------
@@ -103,6 +110,7 @@ class RegistryView:
             The watch could not be started, or the bucket not read, by ``deadline``.
         """
         await retried(who, "read the registry", self._first_watch, deadline)
+        self._following = True
         self._task = asyncio.create_task(self._follow())
 
     async def _first_watch(self) -> None:
@@ -132,9 +140,12 @@ class RegistryView:
                 await asyncio.wait_for(old.stop(), 1.0)
         self._watcher = await self.kv.watchall()
 
+    def _heartbeat_s(self) -> float:
+        """The longest heartbeat of the records held (1 s with none), s."""
+        return max((entry.record.heartbeat_s for entry in self._entries.values()), default=1.0)
+
     def _silence_s(self) -> float:
-        beats_s = [entry.record.heartbeat_s for entry in self._entries.values()]
-        return SILENT_HEARTBEATS * max(beats_s, default=1.0)
+        return SILENT_HEARTBEATS * self._heartbeat_s()
 
     async def _follow(self) -> None:
         import nats.errors
@@ -154,18 +165,21 @@ class RegistryView:
                 self._apply(entry)
 
     def _apply(self, entry: Any) -> None:
+        known = self._entries.get(entry.key)
+        if known is not None and entry.revision <= known.revision:
+            return  # a watch started again replays what the view holds
         created_s = entry.created.timestamp() if entry.created is not None else 0.0
         if created_s > self._newest_created_s:
+            if self._following:
+                rise_s = created_s - self._newest_created_s
+                self._skipped_s += max(0.0, rise_s - self._heartbeat_s())
             self._newest_created_s = created_s
             self._newest_received_s = time.monotonic()
-        known = self._entries.get(entry.key)
-        if known is not None and entry.revision < known.revision:
-            return
         record = None if entry.operation is not None else read_record(entry.value)
         if record is None or record.armband != entry.key:
             self._entries.pop(entry.key, None)
         else:
-            self._entries[entry.key] = _Entry(record, created_s, entry.revision)
+            self._entries[entry.key] = _Entry(record, created_s - self._skipped_s, entry.revision)
 
     async def close(self) -> None:
         """Stop following the bucket.
