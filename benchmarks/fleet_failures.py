@@ -2,8 +2,9 @@
 
 - start-up: three nodes and a gateway started together, many rounds, each against a
   freshly deleted registry bucket (tests/support/fleet_startup.py); beside it the same
-  starts with one attempt per call and no retry, as the fleet started before its
-  start-up calls were retried (the yardstick of the race);
+  starts with a 1 ms start deadline (before the start-up calls were retried, this tried
+  each call once; since each attempt is bounded by the deadline too, it cuts the attempt
+  itself, and no start succeeds: docs/fleet.md keeps the yardstick as it was measured);
 - listings across a server loss: the server the gateway is connected to is killed and
   ``GET /armbands`` asked ``count`` times (failed: not 200, or an armband missing);
   beside it the same listings before the kill;
@@ -27,7 +28,7 @@ from tests.support.waiting import wait_until
 
 TAP = {"preset": "vr/tap"}
 ONE_ATTEMPT_S = 1e-3
-"""A start deadline so short that every start-up call is tried exactly once."""
+"""A start deadline so short that no start-up call is tried again."""
 
 
 def startup(cluster: NatsCluster, rounds: int) -> dict[str, Any]:
@@ -38,7 +39,9 @@ def startup(cluster: NatsCluster, rounds: int) -> dict[str, Any]:
         outcomes = run_rounds(cluster.servers, rounds, deadline_s)
         figures[label] = {
             "succeeded": sum(o.outcome == "ok" for o in outcomes),
-            "slowest_start_s": max(o.elapsed_s for o in outcomes if o.outcome == "ok"),
+            "slowest_start_s": max(
+                (o.elapsed_s for o in outcomes if o.outcome == "ok"), default=None
+            ),
             "seconds": time.monotonic() - started_s,
             "first_failure": next((o.outcome for o in outcomes if o.outcome != "ok"), None),
         }
@@ -115,11 +118,13 @@ def refusals(
 
 def report(results: dict[str, Any]) -> None:
     start = results["startup"]
-    for label, what in (("retried", "retried"), ("one_attempt", "one attempt, no retry")):
+    for label, what in (("retried", "retried"), ("one_attempt", "1 ms deadline, no retry")):
         f = start[label]
+        slowest_s = f["slowest_start_s"]
         print(
             f"start-up, 3 nodes + gateway at once ({what}): {f['succeeded']} of "
-            f"{start['starts']} registered; slowest {f['slowest_start_s']:.2f} s"
+            f"{start['starts']} registered"
+            + ("" if slowest_s is None else f"; slowest {slowest_s:.2f} s")
             + (f"; e.g. {f['first_failure']}" if f["first_failure"] else "")
         )
     loss = results["listings"]
