@@ -27,6 +27,7 @@ import asyncio
 import contextlib
 import logging
 import time
+from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,6 +63,8 @@ class RegistryView:
     def __init__(self, kv: Any) -> None:
         self.kv = kv
         self._entries: dict[str, _Entry] = {}
+        self._beats: Counter[float] = Counter()
+        """The records' heartbeats, s: how many records hold each."""
         self._newest_created_s = 0.0
         self._newest_received_s = time.monotonic()
         self._skipped_s = 0.0
@@ -142,7 +145,7 @@ class RegistryView:
 
     def _heartbeat_s(self) -> float:
         """The longest heartbeat of the records held (1 s with none), s."""
-        return max((entry.record.heartbeat_s for entry in self._entries.values()), default=1.0)
+        return max(self._beats, default=1.0)
 
     def _silence_s(self) -> float:
         return SILENT_HEARTBEATS * self._heartbeat_s()
@@ -176,10 +179,15 @@ class RegistryView:
             self._newest_created_s = created_s
             self._newest_received_s = time.monotonic()
         record = None if entry.operation is not None else read_record(entry.value)
+        if known is not None:
+            self._beats[known.record.heartbeat_s] -= 1
+            if not self._beats[known.record.heartbeat_s]:
+                del self._beats[known.record.heartbeat_s]
         if record is None or record.armband != entry.key:
             self._entries.pop(entry.key, None)
         else:
             self._entries[entry.key] = _Entry(record, created_s - self._skipped_s, entry.revision)
+            self._beats[record.heartbeat_s] += 1
 
     async def close(self) -> None:
         """Stop following the bucket.
