@@ -366,7 +366,9 @@ class _Reader:
             if enable is False or (isinstance(enable, str) and enable.lower() == "false"):
                 continue
             for e, effect in enumerate(self.array(_get(track, "effects"), f"{where}.effects")):
-                effects.append(self.effect(self.obj(effect, f"{where}.effects[{e}]"), f"{where}.effects[{e}]"))
+                effects.append(
+                    self.effect(self.obj(effect, f"{where}.effects[{e}]"), f"{where}.effects[{e}]")
+                )
         return TactProject(name=str(name) if name else "", effects=tuple(effects), layouts=layouts)
 
     def layouts(self, layout: Mapping[str, Any]) -> dict[str, dict[int, tuple[float, float]]]:
@@ -402,7 +404,11 @@ class _Reader:
             position = position_name(key)
             if position is None:
                 continue
-            contents.append(self.content(position, self.obj(mode, f"{where}.modes.{key}"), f"{where}.modes.{key}"))
+            contents.append(
+                self.content(
+                    position, self.obj(mode, f"{where}.modes.{key}"), f"{where}.modes.{key}"
+                )
+            )
         return Effect(start_ms=start, length_ms=length, contents=tuple(contents))
 
     def content(self, position: str, mode: Mapping[str, Any], where: str) -> PositionContent:
@@ -411,14 +417,19 @@ class _Reader:
             path_mode = self.obj(_get(mode, "pathMode"), f"{where}.pathMode")
             feedback = self.array(_get(path_mode, "feedback"), f"{where}.pathMode.feedback")
             paths = tuple(
-                self.path(self.obj(fb, f"{where}.pathMode.feedback[{i}]"), f"{where}.pathMode.feedback[{i}]")
+                self.path(
+                    self.obj(fb, f"{where}.pathMode.feedback[{i}]"),
+                    f"{where}.pathMode.feedback[{i}]",
+                )
                 for i, fb in enumerate(feedback)
             )
             return PositionContent(position, "PATH_MODE", (), paths)
         dot_mode = self.obj(_get(mode, "dotMode"), f"{where}.dotMode")
         feedback = self.array(_get(dot_mode, "feedback"), f"{where}.dotMode.feedback")
         dots = tuple(
-            self.dots(self.obj(fb, f"{where}.dotMode.feedback[{i}]"), f"{where}.dotMode.feedback[{i}]")
+            self.dots(
+                self.obj(fb, f"{where}.dotMode.feedback[{i}]"), f"{where}.dotMode.feedback[{i}]"
+            )
             for i, fb in enumerate(feedback)
         )
         return PositionContent(position, "DOT_MODE", dots, ())
