@@ -65,6 +65,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         "wasapi_exclusive": args.exclusive or None,
         "wearer": args.wearer,
         "wearer_band": args.wearer_band,
+        "bhaptics_listen": args.bhaptics,
+        "bhaptics_map": args.bhaptics_map,
     }
     if args.osc is not None:
         _require("osc", "pythonosc")
@@ -88,19 +90,33 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         if settings.osc_map is not None:
             ReceiverMap.load(settings.osc_map)
         open_socket(*settings.osc_address).close()
+    if settings.bhaptics_address is not None:
+        from phantomtouch.clips.tact_map import ArmMap
+
+        if settings.bhaptics_map is not None:
+            ArmMap.load(settings.bhaptics_map)
+        check_port_free(*settings.bhaptics_address)
     print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
+    if settings.bhaptics_address is not None:
+        host, port = settings.bhaptics_address
+        print(f"phantomtouch serve: bHaptics stand-in on ws://{host}:{port}/v2/feedbacks")
     serve(settings, attach=_attachments(settings, fleet))
     return 0
 
 
 def _attachments(settings: Settings, fleet: Attachment | None) -> list[Attachment]:
     """What the running service is joined to, in the order it is entered: the OSC bridge
-    (``osc_listen`` set), then the armband node (``--fleet``)."""
+    (``osc_listen`` set), the bHaptics stand-in (``bhaptics_listen`` set), then the armband
+    node (``--fleet``)."""
     attachments: list[Attachment] = []
     if settings.osc_address is not None:
         from phantomtouch.osc.service_link import attach
 
         attachments.append(attach)
+    if settings.bhaptics_address is not None:
+        from phantomtouch.bhaptics.listener import attach as attach_bhaptics
+
+        attachments.append(attach_bhaptics)
     if fleet is not None:
         attachments.append(fleet)
     return attachments
@@ -131,6 +147,15 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
         "--wearer-band",
         choices=("sine_100hz", "noise_40_500hz"),
         help="band of the wearer profile to apply (default sine_100hz)",
+    )
+    parser.add_argument(
+        "--bhaptics",
+        metavar="HOST:PORT",
+        help="also stand in for the bHaptics Player: its WebSocket protocol on this loopback "
+        "address (the Player's is 127.0.0.1:15881)",
+    )
+    parser.add_argument(
+        "--bhaptics-map", help="bHaptics arm map file (TOML), with --bhaptics (docs/bhaptics.md)"
     )
     fleet_cli.add_serve_options(parser)
 

@@ -8,7 +8,7 @@ The layers, lowest first (docs/architecture.md)::
     package      phantomtouch/__init__.py (the public names) -> renderer, base
     engine       phantomtouch.engine                         -> renderer, base
     service      phantomtouch.service                         -> engine, clips, package, ...
-    server, fleet, osc                                       -> service and below; never
+    server, fleet, osc, bhaptics                             -> service and below; never
                                                                 each other
     composition  the command line (cli, its *_command modules, device_arg, __main__), and the
                  offline tools it runs (analysis, plot, manifest): may import anything.
@@ -39,6 +39,7 @@ LAYER_OF = {
     "phantomtouch.server": "server",
     "phantomtouch.fleet": "fleet",
     "phantomtouch.osc": "osc",
+    "phantomtouch.bhaptics": "bhaptics",
     "phantomtouch.__main__": "composition",
     "phantomtouch.cli": "composition",
     "phantomtouch.serve_command": "composition",
@@ -62,6 +63,7 @@ ALLOWED = {
     "server": _BELOW_SERVICE | {"service", "server"},
     "fleet": _BELOW_SERVICE | {"service", "fleet"},
     "osc": _BELOW_SERVICE | {"service", "osc"},
+    "bhaptics": _BELOW_SERVICE | {"service", "bhaptics"},
     "composition": set(LAYER_OF.values()),
 }
 """The layers each layer may import (its own included)."""

@@ -132,6 +132,12 @@ class Settings(ClientLimits):
     """OSC map file (TOML): avatar receivers on the forearm; None: one per actuator."""
     osc_messages_per_s: float = Field(default=20_000.0, gt=0.0, le=1_000_000.0)
     """OSC messages admitted per second."""
+    bhaptics_listen: str | None = None
+    """Stand in for the bHaptics Player: accept its SDK1 WebSocket protocol at HOST:PORT, a
+    loopback address (games connect to 127.0.0.1:15881); None: no bHaptics input."""
+    bhaptics_map: Path | None = None
+    """bHaptics arm map file (TOML): which arm positions play on the band and where; None: both
+    arms, along the band's actuator span."""
 
     @property
     def voices_per_client(self) -> int:
@@ -173,6 +179,29 @@ class Settings(ClientLimits):
                 "(127.0.0.1), where only programs of this machine reach it"
             )
         return listen
+
+    @field_validator("bhaptics_listen")
+    @classmethod
+    def _bhaptics_listen(cls, listen: str | None) -> str | None:
+        if listen is None:
+            return None
+        host, _, port = listen.rpartition(":")
+        if not host or not port.isdecimal() or not 1 <= int(port) <= 65535:
+            raise ValueError("must be HOST:PORT, e.g. 127.0.0.1:15881")
+        if not is_loopback(host):
+            raise ValueError(
+                "bHaptics clients carry no token, so the stand-in listens on a loopback "
+                "address only (127.0.0.1), where only programs of this machine reach it"
+            )
+        return listen
+
+    @property
+    def bhaptics_address(self) -> tuple[str, int] | None:
+        """``bhaptics_listen`` as (host, port), brackets of an IPv6 host removed."""
+        if self.bhaptics_listen is None:
+            return None
+        host, _, port = self.bhaptics_listen.rpartition(":")
+        return host.strip("[]"), int(port)
 
     @property
     def osc_address(self) -> tuple[str, int] | None:

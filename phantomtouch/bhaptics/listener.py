@@ -1,0 +1,376 @@
+"""The stand-in's WebSocket listener: the bHaptics Player's address, beside the service.
+
+``phantomtouch serve --bhaptics 127.0.0.1:15881`` opens a second listener in the service's
+process and event loop (a ``websockets`` server), where games and mods built on the
+bHaptics SDK1 connect to ``ws://127.0.0.1:15881/v2/feedbacks`` (a trailing slash and the
+query ``app_id``/``app_name`` optional; the name becomes part of the connection's owner
+id, ``bhaptics-N-NAME``). Each connection is one :class:`~phantomtouch.bhaptics.session.
+PlayerSession`; every message it sends is answered with a status, and a status is pushed
+whenever what it shows changes (every :data:`TICK_S` at most while something plays).
+
+What it allows, the same for every client (``docs/security.md``):
+
+- the Host and Origin rule of ``/ws`` (:mod:`phantomtouch.service.origin`): a client
+  without ``Origin`` (every game) connects; a web page only from an origin allowed in
+  ``cors_origins``; a refused handshake is answered 421 or 403 with the service's error
+  body, and counted in ``/metrics``;
+- no RFC 6455 pings (games never answer them), no compression;
+- messages up to :data:`MAX_MESSAGE_BYTES` (a ``Register`` can be megabytes): a larger one
+  closes the connection with 1009 before it is read; the rate limit of ``/ws``
+  (``ws_messages_per_s``, close 1008 when exceeded for a second on end);
+- at most :data:`MAX_CONNECTIONS` connections (1013 beyond), each counted in the
+  service's connection caps, and what each may register is bounded
+  (:mod:`~phantomtouch.bhaptics.session`);
+- a message that cannot be read is answered with a status all the same, logged and counted
+  (``phantomtouch_bhaptics_messages_total{outcome}``); closing, however it happens, releases
+  everything the connection played.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import logging
+import re
+import secrets
+import time
+from collections.abc import AsyncIterator, Iterator
+from contextlib import asynccontextmanager
+from typing import TYPE_CHECKING, Any
+from urllib.parse import parse_qs, urlsplit
+
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+from prometheus_client.registry import Collector
+from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.exceptions import ConnectionClosed
+from websockets.http11 import Request, Response
+
+from phantomtouch.bhaptics.requests import BadRequest
+from phantomtouch.bhaptics.session import PlayerSession, Prepared, prepare
+from phantomtouch.clips.tact_map import ArmMap
+from phantomtouch.errors import DeviceError
+from phantomtouch.service.errors import (
+    WS_CLOSE_POLICY_VIOLATION,
+    WS_CLOSE_TRY_AGAIN_LATER,
+    ServiceError,
+    describe,
+)
+from phantomtouch.service.flood import FloodGuard
+from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
+from phantomtouch.service.running import InputHealth
+from phantomtouch.service.scheduling import client_quota
+
+if TYPE_CHECKING:
+    from phantomtouch.service.running import Service
+
+logger = logging.getLogger("phantomtouch.bhaptics")
+
+PATHS = ("/v2/feedbacks", "/v2/feedbacks/")
+"""Where SDK1 clients connect."""
+SDK2_PATHS = ("/v3/feedback", "/v4/feedback", "/v3/feedback/", "/v4/feedback/")
+MAX_MESSAGE_BYTES = 16 << 20
+"""Largest message, bytes: a game registers hundreds of patterns in one."""
+MAX_CONNECTIONS = 8
+"""Connections open at once (a game, a page or two; each reconnect is a new one)."""
+TICK_S = 0.02
+"""The Player's tick: the status is looked at this often while something plays."""
+SEND_TIMEOUT_S = 10.0
+"""A client that reads nothing for this long while a status waits to be sent is closed."""
+INLINE_BYTES = 32 << 10
+"""Messages up to this size are read on the event loop; larger ones in a worker thread."""
+OUTCOMES = ("accepted", "not_json", "bad_request", "refused", "flood")
+_NAME = re.compile(r"[^A-Za-z0-9_.-]+")
+
+
+class _Counts(Collector):
+    def __init__(self, listener: BhapticsListener) -> None:
+        self.listener = listener
+
+    def collect(self) -> Iterator[CounterMetricFamily | GaugeMetricFamily]:
+        family = CounterMetricFamily(
+            "phantomtouch_bhaptics_messages",
+            "bHaptics stand-in messages (or requests in them) by outcome.",
+            labels=["outcome"],
+        )
+        for outcome, count in self.listener.counts.items():
+            family.add_metric([outcome], count)
+        yield family
+        yield GaugeMetricFamily(
+            "phantomtouch_bhaptics_open_connections",
+            "Clients connected to the bHaptics stand-in.",
+            value=self.listener.open,
+        )
+
+
+async def _no_app(scope: Any, receive: Any, send: Any) -> None:
+    """The Host/Origin check is used for its verdict alone."""
+
+
+def client_name(path: str) -> str:
+    """The client's name from its query (``app_name``, else ``app_id``; bhaptics-go's
+    ``appName``/``appKey``), made fit for an owner id; '' without one."""
+    query = parse_qs(urlsplit(path).query)
+    for field in ("app_name", "app_id", "appName", "appKey"):
+        values = query.get(field)
+        if values and values[0].strip():
+            return _NAME.sub("_", values[0].strip())[:32]
+    return ""
+
+
+class BhapticsListener:
+    """The stand-in's listener for one running service; :meth:`start`, then :meth:`close`.
+
+    Parameters
+    ----------
+    service : Service
+    arm_map : ArmMap
+    """
+
+    def __init__(self, service: Service, arm_map: ArmMap) -> None:
+        address = service.settings.bhaptics_address
+        if address is None:
+            raise ValueError("the service's settings name no bhaptics_listen address")
+        self.service = service
+        self.host, self.port = address
+        self.arm_map = arm_map
+        self.counts = dict.fromkeys(OUTCOMES, 0)
+        self.open = 0
+        self._serials = itertools.count(1)
+        settings = service.settings
+        self._origin = HostOriginMiddleware(
+            _no_app,
+            hosts=HostPolicy.build(self.host, settings.allowed_hosts),
+            origins=OriginPolicy.build(settings.cors_origins),
+            refusals=Refusals(service.metrics),
+        )
+        self._server: Server | None = None
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """Where it listens (host, port)."""
+        assert self._server is not None
+        host, port = next(iter(self._server.sockets)).getsockname()[:2]
+        return str(host), int(port)
+
+    async def start(self) -> None:
+        """Listen on ``settings.bhaptics_listen`` (the event loop).
+
+        Raises
+        ------
+        DeviceError
+            The address cannot be listened on (the Player itself may hold it).
+        """
+        host, port = self.host, self.port
+        try:
+            self._server = await serve(
+                self._connection,
+                host,
+                port,
+                process_request=self._handshake,
+                compression=None,
+                ping_interval=None,
+                ping_timeout=None,
+                max_size=MAX_MESSAGE_BYTES,
+                max_queue=4,
+                server_header=None,
+                logger=logging.getLogger("phantomtouch.bhaptics.websockets"),
+            )
+        except OSError as exc:
+            raise DeviceError(
+                f"bhaptics listen={host}:{port}: cannot listen ({exc.strerror}); is the "
+                "bHaptics Player (or another stand-in) running? Quit it or choose another "
+                "address with --bhaptics"
+            ) from exc
+        self.service.metrics.registry.register(_Counts(self))
+        self.service.inputs["bhaptics"] = self.health
+
+    def health(self) -> InputHealth:
+        """Whether it listens (any thread)."""
+        serving = self._server is not None and self._server.is_serving()
+        return InputHealth(
+            state="running" if serving else "stopped",
+            degraded=not serving,
+            restarts=0,
+            last_failure=None,
+        )
+
+    async def close(self) -> None:
+        """Stop listening and close every connection (each releases what it played)."""
+        if self._server is not None:
+            self._server.close()
+            await self._server.wait_closed()
+
+    def _handshake(self, connection: ServerConnection, request: Request) -> Response | None:
+        path = urlsplit(request.path).path
+        if path not in PATHS:
+            message = f"path={path!r}: the bHaptics stand-in serves SDK1 on /v2/feedbacks"
+            if path in SDK2_PATHS:
+                message += "; SDK2 (port 15882, tact-js 2.x, bhaptics-python) is not supported"
+            return connection.respond(404, message + "\n")
+        scope = {
+            "type": "websocket",
+            "path": path,
+            "headers": [
+                (name.lower().encode("latin-1"), value.encode("latin-1"))
+                for name, value in request.headers.raw_items()
+            ],
+        }
+        error: ServiceError | None = self._origin.check(scope)
+        if error is None:
+            return None
+        problem = describe(error)
+        response = connection.respond(problem.status_code, json.dumps(problem.body()))
+        response.headers["Content-Type"] = "application/json"
+        return response
+
+    async def _connection(self, connection: ServerConnection) -> None:
+        peer = connection.remote_address
+        host = None if peer is None else str(peer[0])
+        if self.open >= MAX_CONNECTIONS:
+            await connection.close(
+                WS_CLOSE_TRY_AGAIN_LATER,
+                f"{self.open} bHaptics clients are connected, the most at once; retry later",
+            )
+            return
+        refused = self.service.connections.enter(host)
+        if refused is not None:
+            await connection.close(WS_CLOSE_TRY_AGAIN_LATER, refused[1])
+            return
+        self.open += 1
+        try:
+            await _Connection(self, connection).run()
+        finally:
+            self.open -= 1
+            self.service.connections.leave(host)
+
+    def count(self, outcome: str) -> None:
+        self.counts[outcome] += 1
+
+    def owner(self, name: str) -> str:
+        """A new connection's owner id: ``bhaptics-N-NAME`` (a random tag without name)."""
+        return f"bhaptics-{next(self._serials)}-{name or secrets.token_hex(3)}"
+
+
+class _Connection:
+    """One client: its messages, its status, its session (the event loop)."""
+
+    def __init__(self, listener: BhapticsListener, connection: ServerConnection) -> None:
+        self.listener = listener
+        self.connection = connection
+        service = listener.service
+        self.engine = service.engine
+        self.limiter = FloodGuard(service.settings.ws_messages_per_s)
+        self.name = client_name(connection.request.path if connection.request else "")
+        self.owner = listener.owner(self.name)
+        self.session = PlayerSession(
+            service.engine,
+            listener.arm_map,
+            owner=self.owner,
+            quota=client_quota(service.settings),
+            max_contacts=service.settings.max_contacts_per_connection,
+            changed=self._changed,
+        )
+        self._wake = asyncio.Event()
+        self._sending = asyncio.Lock()
+        self._last: dict[str, object] | None = None
+
+    def _changed(self) -> None:
+        self._wake.set()
+
+    async def run(self) -> None:
+        logger.info(
+            "bhaptics: client %r connected from %s as %s",
+            self.name or "(no name)",
+            self.connection.remote_address,
+            self.owner,
+        )
+        ticker = asyncio.create_task(self._tick())
+        try:
+            await self._send(self.session.status())
+            async for data in self.connection:
+                await self._message(data)
+        except ConnectionClosed:
+            pass
+        finally:
+            ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await ticker
+            self.session.close()
+            logger.info("bhaptics: %s disconnected", self.owner)
+
+    async def _message(self, data: str | bytes) -> None:
+        now_s = time.monotonic()
+        self.session.renew()
+        if not self.limiter.admit(now_s):
+            self.listener.count("flood")
+            if self.limiter.sustained(now_s):
+                await self.connection.close(
+                    WS_CLOSE_POLICY_VIOLATION,
+                    f"over the message rate limit of {self.limiter.rate_per_s:g}/s for "
+                    f"{self.limiter.close_after_s:g} s",
+                )
+            return
+        text = data if isinstance(data, str) else data.decode("utf-8", errors="replace")
+        try:
+            prepared: Prepared = (
+                prepare(text)
+                if len(text) <= INLINE_BYTES
+                else await asyncio.to_thread(prepare, text)
+            )
+        except BadRequest as exc:
+            self.listener.count(exc.reason)
+            logger.debug("bhaptics: %s: %s", self.owner, exc)
+        else:
+            for skipped in prepared.message.skipped:
+                self.listener.count(skipped.reason)
+            refused = await self.session.apply(prepared)
+            self.listener.count("accepted")
+            for _ in range(refused):
+                self.listener.count("refused")
+        self.session.expire()
+        await self._send(self.session.status())
+
+    async def _tick(self) -> None:
+        """Push the status when it changes: on a wake-up, and every :data:`TICK_S` while
+        something plays (renewing the connection's contacts)."""
+        while True:
+            if self.session.active:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._wake.wait(), TICK_S)
+            else:
+                await self._wake.wait()
+            self._wake.clear()
+            self.session.renew()
+            self.session.expire()
+            status = self.session.status()
+            if status != self._last:
+                await self._send(status)
+
+    async def _send(self, status: dict[str, object]) -> None:
+        async with self._sending:
+            self._last = status
+            try:
+                await asyncio.wait_for(self.connection.send(json.dumps(status)), SEND_TIMEOUT_S)
+            except ConnectionClosed:
+                return
+            except TimeoutError:
+                await self.connection.close(
+                    WS_CLOSE_POLICY_VIOLATION, f"the client read nothing for {SEND_TIMEOUT_S:g} s"
+                )
+
+
+@asynccontextmanager
+async def attach(service: Service) -> AsyncIterator[None]:
+    """What ``create_app(attach=...)`` enters when ``bhaptics_listen`` is set: the
+    listener, started with the settings' arm map, closed before the service stops."""
+    settings = service.settings
+    arm_map = ArmMap.load(settings.bhaptics_map) if settings.bhaptics_map else ArmMap()
+    listener = BhapticsListener(service, arm_map)
+    await listener.start()
+    logger.info("phantomtouch: bHaptics stand-in on ws://%s:%d/v2/feedbacks", *listener.address)
+    try:
+        yield
+    finally:
+        await listener.close()
