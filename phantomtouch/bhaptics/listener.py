@@ -331,6 +331,7 @@ class _Connection:
                 self.listener.count("refused")
         self.session.expire()
         await self._send(self.session.status())
+        self._wake.set()  # something may play now: the ticker looks again
 
     async def _tick(self) -> None:
         """Push the status when it changes: on a wake-up, and every :data:`TICK_S` while
