@@ -243,7 +243,13 @@ def test_missing_arrays_are_nothing_and_bad_numbers_are_refused_naming_the_field
     assert (
         score(
             parse_tact(
-                '{"project": {"tracks": [{"effects": [{"modes": {"ForearmL": {"mode": "DOT_MODE"}}}]}]}}'
+                json.dumps(
+                    {
+                        "project": {
+                            "tracks": [{"effects": [{"modes": {"ForearmL": {"mode": "DOT_MODE"}}}]}]
+                        }
+                    }
+                )
             ),
             ArmMap(),
             DEVICE,
