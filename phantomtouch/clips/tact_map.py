@@ -41,6 +41,10 @@ from phantomtouch.schema.validation import read_model_file
 ArmName = Literal["ForearmL", "ForearmR"]
 
 
+def _both_arms() -> list[ArmName]:
+    return ["ForearmL", "ForearmR"]
+
+
 class ArmPlacement(BaseModel):
     """Where the corners ``(0, 0)``, ``(1, 0)`` and ``(0, 1)`` of an arm's unit square land."""
 
@@ -72,7 +76,7 @@ class ArmMap(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
 
     arms: list[ArmName] = Field(
-        default_factory=lambda: ["ForearmL", "ForearmR"],
+        default_factory=_both_arms,
         min_length=1,
         max_length=2,
         description="The arm positions this band plays; the others play nothing.",
