@@ -3,7 +3,7 @@
 ``phantomtouch serve``    the touch service: REST and WebSocket API on 127.0.0.1:8000
 ``phantomtouch osc``      the same with OSC input (VRChat contact receivers) on UDP 9001
 ``phantomtouch import``   a haptic clip (.haptic, .ahap) into the clip library
-``phantomtouch render``   one pattern (JSON file or preset) to an 8-channel WAV (+ plot)
+``phantomtouch render``   one pattern (JSON file, preset or .tact) to an 8-channel WAV
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder
 ``phantomtouch devices``  list the sound card outputs (``*``: enough outputs for the armband)
@@ -40,6 +40,7 @@ from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import TouchPattern, describe_validation_error, limits
 from phantomtouch.serve_command import EXIT_FAILURE, add_serve_commands
+from phantomtouch.tact_command import add_tact_render_arguments, is_tact, render_tact
 
 """The command could not do its work (``serve``: the pattern library cannot be opened)."""
 EXIT_USAGE = 2
@@ -153,6 +154,8 @@ def _with_library_clip(pattern: TouchPattern, db: str | None) -> TouchPattern:
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
+    if is_tact(args.pattern):
+        return render_tact(args)
     if (args.pattern is None) == (args.preset is None):
         raise ParameterError("give a PATTERN.json file or --preset NAME (one of them)")
     if args.plot is not None:
@@ -305,7 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_calibrate_command(sub)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
-    render.add_argument("pattern", nargs="?", help="TouchPattern JSON file")
+    render.add_argument("pattern", nargs="?", help="TouchPattern JSON file, or a .tact file")
     render.add_argument("--preset", help="a preset name (phantomtouch presets lists them)")
     render.add_argument("-o", "--output", required=True, help="output WAV file (float32)")
     render.add_argument("--plot", help="also write the Fig. 3 view to this PNG")
@@ -315,6 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument(
         "--db", help="clip library (SQLite) for a clip carrier named by clip (default: serve's)"
     )
+    add_tact_render_arguments(render)
     render.set_defaults(func=_cmd_render)
 
     presets = sub.add_parser("presets", help="list the preset patterns")

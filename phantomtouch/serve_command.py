@@ -85,10 +85,13 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     check_port_free(settings.host, settings.port)
     if settings.osc_address is not None:
         from phantomtouch.osc.bridge import open_socket
-        from phantomtouch.osc.mapping import ReceiverMap
+        from phantomtouch.osc.mapping import load_map
+        from phantomtouch.schema import DeviceProfile
 
-        if settings.osc_map is not None:
-            ReceiverMap.load(settings.osc_map)
+        profile = settings.device_profile
+        load_map(
+            settings.osc_map, DeviceProfile.load(profile) if profile else DeviceProfile.default()
+        )
         open_socket(*settings.osc_address).close()
     if settings.bhaptics_address is not None:
         from phantomtouch.clips.tact_map import ArmMap

@@ -321,7 +321,8 @@ class _Reader:
         self.points = 0
 
     def fail(self, field: str, message: str) -> ParameterError:
-        return ParameterError(f"{self.source}: {field or 'the document'} {message}")
+        joint = "" if message.startswith("=") else " "
+        return ParameterError(f"{self.source}: {field or 'the document'}{joint}{message}")
 
     def obj(self, value: Any, field: str) -> Mapping[str, Any]:
         if value is None:

@@ -32,13 +32,17 @@ from typing import Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from phantomtouch.clips.tact import ARM_POSITIONS, TACTOSY2_LAYOUT
+from phantomtouch.clips.tact import TACTOSY2_LAYOUT
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.schema.pattern import Carrier, Law, Point, SineCarrier
 from phantomtouch.schema.validation import read_model_file
 
 ArmName = Literal["ForearmL", "ForearmR"]
+
+
+def _both_arms() -> list[ArmName]:
+    return ["ForearmL", "ForearmR"]
 
 
 class ArmPlacement(BaseModel):
@@ -72,7 +76,7 @@ class ArmMap(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
 
     arms: list[ArmName] = Field(
-        default_factory=lambda: list(ARM_POSITIONS),
+        default_factory=_both_arms,
         min_length=1,
         max_length=2,
         description="The arm positions this band plays; the others play nothing.",

@@ -33,6 +33,7 @@ def add_osc_command(
     osc.add_argument(
         "--map",
         dest="osc_map",
-        help="OSC map file (TOML): avatar receivers on the forearm; default one per actuator",
+        help="OSC map file (TOML): avatar receivers on the forearm; default one per actuator; "
+        "'bhaptics': a bHapticsOSC avatar's arm parameters",
     )
     osc.set_defaults(func=serve)

@@ -23,7 +23,7 @@ from pydantic import ValidationError
 
 from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.osc.bridge import OWNER, OscBridge
-from phantomtouch.osc.mapping import ReceiverMap, default_map
+from phantomtouch.osc.mapping import load_map
 from phantomtouch.schema import describe_validation_error
 from phantomtouch.service import scheduling
 from phantomtouch.service.models import NamedTouch, PresetTouch
@@ -74,11 +74,7 @@ def start_osc(service: Service) -> OscBridge:
     address = settings.osc_address
     assert address is not None and service.loop is not None
     loop = service.loop
-    receiver_map = (
-        ReceiverMap.load(settings.osc_map)
-        if settings.osc_map is not None
-        else default_map(service.device)
-    )
+    receiver_map = load_map(settings.osc_map, service.device)
 
     def play(name: str) -> None:
         try:
