@@ -57,7 +57,7 @@ from phantomtouch.service.errors import (
     ServiceError,
     describe,
 )
-from phantomtouch.service.flood import FloodGuard
+from phantomtouch.service.flood import FloodGuard, LimitedLog
 from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
 from phantomtouch.service.running import InputHealth
 from phantomtouch.service.scheduling import client_quota
@@ -80,6 +80,7 @@ SEND_TIMEOUT_S = 10.0
 """A client that reads nothing for this long while a status waits to be sent is closed."""
 INLINE_BYTES = 32 << 10
 """Messages up to this size are read on the event loop; larger ones in a worker thread."""
+LOG_INTERVAL_S = 10.0
 OUTCOMES = ("accepted", "not_json", "bad_request", "refused", "flood")
 _NAME = re.compile(r"[^A-Za-z0-9_.-]+")
 
@@ -136,6 +137,8 @@ class BhapticsListener:
         self.host, self.port = address
         self.arm_map = arm_map
         self.counts = dict.fromkeys(OUTCOMES, 0)
+        self.log = LimitedLog(logger, LOG_INTERVAL_S)
+        """Unreadable messages: one line per reason and interval."""
         self.open = 0
         self._serials = itertools.count(1)
         settings = service.settings
@@ -321,7 +324,7 @@ class _Connection:
             )
         except BadRequest as exc:
             self.listener.count(exc.reason)
-            logger.debug("bhaptics: %s: %s", self.owner, exc)
+            self.listener.log.warning(exc.reason, f"bhaptics: {self.owner}: {exc}")
         else:
             for skipped in prepared.message.skipped:
                 self.listener.count(skipped.reason)
