@@ -53,7 +53,11 @@ def test_the_run_outlives_a_restart(client: TestClient, settings: Any) -> None:
         ({"channel": 9, "level_db": 0.0, "test_stronger": True}, "trials[1].channel", "1 to 8"),
         ({"channel": 0, "level_db": 0.0, "test_stronger": True}, "trials[1].channel", "1"),
         ({"channel": 2, "level_db": 20.5, "test_stronger": True}, "trials[1].level_db", "20"),
-        ({"channel": 2, "level_db": 1.0, "test_stronger": "yes"}, "trials[1].test_stronger", "bool"),
+        (
+            {"channel": 2, "level_db": 1.0, "test_stronger": "yes"},
+            "trials[1].test_stronger",
+            "bool",
+        ),
         ({"channel": 2, "level_db": 1.0}, "trials[1].test_stronger", "required"),
     ],
 )
