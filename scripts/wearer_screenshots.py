@@ -44,8 +44,14 @@ def felt_db(touch: dict[str, Any], applied_db: np.ndarray) -> float:
 
 
 def shoot(page: Any, step: str) -> None:
+    """The wearer panel as a PNG of at most 64 colours (a few tens of KiB)."""
+    from PIL import Image  # matplotlib's dependency (the plot extra)
+
     path = OUT / f"{step}.png"
     page.locator(".wearer-panel").screenshot(path=str(path))
+    with Image.open(path) as shot:
+        small = shot.convert("RGB").quantize(colors=64)
+    small.save(path, optimize=True)
     print(f"{path.relative_to(ROOT)}: {path.stat().st_size // 1024} KiB")
 
 
@@ -109,7 +115,7 @@ def main() -> None:
         server = LiveServer(Path(folder) / "library.db").start()
         try:
             with sync_playwright() as playwright:
-                browser = playwright.chromium.launch(
+                browser: Any = playwright.chromium.launch(
                     executable_path=CHROMIUM, args=["--headless", "--no-sandbox"]
                 )
                 page = browser.new_page(viewport=VIEWPORT)
