@@ -23,7 +23,15 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, WithJsonSchema
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictInt,
+    StringConstraints,
+    WithJsonSchema,
+)
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema.clip import CLIP_NAME_REGEX
@@ -39,6 +47,8 @@ CHANNEL_REGEX = r"^(?:[1-9]|[1-5][0-9]|6[0-4])$"
 """An output channel as a JSON key: 1 to 64 (``limits.MAX_CHANNEL``), no leading zero."""
 Channel = Annotated[str, StringConstraints(pattern=CHANNEL_REGEX)]
 """An actuator by its output channel, 1-based, as a JSON object key ("1" .. "64")."""
+MAX_RUN_TRIALS = 4096
+"""Most answers one matching run may hold (64 channels of 64 trials)."""
 OffsetDb = Annotated[float, Field(ge=-MAX_OFFSET_DB, le=MAX_OFFSET_DB, allow_inf_nan=False)]
 """An offset in dB: finite, within ±``MAX_OFFSET_DB``."""
 ChannelOffsets = Annotated[
@@ -84,6 +94,39 @@ class WearerProfile(BaseModel):
         return tuple(float(given.get(str(k), 0.0)) for k in range(1, channels + 1))
 
 
+class WearerTrial(BaseModel):
+    """One answered trial of the matching procedure: the test actuator, the level its
+    interval was played at relative to the reference interval, and the wearer's answer."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    channel: StrictInt = Field(ge=1, le=64, description="The test actuator's output channel.")
+    level_db: OffsetDb = Field(
+        description=(
+            "Level of the test interval as played, dB re the reference interval, within "
+            f"±{MAX_OFFSET_DB:g} dB (at most the device's max_level_db less the reference's)."
+        )
+    )
+    test_stronger: StrictBool = Field(description="The wearer felt the test interval stronger.")
+
+
+class WearerRun(BaseModel):
+    """The answers of one matching run so far, stored as they come (``PUT
+    /wearers/{name}/run``): a run that stops loses nothing and can be resumed."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    band: Band = Field(description="The carrier band the run matches in.")
+    reference_channel: StrictInt = Field(
+        ge=1, le=64, description="The reference actuator's output channel."
+    )
+    trials: list[WearerTrial] = Field(
+        default_factory=list,
+        max_length=MAX_RUN_TRIALS,
+        description=f"Every answered trial in the order asked, at most {MAX_RUN_TRIALS}.",
+    )
+
+
 def check_channels(profile: WearerProfile, channels: int) -> None:
     """Refuse a profile naming a channel a device of ``channels`` outputs does not have.
 
@@ -100,3 +143,22 @@ def check_channels(profile: WearerProfile, channels: int) -> None:
                     f"offsets_db.{band}.{channel}={given[channel]!r}: this device has no "
                     f"actuator on channel {channel}; channels are 1 to {channels}"
                 )
+
+
+def check_run_channels(run: WearerRun, channels: int) -> None:
+    """Refuse a run naming a channel a device of ``channels`` outputs does not have.
+
+    Raises
+    ------
+    ParameterError
+        Naming the first such field, e.g. ``trials[3].channel=9:``.
+    """
+    named = [("reference_channel", run.reference_channel)] + [
+        (f"trials[{index}].channel", trial.channel) for index, trial in enumerate(run.trials)
+    ]
+    for field, channel in named:
+        if channel > channels:
+            raise ParameterError(
+                f"{field}={channel}: this device has no actuator on channel {channel}; "
+                f"channels are 1 to {channels}"
+            )

@@ -438,6 +438,12 @@ class DeviceInfo(BaseModel):
     output_latency_s: float
     actuators: list[Actuator]
     triangles: list[tuple[int, int, int]]
+    max_level_db: float = Field(
+        description=(
+            "The device's safety.max_level_db: the strongest acceleration level, dB re "
+            "1 µm/s², a touch may ask for (`level_db`; relative intensity 1 is this level)."
+        )
+    )
 
 
 class ClockInfo(BaseModel):

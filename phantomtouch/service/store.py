@@ -1,4 +1,5 @@
-"""The library: named ``TouchPattern`` s, haptic clips and wearer profiles in one SQLite file.
+"""The library: named ``TouchPattern`` s, haptic clips, wearer profiles and the answers of
+their matching runs in one SQLite file.
 
 WAL journal and ``synchronous=FULL``: a committed ``PUT`` survives the process being
 killed (and a power cut). One connection shared by the worker threads, guarded by a lock;
@@ -33,14 +34,19 @@ from pydantic import BaseModel, ValidationError
 
 from phantomtouch.errors import DeviceError
 from phantomtouch.schema import HapticClip, TouchPattern
-from phantomtouch.schema.wearer import WearerProfile
+from phantomtouch.schema.wearer import WearerProfile, WearerRun
 from phantomtouch.service.errors import StorageError, StoredPatternError
 from phantomtouch.service.models import PlanSummary
 
 logger = logging.getLogger("phantomtouch.server.store")
-Table = Literal["patterns", "clips", "wearers"]
+Table = Literal["patterns", "clips", "wearers", "wearer_runs"]
 """The tables whose rows are written and deleted by name (never a value from a request)."""
-_DOCUMENT: dict[Table, str] = {"patterns": "pattern", "clips": "clip", "wearers": "profile"}
+_DOCUMENT: dict[Table, str] = {
+    "patterns": "pattern",
+    "clips": "clip",
+    "wearers": "profile",
+    "wearer_runs": "run",
+}
 """The column holding each table's document as JSON."""
 Document = TypeVar("Document", bound=BaseModel)
 
@@ -63,6 +69,13 @@ _WEARER_SCHEMA = """
 CREATE TABLE IF NOT EXISTS wearers (
     name TEXT PRIMARY KEY,
     profile TEXT NOT NULL,
+    updated_unix_s REAL NOT NULL
+)
+"""
+_WEARER_RUN_SCHEMA = """
+CREATE TABLE IF NOT EXISTS wearer_runs (
+    name TEXT PRIMARY KEY,
+    run TEXT NOT NULL,
     updated_unix_s REAL NOT NULL
 )
 """
@@ -121,6 +134,7 @@ class PatternStore:
             db.execute(_SCHEMA)
             db.execute(_CLIP_SCHEMA)
             db.execute(_WEARER_SCHEMA)
+            db.execute(_WEARER_RUN_SCHEMA)
         except sqlite3.DatabaseError as exc:
             if isinstance(exc, sqlite3.OperationalError):
                 raise DeviceError(
@@ -284,6 +298,21 @@ class PatternStore:
     def delete_wearer(self, name: str) -> bool:
         """Remove the wearer profile ``name``; False if it was not stored."""
         return self._delete("wearers", name)
+
+    # -- the answers of a wearer's matching run, saved as they come -------------------------
+
+    def get_wearer_run(self, name: str) -> WearerRun | None:
+        """The matching run of wearer ``name``, or None (StoredPatternError: it no longer
+        reads)."""
+        return self._read("wearer_runs", WearerRun, name, field="wearer")
+
+    def put_wearer_run(self, name: str, run: WearerRun) -> bool:
+        """Store (replace) the matching run of wearer ``name``; True if it was new."""
+        return self._replace("wearer_runs", name, (run.model_dump_json(), time.time()))
+
+    def delete_wearer_run(self, name: str) -> bool:
+        """Remove the matching run of wearer ``name``; False if there was none."""
+        return self._delete("wearer_runs", name)
 
 
 FULL_DISK_BYTES = 1 << 20

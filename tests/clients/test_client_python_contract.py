@@ -30,6 +30,7 @@ from phantomtouch_client import (
     Summary,
     TouchPattern,
     Wearer,
+    WearerRun,
     WearerSummary,
     _calls,
 )
@@ -56,6 +57,7 @@ ANSWERS: dict[str, type[BaseModel]] = {
     "DeviceInfo": DeviceInfo,
     "WearerProfile": Wearer,
     "WearerInfo": WearerSummary,
+    "WearerRun": WearerRun,
 }
 
 
@@ -76,6 +78,9 @@ def test_the_client_calls_every_route_of_the_openapi_document(server: LiveServer
         "pattern": STROKE,
         "clip": {"duration_s": 1.0, "amplitude": [{"t_s": 0.0, "value": 1.0}]},
         "offsets_db": {},
+        "band": "sine_100hz",
+        "reference_channel": 1,
+        "trials": [],
     }
     calls = []
     for _, build in inspect.getmembers(_calls, inspect.isfunction):

@@ -129,7 +129,7 @@ class ArmbandOnPage:
         return float(x), float(y)
 
     def centre(self, actuator: int) -> tuple[float, float]:
-        box = self.page.locator(f'[data-actuator="{actuator}"] circle.body').bounding_box()
+        box = self.page.locator(f'#armband [data-actuator="{actuator}"] circle.body').bounding_box()
         assert box is not None, f"actuator {actuator} is not drawn"
         return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
 

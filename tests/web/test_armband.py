@@ -41,7 +41,7 @@ def test_actuators_are_drawn_to_scale_with_labels_and_ends(
 ) -> None:
     device = httpx.get(f"{server}/device").json()
     actuators = device["actuators"]
-    labels = page.locator(".actuator-label").all_text_contents()
+    labels = page.locator("#armband .actuator-label").all_text_contents()
     assert labels == [str(n) for n in range(1, len(actuators) + 1)]
     centres = np.array([armband.centre(n) for n in range(1, len(actuators) + 1)])
     cm = np.array([[a["y_cm"], a["x_cm"]] for a in actuators])
@@ -50,10 +50,10 @@ def test_actuators_are_drawn_to_scale_with_labels_and_ends(
     cm_d = np.hypot(*(cm[:, None, :] - cm[None, :, :]).transpose(2, 0, 1))
     scale = page_d[cm_d > 0] / cm_d[cm_d > 0]
     np.testing.assert_allclose(scale, scale.mean(), rtol=0.02)  # 2 %: sub-pixel rounding
-    assert page.locator(".armband .triangles polygon").count() == len(device["triangles"])
-    ends = page.locator(".end-label").all_text_contents()
+    assert page.locator("#armband .triangles polygon").count() == len(device["triangles"])
+    ends = page.locator("#armband .end-label").all_text_contents()
     assert any("wrist" in e for e in ends) and any("elbow" in e for e in ends)
-    wrist, elbow = (page.locator(".end-label").nth(i).bounding_box() for i in (0, 1))
+    wrist, elbow = (page.locator("#armband .end-label").nth(i).bounding_box() for i in (0, 1))
     assert wrist is not None and elbow is not None
     first = min(actuators, key=lambda a: a["y_cm"])
     assert "wrist" in ends[0], "the wrist label sits at the y = 0 end"

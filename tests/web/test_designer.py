@@ -85,7 +85,7 @@ def test_preset_plan_matches_the_server_and_the_chart_is_drawn(
     assert coloured_pixels(page) > 3000
     description = page.get_attribute("#chart", "aria-label") or ""
     assert "8 actuators" in description and f"{expected['duration_s']:.2f} s" in description
-    path_points = page.get_attribute(".armband .plan-path", "points") or ""
+    path_points = page.get_attribute("#armband .plan-path", "points") or ""
     assert len(path_points.split()) > 10, "the arc is drawn on the armband"
 
     start = observer.mark()

@@ -27,7 +27,8 @@ router = APIRouter(tags=["info"])
 
 @router.get("/device", response_model=DeviceInfo, responses=responses(401), summary="The armband")
 async def get_device(engine: EngineDep) -> DeviceInfo:
-    """Layout (actuators, triangles), channels, timing, and where the engine plays."""
+    """Layout (actuators, triangles), channels, timing, where the engine plays, and the
+    strongest level a touch may ask for (`max_level_db`)."""
     status = engine.status().to_dict()
     device: DeviceProfile = engine.device
     return DeviceInfo(
@@ -40,6 +41,7 @@ async def get_device(engine: EngineDep) -> DeviceInfo:
         output_latency_s=status["output_latency_s"],
         actuators=list(device.actuators),
         triangles=list(engine_triangles(device)),
+        max_level_db=device.safety.max_level_db,
     )
 
 

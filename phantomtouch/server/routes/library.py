@@ -19,9 +19,9 @@ Item = TypeVar("Item")
 
 
 def get_item(
-    router: APIRouter, model: Any, summary: str, **options: Any
+    router: APIRouter, model: Any, summary: str, path: str = "/{name}", **options: Any
 ) -> Callable[[DecoratedCallable], DecoratedCallable]:
-    """``GET /{name}``: the stored item (404: no such item).
+    """``GET path``: the stored item (404: no such item).
 
     Parameters
     ----------
@@ -31,11 +31,13 @@ def get_item(
         The answer's model.
     summary : str
         The route's OpenAPI summary.
+    path : str
+        ``/{name}``, or a path below it (``/{name}/run``).
     **options
         More arguments of ``router.get`` (``response_model_exclude_unset``).
     """
     return router.get(
-        "/{name}",
+        path,
         response_model=model,
         responses=responses(401, 404, 422, 500, 503),
         summary=summary,
@@ -56,7 +58,8 @@ def put_item(
         The body's OpenAPI entry, as :func:`~phantomtouch.service.bodies.strict_body`
         makes it.
     path : str
-        ``/{name}``, or ``""`` where the router's prefix names the one item (``/wearer``).
+        ``/{name}``, a path below it (``/{name}/run``), or ``""`` where the router's prefix
+        names the one item (``/wearer``).
     """
     return router.put(
         path,
@@ -68,11 +71,11 @@ def put_item(
 
 
 def delete_item(
-    router: APIRouter, summary: str
+    router: APIRouter, summary: str, path: str = "/{name}"
 ) -> Callable[[DecoratedCallable], DecoratedCallable]:
-    """``DELETE /{name}``: 204 without a body (404: no such item)."""
+    """``DELETE path``: 204 without a body (404: no such item)."""
     return router.delete(
-        "/{name}", status_code=204, responses=responses(401, 404, 422, 503), summary=summary
+        path, status_code=204, responses=responses(401, 404, 422, 503), summary=summary
     )
 
 

@@ -1,4 +1,5 @@
-"""Wearer profiles: ``GET /wearers``, ``GET|PUT|DELETE /wearers/{name}``.
+"""Wearer profiles: ``GET /wearers``, ``GET|PUT|DELETE /wearers/{name}``, and the answers
+of a wearer's matching run, saved as they come: ``GET|PUT|DELETE /wearers/{name}/run``.
 
 A profile holds, per carrier band and actuator, the offset in dB that makes each actuator
 felt as strong as the reference actuator (:mod:`phantomtouch.schema.wearer`). The output
@@ -14,7 +15,13 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Path, Response
 from pydantic import TypeAdapter
 
-from phantomtouch.schema.wearer import WEARER_NAME_REGEX, WearerProfile, check_channels
+from phantomtouch.schema.wearer import (
+    WEARER_NAME_REGEX,
+    WearerProfile,
+    WearerRun,
+    check_channels,
+    check_run_channels,
+)
 from phantomtouch.server.deps import ServiceDep, StoreDep
 from phantomtouch.server.routes import library
 from phantomtouch.service.bodies import strict_body
@@ -33,6 +40,17 @@ EXAMPLE = {
 wearer_body, WEARER_BODY_OPENAPI = strict_body(TypeAdapter(WearerProfile))
 WEARER_BODY_OPENAPI["requestBody"]["content"]["application/json"]["example"] = EXAMPLE
 WearerBody = Annotated[WearerProfile, Depends(wearer_body)]
+RUN_EXAMPLE = {
+    "band": "sine_100hz",
+    "reference_channel": 1,
+    "trials": [
+        {"channel": 2, "level_db": 0.0, "test_stronger": False},
+        {"channel": 2, "level_db": 4.0, "test_stronger": True},
+    ],
+}
+run_body, RUN_BODY_OPENAPI = strict_body(TypeAdapter(WearerRun))
+RUN_BODY_OPENAPI["requestBody"]["content"]["application/json"]["example"] = RUN_EXAMPLE
+RunBody = Annotated[WearerRun, Depends(run_body)]
 WearerNameParam = Annotated[
     str,
     Path(
@@ -46,6 +64,7 @@ WearerNameParam = Annotated[
 
 
 NOT_STORED = "a stored wearer (GET /wearers)"
+NO_RUN = "a wearer with a stored matching run (PUT /wearers/{name}/run)"
 
 
 @router.get("", response_model=list[WearerInfo], responses=responses(401, 503), summary="Wearers")
@@ -86,4 +105,32 @@ def delete_wearer(name: WearerNameParam, service: ServiceDep) -> Response:
     if not service.store.delete_wearer(name):
         raise library.not_stored(name, NOT_STORED)
     service.wearer.removed(name)
+    return Response(status_code=204)
+
+
+@library.get_item(router, WearerRun, "A wearer's matching run", path="/{name}/run")
+def get_wearer_run(name: WearerNameParam, store: StoreDep) -> WearerRun:
+    """The answers of the wearer's matching run as last stored: the band, the reference
+    actuator and every answered trial, in order (the web page resumes a run from them)."""
+    return library.found(store.get_wearer_run(name), name, NO_RUN)
+
+
+@library.put_item(
+    router, WearerRun, "Store a wearer's matching run", RUN_BODY_OPENAPI, path="/{name}/run"
+)
+def put_wearer_run(name: WearerNameParam, run: RunBody, service: ServiceDep) -> WearerRun:
+    """Store (or replace) the answers of the wearer's matching run so far; the web page
+    stores them after every answer, so a run that stops loses nothing. A channel the device
+    does not have is refused (422, the field named). The run is a record only: the output
+    stage applies profiles (`PUT /wearers/{name}`, `PUT /wearer`), never runs."""
+    check_run_channels(run, service.device.channels)
+    service.store.put_wearer_run(name, run)
+    return run
+
+
+@library.delete_item(router, "Remove a wearer's matching run", path="/{name}/run")
+def delete_wearer_run(name: WearerNameParam, store: StoreDep) -> Response:
+    """Remove the answers of the wearer's matching run (the profile stays)."""
+    if not store.delete_wearer_run(name):
+        raise library.not_stored(name, NO_RUN)
     return Response(status_code=204)

@@ -70,6 +70,13 @@ export const api = {
   health: () => json("GET", "/health"),
   putWearer: (name, profile) =>
     json("PUT", `/wearers/${encodeURIComponent(name)}`, { json: profile }),
+  wearerRun: (name) => json("GET", `/wearers/${encodeURIComponent(name)}/run`),
+  putWearerRun: (name, run) =>
+    json("PUT", `/wearers/${encodeURIComponent(name)}/run`, { json: run }),
+  deleteWearerRun: (name) => json("DELETE", `/wearers/${encodeURIComponent(name)}/run`),
+  activeWearer: () => json("GET", "/wearer"),
+  useWearer: (name, band) => json("PUT", "/wearer", { json: { name, band } }),
+  noWearer: () => json("DELETE", "/wearer"),
   async wav(touchRequest) {
     const response = await request("POST", "/render", { json: touchRequest, accept: "audio/wav" });
     return response.blob();

@@ -82,13 +82,16 @@ export class Armband {
     svg.style.aspectRatio = `${width} / ${height}`;
     this.scaleLabels();
 
+    // Ids of this picture's own gradient and marker: a page may hold two armbands.
+    const glowId = `${svg.id}-glow`;
+    const arrowId = `${svg.id}-arrow`;
     const defs = el("defs", {}, svg);
-    const glow = el("radialGradient", { id: "glow" }, defs);
+    const glow = el("radialGradient", { id: glowId }, defs);
     el("stop", { offset: "0%", "stop-color": "#f59e0b", "stop-opacity": 0.9 }, glow);
     el("stop", { offset: "55%", "stop-color": "#f59e0b", "stop-opacity": 0.35 }, glow);
     el("stop", { offset: "100%", "stop-color": "#f59e0b", "stop-opacity": 0 }, glow);
     const arrow = el("marker", {
-      id: "arrow", viewBox: "0 0 10 10", refX: 6, refY: 5, markerWidth: 4, markerHeight: 4,
+      id: arrowId, viewBox: "0 0 10 10", refX: 6, refY: 5, markerWidth: 4, markerHeight: 4,
       orient: "auto-start-reverse",
     }, defs);
     el("path", { d: "M0,0 L10,5 L0,10 z", class: "path-arrow" }, arrow);
@@ -108,7 +111,7 @@ export class Armband {
     }
 
     this.pathLayer = el("g", { class: "path-layer" }, svg);
-    this.pathLine = el("polyline", { class: "plan-path", "marker-end": "url(#arrow)" },
+    this.pathLine = el("polyline", { class: "plan-path", "marker-end": `url(#${arrowId})` },
       this.pathLayer);
     this.pathStart = el("circle", { class: "plan-start", r: 0.22, visibility: "hidden" },
       this.pathLayer);
@@ -120,7 +123,9 @@ export class Armband {
         class: "actuator", transform: `translate(${a.y_cm} ${a.x_cm})`,
         "data-actuator": a.number, "data-channel": a.channel, "data-level": 0,
       }, actuatorLayer);
-      a.halo = el("circle", { class: "halo", r: ACTUATOR_R_CM, fill: "url(#glow)", opacity: 0 }, g);
+      a.halo = el("circle", {
+        class: "halo", r: ACTUATOR_R_CM, fill: `url(#${glowId})`, opacity: 0,
+      }, g);
       a.body = el("circle", { class: "body", r: ACTUATOR_R_CM }, g);
       a.fill = el("circle", { class: "fill", r: 0 }, g);
       el("circle", {
@@ -205,6 +210,16 @@ export class Armband {
       a.halo.setAttribute("opacity", fmt(Math.min(1, shown * 1.2)));
       a.fill.setAttribute("r", fmt(ACTUATOR_R_CM * shown));
       a.body.parentNode.dataset.level = String(level);
+    }
+  }
+
+  // Light actuators by number (`lit`: the one under test) and outline others (`marked`:
+  // the reference); numbers left out are shown plain.
+  highlight({ lit = [], marked = [] } = {}) {
+    for (const a of this.actuators) {
+      const group = a.body.parentNode;
+      group.classList.toggle("lit", lit.includes(a.number));
+      group.classList.toggle("marked", marked.includes(a.number));
     }
   }
 

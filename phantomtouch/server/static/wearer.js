@@ -1,191 +1,210 @@
 // The wearer procedure (docs/wearer.md): intensity matching of each actuator against a
-// reference actuator in two intervals ("which was stronger"), trials placed by a 1-up-1-down
-// staircase and the match fitted by maximum likelihood; then a localisation check of
-// phantom points. Every stimulus is a POST /touch.
+// reference actuator in two intervals ("which was stronger"), every answer saved on the
+// service as it is given (PUT /wearers/{name}/run) so that a stopped run resumes; the
+// profile stored at the end and applied to the running service on request (PUT /wearer);
+// then a localisation check of phantom points, without and with the profile. Every
+// stimulus is a POST /touch at a level (dB) bounded by the service's own ceiling.
 
 import { api } from "./api.js";
+import { Armband } from "./armband.js";
+import { checkPoints, localisationCsv, localisationSummary } from "./localisation.js";
+import { Levels, STAIRCASE, Staircase, seededRandom } from "./staircase.js";
 import { formatNumber } from "./units.js";
 
 const $ = (id) => document.getElementById(id);
-const SVG = "http://www.w3.org/2000/svg";
-
-export const STAIRCASE = {
-  baseIntensity: 0.2, // relative intensity of the reference interval
-  startStepDb: 4, // first step; halved at each reversal down to minStepDb
-  minStepDb: 0.5,
-  trials: 24, // trials per actuator
-  gapS: 0.25, // silence between the two intervals
-};
-const ANSWER_S = 1; // the wearer's time to answer a trial, s (for the time shown)
-const MAX_DB = 20 * Math.log10(1 / STAIRCASE.baseIntensity); // test interval at intensity 1
-const FIT = {
-  lapse: 0.04, // answers at random on this fraction of trials (half of them "test")
-  pointsDb: { from: -20, to: 20, step: 0.05 },
-  spreadsDb: [0.5, 0.75, 1, 1.5, 2, 3], // logistic scale of the psychometric function
-};
+const ANSWER_S = 1; // the wearer's time to answer a trial, s, until their own pace is measured
+const FADE_S = 0.02;
 export const CARRIERS = {
   sine_100hz: { kind: "sine", freq_hz: 100 },
   noise_40_500hz: { kind: "noise", low_hz: 40, high_hz: 500 },
 };
+const BAND_NAMES = { sine_100hz: "sine 100 Hz", noise_40_500hz: "noise 40–500 Hz" };
 
-// A small seeded generator (mulberry32): the interval order, repeatable for one wearer.
-export function seededRandom(text) {
-  let state = [...text].reduce((h, c) => Math.imul(h ^ c.charCodeAt(0), 2654435761) >>> 0, 1);
-  return () => {
-    state = (state + 0x6d2b79f5) >>> 0;
-    let t = state;
-    t = Math.imul(t ^ (t >>> 15), t | 1);
-    t ^= t + Math.imul(t ^ (t >>> 7), t | 61);
-    return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
-  };
-}
+class Cancelled extends Error {}
 
-// One actuator's staircase: the level (dB re the reference) of its test interval. It places
-// the trials (1-up-1-down: it converges on equal strength); the match is the maximum
-// likelihood fit of a psychometric function to all its trials.
-export class Staircase {
-  constructor() {
-    this.levelDb = 0;
-    this.stepDb = STAIRCASE.startStepDb;
-    this.lastDirection = 0;
-    this.records = [];
-  }
-
-  get done() {
-    return this.records.length >= STAIRCASE.trials;
-  }
-
-  // The test was judged stronger: step down; weaker: step up.
-  answer(testStronger) {
-    this.records.push([this.levelDb, testStronger]);
-    const direction = testStronger ? -1 : 1;
-    if (this.lastDirection !== 0 && direction !== this.lastDirection) {
-      this.stepDb = Math.max(STAIRCASE.minStepDb, this.stepDb / 2);
-    }
-    this.lastDirection = direction;
-    this.levelDb = Math.min(MAX_DB, Math.max(-MAX_DB, this.levelDb + direction * this.stepDb));
-  }
-
-  // The level felt as strong as the reference: P(test stronger) = lapse / 2 + (1 - lapse)
-  // / (1 + exp(-(level - match) / spread)), match and spread by maximum likelihood on a grid.
-  estimateDb() {
-    let best = { logLikelihood: -Infinity, matchDb: 0 };
-    const { from, to, step } = FIT.pointsDb;
-    for (const spread of FIT.spreadsDb) {
-      for (let i = 0; from + i * step <= to; i += 1) {
-        const matchDb = from + i * step;
-        let logLikelihood = 0;
-        for (const [levelDb, testStronger] of this.records) {
-          const p = FIT.lapse / 2 + (1 - FIT.lapse) / (1 + Math.exp(-(levelDb - matchDb) / spread));
-          logLikelihood += Math.log(testStronger ? p : 1 - p);
-        }
-        if (logLikelihood > best.logLikelihood) best = { logLikelihood, matchDb };
-      }
-    }
-    return best.matchDb;
-  }
-}
-
-function stillTouch(actuator, intensity, carrier, durationS, startInMs) {
+function stillTouch(point, levelDb, carrier, durationS, startInMs = 0) {
+  const fadeS = Math.min(FADE_S, durationS / 4);
   return {
-    path: { kind: "polyline", points_cm: [[actuator.x_cm, actuator.y_cm]] },
+    path: { kind: "polyline", points_cm: [point] },
     duration_s: durationS,
-    fade_in_s: Math.min(0.02, durationS / 4),
-    fade_out_s: Math.min(0.02, durationS / 4),
-    intensity,
+    fade_in_s: fadeS,
+    fade_out_s: fadeS,
+    level_db: levelDb,
     carrier,
     start_in_ms: startInMs,
   };
 }
 
-function phantomTouch(point, carrier, durationS) {
-  return {
-    path: { kind: "polyline", points_cm: [point] },
-    duration_s: durationS,
-    fade_in_s: Math.min(0.02, durationS / 4),
-    fade_out_s: Math.min(0.02, durationS / 4),
-    intensity: STAIRCASE.baseIntensity,
-    carrier,
-  };
-}
-
-// Phantom positions of the check: the centre of each triangle of the layout.
-export function checkPoints(device) {
-  return device.triangles.map((triangle) => {
-    const corners = triangle.map((index) => device.actuators[index]);
-    return [
-      corners.reduce((sum, a) => sum + a.x_cm, 0) / 3,
-      corners.reduce((sum, a) => sum + a.y_cm, 0) / 3,
-    ];
-  });
-}
-
-export function localisationSummary(rows) {
-  const n = rows.length || 1;
-  const mean = (f) => rows.reduce((sum, row) => sum + f(row), 0) / n;
-  return {
-    errorCm: mean((r) => Math.hypot(r.felt[0] - r.intended[0], r.felt[1] - r.intended[1])),
-    biasXCm: mean((r) => r.felt[0] - r.intended[0]),
-    biasYCm: mean((r) => r.felt[1] - r.intended[1]),
-  };
-}
-
-export function localisationCsv(runs) {
-  const lines = ["run,wearer,intended_x_cm,intended_y_cm,felt_x_cm,felt_y_cm,error_cm"];
-  runs.forEach((run, index) => {
-    for (const row of run.rows) {
-      const error = Math.hypot(row.felt[0] - row.intended[0], row.felt[1] - row.intended[1]);
-      const values = [index + 1, run.wearer, ...row.intended, ...row.felt, error];
-      lines.push(values.map((v) => (typeof v === "number" ? v.toFixed(4) : v)).join(","));
-    }
-  });
-  return `${lines.join("\n")}\n`;
-}
-
 export class WearerPanel {
   constructor({ device, showError }) {
     this.device = device;
+    this.levels = new Levels(device.max_level_db);
     this.showError = showError;
-    this.runs = [];
+    this.runs = []; // localisation runs of this page
     this.questions = 0; // questions asked so far: data-question on #wearer-trial
-    this.pending = null; // resolves with the wearer's answer of the current trial
-    this.buildPicture();
+    this.pending = null; // {resolve, reject} of the question on screen
+    this.trial = null; // the matching trial on screen, for "replay"
+    this.savedRun = null; // the stored run of the wearer named, if it is unfinished
+    this.stopping = false; // Cancel was pressed: the procedure ends at its next step
+    this.picture = new Armband($("wearer-picture"), {
+      down: (id, pos) => this.located(pos),
+      move: () => {},
+      up: () => {},
+      drawn: () => {},
+      addPoint: () => {},
+    }, $("wearer-readout"));
+    this.picture.build(device);
     for (const [index, actuator] of device.actuators.entries()) {
-      const option = new Option(`${index + 1} (channel ${actuator.channel})`, String(index));
-      $("wearer-reference").append(option);
+      $("wearer-reference").append(new Option(`${index + 1} (channel ${actuator.channel})`, String(index)));
     }
+    $("wearer-name").addEventListener("input", () => this.named());
+    $("wearer-name").addEventListener("change", () => this.lookUpRun());
     $("wearer-match").addEventListener("click", () => this.run(() => this.match()));
+    $("wearer-restart").addEventListener("click", () => this.restart());
+    $("wearer-cancel").addEventListener("click", () => this.cancel());
     $("wearer-check").addEventListener("click", () => this.run(() => this.check()));
+    $("wearer-apply").addEventListener("click", () => this.apply());
+    $("wearer-off").addEventListener("click", () => this.takeOff());
     $("wearer-first").addEventListener("click", () => this.respond(1));
     $("wearer-second").addEventListener("click", () => this.respond(2));
+    $("wearer-replay").addEventListener("click", () => this.replay());
     $("wearer-csv").addEventListener("click", () => this.downloadCsv());
+    document.addEventListener("keydown", (event) => {
+      if ($("wearer-trial").dataset.state === "asking" && !event.target.closest("input, select")) {
+        this.key(event);
+      }
+    });
+    this.showInForce();
   }
 
-  get carrier() {
-    return CARRIERS[$("wearer-band").value];
+  get name() {
+    return $("wearer-name").value.trim();
+  }
+
+  get band() {
+    return $("wearer-band").value;
   }
 
   get durationS() {
     return Number($("wearer-duration").value);
   }
 
+  say(text) {
+    $("wearer-message").textContent = text;
+  }
+
+  // A name that the library takes, or an Error saying what to type.
+  checkedName() {
+    if (!this.name || !$("wearer-name").checkValidity()) {
+      $("wearer-name").focus();
+      throw new Error("Give the wearer a name: 1 to 64 letters, digits, '.', '_' or '-'.");
+    }
+    return this.name;
+  }
+
+  named() {
+    this.say("");
+    this.savedRun = null;
+    this.showResume();
+  }
+
+  // An unfinished run stored for the wearer named: offered as "Resume".
+  async lookUpRun() {
+    const name = this.name;
+    if (!name || !$("wearer-name").checkValidity()) return;
+    let run = null;
+    try {
+      run = await api.wearerRun(name);
+    } catch (exc) {
+      if (exc.status !== 404) this.say(`Cannot read the saved answers: ${exc.message}`);
+    }
+    if (name !== this.name) return;
+    this.savedRun = run && !this.plan(run).finished ? run : null;
+    this.showResume();
+  }
+
+  showResume() {
+    const run = this.savedRun;
+    $("wearer-restart").hidden = !run;
+    $("wearer-match").textContent = run
+      ? `Resume matching (${run.trials.length} answers saved)` : "Match intensities";
+    if (run) {
+      $("wearer-band").value = run.band;
+      const reference = this.device.actuators.findIndex((a) => a.channel === run.reference_channel);
+      if (reference >= 0) $("wearer-reference").value = String(reference);
+    }
+  }
+
+  async restart() {
+    try {
+      await api.deleteWearerRun(this.checkedName());
+    } catch (exc) {
+      if (exc.status !== 404) this.say(`Cannot forget the saved answers: ${exc.message}`);
+    }
+    this.savedRun = null;
+    this.showResume();
+  }
+
   async run(procedure) {
-    $("wearer-match").disabled = $("wearer-check").disabled = true;
+    this.say("");
+    this.stopping = false;
+    delete $("wearer-trial").dataset.done;
+    this.busy(true);
+    $("wearer-progress").scrollIntoView({ block: "start" });
     try {
       await procedure();
     } catch (exc) {
-      this.showError(`Wearer procedure: ${exc.message}`);
+      this.say(exc instanceof Cancelled ? this.stoppedText() : exc.message);
     } finally {
-      $("wearer-match").disabled = $("wearer-check").disabled = false;
+      this.busy(false);
+      this.showResume();
+      this.trial = null;
+      this.picture.highlight();
       $("wearer-trial").dataset.state = "idle";
+      $("wearer-trial-text").textContent = "";
     }
+  }
+
+  busy(running) {
+    for (const id of ["wearer-match", "wearer-check", "wearer-restart", "wearer-name",
+      "wearer-reference", "wearer-band"]) {
+      $(id).disabled = running;
+    }
+    $("wearer-cancel").disabled = !running;
+  }
+
+  cancel() {
+    this.stopping = true;
+    if (!this.pending) return;
+    const { reject } = this.pending;
+    this.pending = null;
+    reject(new Cancelled());
+  }
+
+  stoppedText() {
+    const run = this.savedRun;
+    return run && this.trial
+      ? `Stopped after ${run.trials.length} answers; they are saved: press Resume to go on.`
+      : "Stopped.";
   }
 
   respond(answer) {
     if (!this.pending) return;
-    const resolve = this.pending;
+    const { resolve } = this.pending;
     this.pending = null;
     resolve(answer);
+  }
+
+  key(event) {
+    const actions = { 1: () => this.respond(1), 2: () => this.respond(2), r: () => this.replay() };
+    const action = actions[event.key.toLowerCase()];
+    if (!action) return;
+    event.preventDefault();
+    action();
+  }
+
+  located(pos) {
+    if ($("wearer-trial").dataset.state === "locating") this.respond([pos.x_cm, pos.y_cm]);
   }
 
   waitFor(state, text) {
@@ -193,77 +212,193 @@ export class WearerPanel {
     $("wearer-trial").dataset.question = String(this.questions);
     $("wearer-trial").dataset.state = state;
     $("wearer-trial-text").textContent = text;
-    return new Promise((resolve) => { this.pending = resolve; });
+    return new Promise((resolve, reject) => { this.pending = { resolve, reject }; });
   }
 
-  // Each actuator against the reference, one staircase after another.
+  // --- intensity matching --------------------------------------------------------------
+
+  // The staircases of a run (one per actuator but the reference), replayed from its
+  // answers, and the seeded interval order advanced past them.
+  plan(run) {
+    const reference = this.device.actuators.findIndex((a) => a.channel === run.reference_channel);
+    const staircases = new Map();
+    this.device.actuators.forEach((a, index) => {
+      if (index !== reference) staircases.set(a.channel, new Staircase(this.levels));
+    });
+    const random = seededRandom(`${this.name}`);
+    for (const trial of run.trials) {
+      random();
+      staircases.get(trial.channel).answer(trial.test_stronger);
+    }
+    const all = [...staircases.values()];
+    return { reference, staircases, random, finished: all.every((s) => s.done) };
+  }
+
   async match() {
-    const name = $("wearer-name").value.trim();
-    if (!$("wearer-name").checkValidity() || !name) throw new Error("give the wearer a name");
-    const reference = Number($("wearer-reference").value);
-    const band = $("wearer-band").value;
-    const offsets = {};
-    const random = seededRandom(name);
-    let trials = 0;
-    for (const [index, actuator] of this.device.actuators.entries()) {
-      if (index === reference) {
-        offsets[String(actuator.channel)] = 0;
-        continue;
-      }
-      const staircase = new Staircase();
+    const name = this.checkedName();
+    if (!this.savedRun) await this.lookUpRun();
+    let run = this.savedRun;
+    if (!run || run.band !== this.band) {
+      const reference = this.device.actuators[Number($("wearer-reference").value)];
+      run = { band: this.band, reference_channel: reference.channel, trials: [] };
+    }
+    const { reference, staircases, random } = this.plan(run);
+    const pace = { startedMs: performance.now(), answered: 0 };
+    this.showProgress(run, staircases, pace);
+    for (const [channel, staircase] of staircases) {
+      const index = this.device.actuators.findIndex((a) => a.channel === channel);
       while (!staircase.done) {
-        const testFirst = random() < 0.5;
-        const testIntensity = STAIRCASE.baseIntensity * 10 ** (staircase.levelDb / 20);
-        const intervals = [
-          [this.device.actuators[reference], STAIRCASE.baseIntensity],
-          [actuator, testIntensity],
-        ];
-        if (testFirst) intervals.reverse();
-        const secondAtMs = 1000 * (this.durationS + STAIRCASE.gapS);
-        await api.touch(stillTouch(...intervals[0], this.carrier, this.durationS, 0));
-        await api.touch(stillTouch(...intervals[1], this.carrier, this.durationS, secondAtMs));
+        if (this.stopping) throw new Cancelled();
+        this.trial = {
+          testFirst: random() < 0.5,
+          test: [this.device.actuators[index], this.levels.absoluteDb(staircase.levelDb)],
+          reference: [this.device.actuators[reference], this.levels.referenceDb],
+        };
+        this.picture.highlight({ lit: [index + 1], marked: [reference + 1] });
+        await this.play(this.trial);
         const answer = await this.waitFor(
           "asking",
-          `Actuator ${index + 1}: which of the two touches was stronger?`,
+          `Actuator ${index + 1} (lit) against actuator ${reference + 1}: which of the two `
+          + "touches was stronger?",
         );
-        staircase.answer((answer === 1) === testFirst);
-        trials += 1;
-        $("wearer-progress").textContent = `${trials} trials`;
+        const testStronger = (answer === 1) === this.trial.testFirst;
+        run.trials.push({ channel, level_db: staircase.levelDb, test_stronger: testStronger });
+        staircase.answer(testStronger);
+        await api.putWearerRun(name, run);
+        this.savedRun = run;
+        pace.answered += 1;
+        this.showProgress(run, staircases, pace);
       }
-      offsets[String(actuator.channel)] = Number(staircase.estimateDb().toFixed(2));
     }
-    const profile = { offsets_db: { [band]: offsets }, note: `matched against actuator ${reference + 1}` };
-    await api.putWearer(name, profile);
-    this.showOffsets(offsets, trials);
+    await this.store(name, run, staircases, reference);
+    this.savedRun = null;
+    this.showResume();
   }
 
-  showOffsets(offsets, trials) {
+  async play({ testFirst, test, reference }) {
+    const intervals = testFirst ? [test, reference] : [reference, test];
+    const carrier = CARRIERS[this.band];
+    const secondAtMs = 1000 * (this.durationS + STAIRCASE.gapS);
+    const touch = ([actuator, levelDb], atMs) => stillTouch(
+      [actuator.x_cm, actuator.y_cm], levelDb, carrier, this.durationS, atMs,
+    );
+    await api.touch(touch(intervals[0], 0));
+    await api.touch(touch(intervals[1], secondAtMs));
+  }
+
+  async replay() {
+    if (!this.trial || $("wearer-trial").dataset.state !== "asking") return;
+    try {
+      await this.play(this.trial);
+    } catch (exc) {
+      this.say(`Replay: ${exc.message}`);
+    }
+  }
+
+  // "Trial 12 of about 170, ~4 min left": the total shrinks when an actuator ends early at
+  // the ceiling; the time left is at the wearer's own pace once a few answers are in.
+  showProgress(run, staircases, pace) {
+    const answered = run.trials.length;
+    const remaining = [...staircases.values()].reduce((sum, s) => sum + s.remaining, 0);
+    const total = answered + remaining;
+    const guessS = 2 * this.durationS + STAIRCASE.gapS + ANSWER_S;
+    const perTrialS = pace.answered >= 3
+      ? (performance.now() - pace.startedMs) / 1000 / pace.answered : guessS;
+    const leftMin = (remaining * perTrialS) / 60;
+    const left = leftMin < 1 ? "under a minute left" : `~${Math.round(leftMin)} min left`;
+    $("wearer-progress-bar").max = Math.max(1, total);
+    $("wearer-progress-bar").value = answered;
+    $("wearer-progress-text").textContent = remaining > 0
+      ? `Trial ${answered + 1} of about ${total}, ${left}`
+      : `${answered} trials answered`;
+  }
+
+  async store(name, run, staircases, reference) {
+    const offsets = { [String(run.reference_channel)]: 0 };
+    const atCeiling = [];
+    for (const [channel, staircase] of staircases) {
+      offsets[String(channel)] = Number(staircase.estimateDb().toFixed(2));
+      if (staircase.limit) atCeiling.push([channel, staircase.limit]);
+    }
+    const limits = atCeiling.map(([channel, limit]) => `channel ${channel} at the ${limit}`);
+    const note = `matched against actuator ${reference + 1} in ${run.trials.length} trials`
+      + (limits.length ? `; ${limits.join(", ")}` : "");
+    await api.putWearer(name, { offsets_db: { [run.band]: offsets }, note });
+    this.showOffsets(offsets, new Map(atCeiling), run.trials.length);
+  }
+
+  showOffsets(offsets, limits, trials) {
     const list = $("wearer-offsets");
     list.replaceChildren();
     for (const [channel, db] of Object.entries(offsets)) {
       const item = document.createElement("li");
       item.dataset.channel = channel;
       item.dataset.offsetDb = String(db);
-      item.textContent = `channel ${channel}: ${formatNumber(db, 2)} dB`;
+      const limit = limits.get(Number(channel));
+      item.textContent = `channel ${channel}: ${formatNumber(db, 2)} dB`
+        + (limit === "ceiling" ? " (at the ceiling: weaker than the reference even there)"
+          : limit === "floor" ? " (at the floor: stronger than the reference even there)" : "");
       list.append(item);
     }
-    const trialS = 2 * this.durationS + STAIRCASE.gapS + ANSWER_S;
-    $("wearer-progress").textContent = `${trials} trials, about ${formatNumber(trials * trialS / 60, 1)} min `
-      + "of the wearer's time (two intervals, the gap and ${ANSWER_S} s to answer per trial)";
+    $("wearer-progress-text").textContent = `Done: ${trials} trials; the profile is stored. `
+      + "Apply it to the service, then run the localisation check.";
     $("wearer-trial").dataset.done = "match";
   }
 
-  // Phantom points at the triangles' centres, in random order; the wearer clicks where each was felt.
+  // --- the profile in force -------------------------------------------------------------
+
+  async showInForce() {
+    try {
+      const active = await api.activeWearer();
+      $("wearer-in-force").textContent = active.name
+        ? `In force: ${active.name} (${BAND_NAMES[active.band] || active.band})`
+        : "In force: none (the calibration alone)";
+      $("wearer-in-force").dataset.name = active.name || "";
+    } catch (exc) {
+      this.say(`Cannot read the wearer in force: ${exc.message}`);
+    }
+  }
+
+  async apply() {
+    try {
+      await api.useWearer(this.checkedName(), this.band);
+      this.say("");
+    } catch (exc) {
+      this.say(`Apply: ${exc.message}`);
+    }
+    await this.showInForce();
+  }
+
+  async takeOff() {
+    try {
+      await api.noWearer();
+    } catch (exc) {
+      this.say(`Take it off: ${exc.message}`);
+    }
+    await this.showInForce();
+  }
+
+  // --- localisation check ---------------------------------------------------------------
+
+  // Phantom points at the triangles' centres, in random order; the wearer clicks where each
+  // was felt on the armband picture.
   async check() {
-    const health = await api.health();
+    const active = await api.activeWearer();
     const points = checkPoints(this.device).sort(() => Math.random() - 0.5);
     const rows = [];
-    for (const point of points) {
-      await api.touch(phantomTouch(point, this.carrier, this.durationS));
+    for (const [number, point] of points.entries()) {
+      await api.touch(stillTouch(point, this.levels.referenceDb, CARRIERS[this.band], this.durationS));
+      $("wearer-progress-bar").max = points.length;
+      $("wearer-progress-bar").value = number;
+      $("wearer-progress-text").textContent = `Point ${number + 1} of ${points.length}`;
       const felt = await this.waitFor("locating", "Click where you felt the touch.");
+      this.picture.releaseAll();
       rows.push({ intended: point, felt });
+      if (this.stopping) throw new Cancelled();
     }
-    this.runs.push({ wearer: health.wearer || "none", rows });
+    $("wearer-progress-bar").value = points.length;
+    $("wearer-progress-text").textContent = `Localisation check done: ${points.length} points.`;
+    this.runs.push({ wearer: active.name || "none", rows });
     this.showRuns();
   }
 
@@ -283,8 +418,21 @@ export class WearerPanel {
       }
       body.append(row);
     });
+    this.showComparison();
     $("wearer-csv").disabled = this.runs.length === 0;
     $("wearer-trial").dataset.done = "check";
+  }
+
+  // Before and after: the latest run without a profile against the latest with one.
+  showComparison() {
+    const latest = (test) => [...this.runs].reverse().find(test);
+    const without = latest((run) => run.wearer === "none");
+    const fitted = latest((run) => run.wearer !== "none");
+    const error = (run) => formatNumber(localisationSummary(run.rows).errorCm, 2);
+    $("wearer-compare").textContent = without && fitted
+      ? `Localisation error: ${error(without)} cm without a profile, ${error(fitted)} cm `
+        + `with ${fitted.wearer}.`
+      : "";
   }
 
   downloadCsv() {
@@ -294,34 +442,5 @@ export class WearerPanel {
     link.download = "localisation.csv";
     link.click();
     setTimeout(() => URL.revokeObjectURL(link.href), 1000);
-  }
-
-  // The armband as the wearer sees it, in cm (viewBox), 1 cm margin; a click names a point.
-  buildPicture() {
-    const svg = $("wearer-picture");
-    const xs = this.device.actuators.map((a) => a.x_cm);
-    const ys = this.device.actuators.map((a) => a.y_cm);
-    const [x0, y0] = [Math.min(...xs) - 1, Math.min(...ys) - 1];
-    const [w, h] = [Math.max(...xs) - x0 + 1, Math.max(...ys) - y0 + 1];
-    svg.setAttribute("viewBox", `${x0} ${y0} ${w} ${h}`);
-    svg.setAttribute("preserveAspectRatio", "none");
-    const band = document.createElementNS(SVG, "rect");
-    Object.entries({ x: x0, y: y0, width: w, height: h, rx: 0.8, class: "wearer-band" })
-      .forEach(([k, v]) => band.setAttribute(k, v));
-    svg.append(band);
-    this.device.actuators.forEach((a, index) => {
-      const dot = document.createElementNS(SVG, "circle");
-      Object.entries({ cx: a.x_cm, cy: a.y_cm, r: 0.5, class: "wearer-actuator" })
-        .forEach(([k, v]) => dot.setAttribute(k, v));
-      dot.append(Object.assign(document.createElementNS(SVG, "title"), { textContent: `${index + 1}` }));
-      svg.append(dot);
-    });
-    svg.addEventListener("click", (event) => {
-      if ($("wearer-trial").dataset.state !== "locating") return;
-      const box = svg.getBoundingClientRect();
-      const x = x0 + ((event.clientX - box.left) / box.width) * w;
-      const y = y0 + ((event.clientY - box.top) / box.height) * h;
-      this.respond([x, y]);
-    });
   }
 }

@@ -7,7 +7,7 @@ send these and hand the response to ``parse``, so both speak the routes the same
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 from urllib.parse import quote
@@ -29,6 +29,7 @@ from phantomtouch_client.models import (
     StopAnswer,
     Summary,
     Wearer,
+    WearerRun,
     WearerSummary,
     pattern_json,
     timing,
@@ -229,6 +230,21 @@ def put_wearer(
 
 def delete_wearer(name: str) -> Call[None]:
     return Call("DELETE", f"/wearers/{_segment(name)}", _nothing)
+
+
+def wearer_run(name: str) -> Call[WearerRun]:
+    return Call("GET", f"/wearers/{_segment(name)}/run", _model(WearerRun))
+
+
+def put_wearer_run(
+    name: str, band: str, reference_channel: int, trials: Sequence[Mapping[str, Any]]
+) -> Call[WearerRun]:
+    body = {"band": band, "reference_channel": reference_channel, "trials": list(trials)}
+    return Call("PUT", f"/wearers/{_segment(name)}/run", _model(WearerRun), body)
+
+
+def delete_wearer_run(name: str) -> Call[None]:
+    return Call("DELETE", f"/wearers/{_segment(name)}/run", _nothing)
 
 
 def active_wearer() -> Call[ActiveWearer]:

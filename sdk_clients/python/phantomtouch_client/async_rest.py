@@ -8,7 +8,7 @@ what the two clients share is in :mod:`phantomtouch_client.rest_base`.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self, TypeVar
 
@@ -29,6 +29,7 @@ from phantomtouch_client.models import (
     StopAnswer,
     Summary,
     Wearer,
+    WearerRun,
     WearerSummary,
     touch_request,
 )
@@ -232,6 +233,25 @@ class AsyncClient(ClientBase):
     async def delete_wearer(self, name: str) -> None:
         """``DELETE /wearers/{name}``."""
         await self._run(_calls.delete_wearer(name))
+
+    async def wearer_run(self, name: str) -> WearerRun:
+        """``GET /wearers/{name}/run``: the answers of the wearer's matching run so far."""
+        return await self._run(_calls.wearer_run(name))
+
+    async def put_wearer_run(
+        self,
+        name: str,
+        band: str,
+        reference_channel: int,
+        trials: Sequence[Mapping[str, Any]],
+    ) -> WearerRun:
+        """``PUT /wearers/{name}/run``: store the answers of a matching run so far (each
+        trial ``{"channel", "level_db", "test_stronger"}``); a record, never applied."""
+        return await self._run(_calls.put_wearer_run(name, band, reference_channel, trials))
+
+    async def delete_wearer_run(self, name: str) -> None:
+        """``DELETE /wearers/{name}/run``."""
+        await self._run(_calls.delete_wearer_run(name))
 
     async def wearer(self) -> ActiveWearer:
         """``GET /wearer``: the wearer the output stage is fitted to now."""

@@ -172,6 +172,16 @@ class Wearer(_Answer):
     note: str = ""
 
 
+class WearerRun(_Answer):
+    """``GET|PUT /wearers/{name}/run``: the answers of a wearer's matching run so far, in
+    the band ``band`` against the reference actuator on ``reference_channel``; each trial
+    a dict ``{"channel", "level_db", "test_stronger"}`` (``level_db`` re the reference)."""
+
+    band: str
+    reference_channel: int
+    trials: list[dict[str, Any]] = []
+
+
 class WearerSummary(_Answer):
     """One entry of ``GET /wearers``."""
 
@@ -192,6 +202,7 @@ class DeviceInfo(_Answer):
     output_latency_s: float
     actuators: list[dict[str, Any]]
     triangles: list[tuple[int, int, int]]
+    max_level_db: float
 
 
 class Welcome(_Answer):

@@ -8,7 +8,7 @@ It covers every route of the service; the routes themselves are described once, 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self, TypeVar
 
@@ -29,6 +29,7 @@ from phantomtouch_client.models import (
     StopAnswer,
     Summary,
     Wearer,
+    WearerRun,
     WearerSummary,
     touch_request,
 )
@@ -239,6 +240,25 @@ class Client(ClientBase):
     def delete_wearer(self, name: str) -> None:
         """``DELETE /wearers/{name}``."""
         self._run(_calls.delete_wearer(name))
+
+    def wearer_run(self, name: str) -> WearerRun:
+        """``GET /wearers/{name}/run``: the answers of the wearer's matching run so far."""
+        return self._run(_calls.wearer_run(name))
+
+    def put_wearer_run(
+        self,
+        name: str,
+        band: str,
+        reference_channel: int,
+        trials: Sequence[Mapping[str, Any]],
+    ) -> WearerRun:
+        """``PUT /wearers/{name}/run``: store the answers of a matching run so far (each
+        trial ``{"channel", "level_db", "test_stronger"}``); a record, never applied."""
+        return self._run(_calls.put_wearer_run(name, band, reference_channel, trials))
+
+    def delete_wearer_run(self, name: str) -> None:
+        """``DELETE /wearers/{name}/run``."""
+        self._run(_calls.delete_wearer_run(name))
 
     def wearer(self) -> ActiveWearer:
         """``GET /wearer``: the wearer the output stage is fitted to now."""
