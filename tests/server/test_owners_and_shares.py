@@ -21,7 +21,6 @@ from tests.support.owner_attacks import (
     answer_to,
     http_crowd_voices,
     job_history_flood,
-    job_state,
     osc_other_sender_renews,
     osc_sender_pool,
     stop_all,
