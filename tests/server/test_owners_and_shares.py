@@ -47,14 +47,18 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[LiveServer,
         yield server, osc_port
 
 
-def test_another_osc_senders_messages_do_not_keep_a_silent_senders_contact_on(live) -> None:
+def test_another_osc_senders_messages_do_not_keep_a_silent_senders_contact_on(
+    live: tuple[LiveServer, int],
+) -> None:
     server, osc_port = live
     seen = osc_other_sender_renews(server.url, osc_port, seconds=3.0)
     # the map's watchdog is 1 s: A's contact went 1 s after A fell silent, whatever B sent
     assert seen == {"contacts": 0.0, "stayed_on": False}
 
 
-def test_one_osc_sender_cannot_hold_every_contact_of_the_bridge(live) -> None:
+def test_one_osc_sender_cannot_hold_every_contact_of_the_bridge(
+    live: tuple[LiveServer, int],
+) -> None:
     server, osc_port = live
     seen = osc_sender_pool(server.url, osc_port)
     # B's contact went down (one of A's made room: still 10) and A could not take it back
@@ -62,13 +66,15 @@ def test_one_osc_sender_cannot_hold_every_contact_of_the_bridge(live) -> None:
     assert seen == {"after_down": 10.0, "after_lift": 9.0, "refused": 1.0}
 
 
-def test_a_touch_played_over_a_websocket_stops_when_the_socket_closes(live) -> None:
+def test_a_touch_played_over_a_websocket_stops_when_the_socket_closes(
+    live: tuple[LiveServer, int],
+) -> None:
     server, _ = live
     seen = ws_touch_outlives_socket(server.url, server.ws_url)
     assert seen == {"state": "stopped", "reason": "closed", "stayed_on": False}
 
 
-def test_a_detached_touch_plays_on_within_its_own_quota(live) -> None:
+def test_a_detached_touch_plays_on_within_its_own_quota(live: tuple[LiveServer, int]) -> None:
     server, _ = live
     seen = ws_touch_outlives_socket(server.url, server.ws_url, detached=True)
     assert seen["state"] == "playing" and seen["stayed_on"]  # asked for in so many words
@@ -97,7 +103,9 @@ def test_a_detached_touch_plays_on_within_its_own_quota(live) -> None:
     assert answers[6]["type"] == "error" and answers[6]["fields"][0]["field"] == "detached"
 
 
-def test_seventy_connections_holding_every_voice_leave_a_newcomer_one(live) -> None:
+def test_seventy_connections_holding_every_voice_leave_a_newcomer_one(
+    live: tuple[LiveServer, int],
+) -> None:
     server, _ = live
     seen = ws_crowd_voices(server.url, server.ws_url, crowd=70)
     assert seen["crowd"] == {"ok": 70}, seen  # each newcomer of the crowd got one too
@@ -107,7 +115,9 @@ def test_seventy_connections_holding_every_voice_leave_a_newcomer_one(live) -> N
     assert not seen["stayed_on"], seen  # every connection closed: its touch stopped
 
 
-def test_sixty_four_addresses_holding_every_voice_leave_a_65th_one(live) -> None:
+def test_sixty_four_addresses_holding_every_voice_leave_a_65th_one(
+    live: tuple[LiveServer, int],
+) -> None:
     server, _ = live
     seen = http_crowd_voices(server.url, crowd=64)
     assert seen["crowd"] == {"202": 64}, seen
@@ -116,7 +126,9 @@ def test_sixty_four_addresses_holding_every_voice_leave_a_65th_one(live) -> None
     assert seen["stolen"] >= 1, seen
 
 
-def test_128_connections_holding_every_contact_leave_a_newcomer_one(live) -> None:
+def test_128_connections_holding_every_contact_leave_a_newcomer_one(
+    live: tuple[LiveServer, int],
+) -> None:
     server, _ = live
     seen = ws_crowd_contacts(server.url, server.ws_url, crowd=128)
     assert seen["crowd_ok"] == 128, seen
@@ -126,7 +138,9 @@ def test_128_connections_holding_every_contact_leave_a_newcomer_one(live) -> Non
     assert not seen["stayed_on"], seen
 
 
-def test_another_clients_flood_does_not_evict_my_job_from_the_history(live) -> None:
+def test_another_clients_flood_does_not_evict_my_job_from_the_history(
+    live: tuple[LiveServer, int],
+) -> None:
     server, _ = live
     seen = job_history_flood(server.url, server.ws_url, flood=1100)
     assert seen["flooded"] == 1100, seen
