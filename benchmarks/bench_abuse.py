@@ -21,6 +21,14 @@ abuse runs in a process of its own, bounded in count and time:
 - ``osc deep bundles``: bundles nested 500 deep (10 KB each), as fast as they go;
 - ``invalid utf-8``: WebSocket connections each sending one text frame that is not UTF-8
   (closed with 1007, one log line per 10 s).
+- owners and shares (:func:`owner_abuses`, :mod:`tests.support.owner_attacks`):
+  ``osc other sender`` (sender B's messages while silent sender A's contact is down),
+  ``osc 10 contacts`` (sender A holds the bridge's 10 contacts, B asks for one), ``ws closes``
+  (a 600 s touch played over a socket that closes), ``crowd ws x70`` (70 connections each
+  play one quiet 2 h touch, then a newcomer), ``crowd 64 addresses`` (the same over HTTP
+  from 127.0.0.2-65), ``contacts crowd x128`` (128 connections hold one silent contact each,
+  then a newcomer's ``down``) and ``jobs history flood``; each outcome says whether a
+  vibration stayed on (``stayed_on``) and how the newcomer fared.
 
 Each line reports the probe's p50, p99 and slowest answer while the abuse ran and the
 underruns the engine counted meanwhile (``/metrics``)::
@@ -55,6 +63,15 @@ from tests.support.fairness import (
     ws_play_flood,
 )
 from tests.support.live_server import LiveServer
+from tests.support.owner_attacks import (
+    http_crowd_voices,
+    job_history_flood,
+    osc_other_sender_renews,
+    osc_sender_pool,
+    ws_crowd_contacts,
+    ws_crowd_voices,
+    ws_touch_outlives_socket,
+)
 
 
 def underruns(server: LiveServer) -> float:
@@ -127,6 +144,20 @@ def input_abuses(server: LiveServer, osc_port: int) -> dict[str, Callable[[], An
     }
 
 
+def owner_abuses(server: LiveServer, osc_port: int) -> dict[str, Callable[[], Any]]:
+    """The attacks on owners and shares (docs/security.md, "Owners and shares")."""
+    url, ws_url = server.url, server.ws_url
+    return {
+        "osc other sender": lambda: in_process(osc_other_sender_renews, url, osc_port),
+        "osc 10 contacts": lambda: in_process(osc_sender_pool, url, osc_port),
+        "ws closes": lambda: in_process(ws_touch_outlives_socket, url, ws_url),
+        "crowd ws x70": lambda: in_process(ws_crowd_voices, url, ws_url),
+        "crowd 64 addresses": lambda: in_process(http_crowd_voices, url),
+        "contacts crowd x128": lambda: in_process(ws_crowd_contacts, url, ws_url),
+        "jobs history flood": lambda: in_process(job_history_flood, url, ws_url),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of the baseline")
@@ -134,7 +165,11 @@ def main(argv: list[str] | None = None) -> int:
     osc_port = free_udp_port()
     with (
         tempfile.TemporaryDirectory() as folder,
-        LiveServer(Path(folder) / "p.db", args=("--osc", f"127.0.0.1:{osc_port}")) as server,
+        LiveServer(
+            Path(folder) / "p.db",
+            args=("--osc", f"127.0.0.1:{osc_port}"),
+            env={"PHANTOMTOUCH_WATCHDOG_S": "30"},  # the contact crowd's silent contacts
+        ) as server,
     ):
         abuses: dict[str, Callable[[], Any]] = {
             "none": lambda: time.sleep(args.seconds),
@@ -144,6 +179,7 @@ def main(argv: list[str] | None = None) -> int:
             "hang-ups": lambda: in_process(hang_ups, server.port, 500),
             **fairness_abuses(server, args.seconds),
             **input_abuses(server, osc_port),
+            **owner_abuses(server, osc_port),
         }
         inputs = set(input_abuses(server, osc_port))
         print(

@@ -214,8 +214,8 @@ class JobCalls:
         return self.schedule(pattern, **options)
 
     def job_state(self, job_id: str) -> JobState | None:
-        """The state of a job, or None if unknown (or too old: the last 1000 are kept);
-        host, any thread."""
+        """The state of a job, or None if unknown (or too old: the last 1000 of its owner
+        are kept, :class:`~phantomtouch.engine.jobs.JobTable`); host, any thread."""
         self._audio.sync()
         with self._lock:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
@@ -231,3 +231,15 @@ class JobCalls:
             post_release(self._audio, ReleaseJob(record.handle, None, None))
             self._jobs.mark_stopped(record)
             return True
+
+    def stop_owner(self, owner: str, reason: str = "closed") -> int:
+        """Stop every job of ``owner`` scheduled or playing, each with its release ramp
+        (its state says ``stopped`` with ``reason``: the owner went, ``docs/owners.md``);
+        host, any thread. Returns how many were stopped; never refused."""
+        with self._lock:
+            records = self._jobs.live_of(owner)
+            for record in records:
+                post_release(self._audio, ReleaseJob(record.handle, None, None))
+                self._jobs.mark_stopped(record)
+                record.reason = reason
+            return len(records)

@@ -13,6 +13,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Literal, get_args
 
+from phantomtouch.engine.shares import yielding
 from phantomtouch.errors import EngineBusyError, PhantomTouchError
 from phantomtouch.renderer.plan import Plan
 
@@ -26,7 +27,10 @@ _STEAL_ORDER: dict[str, Callable[[JobRecord], tuple[Any, ...]]] = {
 }
 """How a policy orders an owner's sounding jobs: the least is stolen first."""
 HISTORY_JOBS = 1000
-"""Jobs that are over and still answered by :meth:`Engine.job_state`."""
+"""Jobs that are over and still answered by :meth:`Engine.job_state`, per owner."""
+HISTORY_OWNERS = 10
+"""The history holds at most ``HISTORY_OWNERS * history`` jobs over every owner; beyond
+that, the owner holding the most gives up its oldest (``docs/owners.md``)."""
 
 
 @dataclass(frozen=True)
@@ -164,14 +168,16 @@ class QuotaRefused(PhantomTouchError):
 
 class JobTable:
     """Jobs by id: those scheduled or playing, those asked to stop (the callback has yet to
-    silence them), and the last ``history`` (>= 0) that are over; ``handles``: the same by
-    their integer on the audio side."""
+    silence them), and the last ``history`` (>= 0) of each owner that are over (at most
+    :data:`HISTORY_OWNERS` times as many in all: so one client's flood of touches never
+    evicts another's job); ``handles``: the same by their integer on the audio side."""
 
     def __init__(self, history: int = HISTORY_JOBS) -> None:
         self.history = history
         self._live: dict[str, JobRecord] = {}
         self._stopping: dict[str, JobRecord] = {}
-        self._over: OrderedDict[str, JobRecord] = OrderedDict()
+        self._over: dict[str | None, OrderedDict[str, JobRecord]] = {}
+        self._over_owner: dict[str, str | None] = {}
         self.handles: dict[int, JobRecord] = {}
 
     def __len__(self) -> int:
@@ -256,7 +262,14 @@ class JobTable:
         self.handles[record.handle] = record
 
     def get(self, job_id: str) -> JobRecord | None:
-        return self._live.get(job_id) or self._stopping.get(job_id) or self._over.get(job_id)
+        found = self._live.get(job_id) or self._stopping.get(job_id)
+        if found is None and job_id in self._over_owner:
+            found = self._over[self._over_owner[job_id]].get(job_id)
+        return found
+
+    def live_of(self, owner: str) -> list[JobRecord]:
+        """The jobs of ``owner`` scheduled or playing, oldest first."""
+        return [record for record in self._live.values() if record.owner == owner]
 
     def mark_stopped(self, record: JobRecord, *, stolen: bool = False) -> None:
         """The job was asked to stop (or ``stolen``); the callback will silence it."""
@@ -281,32 +294,48 @@ class JobTable:
             self.retire(record)
 
     def retire(self, record: JobRecord) -> None:
-        """Move a job that is over into the bounded history."""
+        """Move a job that is over into its owner's bounded history: past ``history`` jobs
+        the owner's oldest goes; past ``HISTORY_OWNERS * history`` in all, that of the owner
+        holding the most (a flood evicts its own jobs first)."""
         record.plan = None
         self._live.pop(record.job_id, None)
         self._stopping.pop(record.job_id, None)
-        self._over[record.job_id] = record
-        while len(self._over) > self.history:
-            self.handles.pop(self._over.popitem(last=False)[1].handle, None)
+        mine = self._over.setdefault(record.owner, OrderedDict())
+        mine[record.job_id] = record
+        self._over_owner[record.job_id] = record.owner
+        if len(mine) > self.history:
+            self._forget_oldest(record.owner)
+        if len(self._over_owner) > HISTORY_OWNERS * self.history:
+            self._forget_oldest(max(self._over, key=lambda o: len(self._over[o])))
+
+    def _forget_oldest(self, owner: str | None) -> None:
+        held = self._over[owner]
+        if held:
+            job_id, old = held.popitem(last=False)
+            self._over_owner.pop(job_id, None)
+            self.handles.pop(old.handle, None)
+        if not held:
+            del self._over[owner]
 
 
 def _fair_victims(
     sounding: list[JobRecord], start_frame: int, owner: str | None, policy: Policy
 ) -> Iterator[JobRecord]:
-    """Jobs to steal, in turn, max-min fair (``docs/owners.md``); none under ``refuse``."""
+    """Jobs to steal, in turn, by the fair-share rule (:mod:`~phantomtouch.engine.shares`,
+    ``docs/owners.md``): from the owners it lets yield to ``owner``, the one whose next
+    candidate comes first in the policy's order; when none yields, ``owner``'s own (its
+    new touch replaces its oldest); none under ``refuse``."""
     if policy == "refuse":
         return
     held = Counter(record.owner for record in sounding)
-    held[owner] += 1
     order = _STEAL_ORDER[policy]
     candidates: dict[str | None, list[JobRecord]] = {}
     for record in sorted(sounding, key=order, reverse=True):
         if record.first_frame <= start_frame and record.state != "stopped":
             candidates.setdefault(record.owner, []).append(record)
     while True:
-        most = max(held.values())
-        largest = [owner] if held[owner] == most else [o for o, n in held.items() if n == most]
-        ready = [o for o in largest if candidates.get(o)]
+        givers = yielding(held, owner) or ([owner] if held[owner] else [])
+        ready = [o for o in givers if candidates.get(o)]
         if not ready:
             return
         holder = min(ready, key=lambda o: order(candidates[o][-1]))

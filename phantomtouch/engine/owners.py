@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, TypedDict, Unpack
 
 from phantomtouch.engine.checks import check_frame, check_id, check_law, check_range
 from phantomtouch.engine.messages import Command, ContactDown, ContactMove, ContactUp
+from phantomtouch.engine.shares import yielding
 from phantomtouch.engine.touchdown import Touchdowns, check_contact_carrier, contact_amplitude
 from phantomtouch.errors import EngineBusyError, ParameterError, ProtocolError
 from phantomtouch.schema import limits
@@ -101,26 +102,30 @@ class OwnerTable:
 
     def make_room(self, owner: str) -> tuple[str, str, ContactRecord] | None:
         """Room for one more contact of ``owner``: None if a slot is free, else the
-        contact to take from the largest holder (taken out of the table).
+        contact taken (out of the table) from a holder the fair-share rule lets yield
+        (:func:`~phantomtouch.engine.shares.yielding`): of those, the one whose oldest
+        contact is oldest gives that one up.
 
         Raises
         ------
         EngineBusyError
-            Every slot is taken and no owner holds two more than ``owner``.
+            Every slot is taken and no owner yields to ``owner``.
         """
         count = len(self)
         if count < self.max_contacts:
             return None
-        mine = len(self.held(owner))
-        largest, held = max(self._owners.items(), key=lambda item: len(item[1]))
-        if len(held) < mine + 2:
+        givers = yielding({o: len(held) for o, held in self._owners.items()}, owner)
+        if not givers:
+            mine = len(self.held(owner))
             raise EngineBusyError(
                 f"{count} contacts are down; at most max_contacts={self.max_contacts}, "
                 f"and no other owner holds two more than this one ({mine})"
             )
-        contact, record = next(iter(held.items()))
-        self.pop(largest, contact)
-        return largest, contact, record
+        oldest = {o: next(iter(self._owners[o].items())) for o in givers}
+        giver = min(givers, key=lambda o: oldest[o][1].handle)
+        contact, record = oldest[giver]
+        self.pop(giver, contact)
+        return giver, contact, record
 
     def put(self, owner: str, contact: str, record: ContactRecord) -> None:
         """Hold ``contact`` of ``owner`` down (a contact down again keeps its age)."""
@@ -258,8 +263,9 @@ class ContactCalls:
         ParameterError
             An argument is out of range (the message names it).
         EngineBusyError
-            ``contact.max_contacts`` contacts are down and no owner holds two more than
-            ``owner`` (when one does, its oldest contact is released, reason ``quota``).
+            ``contact.max_contacts`` contacts are down and no owner yields one to ``owner``
+            (:mod:`~phantomtouch.engine.shares`; when one does, its oldest contact is
+            released, reason ``quota``).
         DeviceError
             The engine is closed, or its audio side is not running.
         """

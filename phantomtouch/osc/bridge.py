@@ -14,14 +14,17 @@ datagrams without counting them, hence the loop here).
 Safety: every datagram and message is checked and a bad one dropped, counted
 (:class:`~phantomtouch.osc.counters.OscCounters`) and logged in one line, at most one per
 reason every :data:`LOG_INTERVAL_S`; a token bucket bounds the message rate. The bridge
-keeps no contact state: its contacts are held by the engine's front (owner ``osc``,
-:mod:`phantomtouch.engine.owners`), each with the map's ``watchdog_s`` as its deadline,
-which every accepted message pushes on. Silence for ``watchdog_s`` releases them -- by the
-front's deadline thread, so also when this thread is gone -- and so does closing the
-bridge. The receive thread is supervised: should it die anyway, the bridge's contacts are
-released at once and a new thread started (:meth:`OscBridge.health`). A contact that the
-engine let go of meanwhile (``POST /stop``, an engine restart, its deadline) touches down
-again on its next message.
+keeps no contact state: its contacts are held by the engine's front, by sender (owner
+``osc:HOST:PORT``, :mod:`~phantomtouch.osc.senders`, :mod:`phantomtouch.engine.owners`),
+each with the map's ``watchdog_s`` as its deadline, which every accepted message of the
+same sender pushes on (another sender's messages never do). A sender's silence for
+``watchdog_s`` releases its contacts -- by the front's deadline thread, so also when this
+thread is gone -- and closing the bridge releases them all. The generic contacts the bridge
+holds (at most :data:`MAX_CONTACTS`) are shared fairly between senders
+(:mod:`phantomtouch.engine.shares`). The receive thread is supervised: should it die
+anyway, the bridge's contacts are released at once and a new thread started
+(:meth:`OscBridge.health`). A contact that the engine let go of meanwhile (``POST /stop``,
+an engine restart, its deadline) touches down again on its sender's next message.
 """
 
 from __future__ import annotations
@@ -36,11 +39,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from phantomtouch.engine.shares import yielding
 from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError
 from phantomtouch.osc import messages
 from phantomtouch.osc.counters import OscCounters
 from phantomtouch.osc.mapping import ReceiverMap
-from phantomtouch.osc.receivers import Change, ContactTracker, ReceiverLayout
+from phantomtouch.osc.receivers import Change, ReceiverLayout
+from phantomtouch.osc.senders import OWNER_PREFIX, Sender, SenderTable
 from phantomtouch.service.flood import FloodGuard, LimitedLog
 from phantomtouch.service.running import InputHealth
 
@@ -54,12 +59,13 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger("phantomtouch.osc")
 
-OWNER = "osc"
-"""The engine owner of every contact the bridge holds."""
+INPUT = "osc"
+"""The input's name in ``/health`` (its owners: ``osc:HOST:PORT``, one per sender)."""
 RATE_PER_S = 20_000.0
 """Default of the message rate limit: 8 receivers at 90 Hz are 720 messages/s."""
 MAX_CONTACTS = 10
-"""Generic contacts (``/phantomtouch/contact/{id}``) the bridge holds at once."""
+"""Generic contacts (``/phantomtouch/contact/{id}``) the bridge holds at once, over every
+sender (shared by :func:`~phantomtouch.engine.shares.yielding`)."""
 CONTACT_PREFIX = "contact-"
 """Engine contact ids of generic contacts start with this (receivers' with ``receivers-``)."""
 _POLL_S = 0.05
@@ -87,7 +93,8 @@ class OscBridge:
     host, port : str, int
         Where to listen (UDP); port 0 picks a free one (see :attr:`address`).
     play : callable or None
-        ``play(name)`` plays a preset or stored pattern; it may raise
+        ``play(name, owner)`` plays a preset or stored pattern for the sender ``owner``
+        (``osc:HOST:PORT``, its quota's client); it may raise
         :class:`~phantomtouch.errors.PhantomTouchError`. None: presets only, planned and
         scheduled here.
     stop : callable or None
@@ -106,7 +113,7 @@ class OscBridge:
         *,
         host: str = "127.0.0.1",
         port: int = 9001,
-        play: Callable[[str], None] | None = None,
+        play: Callable[[str, str], None] | None = None,
         stop: Callable[[], None] | None = None,
         rate_per_s: float = RATE_PER_S,
         record_latency: bool = False,
@@ -126,10 +133,9 @@ class OscBridge:
             np.array([(r.x_cm, r.y_cm) for r in receiver_map.receiver]),
             receiver_map.cluster_gap_cm,
         )
-        self._proximity = [0.0] * len(receiver_map.receiver)
-        self._tracker = ContactTracker(receiver_map.smoothing_s)
-        self._let_go: collections.deque[str] = collections.deque()
-        self._unsubscribe = engine.subscribe_released(self._released, OWNER)
+        self._senders = SenderTable(len(receiver_map.receiver), receiver_map.smoothing_s)
+        self._let_go: collections.deque[tuple[str, str]] = collections.deque()
+        self._unsubscribe = engine.subscribe_released(self._released)
         self._log = LimitedLog(logger, LOG_INTERVAL_S)
         self.restarts = 0
         self.last_failure: str | None = None
@@ -147,15 +153,19 @@ class OscBridge:
 
     @property
     def contacts(self) -> list[str]:
-        """Engine contact ids the bridge holds down now (as the engine's front says)."""
-        return sorted(self.engine.contacts_of(OWNER))
+        """Engine contact ids the bridge holds down now, over every sender (as the engine's
+        front says)."""
+        held = self.engine.contact_owners(OWNER_PREFIX).values()
+        return sorted(contact for contacts in held for contact in contacts)
 
     def _released(self, owner: str, contacts: tuple[str, ...], reason: str) -> None:
-        """The front let go of contacts of the bridge (any thread): count a watchdog
-        release; the receive thread forgets their smoothing state (:meth:`_let_go`)."""
+        """The front let go of contacts (any thread): of a sender of the bridge, count a
+        watchdog release; the receive thread forgets their smoothing state."""
+        if not owner.startswith(OWNER_PREFIX):
+            return
         if reason == "watchdog":
             self.watchdog_releases += 1
-        self._let_go.extend(contacts)
+        self._let_go.extend((owner, contact) for contact in contacts)
 
     def start(self) -> None:
         """Start the receive thread (in the caller's thread)."""
@@ -237,7 +247,7 @@ class OscBridge:
         receive = self._socket.recvfrom
         while not self._closing.is_set():
             try:
-                data, _ = receive(_MAX_DATAGRAM)
+                data, peer = receive(_MAX_DATAGRAM)
             except TimeoutError:
                 continue
             except OSError:
@@ -246,23 +256,28 @@ class OscBridge:
                 raise
             received_s = time.perf_counter()
             while self._let_go:
-                self._tracker.live.pop(self._let_go.popleft(), None)
-            self._datagram(data, time.monotonic())
+                owner, contact = self._let_go.popleft()
+                if (gone := self._senders.get(owner)) is not None:
+                    gone.tracker.live.pop(contact, None)
+            self._datagram(data, peer, time.monotonic())
             if self.latencies_s is not None:
                 self.latencies_s.append(time.perf_counter() - received_s)
 
-    def _datagram(self, data: bytes, now_s: float) -> None:
+    def _datagram(self, data: bytes, peer: tuple[str, int], now_s: float) -> None:
         try:
             found = messages_of(data)
         except BadDatagram as exc:
             self._drop(exc.reason, f"a datagram of {len(data)} bytes: {exc}")
             return
+        sender, dropped = self._senders.heard(peer)
+        if dropped is not None:  # silent longest of MAX_SENDERS: its contacts go with it
+            self.engine.release_owner(dropped.owner, "quota")
         for address, args in found:
             if not self._flood.admit(now_s):
                 self._drop("flood", f"over the rate limit of {self._flood.rate_per_s:g}/s")
                 continue
             try:
-                self._handle(address, args, now_s)
+                self._handle(sender, address, args, now_s)
             except messages.BadMessage as exc:
                 self._drop(exc.reason, str(exc))
             except PhantomTouchError as exc:
@@ -271,36 +286,33 @@ class OscBridge:
                 self._drop("failed", f"{address[:64]}: {type(exc).__name__}: {exc}")
             else:
                 self.counters.count("accepted")
-                self.engine.renew_owner(OWNER)
+                self.engine.renew_owner(sender.owner)
 
     def _drop(self, reason: str, message: str) -> None:
         self.counters.count(reason)
         self._log.warning(reason, f"osc: dropped ({reason}): {message}")
 
     def _release_all(self, reason: str) -> None:
-        """Forget the smoothing state and let the front release every contact of the
-        bridge, published with ``reason`` (the receive thread, or the one closing it)."""
-        self._forget()
-        self.engine.release_owner(OWNER, reason)
-
-    def _forget(self) -> None:
-        self._tracker.forget()
-        self._proximity = [0.0] * len(self._proximity)
+        """Forget the smoothing state and let the front release every contact of every
+        sender, published with ``reason`` (the receive thread, or the one closing it)."""
+        self._senders.forget_all()
+        for owner in self.engine.contact_owners(OWNER_PREFIX):
+            self.engine.release_owner(owner, reason)
 
     # -- messages -------------------------------------------------------------------------
 
-    def _handle(self, address: str, args: tuple[Any, ...], now_s: float) -> None:
+    def _handle(self, sender: Sender, address: str, args: tuple[Any, ...], now_s: float) -> None:
         index = self._index.get(address)
         if index is not None:
-            self._proximity[index] = messages.proximity(address, args)
-            self._receivers(now_s)
+            sender.proximity[index] = messages.proximity(address, args)
+            self._receivers(sender, now_s)
         elif address.startswith(messages.CONTACT_PREFIX):
-            self._contact(address, args)
+            self._contact(sender.owner, address, args)
         elif address == messages.TOUCH:
-            self._play(messages.touch_name(address, args))
+            self._play(messages.touch_name(address, args), sender.owner)
         elif address == messages.STOP:
             messages.no_arguments(address, args)
-            self._forget()
+            self._senders.forget_all()
             self._stop()
         else:
             raise messages.BadMessage(
@@ -309,31 +321,31 @@ class OscBridge:
                 "/phantomtouch/touch, /phantomtouch/contact/{id} or /phantomtouch/stop",
             )
 
-    def _receivers(self, now_s: float) -> None:
+    def _receivers(self, sender: Sender, now_s: float) -> None:
         found = self._layout.touches(
-            self._proximity, threshold=self.map.threshold, max_intensity=self.map.max_intensity
+            sender.proximity, threshold=self.map.threshold, max_intensity=self.map.max_intensity
         )
         refused: PhantomTouchError | None = None
-        for change in self._tracker.update(found, now_s):
+        for change in sender.tracker.update(found, now_s):
             try:
-                self._apply(change)
+                self._apply(sender.owner, change)
             except PhantomTouchError as exc:
-                self._tracker.live.pop(change.contact, None)  # tried again on the next value
+                sender.tracker.live.pop(change.contact, None)  # tried again on the next value
                 refused = exc
         if refused is not None:
             raise refused
 
-    def _apply(self, change: Change) -> None:
+    def _apply(self, owner: str, change: Change) -> None:
         if change.kind == "up":
-            self.engine.contact_up(OWNER, change.contact)
+            self.engine.contact_up(owner, change.contact)
         elif change.kind == "down":
-            self._down(change.contact, change.x_cm, change.y_cm, change.intensity)
+            self._down(owner, change.contact, change.x_cm, change.y_cm, change.intensity)
         else:
-            self._move(change.contact, change.x_cm, change.y_cm, change.intensity)
+            self._move(owner, change.contact, change.x_cm, change.y_cm, change.intensity)
 
-    def _down(self, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
+    def _down(self, owner: str, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
         self.engine.contact_down(
-            OWNER,
+            owner,
             contact,
             x_cm,
             y_cm,
@@ -342,34 +354,40 @@ class OscBridge:
             deadline_s=self.map.watchdog_s,
         )
 
-    def _move(self, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
+    def _move(self, owner: str, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
         try:
-            self.engine.contact_move(OWNER, contact, x_cm, y_cm, intensity=intensity)
+            self.engine.contact_move(owner, contact, x_cm, y_cm, intensity=intensity)
         except ProtocolError:  # the engine let go of it (a stop, a restart): down again
-            self._down(contact, x_cm, y_cm, intensity)
+            self._down(owner, contact, x_cm, y_cm, intensity)
 
-    def _contact(self, address: str, args: tuple[Any, ...]) -> None:
+    def _contact(self, owner: str, address: str, args: tuple[Any, ...]) -> None:
         contact = CONTACT_PREFIX + messages.contact_id(address)
         x_cm, y_cm, intensity = messages.contact(address, args)
         if intensity == 0.0:
-            self.engine.contact_up(OWNER, contact)
+            self.engine.contact_up(owner, contact)
             return
-        held = [c for c in self.engine.contacts_of(OWNER) if c.startswith(CONTACT_PREFIX)]
-        if contact in held:
-            self._move(contact, x_cm, y_cm, intensity)
+        held = {
+            other: [c for c in contacts if c.startswith(CONTACT_PREFIX)]
+            for other, contacts in self.engine.contact_owners(OWNER_PREFIX).items()
+        }
+        if contact in held.get(owner, ()):
+            self._move(owner, contact, x_cm, y_cm, intensity)
             return
-        if len(held) >= MAX_CONTACTS:
-            raise messages.BadMessage(
-                "refused",
-                f"{address}: {MAX_CONTACTS} contacts are down (the bridge's most); "
-                "lift one with intensity 0 first",
-            )
-        self._down(contact, x_cm, y_cm, intensity)
+        if sum(map(len, held.values())) >= MAX_CONTACTS:
+            givers = yielding({other: len(mine) for other, mine in held.items()}, owner)
+            if not givers:
+                raise messages.BadMessage(
+                    "refused",
+                    f"{address}: {MAX_CONTACTS} contacts are down (the bridge's most) and no "
+                    "other sender holds two more than this one; lift one with intensity 0 first",
+                )
+            self.engine.contact_up(givers[0], held[givers[0]][0])  # its oldest, faded out
+        self._down(owner, contact, x_cm, y_cm, intensity)
 
-    def _play_preset(self, name: str) -> None:
+    def _play_preset(self, name: str, owner: str) -> None:
         from phantomtouch.renderer import plan, preset
 
-        self.engine.schedule(plan(preset(name), self.engine.device))
+        self.engine.schedule(plan(preset(name), self.engine.device), owner=owner)
 
 
 def open_socket(host: str, port: int) -> socket.socket:

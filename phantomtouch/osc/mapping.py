@@ -2,7 +2,7 @@
 
 A TOML file (every key but ``receiver`` optional)::
 
-    watchdog_s = 1.0          # silence this long releases every OSC contact
+    watchdog_s = 1.0          # a sender's silence this long releases its contacts
     threshold = 0.01          # proximity below this counts as untouched
     cluster_gap_cm = 6.2      # active receivers closer than this belong to one touch
     max_intensity = 0.6       # intensity at full proximity (1 = the device's max level)

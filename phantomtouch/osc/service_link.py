@@ -3,8 +3,9 @@
 ``/phantomtouch/touch NAME`` is a touch request as ``POST /touch`` makes it: a name with a
 ``/`` is a preset (``exp2/curved``), any other a stored pattern, scheduled by
 :func:`phantomtouch.service.scheduling.schedule` on the event loop under the quotas of the
-client ``osc``; the bridge's thread waits for it (planning takes a millisecond or so, a new
-noise band about 60 ms the first time), at most ``PLAY_TIMEOUT_S``.
+client that sent it (``osc:HOST:PORT``; the touch is not tied to the sender's lifetime, as
+one of ``POST /touch`` is not); the bridge's thread waits for it (planning takes a
+millisecond or so, a new noise band about 60 ms the first time), at most ``PLAY_TIMEOUT_S``.
 ``/phantomtouch/stop`` is :meth:`Service.stop_everything`. The bridge's
 counts appear in ``/metrics`` as ``phantomtouch_osc_messages_total{outcome}`` (with
 ``phantomtouch_osc_restarts_total``), and its health in ``/health`` under ``inputs``.
@@ -22,7 +23,7 @@ from prometheus_client.registry import Collector
 from pydantic import ValidationError
 
 from phantomtouch.errors import DeviceError, ParameterError
-from phantomtouch.osc.bridge import OWNER, OscBridge
+from phantomtouch.osc.bridge import INPUT, OscBridge
 from phantomtouch.osc.mapping import load_map
 from phantomtouch.schema import describe_validation_error
 from phantomtouch.service import scheduling
@@ -76,12 +77,12 @@ def start_osc(service: Service) -> OscBridge:
     loop = service.loop
     receiver_map = load_map(settings.osc_map, service.device)
 
-    def play(name: str) -> None:
+    def play(name: str, owner: str) -> None:
         try:
             request = PresetTouch(preset=name) if "/" in name else NamedTouch(stored=name)
         except ValidationError as exc:
             raise ParameterError(f"/phantomtouch/touch: {describe_validation_error(exc)}") from exc
-        scheduled = scheduling.schedule(service, request, client=OWNER, owner=OWNER)
+        scheduled = scheduling.schedule(service, request, client=owner)
         try:
             asyncio.run_coroutine_threadsafe(scheduled, loop).result(PLAY_TIMEOUT_S)
         except TimeoutError as exc:
@@ -102,7 +103,7 @@ def start_osc(service: Service) -> OscBridge:
         rate_per_s=settings.osc_messages_per_s,
     )
     service.metrics.registry.register(_Counts(bridge))
-    service.inputs[OWNER] = bridge.health
+    service.inputs[INPUT] = bridge.health
     bridge.start()
     return bridge
 

@@ -22,7 +22,11 @@ The connection keeps no contact state: the engine's front holds its contacts (it
 table, :mod:`phantomtouch.engine.owners`) with a deadline of ``watchdog_s`` that every
 message of the connection pushes on; silence longer than that releases them, and the
 front's ``released`` events (``watchdog``, ``quota``, ``stop``, ``engine gone`` ...)
-become ``released`` messages. Closing, in any way, releases them all.
+become ``released`` messages. Closing, in any way, releases them all, and stops every
+touch the connection played (with its release ramp; its state says ``stopped``, reason
+``closed``) but those it asked to be ``detached``: they belong to the connection's
+address (owner ``detached:HOST``, with a quota of their own) and play on
+(``docs/owners.md``).
 """
 
 from __future__ import annotations
@@ -106,6 +110,9 @@ class Session:
         self._state_task: asyncio.Task[None] | None = None
         self._notices: set[asyncio.Task[None]] = set()
         self._count_in = service.metrics.ws_messages.labels("in", "move")
+        peer = websocket.client
+        self.detached_owner = f"detached:{peer.host if peer is not None else 'unknown'}"
+        """Whose detached touches this connection plays: its address's (they outlive it)."""
 
     # -- the state machine -------------------------------------------------------------
 
@@ -162,6 +169,7 @@ class Session:
             if self._state_task is not None:
                 self._state_task.cancel()
             self.engine.release_owner(self.owner, "closed")
+            self.engine.stop_owner(self.owner, "closed")
             self.service.metrics.ws_open.dec()
         if code is not None:
             try:
@@ -260,8 +268,9 @@ class Session:
                 )
             await self.sender.send(self._welcome(message))
         elif isinstance(message, Play):
+            owner = self.detached_owner if message.detached else self.owner
             job = await scheduling.schedule(
-                self.service, message.request, client=self.owner, owner=self.owner
+                self.service, message.request, client=owner, detached=message.detached
             )
             await self.sender.ok(message.id, job.model_dump())
         elif isinstance(message, Stop):

@@ -359,8 +359,9 @@ class JobInfo(BaseModel):
     late: bool = Field(description="It started after its requested start.")
     reason: str | None = Field(
         default=None,
-        description="Why a stopped job stopped unasked: `stolen` (room for another), or "
-        "the engine's fault (`engine gone before it played`, `engine stalled while it "
+        description="Why a stopped job stopped unasked: `stolen` (room for another), "
+        "`closed` (the WebSocket connection that played it closed), or the engine's "
+        "fault (`engine gone before it played`, `engine stalled while it "
         "played`: accepted just before the fault was noticed).",
     )
 

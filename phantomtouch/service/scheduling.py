@@ -128,22 +128,38 @@ def accepted(engine: EngineFront, job: Job, plan: Plan) -> JobAccepted:
     )
 
 
+QUOTA_NAMES = ("max_voices_per_client", "max_voice_seconds_per_client")
+"""The settings of a client's quota, by the limits of :class:`OwnerQuota`."""
+DETACHED_NAMES = ("max_detached_voices_per_client", "max_detached_seconds_per_client")
+"""The settings of a client's quota of detached touches (``docs/owners.md``)."""
+
+
 def client_quota(settings: Settings) -> OwnerQuota:
     """The quota of every client, from the settings."""
     return OwnerQuota(settings.voices_per_client, settings.max_voice_seconds_per_client)
 
 
-def quota_error(refused: QuotaRefused, duration_s: float) -> QuotaError:
-    """The answer to a touch of ``duration_s`` s the engine refused by its client's quota."""
+def detached_quota(settings: Settings) -> OwnerQuota:
+    """The quota of every client's detached touches, from the settings."""
+    return OwnerQuota(
+        settings.max_detached_voices_per_client, settings.max_detached_seconds_per_client
+    )
+
+
+def quota_error(
+    refused: QuotaRefused, duration_s: float, names: tuple[str, str] = QUOTA_NAMES
+) -> QuotaError:
+    """The answer to a touch of ``duration_s`` s the engine refused by its client's quota,
+    whose settings are ``names`` (voices, seconds)."""
     if refused.limit == "voices":
         return QuotaError(
-            f"quota max_voices_per_client={refused.quota.voices} is used up: this client has "
+            f"quota {names[0]}={refused.quota.voices} is used up: this client has "
             f"{refused.jobs} touches scheduled or playing; retry when one ends, or stop one",
             field="voices",
             value=refused.jobs,
         )
     return QuotaError(
-        f"quota max_voice_seconds_per_client={refused.quota.seconds:g} s: this client's "
+        f"quota {names[1]}={refused.quota.seconds:g} s: this client's "
         f"touches hold {refused.held_s:.1f} s still to play and this one would add "
         f"{refused.ahead_s:.1f} s; long touches count by the time they hold",
         field="duration_s",
@@ -157,6 +173,7 @@ async def schedule(
     *,
     client: str,
     owner: str | None = None,
+    detached: bool = False,
 ) -> JobAccepted:
     """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
 
@@ -164,8 +181,9 @@ async def schedule(
     engine's owner): its quotas count the client's jobs not over in the engine's job
     table (``docs/owners.md``), and it is the client's share of the
     voices when voices are stolen (:meth:`~phantomtouch.engine.jobs.JobTable.admit`).
-    Reading the store, planning and scheduling (which may build a noise loop) run in a
-    worker thread: the event loop never waits for them.
+    A ``detached`` touch (``client`` is then its detached owner) counts against the
+    detached quota instead. Reading the store, planning and scheduling (which may build a
+    noise loop) run in a worker thread: the event loop never waits for them.
 
     Raises
     ------
@@ -174,7 +192,9 @@ async def schedule(
     """
     engine = service.engine
     owner = client if owner is None else owner
-    quota = client_quota(service.settings)
+    settings = service.settings
+    quota = detached_quota(settings) if detached else client_quota(settings)
+    names = DETACHED_NAMES if detached else QUOTA_NAMES
     stops = engine.stop_count  # a stop that comes while this one is planned voids it
 
     def plan_and_schedule() -> JobAccepted:
@@ -185,7 +205,7 @@ async def schedule(
                 planned, start_frame=first, owner=owner, stop_count=stops, quota=quota
             )
         except QuotaRefused as refused:
-            raise quota_error(refused, planned.duration_s) from refused
+            raise quota_error(refused, planned.duration_s, names) from refused
         return accepted(engine, job, planned)
 
     return await asyncio.to_thread(plan_and_schedule)

@@ -120,6 +120,11 @@ class Settings(ClientLimits):
     max_voice_seconds_per_client: float = Field(default=14_400.0, gt=0.0, le=1_000_000.0)
     """Seconds of touch still to play that one client may hold, summed over its touches: long
     touches count by the time they hold (default: two of the longest, 2 h each)."""
+    max_detached_voices_per_client: int = Field(default=4, ge=1, le=1000)
+    """Detached touches (a WebSocket ``play`` with ``detached: true``: it plays on after the
+    connection closes) one address may have scheduled or playing at once."""
+    max_detached_seconds_per_client: float = Field(default=600.0, gt=0.0, le=1_000_000.0)
+    """Seconds of detached touch still to play that one address may hold, summed."""
     engine_process: bool = True
     """Run the engine in a process of its own (the default), so that request handling never holds
     the interpreter lock its audio callback needs; False: a thread."""

@@ -87,10 +87,12 @@ class Subscribe(_Message):
 
 
 class Play(_Message):
-    """``play``: a touch request (the body of ``POST /touch``) with ``type`` and ``id``."""
+    """``play``: a touch request (the body of ``POST /touch``) with ``type`` and ``id``;
+    ``detached: true`` asks for a touch that outlives the connection (``docs/owners.md``)."""
 
     type: Literal["play"]
     request: AnyTouch
+    detached: bool = False
 
 
 SIMPLE_TYPES: dict[str, type[_Message]] = {
@@ -155,11 +157,16 @@ def parse(text: str) -> ClientMessage:
         if model is not None:
             return cast(ClientMessage, model.model_validate_json(text, strict=True))
         if kind == "play":
-            request = {k: v for k, v in data.items() if k not in ("type", "id")}
+            request = {k: v for k, v in data.items() if k not in ("type", "id", "detached")}
+            detached = data.get("detached", False)
+            if not isinstance(detached, bool):
+                message = f"detached={detached!r} must be true or false"
+                raise MessageError(_problem("invalid", "detached", detached, message), message_id)
             return Play(
                 type="play",
                 id=data.get("id"),
                 request=parse_touch_request(json.dumps(request)),
+                detached=detached,
             )
     except ValidationError as exc:
         raise MessageError(validation_problem(exc), message_id) from None

@@ -22,7 +22,7 @@ def test_a_dead_receive_thread_releases_its_contacts_restarts_and_shows_in_healt
     assert client.get("/health").json()["status"] == "ok"
     first = bridge._thread
 
-    def fail(data: bytes, now_s: float) -> None:
+    def fail(data: bytes, peer: tuple[str, int], now_s: float) -> None:
         # A fault outside every per-message guard: the thread's loop itself dies.
         del bridge._datagram
         raise RuntimeError("injected fault")
