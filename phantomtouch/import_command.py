@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
+import warnings
 from pathlib import Path
 
 from phantomtouch.errors import ParameterError
@@ -27,10 +29,14 @@ def clip_name(path: Path) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from phantomtouch.clips.load import load_clip
+    from phantomtouch.clips.load import ClipWarning, load_clip
 
     path = Path(args.file)
-    clip = load_clip(path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ClipWarning)
+        clip = load_clip(path)
+    for warning in caught:
+        print(f"warning: {warning.message}", file=sys.stderr)
     summary = (
         f"{clip.duration_s:.3g} s, {len(clip.amplitude)} amplitude and "
         f"{len(clip.frequency)} frequency points, {len(clip.transients)} transients"

@@ -9,6 +9,6 @@ storing a clip is the library's (:mod:`phantomtouch.service.store`), and ``phant
 import`` is :mod:`phantomtouch.import_command`.
 """
 
-from phantomtouch.clips.load import load_clip, parse_clip
+from phantomtouch.clips.load import ClipWarning, load_clip, parse_clip
 
-__all__ = ["load_clip", "parse_clip"]
+__all__ = ["ClipWarning", "load_clip", "parse_clip"]

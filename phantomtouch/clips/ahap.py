@@ -5,7 +5,9 @@ The file is JSON: ``{"Version": 1.0, "Pattern": [entry, ...]}``, each entry one 
 - ``{"Event": {"Time", "EventType", "EventDuration", "EventParameters": [{"ParameterID",
   "ParameterValue"}]}}``: ``HapticTransient`` (a click: ``HapticIntensity``,
   ``HapticSharpness``) or ``HapticContinuous`` (a tone for ``EventDuration`` s, with
-  ``AttackTime`` and ``ReleaseTime`` ramps); audio events are ignored;
+  ``AttackTime`` and ``ReleaseTime`` ramps); audio events (``AudioContinuous``,
+  ``AudioCustom``) are not played, and a :class:`~phantomtouch.clips.load.ClipWarning`
+  names them;
 - ``{"Parameter": {"ParameterID", "Time", "ParameterValue"}}``: a dynamic parameter set
   from ``Time`` on;
 - ``{"ParameterCurve": {"ParameterID", "Time", "ParameterCurveControlPoints": [{"Time",
@@ -25,10 +27,13 @@ time linear in the file (:mod:`~phantomtouch.clips.ahap_envelope`; benchmarks/be
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from phantomtouch.clips.ahap_envelope import SOUNDING, Control, kept_points, summed_envelope
 from phantomtouch.clips.ahap_schema import AhapEvent, AhapFile
+from phantomtouch.clips.load import ClipWarning
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema.clip import MAX_CLIP_POINTS, HapticClip
 
@@ -37,10 +42,29 @@ DIGITS = 12
 """Decimals kept of each envelope value (the audio path is float32, 7 digits)."""
 _EMPTY_S = 0.1
 """Length of a clip with nothing but transients at time 0, s."""
+_NAMED = 5
+"""Most unplayed entries a warning names one by one (it counts the rest)."""
 
 
-def clip_of_ahap(document: AhapFile) -> HapticClip:
+def _warn_unplayed(unplayed: list[str], source: str) -> None:
+    """One line naming what of the file is not played, by path."""
+    if not unplayed:
+        return
+    named = ", ".join(unplayed[:_NAMED])
+    more = f" and {len(unplayed) - _NAMED} more" if len(unplayed) > _NAMED else ""
+    warnings.warn(
+        f"{source}: not played (the armband plays haptic events, intensity and sharpness): "
+        f"{named}{more}",
+        ClipWarning,
+        stacklevel=3,
+    )
+
+
+def clip_of_ahap(document: AhapFile, *, source: str = "clip") -> HapticClip:
     """The clip a validated ``.ahap`` document describes, in time linear in its entries.
+
+    Audio events and the dynamic parameters a clip has no place for (audio, attack, decay
+    and release controls) are left out and named in one :class:`ClipWarning`.
 
     Raises
     ------
@@ -51,11 +75,14 @@ def clip_of_ahap(document: AhapFile) -> HapticClip:
     sharpness = Control(0.0)
     continuous: list[tuple[float, float, float, float, float, float]] = []
     transients: list[tuple[float, float, float]] = []
-    for entry in document["Pattern"]:
+    unplayed: list[str] = []
+    for index, entry in enumerate(document["Pattern"]):
         event = entry.get("Event")
         if event is not None:
             kind = event["EventType"]
-            if kind == "HapticContinuous":
+            if kind.startswith("Audio"):
+                unplayed.append(f"Pattern[{index}].Event ({kind})")
+            elif kind == "HapticContinuous":
                 given = _parameters(event)
                 continuous.append(
                     (
@@ -80,18 +107,23 @@ def clip_of_ahap(document: AhapFile) -> HapticClip:
         parameter = entry.get("Parameter")
         if parameter is not None:
             control = _control(parameter["ParameterID"], intensity, sharpness)
-            if control is not None:
+            if control is None:
+                unplayed.append(f"Pattern[{index}].Parameter ({parameter['ParameterID']})")
+            else:
                 control.add(np.array([parameter["Time"]]), np.array([parameter["ParameterValue"]]))
             continue
         curve = entry.get("ParameterCurve")
         if curve is not None:
             control = _control(curve["ParameterID"], intensity, sharpness)
-            if control is not None:
+            if control is None:
+                unplayed.append(f"Pattern[{index}].ParameterCurve ({curve['ParameterID']})")
+            else:
                 points = curve["ParameterCurveControlPoints"]
                 control.add(
                     curve["Time"] + np.array([p["Time"] for p in points]),
                     np.array([p["ParameterValue"] for p in points]),
                 )
+    _warn_unplayed(unplayed, source)
 
     events = np.array(continuous, dtype=np.float64).reshape(-1, 6)
     starts, durations = events[:, 0], events[:, 1]

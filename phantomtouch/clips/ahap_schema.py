@@ -40,12 +40,42 @@ DynamicParameterId = Literal[
     "AudioBrightnessControl",
 ]
 ControlValue = Annotated[float, Field(ge=-1.0, le=1.0, allow_inf_nan=False)]
-"""A dynamic parameter's value, -1 to 1."""
+"""A dynamic parameter's value, -1 to 1 (``HapticIntensityControl``: 0 to 1)."""
+
+RANGES: dict[str, tuple[float, float]] = {
+    "HapticIntensity": (0.0, 1.0),
+    "HapticSharpness": (0.0, 1.0),
+    "AttackTime": (0.0, 1.0),
+    "DecayTime": (0.0, 1.0),
+    "ReleaseTime": (0.0, 1.0),
+    "Sustained": (0.0, 1.0),
+    "AudioVolume": (0.0, 1.0),
+    "AudioPan": (-1.0, 1.0),
+    "AudioPitch": (-1.0, 1.0),
+    "AudioBrightness": (0.0, 1.0),
+    "HapticIntensityControl": (0.0, 1.0),
+}
+"""Apple's documented range of each parameter (Core Haptics, ``CHHapticParameter.h``);
+every other dynamic parameter is -1 to 1. A value outside is refused, not clamped."""
+
+
+def _in_range(parameter: str, value: float) -> None:
+    low, high = RANGES.get(parameter, (-1.0, 1.0))
+    if not low <= value <= high:
+        raise ValueError(
+            f"ParameterValue={value!r} is outside {parameter}'s range {low:g} to {high:g} "
+            "(Apple's documented range)"
+        )
 
 
 class EventParameter(TypedDict):
     ParameterID: EventParameterId
-    ParameterValue: Annotated[float, Field(ge=-1.0, le=30.0, allow_inf_nan=False)]
+    ParameterValue: Annotated[float, Field(allow_inf_nan=False)]
+
+
+def _event_parameter(parameter: EventParameter) -> EventParameter:
+    _in_range(parameter["ParameterID"], parameter["ParameterValue"])
+    return parameter
 
 
 class AhapEvent(TypedDict):
@@ -54,7 +84,12 @@ class AhapEvent(TypedDict):
     EventDuration: NotRequired[
         Annotated[float, Field(gt=0.0, le=600.0, allow_inf_nan=False)] | None
     ]
-    EventParameters: NotRequired[Annotated[list[EventParameter], Field(max_length=16)]]
+    EventParameters: NotRequired[
+        Annotated[
+            list[Annotated[EventParameter, AfterValidator(_event_parameter)]],
+            Field(max_length=16),
+        ]
+    ]
 
 
 def _duration(event: AhapEvent) -> AhapEvent:
@@ -67,6 +102,11 @@ class AhapParameter(TypedDict):
     ParameterID: DynamicParameterId
     Time: ClipTime
     ParameterValue: ControlValue
+
+
+def _parameter(parameter: AhapParameter) -> AhapParameter:
+    _in_range(parameter["ParameterID"], parameter["ParameterValue"])
+    return parameter
 
 
 class ControlPoint(TypedDict):
@@ -84,6 +124,11 @@ class AhapCurve(TypedDict):
 
 def _increasing(curve: AhapCurve) -> AhapCurve:
     points = curve["ParameterCurveControlPoints"]
+    for i, point in enumerate(points):
+        try:
+            _in_range(curve["ParameterID"], point["ParameterValue"])
+        except ValueError as exc:
+            raise ValueError(f"ParameterCurveControlPoints[{i}].{exc}") from None
     for i in range(1, len(points)):
         if points[i]["Time"] < points[i - 1]["Time"]:
             raise ValueError(
@@ -95,7 +140,7 @@ def _increasing(curve: AhapCurve) -> AhapCurve:
 
 class Entry(TypedDict):
     Event: NotRequired[Annotated[AhapEvent, AfterValidator(_duration)] | None]
-    Parameter: NotRequired[AhapParameter | None]
+    Parameter: NotRequired[Annotated[AhapParameter, AfterValidator(_parameter)] | None]
     ParameterCurve: NotRequired[Annotated[AhapCurve, AfterValidator(_increasing)] | None]
 
 

@@ -7,15 +7,18 @@ The file is JSON::
      "signals": {"continuous": {"envelopes": {
          "amplitude": [{"time": 0.0, "amplitude": 0.2},
                        {"time": 0.1, "amplitude": 1.0,
-                        "emphasis": {"amplitude": 0.9, "frequency": 0.7}}],
+                        "emphasis": {"amplitude": 1.0, "frequency": 0.7}}],
          "frequency": [{"time": 0.0, "frequency": 0.5}]}}}}
 
 Times in seconds; amplitude and frequency 0-1, joined by straight lines. An ``emphasis``
-on an amplitude breakpoint is a transient at that breakpoint's time. Checked against the
-format: ``version`` with ``major`` 1 (``minor`` and ``patch`` any), both envelopes, each
-with at least one breakpoint, times strictly increasing within an envelope. Keys this does
-not use (``metadata``, and whatever later minor versions add) are ignored. docs/clips.md
-shows a whole file.
+on an amplitude breakpoint is a transient at that breakpoint's time. Checked as Lofelt's
+data model v1 and its validator have it: ``version`` with ``major`` 1 (``minor`` and
+``patch`` optional); an amplitude envelope of at least one breakpoint; a frequency
+envelope optional, and empty allowed (the clip then keeps the middle frequency, 0.5);
+times at least 0 and never decreasing within an envelope (two breakpoints at one time
+are a step); an emphasis' amplitude not below its breakpoint's. Keys this does not use
+(``metadata``, and whatever later minor versions add) are ignored. docs/clips.md shows a
+whole file and the rules.
 """
 
 from __future__ import annotations
@@ -48,35 +51,45 @@ class AmplitudePoint(_Lenient):
     amplitude: Unit
     emphasis: Emphasis | None = None
 
+    @model_validator(mode="after")
+    def _emphasis_above(self) -> Self:
+        if self.emphasis is not None and self.emphasis.amplitude < self.amplitude:
+            raise ValueError(
+                f"emphasis.amplitude={self.emphasis.amplitude!r} is below the breakpoint's "
+                f"amplitude={self.amplitude!r}; an emphasis is at least as strong as its "
+                "breakpoint (Lofelt's rule)"
+            )
+        return self
+
 
 class FrequencyPoint(_Lenient):
     time: ClipTime
     frequency: Unit
 
 
-def _increasing(points: list[Any], field: str) -> None:
+def _never_decreasing(points: list[Any], field: str) -> None:
     for i in range(1, len(points)):
-        if points[i].time <= points[i - 1].time:
+        if points[i].time < points[i - 1].time:
             raise ValueError(
-                f"{field}[{i}].time={points[i].time!r} must be after {field}[{i - 1}].time="
-                f"{points[i - 1].time!r} (times strictly increase)"
+                f"{field}[{i}].time={points[i].time!r} must not be before {field}[{i - 1}]"
+                f".time={points[i - 1].time!r} (times never decrease; equal times are a step)"
             )
 
 
 class Version(_Lenient):
     major: Literal[1] = Field(description="The format's major version: 1.")
-    minor: int = Field(ge=0)
-    patch: int = Field(ge=0)
+    minor: int = Field(default=0, ge=0)
+    patch: int = Field(default=0, ge=0)
 
 
 class Envelopes(_Lenient):
     amplitude: list[AmplitudePoint] = Field(min_length=1, max_length=MAX_CLIP_POINTS)
-    frequency: list[FrequencyPoint] = Field(min_length=1, max_length=MAX_CLIP_POINTS)
+    frequency: list[FrequencyPoint] | None = Field(default=None, max_length=MAX_CLIP_POINTS)
 
     @model_validator(mode="after")
     def _times(self) -> Self:
-        _increasing(self.amplitude, "amplitude")
-        _increasing(self.frequency, "frequency")
+        _never_decreasing(self.amplitude, "amplitude")
+        _never_decreasing(self.frequency or [], "frequency")
         return self
 
 
@@ -99,7 +112,7 @@ def clip_of_haptic(document: HapticFile) -> HapticClip:
     """The clip a validated ``.haptic`` document describes."""
     envelopes = document.signals.continuous.envelopes
     amplitude = [Breakpoint(t_s=p.time, value=p.amplitude) for p in envelopes.amplitude]
-    frequency = [Breakpoint(t_s=p.time, value=p.frequency) for p in envelopes.frequency]
+    frequency = [Breakpoint(t_s=p.time, value=p.frequency) for p in envelopes.frequency or []]
     transients = [
         Transient(t_s=p.time, amplitude=p.emphasis.amplitude, frequency=p.emphasis.frequency)
         for p in envelopes.amplitude
@@ -109,8 +122,8 @@ def clip_of_haptic(document: HapticFile) -> HapticClip:
     return HapticClip(
         duration_s=end_s if end_s > 0.0 else _TRANSIENT_ONLY_S,
         amplitude=amplitude,
-        frequency=frequency,
         transients=transients,
+        **({"frequency": frequency} if frequency else {}),
     )
 
 

@@ -14,6 +14,13 @@ from phantomtouch.schema.clip import HapticClip
 from phantomtouch.schema.validation import describe_validation_error
 
 ClipFormat = Literal["haptic", "ahap"]
+
+
+class ClipWarning(UserWarning):
+    """Part of a clip file the engine does not play (an audio event, say): the clip is
+    made of the rest, and the warning's one line names the part by its path in the file."""
+
+
 MAX_FILE_BYTES = 16 << 20
 """Largest clip file read, bytes."""
 CLIP_DEPTH = 6
@@ -55,6 +62,12 @@ def parse_clip(text: str | bytes, *, suffix: str = "", source: str = "clip") -> 
         Not JSON (or nested deeper than the interpreter reads), not either format, or a
         field outside its range; the message names the field by its path in the file
         (``signals.continuous.envelopes.amplitude[2].time``).
+
+    Warns
+    -----
+    ClipWarning
+        Parts of an ``.ahap`` file the engine does not play (audio events, dynamic
+        parameters other than intensity and sharpness), named by their path.
     """
     from phantomtouch.clips.ahap import clip_of_ahap
     from phantomtouch.clips.ahap_schema import AHAP_FILE
@@ -67,7 +80,7 @@ def parse_clip(text: str | bytes, *, suffix: str = "", source: str = "clip") -> 
             try:
                 if kind == "haptic":
                     return clip_of_haptic(HapticFile.model_validate_json(text))
-                return clip_of_ahap(AHAP_FILE.validate_json(text))
+                return clip_of_ahap(AHAP_FILE.validate_json(text), source=source)
             except ValidationError as exc:
                 if exc.errors()[0]["type"] != "json_invalid":
                     raise
@@ -77,7 +90,7 @@ def parse_clip(text: str | bytes, *, suffix: str = "", source: str = "clip") -> 
         kind = detect_format(document, suffix)
         if kind == "haptic":
             return clip_of_haptic(HapticFile.model_validate(document))
-        return clip_of_ahap(AHAP_FILE.validate_python(document))
+        return clip_of_ahap(AHAP_FILE.validate_python(document), source=source)
     except ValidationError as exc:
         raise ParameterError(f"{source} (.{kind}): {describe_validation_error(exc)}") from exc
 

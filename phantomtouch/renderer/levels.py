@@ -60,7 +60,7 @@ def pattern_level_db(pattern: TouchPattern, device: DeviceProfile) -> float:
         return max_db + 20.0 * math.log10(rel) if rel > 0.0 else -math.inf
     if level_db > max_db:
         raise ParameterError(
-            f"{field} gives {level_db:g} dB re 1 µm/s²; the device allows at most "
+            f"{field}: it gives {level_db:g} dB re 1 µm/s²; the device allows at most "
             f"safety.max_level_db={max_db:g} dB"
         )
     return level_db

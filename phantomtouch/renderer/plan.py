@@ -168,8 +168,9 @@ def _stroke_timing(pattern: TouchPattern, path: ResolvedPath) -> tuple[float, fl
             worst = int(np.argmax(seg_speed))
             if seg_speed[worst] > limits.MAX_SPEED_CM_S:
                 raise ParameterError(
-                    f"path.keyframes[{worst + 1}] is reached at {seg_speed[worst]:.6g} cm/s; "
-                    f"at most {limits.MAX_SPEED_CM_S:g} cm/s"
+                    f"path.keyframes[{worst + 1}].t_s={float(path.times_s[worst + 1])!r}: the "
+                    f"keyframe is reached at {seg_speed[worst]:.6g} cm/s; at most "
+                    f"{limits.MAX_SPEED_CM_S:g} cm/s"
                 )
         return motion, (length / motion if motion > 0 else 0.0)
     if pattern.speed_cm_s is not None:
@@ -248,21 +249,23 @@ def plan(pattern: TouchPattern, device: DeviceProfile | None = None) -> Plan:
     path = resolve_path(pattern.path)
     if len(path.points_cm) * (2 if pattern.alternate else 1) > limits.MAX_TIMELINE_POINTS:
         raise ParameterError(
-            f"path has {len(path.points_cm)} points; at most {limits.MAX_TIMELINE_POINTS} "
-            "(half that with alternate=true)"
+            f"path: path has {len(path.points_cm)} points; at most "
+            f"{limits.MAX_TIMELINE_POINTS} (half that with alternate=true)"
         )
     motion_s, speed_cm_s = _stroke_timing(pattern, path)
     stroke_s = pattern.fade_in_s + motion_s + pattern.fade_out_s
     duration_s = stroke_s * pattern.repeat
     if duration_s > limits.MAX_DURATION_S * (1 + 1e-12):
         raise ParameterError(
-            f"pattern lasts {duration_s:.6g} s ({pattern.repeat} stroke(s) of {stroke_s:.6g} s); "
-            f"at most {limits.MAX_DURATION_S:g} s: raise speed_cm_s or lower repeat"
+            f"duration_s={duration_s:.6g}: the pattern lasts {duration_s:.6g} s "
+            f"({pattern.repeat} stroke(s) of {stroke_s:.6g} s); at most "
+            f"{limits.MAX_DURATION_S:g} s: raise speed_cm_s or lower repeat"
         )
     frames = round(duration_s * sample_rate_hz)
     if frames < 1:
         raise ParameterError(
-            "pattern has zero duration: give fades, a duration_s, or a path that moves"
+            f"duration_s={duration_s:.6g}: the pattern has zero duration (less than one frame "
+            f"at {sample_rate_hz} Hz): give fades, a duration_s, or a path that moves"
         )
     _, distance = gains_for_points(geometry, path.points_cm, law=pattern.law, mode=pattern.mode)
     outside = np.flatnonzero(distance > 1e-9)
@@ -270,8 +273,9 @@ def plan(pattern: TouchPattern, device: DeviceProfile | None = None) -> Plan:
         i = int(outside[0])
         x, y = path.points_cm[i]
         raise ParameterError(
-            f"path point {i} at ({x:.6g}, {y:.6g}) cm lies {distance[i]:.3g} cm outside the "
-            f"actuator layout of {device.name!r} (outside='error'; 'project' moves it onto it)"
+            f"outside='error': path point {i} at ({x:.6g}, {y:.6g}) cm lies {distance[i]:.3g} "
+            f"cm outside the actuator layout of {device.name!r} "
+            "(outside='error'; 'project' moves it onto it)"
         )
     forward, backward = _timelines(pattern, path, motion_s)
     level_db = pattern_level_db(pattern, device)

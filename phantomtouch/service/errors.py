@@ -32,6 +32,7 @@ WebSocket session asks :func:`describe` for the same code and message.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
@@ -307,15 +308,20 @@ def _problem(field: str, value: Any, message: str) -> dict[str, Any]:
     return {"field": field, "value": _short_value(value), "message": message}
 
 
+_NAMED = re.compile(r"([a-z_][a-z0-9_]*(?:\.[a-z_][a-z0-9_]*|\[\d+\])*):")
+"""A message's head that names a field without its value: ``path.keyframes[2]:``."""
+
+
 def _field_and_value(message: str) -> tuple[str, Any]:
     """The field and value a renderer message starts with (``"name=value: why"``).
 
     The value is read back as JSON (numbers, ``true``) or as a quoted string (``'x'``);
-    one that is neither (a tuple, a long text) is None.
+    one that is neither (a tuple, a long text) is None, as it is for ``"name: why"``.
     """
     head = message.split(" ", 1)[0]
     if "=" not in head:
-        return "body", None
+        named = _NAMED.fullmatch(head)
+        return (named.group(1), None) if named else ("body", None)
     field, _, text = head.partition("=")
     text = text.rstrip(":;,")
     if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"":

@@ -107,10 +107,12 @@ def test_level_db_replaces_intensity():
 def test_level_above_the_devices_maximum_is_refused():
     with pytest.raises(ParameterError) as info:
         pt.plan(still_touch({"kind": "sine"}, level_db=151.0))
-    assert "level_db gives 151 dB" in str(info.value)
+    assert "level_db: it gives 151 dB" in str(info.value)
     assert "safety.max_level_db=150" in str(info.value)
     quiet = DeviceProfile(safety={"max_level_db": 130.0})
-    with pytest.raises(ParameterError, match=r"intensity gives 138 dB .*safety\.max_level_db=130"):
+    with pytest.raises(
+        ParameterError, match=r"intensity: it gives 138 dB .*safety\.max_level_db=130"
+    ):
         pt.plan(still_touch({"kind": "sine"}, intensity="high"), quiet)
 
 

@@ -158,7 +158,9 @@ def test_keyframes_faster_than_the_maximum_speed_are_refused():
             {"t_s": 1.001, "x_cm": 0, "y_cm": 11},  # 10 cm in 1 ms
         ],
     }
-    with pytest.raises(ParameterError, match=r"path\.keyframes\[2\] .* at most 1000 cm/s"):
+    with pytest.raises(
+        ParameterError, match=r"path\.keyframes\[2\]\.t_s=1\.001: .* at most 1000 cm/s"
+    ):
         pt.plan(pattern(path=path))
 
 
