@@ -62,7 +62,10 @@ logger = logging.getLogger("phantomtouch.osc")
 INPUT = "osc"
 """The input's name in ``/health`` (its owners: ``osc:HOST:PORT``, one per sender)."""
 RATE_PER_S = 20_000.0
-"""Default of the message rate limit: 8 receivers at 90 Hz are 720 messages/s."""
+"""Default of the message rate limit of one sender: 8 receivers at 90 Hz are 720 messages/s."""
+TOTAL_RATE_FACTOR = 2.0
+"""Every sender together may send this many times one sender's rate: one flooding sender
+takes at most half of what the bridge admits."""
 MAX_CONTACTS = 10
 """Generic contacts (``/phantomtouch/contact/{id}``) the bridge holds at once, over every
 sender (shared by :func:`~phantomtouch.engine.shares.yielding`)."""
@@ -101,7 +104,9 @@ class OscBridge:
         What ``/phantomtouch/stop`` does besides dropping the bridge's contacts; None:
         ``engine.stop_all()``.
     rate_per_s : float, > 0
-        Messages per second admitted (one second of burst); more are dropped (``flood``).
+        Messages per second admitted from each sender (one second of burst), and
+        :data:`TOTAL_RATE_FACTOR` times that from every sender together; more are dropped
+        (``flood``), a sender's own excess before it counts against the others.
     record_latency : bool
         Keep each datagram's receipt-to-engine time in :attr:`latencies_s` (benchmarks).
     """
@@ -127,13 +132,15 @@ class OscBridge:
         )
         self._play = play or self._play_preset
         self._stop = stop or engine.stop_all
-        self._flood = FloodGuard(rate_per_s)
+        self._flood = FloodGuard(rate_per_s * TOTAL_RATE_FACTOR)
         self._index = {r.address: i for i, r in enumerate(receiver_map.receiver)}
         self._layout = ReceiverLayout(
             np.array([(r.x_cm, r.y_cm) for r in receiver_map.receiver]),
             receiver_map.cluster_gap_cm,
         )
-        self._senders = SenderTable(len(receiver_map.receiver), receiver_map.smoothing_s)
+        self._senders = SenderTable(
+            len(receiver_map.receiver), receiver_map.smoothing_s, rate_per_s
+        )
         self._let_go: collections.deque[tuple[str, str]] = collections.deque()
         self._unsubscribe = engine.subscribe_released(self._released)
         self._log = LimitedLog(logger, LOG_INTERVAL_S)
@@ -273,8 +280,13 @@ class OscBridge:
         if dropped is not None:  # silent longest of MAX_SENDERS: its contacts go with it
             self.engine.release_owner(dropped.owner, "quota")
         for address, args in found:
+            if not sender.flood.admit(now_s):
+                self._drop(
+                    "flood", f"{sender.owner} over its rate of {sender.flood.rate_per_s:g}/s"
+                )
+                continue
             if not self._flood.admit(now_s):
-                self._drop("flood", f"over the rate limit of {self._flood.rate_per_s:g}/s")
+                self._drop("flood", f"every sender together over {self._flood.rate_per_s:g}/s")
                 continue
             try:
                 self._handle(sender, address, args, now_s)

@@ -5,7 +5,9 @@ sender's contacts in the engine's front as owner ``osc:HOST:PORT``, and only the
 own messages renew their deadline. Each sender has its own receiver proximities and
 contact tracker, so that one program's receivers (VRChat, a hand away: every proximity
 0.0) never move, lift or keep on another's contacts. The table keeps the senders heard
-last, at most :data:`MAX_SENDERS`; the one silent longest makes room for a new one.
+last, at most :data:`MAX_SENDERS`; the one silent longest makes room for a new one. Each
+sender has its own message rate (a :class:`~phantomtouch.service.flood.FloodGuard`), so
+one program flooding the port has its own messages dropped, not another's.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 
 from phantomtouch.osc.receivers import ContactTracker
+from phantomtouch.service.flood import FloodGuard
 
 OWNER_PREFIX = "osc:"
 """Every engine owner of the OSC bridge starts with this: ``osc:HOST:PORT``."""
@@ -29,11 +32,13 @@ def sender_owner(peer: tuple[str, int]) -> str:
 
 @dataclass
 class Sender:
-    """One sender: its engine owner, its receivers' proximities and its live contacts."""
+    """One sender: its engine owner, its receivers' proximities, its live contacts and its
+    message rate."""
 
     owner: str
     proximity: list[float]
     tracker: ContactTracker = field(repr=False)
+    flood: FloodGuard = field(repr=False)
 
     def forget(self) -> None:
         """Drop the smoothing state and the proximities (its contacts were released)."""
@@ -51,13 +56,18 @@ class SenderTable:
         Receivers of the map (each sender's proximities).
     smoothing_s : float, >= 0
         The map's smoothing time constant (:class:`ContactTracker`).
+    rate_per_s : float, > 0
+        Messages per second each sender may send (one second of burst).
     most : int, >= 1
         Senders kept at once.
     """
 
-    def __init__(self, receivers: int, smoothing_s: float, most: int = MAX_SENDERS) -> None:
+    def __init__(
+        self, receivers: int, smoothing_s: float, rate_per_s: float, most: int = MAX_SENDERS
+    ) -> None:
         self.receivers = receivers
         self.smoothing_s = smoothing_s
+        self.rate_per_s = rate_per_s
         self.most = most
         self._senders: OrderedDict[str, Sender] = OrderedDict()
 
@@ -76,7 +86,12 @@ class SenderTable:
         dropped = None
         if len(self._senders) >= self.most:
             dropped = self._senders.popitem(last=False)[1]
-        sender = Sender(owner, [0.0] * self.receivers, ContactTracker(self.smoothing_s))
+        sender = Sender(
+            owner,
+            [0.0] * self.receivers,
+            ContactTracker(self.smoothing_s),
+            FloodGuard(self.rate_per_s),
+        )
         self._senders[owner] = sender
         return sender, dropped
 

@@ -21,6 +21,7 @@ from tests.support.owner_attacks import (
     answer_to,
     http_crowd_voices,
     job_history_flood,
+    osc_flooder_and_another_sender,
     osc_other_sender_renews,
     osc_sender_pool,
     stop_all,
@@ -64,6 +65,21 @@ def test_one_osc_sender_cannot_hold_every_contact_of_the_bridge(
     # B's contact went down (one of A's made room: still 10) and A could not take it back
     # (refused: A holds 9, B 1); lifting B's leaves 9
     assert seen == {"after_down": 10.0, "after_lift": 9.0, "refused": 1.0}
+
+
+def test_one_osc_sender_flooding_does_not_drop_another_senders_messages(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> None:
+    # a rate of 150/s for each sender: the flooder sends about 2,000 a second, B 90
+    env = {"PHANTOMTOUCH_OSC_MESSAGES_PER_S": "150"}
+    osc_port = free_udp_port()
+    folder = tmp_path_factory.mktemp("osc-flood")
+    args = ("--osc", f"127.0.0.1:{osc_port}")
+    with LiveServer(folder / "patterns.db", env=env, args=args) as server:
+        seen = osc_flooder_and_another_sender(server.url, osc_port, seconds=2.0)
+    assert seen["flood"] > 500, seen  # the flooder was over its rate all along
+    # B's own rate is far from its limit: its messages are handled, not A's excess
+    assert seen["b_accepted"] >= 0.8 * seen["b_sent"], seen
 
 
 def test_a_touch_played_over_a_websocket_stops_when_the_socket_closes(

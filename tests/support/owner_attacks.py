@@ -14,6 +14,8 @@ returns what it saw; the tests assert on it and ``benchmarks/bench_abuse.py`` pr
 - :func:`osc_other_sender_renews`: OSC sender A puts a contact down and falls silent,
   sender B keeps sending (every proximity 0.0);
 - :func:`osc_sender_pool`: OSC sender A holds the bridge's 10 contacts, sender B asks for one;
+- :func:`osc_flooder_and_another_sender`: OSC sender A floods the port while sender B sends
+  its contact at 90 Hz;
 - :func:`job_history_flood`: one client floods short touches while another's job is over.
 
 Every one ends what it started (``POST /stop`` at its end) and reports whether a vibration
@@ -26,6 +28,7 @@ import asyncio
 import contextlib
 import json
 import re
+import threading
 import time
 from typing import Any
 
@@ -265,10 +268,49 @@ def osc_sender_pool(url: str, osc_port: int) -> dict[str, Any]:
     return seen
 
 
-def osc_refusals(url: str) -> float:
+def osc_flooder_and_another_sender(url: str, osc_port: int, seconds: float = 2.0) -> dict[str, Any]:
+    """OSC sender A floods the port (about 2,000 messages/s) for ``seconds`` while
+    sender B (another port) sends its contact at 90 Hz. Returns how many of B's messages
+    were sent and accepted, and the flood drops counted (A's excess)."""
+    accepted, flood = osc_count(url, "accepted"), osc_count(url, "flood")
+    a = SimpleUDPClient("127.0.0.1", osc_port)
+    b = SimpleUDPClient("127.0.0.1", osc_port)
+    end = time.monotonic() + seconds
+    done = threading.Event()
+
+    def a_floods() -> None:  # an address no receiver has: each message costs a token only
+        while not done.is_set() and time.monotonic() < end:
+            a.send_message("/phantomtouch/flood", 1.0)  # steady, about 2,000/s: far over a
+            time.sleep(0.0005)  # sender's rate, yet few enough for the bridge to read them all
+
+    flooder = threading.Thread(target=a_floods)
+    flooder.start()
+    sent = 0
+    try:
+        while time.monotonic() < end:
+            b.send_message("/phantomtouch/contact/b", [1.9, 2.4, 0.5])
+            sent += 1
+            time.sleep(1 / 90)
+    finally:
+        done.set()
+        flooder.join()
+    time.sleep(0.3)
+    seen = {"b_sent": sent, "b_accepted": osc_count(url, "accepted") - accepted,
+            "flood": osc_count(url, "flood") - flood}  # fmt: skip
+    stop_all(url)
+    return seen
+
+
+def osc_count(url: str, outcome: str) -> float:
+    """``phantomtouch_osc_messages_total`` of one outcome, from ``/metrics``."""
     text = httpx.get(f"{url}/metrics", timeout=10).text
-    match = re.search(r'^phantomtouch_osc_messages_total\{outcome="refused"\} (\S+)$', text, re.M)
+    pattern = rf'^phantomtouch_osc_messages_total\{{outcome="{outcome}"\}} (\S+)$'
+    match = re.search(pattern, text, re.M)
     return float(match.group(1)) if match else 0.0
+
+
+def osc_refusals(url: str) -> float:
+    return osc_count(url, "refused")
 
 
 def job_history_flood(url: str, ws_url: str, flood: int = 1100) -> dict[str, Any]:
