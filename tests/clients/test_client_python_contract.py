@@ -26,8 +26,10 @@ from phantomtouch_client import (
     PlanSummary,
     RenderCurves,
     RenderPlan,
+    ScoreStarted,
     StopAnswer,
     Summary,
+    TactSummary,
     TouchPattern,
     Wearer,
     WearerSummary,
@@ -56,6 +58,8 @@ ANSWERS: dict[str, type[BaseModel]] = {
     "DeviceInfo": DeviceInfo,
     "WearerProfile": Wearer,
     "WearerInfo": WearerSummary,
+    "TactInfo": TactSummary,
+    "ScoreAccepted": ScoreStarted,
 }
 
 
@@ -76,6 +80,7 @@ def test_the_client_calls_every_route_of_the_openapi_document(server: LiveServer
         "pattern": STROKE,
         "clip": {"duration_s": 1.0, "amplitude": [{"t_s": 0.0, "value": 1.0}]},
         "offsets_db": {},
+        "project": {"project": {"tracks": []}},
     }
     calls = []
     for _, build in inspect.getmembers(_calls, inspect.isfunction):
