@@ -1,10 +1,15 @@
-"""``phantomtouch import FILE``: a ``.haptic`` or ``.ahap`` file into the clip library.
+"""``phantomtouch import FILE``: a ``.haptic``, ``.ahap`` or ``.tact`` file into the library.
 
 ``phantomtouch import heartbeat.ahap [--name NAME] [--db PATH] [-o clip.json]`` reads the
 file, converts it (:func:`~phantomtouch.clips.load.load_clip`) and stores the clip in the
 library the service reads (``--db``, default the service's), under the file's stem unless
 ``--name`` says otherwise; ``-o`` writes the clip's JSON (the body of ``PUT /clips/{name}``)
 instead. A pattern then plays it with ``"carrier": {"kind": "clip", "clip": NAME}``.
+
+A bHaptics Designer project, ``phantomtouch import Stab_ArmL.tact``, is stored in the
+``.tact`` library the same way (``-o``: the body of ``PUT /tact/{name}``), and played by
+``POST /tact/{name}/play`` or the WebSocket's ``play`` with ``"tact": NAME``; a project
+with nothing for an arm is refused in one line (exit 2).
 """
 
 from __future__ import annotations
@@ -28,10 +33,19 @@ def clip_name(path: Path) -> str:
     return name
 
 
+def _library_name(args: argparse.Namespace, path: Path) -> str:
+    name: str = args.name or clip_name(path)
+    if not _NAME.fullmatch(name) or name in (".", ".."):
+        raise ParameterError(f"--name={name!r} must be 1-64 letters, digits, '.', '_' or '-'")
+    return name
+
+
 def _run(args: argparse.Namespace) -> int:
     from phantomtouch.clips.load import ClipWarning, load_clip
 
     path = Path(args.file)
+    if path.suffix.lower() == ".tact":
+        return _import_tact(args, path)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ClipWarning)
         clip = load_clip(path)
@@ -48,9 +62,7 @@ def _run(args: argparse.Namespace) -> int:
     from phantomtouch.service.settings import default_db_path
     from phantomtouch.service.store import PatternStore
 
-    name = args.name or clip_name(path)
-    if not _NAME.fullmatch(name) or name in (".", ".."):
-        raise ParameterError(f"--name={name!r} must be 1-64 letters, digits, '.', '_' or '-'")
+    name = _library_name(args, path)
     db_path = Path(args.db) if args.db else default_db_path()
     store = PatternStore.open(db_path)
     try:
@@ -65,15 +77,53 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _import_tact(args: argparse.Namespace, path: Path) -> int:
+    from phantomtouch.clips.tact import MAX_TACT_BYTES
+    from phantomtouch.service.settings import default_db_path
+    from phantomtouch.service.store import PatternStore
+    from phantomtouch.service.tact_library import read_project, summary
+
+    try:
+        if path.stat().st_size > MAX_TACT_BYTES:
+            raise ParameterError(f"{path.name}: a .tact file may have {MAX_TACT_BYTES} bytes")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ParameterError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from exc
+    text, project = read_project(data, source=path.name)
+    about = summary(project)
+    described = (
+        f"{about['duration_s']:.3g} s, {about['effects']} effects on "
+        f"{', '.join(about['positions'])}"
+    )
+    if args.output is not None:
+        Path(args.output).write_text(text + "\n", encoding="utf-8")
+        print(f"{path.name}: {described}; written to {args.output}")
+        return 0
+    name = _library_name(args, path)
+    db_path = Path(args.db) if args.db else default_db_path()
+    store = PatternStore.open(db_path)
+    try:
+        new = store.put_tact(name, text, about)
+    finally:
+        store.close()
+    verb = "imported" if new else "replaced"
+    print(
+        f"{verb} .tact project {name!r} from {path.name}: {described}, in {db_path}; "
+        f"POST /tact/{name}/play plays it"
+    )
+    return 0
+
+
 def add_import_command(sub: argparse._SubParsersAction) -> None:
     """Register ``phantomtouch import``."""
     command = sub.add_parser(
-        "import", help="import a haptic clip (.haptic, .ahap) into the clip library"
+        "import",
+        help="import a haptic clip (.haptic, .ahap) or a bHaptics project (.tact) into the library",
     )
-    command.add_argument("file", help="a Meta Haptics Studio .haptic or Apple .ahap file")
-    command.add_argument("--name", help="the clip's name in the library (default: file stem)")
-    command.add_argument("--db", help="the library, SQLite file (default: the service's)")
     command.add_argument(
-        "-o", "--output", help="write the clip as JSON here instead of into the library"
+        "file", help="a Meta Haptics Studio .haptic, Apple .ahap or bHaptics Designer .tact file"
     )
+    command.add_argument("--name", help="its name in the library (default: file stem)")
+    command.add_argument("--db", help="the library, SQLite file (default: the service's)")
+    command.add_argument("-o", "--output", help="write it as JSON here instead of into the library")
     command.set_defaults(func=_run)

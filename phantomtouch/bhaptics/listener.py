@@ -368,10 +368,8 @@ class _Connection:
 @asynccontextmanager
 async def attach(service: Service) -> AsyncIterator[None]:
     """What ``create_app(attach=...)`` enters when ``bhaptics_listen`` is set: the
-    listener, started with the settings' arm map, closed before the service stops."""
-    settings = service.settings
-    arm_map = ArmMap.load(settings.bhaptics_map) if settings.bhaptics_map else ArmMap()
-    listener = BhapticsListener(service, arm_map)
+    listener, started with the service's arm map, closed before the service stops."""
+    listener = BhapticsListener(service, service.arm_map)
     await listener.start()
     logger.info("phantomtouch: bHaptics stand-in on ws://%s:%d/v2/feedbacks", *listener.address)
     try:

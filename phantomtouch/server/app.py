@@ -26,6 +26,7 @@ from phantomtouch.server.routes import (
     info,
     patterns,
     render,
+    tact,
     touch,
     wearer,
     wearers,
@@ -142,7 +143,7 @@ def create_app(settings: Settings | None = None, *, attach: Sequence[Attachment]
     )
     app.state.settings = settings
     errors.install(app)
-    for module in (touch, patterns, clips, wearers, wearer, render, info, ws, web, docs):
+    for module in (touch, patterns, clips, tact, wearers, wearer, render, info, ws, web, docs):
         app.include_router(module.router)
     app.mount(docs.ASSETS_PATH, StaticFiles(directory=docs.ASSETS_DIR), name="docs-assets")
     if web.STATIC_DIR.is_dir():

@@ -41,7 +41,7 @@ from pydantic import ValidationError
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
-from phantomtouch.service import scheduling
+from phantomtouch.service import scheduling, tact_library
 from phantomtouch.service.contact_down import contact_down, refuse_if_down
 from phantomtouch.service.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
@@ -65,6 +65,7 @@ from phantomtouch.service.ws_messages import (
     Move,
     Ping,
     Play,
+    PlayTact,
     Stop,
     Subscribe,
     Up,
@@ -273,6 +274,11 @@ class Session:
                 self.service, message.request, client=owner, detached=message.detached
             )
             await self.sender.ok(message.id, job.model_dump())
+        elif isinstance(message, PlayTact):
+            played = await tact_library.play_tact(
+                self.service, message.tact, message, client=self.owner, field="tact"
+            )
+            await self.sender.ok(message.id, played.model_dump())
         elif isinstance(message, Stop):
             await self._stop(message)
         elif isinstance(message, Subscribe):

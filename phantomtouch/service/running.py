@@ -10,6 +10,7 @@ from contextlib import AbstractAsyncContextManager, contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.service.connections import ConnectionCaps
 from phantomtouch.service.errors import RateLimitedError
@@ -51,6 +52,8 @@ class Service:
     metrics: Metrics
     wearer: ActiveWearer = field(init=False)
     """The wearer the output stage is fitted to (``/wearer``, ``hello``)."""
+    arm_map: ArmMap = field(init=False)
+    """Where ``.tact`` projects and bHaptics frames land on the band (``bhaptics_map``)."""
     connections: ConnectionCaps = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
@@ -60,6 +63,8 @@ class Service:
 
     def __post_init__(self) -> None:
         self.wearer = ActiveWearer(self.engine, self.store)
+        map_path = self.settings.bhaptics_map
+        self.arm_map = ArmMap.load(map_path) if map_path is not None else ArmMap()
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
         self.connections = ConnectionCaps(
             self.settings.max_ws_connections, self.settings.max_ws_connections_per_address

@@ -1,5 +1,5 @@
-"""The library: named ``TouchPattern`` s, haptic clips, wearer profiles and the answers of
-their matching runs in one SQLite file.
+"""The library: named ``TouchPattern`` s, haptic clips, wearer profiles, the answers of
+their matching runs and ``.tact`` projects in one SQLite file.
 
 WAL journal and ``synchronous=FULL``: a committed ``PUT`` survives the process being
 killed (and a power cut). One connection shared by the worker threads, guarded by a lock;
@@ -39,13 +39,14 @@ from phantomtouch.service.errors import StorageError, StoredPatternError
 from phantomtouch.service.models import PlanSummary
 
 logger = logging.getLogger("phantomtouch.server.store")
-Table = Literal["patterns", "clips", "wearers", "wearer_runs"]
+Table = Literal["patterns", "clips", "wearers", "wearer_runs", "tact"]
 """The tables whose rows are written and deleted by name (never a value from a request)."""
 _DOCUMENT: dict[Table, str] = {
     "patterns": "pattern",
     "clips": "clip",
     "wearers": "profile",
     "wearer_runs": "run",
+    "tact": "project",
 }
 """The column holding each table's document as JSON."""
 Document = TypeVar("Document", bound=BaseModel)
@@ -79,6 +80,19 @@ CREATE TABLE IF NOT EXISTS wearer_runs (
     updated_unix_s REAL NOT NULL
 )
 """
+
+
+_TACT_SCHEMA = """
+CREATE TABLE IF NOT EXISTS tact (
+    name TEXT PRIMARY KEY,
+    project TEXT NOT NULL,
+    bytes INTEGER NOT NULL,
+    summary TEXT NOT NULL,
+    updated_unix_s REAL NOT NULL
+)
+"""
+"""``.tact`` projects: the project's JSON as stored, its size and a summary, so that a
+listing never reads a project."""
 
 
 class DamagedStoreError(DeviceError):
@@ -135,6 +149,7 @@ class PatternStore:
             db.execute(_CLIP_SCHEMA)
             db.execute(_WEARER_SCHEMA)
             db.execute(_WEARER_RUN_SCHEMA)
+            db.execute(_TACT_SCHEMA)
         except sqlite3.DatabaseError as exc:
             if isinstance(exc, sqlite3.OperationalError):
                 raise DeviceError(
@@ -313,6 +328,34 @@ class PatternStore:
     def delete_wearer_run(self, name: str) -> bool:
         """Remove the matching run of wearer ``name``; False if there was none."""
         return self._delete("wearer_runs", name)
+
+    # -- .tact projects (bHaptics Designer; played by POST /tact/{name}/play) -------------
+
+    def list_tact(self, limit: int, offset: int) -> builtins.list[tuple[str, int, str]]:
+        """One page of stored projects by name: ``(name, bytes, summary JSON)``, at most
+        ``limit`` from the ``offset``-th on (the projects themselves are not read)."""
+        with self._using(writes=False) as db:
+            rows = db.execute(
+                "SELECT name, bytes, summary FROM tact ORDER BY name LIMIT ? OFFSET ?",
+                (limit, offset),
+            ).fetchall()
+        return [(str(name), int(size), str(summary)) for name, size, summary in rows]
+
+    def get_tact(self, name: str) -> str | None:
+        """The project JSON stored as ``name``, or None."""
+        with self._using(writes=False) as db:
+            row = db.execute("SELECT project FROM tact WHERE name = ?", (name,)).fetchone()
+        return None if row is None else str(row[0])
+
+    def put_tact(self, name: str, project: str, summary: dict[str, Any]) -> bool:
+        """Store the project JSON ``project`` under ``name`` with its ``summary``; True if
+        the name was new."""
+        size = len(project.encode("utf-8"))
+        return self._replace("tact", name, (project, size, json.dumps(summary), time.time()))
+
+    def delete_tact(self, name: str) -> bool:
+        """Remove the project ``name``; False if it was not stored."""
+        return self._delete("tact", name)
 
 
 FULL_DISK_BYTES = 1 << 20

@@ -16,6 +16,7 @@ from phantomtouch.service.errors import (
     validation_problem,
 )
 from phantomtouch.service.models import AnyTouch, parse_touch_request
+from phantomtouch.service.tact_models import TactName, TactPlay
 
 PROTOCOL_VERSION = 1
 MAX_NORMAL_VELOCITY_M_S = 10.0
@@ -95,6 +96,15 @@ class Play(_Message):
     detached: bool = False
 
 
+class PlayTact(TactPlay):
+    """``play`` naming a stored ``.tact`` project (``tact``), with the fields of the body of
+    ``POST /tact/{name}/play`` beside ``type`` and ``id``."""
+
+    type: Literal["play"]
+    id: MessageId | None = None
+    tact: TactName
+
+
 SIMPLE_TYPES: dict[str, type[_Message]] = {
     "hello": Hello,
     "down": Down,
@@ -106,7 +116,7 @@ SIMPLE_TYPES: dict[str, type[_Message]] = {
 }
 MESSAGE_TYPES = (*SIMPLE_TYPES, "play")
 
-ClientMessage = Hello | Down | Move | Up | Stop | Ping | Subscribe | Play
+ClientMessage = Hello | Down | Move | Up | Stop | Ping | Subscribe | Play | PlayTact
 
 
 class MessageError(Exception):
@@ -156,6 +166,8 @@ def parse(text: str) -> ClientMessage:
     try:
         if model is not None:
             return cast(ClientMessage, model.model_validate_json(text, strict=True))
+        if kind == "play" and "tact" in data:
+            return PlayTact.model_validate_json(text, strict=True)
         if kind == "play":
             request = {k: v for k, v in data.items() if k not in ("type", "id", "detached")}
             detached = data.get("detached", False)

@@ -26,8 +26,10 @@ from phantomtouch_client import (
     PlanSummary,
     RenderCurves,
     RenderPlan,
+    ScoreStarted,
     StopAnswer,
     Summary,
+    TactSummary,
     TouchPattern,
     Wearer,
     WearerRun,
@@ -58,6 +60,8 @@ ANSWERS: dict[str, type[BaseModel]] = {
     "WearerProfile": Wearer,
     "WearerInfo": WearerSummary,
     "WearerRun": WearerRun,
+    "TactInfo": TactSummary,
+    "ScoreAccepted": ScoreStarted,
 }
 
 
@@ -81,6 +85,7 @@ def test_the_client_calls_every_route_of_the_openapi_document(server: LiveServer
         "band": "sine_100hz",
         "reference_channel": 1,
         "trials": [],
+        "project": {"project": {"tracks": []}},
     }
     calls = []
     for _, build in inspect.getmembers(_calls, inspect.isfunction):

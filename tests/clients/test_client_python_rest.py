@@ -111,6 +111,31 @@ def test_clips_put_list_get_play_delete(client: Client) -> None:
     assert refused.value.fields[0]["field"] == "carrier.clip"
 
 
+def test_tact_projects_put_page_get_play_delete(client: Client) -> None:
+    def dot(length_ms: int) -> dict[str, object]:
+        feedback = {
+            "startTime": 0,
+            "endTime": length_ms,
+            "pointList": [{"index": 4, "intensity": 1}],
+        }
+        mode = {"mode": "DOT_MODE", "dotMode": {"feedback": [feedback]}}
+        effect = {"startTime": 0, "offsetTime": length_ms, "modes": {"ForearmR": mode}}
+        return {"project": {"tracks": [{"effects": [effect]}]}}
+
+    for k in range(3):
+        summary = client.put_tact(f"client-test.tact-{k}", dot(100 * (k + 1)))
+        assert (summary.duration_s, summary.positions) == ((k + 1) / 10, ["ForearmR"])
+    page = client.tact_projects(limit=2, offset=1)
+    assert [p.name for p in page][:1] == ["client-test.tact-1"] and len(page) <= 2
+    assert client.get_tact("client-test.tact-0") == dot(100)
+    started = client.play_tact("client-test.tact-2", duration_scale=2, intensity_scale=0.5)
+    assert (started.duration_s, len(started.job_ids)) == (0.6, 1)
+    for k in range(3):
+        client.delete_tact(f"client-test.tact-{k}")
+    with pytest.raises(NotFound):
+        client.play_tact("client-test.tact-0")
+
+
 def test_wearers_put_list_get_delete(client: Client) -> None:
     offsets = {"sine_100hz": {2: 2.5, 5: -1.5}, "noise_40_500hz": {"2": 1.0}}
     stored = client.put_wearer("client-test.wearer", offsets, note="left forearm")

@@ -32,6 +32,15 @@ DOCUMENTED_RULES: dict[str, str] = {
     ),
     "a level within the device's max_level_db": r"max_level_db",
     "a wearer profile's channels among the device's": r"this device has no actuator on channel",
+    # A .tact project (PUT /tact/{name}) is bHaptics Designer's free-form JSON, read with
+    # its keys in any case and its numbers also as strings (docs/bhaptics.md): the schema
+    # says "an object", the parser says which field is not what a project holds.
+    "a .tact project with content for an arm": r"no arm content",
+    "a .tact project's fields of the types Designer writes": (
+        r"^body: .*must be (an object|an array|a number|finite)"
+    ),
+    "a .tact project's effects within 0 to 600 s": r"the effect must end by",
+    "a .tact project of at most 100,000 points": r"brings the project past",
     # What depends on the library's contents.
     "a wearer chosen (PUT /wearer) among the stored profiles": r"is not a stored wearer",
     "a path inside the device's layout with outside='error'": r"outside the actuator layout",
@@ -45,6 +54,9 @@ DOCUMENTED_RULES: dict[str, str] = {
     ),
     "a duration_s that leaves each stroke time to move after its fades": r"leaves no time to move",
     "a pattern of at most 7200 s in all (repeat x stroke)": r"at most 7200 s",
+    "a stored .tact project stretched to start its voices within 3600 s": (
+        r"the score's last voice would start"
+    ),
     "a pattern longer than zero frames": r"pattern has zero duration",
     "an arc through three points on a circle": r"collinear or coincide",
     "at most 1,000,000 path points once resolved (splines sampled, alternate doubled)": (

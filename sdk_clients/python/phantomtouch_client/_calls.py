@@ -26,8 +26,10 @@ from phantomtouch_client.models import (
     JobId,
     JobStatus,
     RenderPlan,
+    ScoreStarted,
     StopAnswer,
     Summary,
+    TactSummary,
     Wearer,
     WearerRun,
     WearerSummary,
@@ -49,6 +51,8 @@ class Call(Generic[T]):
     parse: Callable[[httpx.Response], T]
     body: Any = None
     accept: str = "application/json"
+    params: Mapping[str, int] | None = None
+    """The query string's parameters (``GET /tact``'s page), or None."""
 
 
 def checked(response: httpx.Response) -> httpx.Response:
@@ -195,6 +199,49 @@ def put_clip(name: str, clip: HapticClip | Mapping[str, Any]) -> Call[ClipSummar
 
 def delete_clip(name: str) -> Call[None]:
     return Call("DELETE", f"/clips/{_segment(name)}", _nothing)
+
+
+_TACT_SUMMARIES = TypeAdapter(list[TactSummary])
+
+
+def _tact_summaries(response: httpx.Response) -> list[TactSummary]:
+    try:
+        return _TACT_SUMMARIES.validate_python(_decode(response))
+    except ValidationError as exc:
+        raise TransportError(f"{response.request.url.path}: unexpected answer: {exc}") from exc
+
+
+def tact_projects(limit: int = 100, offset: int = 0) -> Call[list[TactSummary]]:
+    page = {"limit": int(limit), "offset": int(offset)}
+    return Call("GET", "/tact", _tact_summaries, params=page)
+
+
+def get_tact(name: str) -> Call[Any]:
+    return Call("GET", f"/tact/{_segment(name)}", _decode)
+
+
+def put_tact(name: str, project: Mapping[str, Any]) -> Call[TactSummary]:
+    return Call("PUT", f"/tact/{_segment(name)}", _model(TactSummary), dict(project))
+
+
+def delete_tact(name: str) -> Call[None]:
+    return Call("DELETE", f"/tact/{_segment(name)}", _nothing)
+
+
+def play_tact(
+    name: str,
+    *,
+    intensity_scale: float | None = None,
+    duration_scale: float | None = None,
+    start_in_ms: float | None = None,
+    start_at_s: float | None = None,
+) -> Call[ScoreStarted]:
+    body: dict[str, Any] = timing(start_in_ms=start_in_ms, start_at_s=start_at_s)
+    if intensity_scale is not None:
+        body["intensity_scale"] = intensity_scale
+    if duration_scale is not None:
+        body["duration_scale"] = duration_scale
+    return Call("POST", f"/tact/{_segment(name)}/play", _model(ScoreStarted), body or None)
 
 
 _WEARER_SUMMARIES = TypeAdapter(list[WearerSummary])

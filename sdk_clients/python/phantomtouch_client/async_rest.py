@@ -26,8 +26,10 @@ from phantomtouch_client.models import (
     JobStatus,
     PatternArg,
     RenderPlan,
+    ScoreStarted,
     StopAnswer,
     Summary,
+    TactSummary,
     Wearer,
     WearerRun,
     WearerSummary,
@@ -215,6 +217,42 @@ class AsyncClient(ClientBase):
     async def delete_clip(self, name: str) -> None:
         """``DELETE /clips/{name}``."""
         await self._run(_calls.delete_clip(name))
+
+    async def tact_projects(self, *, limit: int = 100, offset: int = 0) -> list[TactSummary]:
+        """``GET /tact``: one page of the stored ``.tact`` projects, sorted by name."""
+        return await self._run(_calls.tact_projects(limit, offset))
+
+    async def get_tact(self, name: str) -> Any:
+        """``GET /tact/{name}``: the project's JSON as stored."""
+        return await self._run(_calls.get_tact(name))
+
+    async def put_tact(self, name: str, project: Mapping[str, Any]) -> TactSummary:
+        """``PUT /tact/{name}``: store (or replace) a ``.tact`` file's JSON."""
+        return await self._run(_calls.put_tact(name, project))
+
+    async def delete_tact(self, name: str) -> None:
+        """``DELETE /tact/{name}``."""
+        await self._run(_calls.delete_tact(name))
+
+    async def play_tact(
+        self,
+        name: str,
+        *,
+        intensity_scale: float | None = None,
+        duration_scale: float | None = None,
+        start_in_ms: float | None = None,
+        start_at_s: float | None = None,
+    ) -> ScoreStarted:
+        """``POST /tact/{name}/play``: every voice of the project, one job each."""
+        return await self._run(
+            _calls.play_tact(
+                name,
+                intensity_scale=intensity_scale,
+                duration_scale=duration_scale,
+                start_in_ms=start_in_ms,
+                start_at_s=start_at_s,
+            )
+        )
 
     async def wearers(self) -> list[WearerSummary]:
         """``GET /wearers``: the stored wearer profiles."""

@@ -103,6 +103,26 @@ class ClipSummary(_Answer):
     transients: int
 
 
+class TactSummary(_Answer):
+    """One stored bHaptics ``.tact`` project: its name, size, length and positions."""
+
+    name: str
+    bytes: int
+    duration_s: float
+    positions: list[str]
+    effects: int
+
+
+class ScoreStarted(_Answer):
+    """A stored ``.tact`` project scheduled: one job per voice, from ``start_frame``."""
+
+    name: str
+    job_ids: list[str]
+    start_at_s: float
+    start_frame: int
+    duration_s: float
+
+
 class RenderCurves(_Answer):
     """At most 500 points of a rendered touch; ``gains`` include the envelope."""
 

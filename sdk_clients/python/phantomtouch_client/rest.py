@@ -26,8 +26,10 @@ from phantomtouch_client.models import (
     JobStatus,
     PatternArg,
     RenderPlan,
+    ScoreStarted,
     StopAnswer,
     Summary,
+    TactSummary,
     Wearer,
     WearerRun,
     WearerSummary,
@@ -219,6 +221,42 @@ class Client(ClientBase):
     def delete_clip(self, name: str) -> None:
         """``DELETE /clips/{name}``."""
         self._run(_calls.delete_clip(name))
+
+    def tact_projects(self, *, limit: int = 100, offset: int = 0) -> list[TactSummary]:
+        """``GET /tact``: one page of the stored ``.tact`` projects, sorted by name."""
+        return self._run(_calls.tact_projects(limit, offset))
+
+    def get_tact(self, name: str) -> Any:
+        """``GET /tact/{name}``: the project's JSON as stored."""
+        return self._run(_calls.get_tact(name))
+
+    def put_tact(self, name: str, project: Mapping[str, Any]) -> TactSummary:
+        """``PUT /tact/{name}``: store (or replace) a ``.tact`` file's JSON."""
+        return self._run(_calls.put_tact(name, project))
+
+    def delete_tact(self, name: str) -> None:
+        """``DELETE /tact/{name}``."""
+        self._run(_calls.delete_tact(name))
+
+    def play_tact(
+        self,
+        name: str,
+        *,
+        intensity_scale: float | None = None,
+        duration_scale: float | None = None,
+        start_in_ms: float | None = None,
+        start_at_s: float | None = None,
+    ) -> ScoreStarted:
+        """``POST /tact/{name}/play``: every voice of the project, one job each."""
+        return self._run(
+            _calls.play_tact(
+                name,
+                intensity_scale=intensity_scale,
+                duration_scale=duration_scale,
+                start_in_ms=start_in_ms,
+                start_at_s=start_at_s,
+            )
+        )
 
     def wearers(self) -> list[WearerSummary]:
         """``GET /wearers``: the stored wearer profiles; ``active`` marks the one the

@@ -103,6 +103,8 @@ class ClientBase:
         args: dict[str, Any] = {"headers": {"Accept": call.accept}}
         if call.body is not None:
             args["json"] = call.body
+        if call.params is not None:
+            args["params"] = dict(call.params)
         return args
 
     @staticmethod

@@ -1,0 +1,160 @@
+"""The ``.tact`` project library: storing a bHaptics Designer project and playing it.
+
+``phantomtouch import FILE.tact`` and ``PUT /tact/{name}`` store a project read by the
+same parser as ``phantomtouch render FILE.tact`` and the stand-in's ``Register``
+(:func:`~phantomtouch.clips.tact.parse_tact`), as compact JSON with a summary; a project
+with nothing for an arm is refused in one line. ``POST /tact/{name}/play`` and the
+WebSocket's ``play`` naming a ``tact`` read it back, make its score with the service's arm
+map and schedule it (:func:`~phantomtouch.service.scores.schedule_score`) as jobs of the
+client, whole or not at all.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from typing import TYPE_CHECKING, Any
+
+from pydantic import ValidationError
+
+from phantomtouch.clips.tact import ARM_POSITIONS, TactProject, parse_tact
+from phantomtouch.clips.tact_score import ScaleOption, score
+from phantomtouch.engine.jobs import QuotaRefused
+from phantomtouch.errors import ParameterError
+from phantomtouch.service.errors import NotFoundError, StoredPatternError
+from phantomtouch.service.scheduling import client_quota, quota_error, start_frame
+from phantomtouch.service.scores import schedule_score
+from phantomtouch.service.tact_models import ScoreAccepted, TactInfo, TactPlay
+
+if TYPE_CHECKING:
+    from phantomtouch.service.running import Service
+    from phantomtouch.service.store import PatternStore
+
+logger = logging.getLogger("phantomtouch.server.store")
+NOT_STORED = "in the .tact library (GET /tact)"
+
+
+def read_project(document: bytes | str, *, source: str) -> tuple[str, TactProject]:
+    """A ``.tact`` document (the file, or its ``project`` object) as the compact JSON to
+    store and the project it describes (any thread; pure).
+
+    Raises
+    ------
+    ParameterError
+        It does not read as a project (the message names the field by its path), or it
+        has no content for an arm (``ForearmL``, ``ForearmR``): one line, naming
+        ``source`` and the positions it does play on.
+    """
+    project = parse_tact(document, source=source)
+    if not project.has_arm_content:
+        found = sorted(project.positions()) or ["none"]
+        raise ParameterError(
+            f"{source}: no arm content: it plays on {', '.join(found)}; an arm band plays "
+            f"{', '.join(ARM_POSITIONS)}"
+        )
+    text = (
+        bytes(document).decode("utf-8-sig", errors="replace")
+        if isinstance(document, bytes | bytearray)
+        else document.removeprefix("\ufeff")
+    )
+    return json.dumps(json.loads(text), separators=(",", ":"), ensure_ascii=False), project
+
+
+def summary(project: TactProject) -> dict[str, Any]:
+    """What ``GET /tact`` lists of a project, besides its name and size."""
+    return {
+        "duration_s": project.duration_ms / 1000.0,
+        "positions": sorted(project.positions()),
+        "effects": len(project.effects),
+    }
+
+
+def listed(store: PatternStore, *, limit: int, offset: int) -> list[TactInfo]:
+    """One page of the stored projects, sorted by name (any thread); a row whose summary
+    no longer reads is logged and left out."""
+    page = []
+    for name, size, stored in store.list_tact(limit, offset):
+        try:
+            page.append(
+                TactInfo.model_validate({**json.loads(stored), "name": name, "bytes": size})
+            )
+        except (ValueError, ValidationError) as exc:
+            logger.warning("tact=%r: its stored summary no longer reads (%s); left out", name, exc)
+    return page
+
+
+def stored_project(store: PatternStore, name: str, *, field: str = "name") -> TactProject:
+    """The project stored as ``name`` (any thread).
+
+    Raises
+    ------
+    NotFoundError
+        No project of that name; ``field`` is what the request called it.
+    StoredPatternError
+        The row is there but no longer reads as a project.
+    """
+    text = store.get_tact(name)
+    if text is None:
+        raise NotFoundError(f"{field}={name!r} is not {NOT_STORED}", field=field, value=name)
+    try:
+        return parse_tact(text, source=f"tact={name!r}")
+    except ParameterError as exc:
+        raise StoredPatternError(
+            f"{exc}; the stored row no longer reads as a project: PUT it again or DELETE it",
+            field=field,
+            value=name,
+        ) from exc
+
+
+async def play_tact(
+    service: Service, name: str, request: TactPlay, *, client: str, field: str = "name"
+) -> ScoreAccepted:
+    """Schedule the stored project ``name`` as ``request`` asks, as jobs of ``client`` (an
+    HTTP client's address or a WebSocket connection); host, the event loop: reading,
+    planning and scheduling run in a worker thread.
+
+    Raises
+    ------
+    NotFoundError
+        No such project (``field`` names it).
+    ParameterError
+        Nothing of it lands on this band (the arm map plays other arms), or its last voice
+        would start more than an hour from now.
+    QuotaError
+        Its voices would take the client past one of its quotas; none of them plays.
+    """
+    engine = service.engine
+    quota = client_quota(service.settings)
+    stops = engine.stop_count  # a stop that comes while this one is planned voids it
+
+    def plan_and_schedule() -> ScoreAccepted:
+        project = stored_project(service.store, name, field=field)
+        scale = ScaleOption(request.intensity_scale, request.duration_scale)
+        arm_map = service.arm_map
+        if not project.positions() & set(arm_map.arms):
+            raise ParameterError(
+                f"{field}={name!r} plays on {', '.join(sorted(project.positions()))}; this "
+                f"band plays {', '.join(arm_map.arms)} (bhaptics_map)"
+            )
+        played = score(project, arm_map, engine.device, scale)
+        try:
+            scheduled = schedule_score(
+                engine,
+                played,
+                owner=client,
+                quota=quota,
+                start_frame=start_frame(engine, request.timing()),
+                stop_count=stops,
+            )
+        except QuotaRefused as refused:
+            raise quota_error(refused, played.duration_s) from refused
+        return ScoreAccepted(
+            name=name,
+            job_ids=scheduled.jobs,
+            start_at_s=scheduled.start_s,
+            start_frame=scheduled.first_frame,
+            duration_s=scheduled.duration_s,
+        )
+
+    return await asyncio.to_thread(plan_and_schedule)
