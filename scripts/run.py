@@ -30,6 +30,14 @@ OFFLINE_COMMAND = (
 
 def main() -> int:
     """Install if needed, then run ``phantomtouch serve`` with this script's arguments."""
+    if sys.platform == "win32" and sys.version_info < (3, 12):
+        print(
+            f"scripts/run.py: Windows needs Python 3.12 or later (this is "
+            f"{sys.version.split()[0]}): the engine's pipes are non-blocking only from 3.12 "
+            "on; install it from python.org and run py -3.12 scripts\\run.py",
+            file=sys.stderr,
+        )
+        return 1
     try:
         python = ensure(SERVICE_EXTRAS)
     except InstallFailed as exc:
