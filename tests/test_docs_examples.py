@@ -4,9 +4,10 @@ docs/protocol.md's ``http`` and ``ws`` conversations are checked, answer by answ
 ``tests/server/test_protocol_doc.py``. This module takes every other example a reader
 would send to the service:
 
-- each ``curl`` command in a fenced block, with its body, to the route it names; a
-  ``# -> STATUS`` comment on the next line is the status it must get, otherwise any 2xx;
-  ``JOB_ID`` stands for the job the last accepted touch started;
+- each ``curl`` command in a fenced block (and each PowerShell ``Invoke-RestMethod``),
+  with its body, to the route it names; a ``# -> STATUS`` comment on the next line is the
+  status it must get, otherwise any 2xx; ``JOB_ID`` stands for the job the last accepted
+  touch started;
 - each fenced ``json`` block, to the route its kind of body is for (:func:`json_route`):
   a touch pattern to ``POST /touch`` and ``PUT /patterns``, a wearer profile to
   ``PUT /wearers``, a haptic clip file through the real ``phantomtouch import -o`` to
@@ -144,6 +145,31 @@ def curls() -> list[Curl]:
     return found
 
 
+def powershell_requests() -> list[Curl]:
+    """Each ``Invoke-RestMethod`` of a PowerShell block (lines joined at a closing `` ` ``)."""
+    found = []
+    for block in blocks("powershell"):
+        for command in re.sub(r"`\n\s*", " ", block.text).splitlines():
+            if not command.startswith("Invoke-RestMethod "):
+                continue
+            words = shlex.split(command, comments=True)
+            options = {}
+            url = ""
+            rest = iter(words[1:])
+            for word in rest:
+                if word.startswith("-"):
+                    options[word.lower()] = next(rest)
+                else:
+                    url = word
+            headers = {"Content-Type": options["-contenttype"]} if "-contenttype" in options else {}
+            method = options.get("-method", "Get").upper()
+            url = url.removeprefix("http://").replace("127.0.0.1:8000", DOC_BASE)
+            found.append(
+                Curl(str(block), method, url, options.get("-body"), None, tuple(headers.items()))
+            )
+    return found
+
+
 def json_route(block: Block, body: dict[str, Any]) -> str:
     """What a json block is: ``pattern``, ``wearer``, ``clip-file`` or ``answer``."""
     if (block.page.name, next(iter(body))) in ANSWERS:
@@ -235,7 +261,7 @@ def test_the_refusal_shown_is_the_servers(live: LiveServer) -> None:
 
 def test_every_curl_command_is_answered_as_the_page_says(live: LiveServer, tmp_path: Path) -> None:
     problems: list[str] = []
-    commands = [c for c in curls() if not c.url.startswith(FLEET_PORTS)]
+    commands = [c for c in curls() + powershell_requests() if not c.url.startswith(FLEET_PORTS)]
     assert len(commands) >= 10, commands
     job_id = None
     with httpx.Client(base_url=live.url, timeout=30.0) as client:
@@ -317,3 +343,25 @@ def test_the_extraction_finds_what_the_pages_show() -> None:
     kinds = {json_route(b, json.loads(b.text)) for b in blocks("json")}
     assert {"pattern", "wearer", "clip-file", "answer"} <= kinds
     assert len(websocket_examples()) >= 1
+    assert {(c.method, c.route) for c in powershell_requests()} >= {("POST", "/touch")}
+
+
+CHECKOUT_COMMANDS = {
+    "bash": ("scripts/", ".venv/bin/", "curl ", "python3 scripts/"),
+    "powershell": ("py scripts\\", ".venv\\Scripts\\", "Invoke-RestMethod ", "$env:"),
+}
+"""How a README command line may start: it runs from the checkout as written, with
+nothing on the PATH but Python's launcher, bash and curl."""
+
+
+def test_every_readme_command_runs_from_the_checkout() -> None:
+    readme = [b for b in blocks("bash", "powershell") if b.page.name == "README.md"]
+    assert {b.kind for b in readme} == {"bash", "powershell"}
+    stray = []
+    for block in readme:
+        for line in block.text.splitlines():
+            command = line.strip()
+            continued = line.startswith(" ") or command.startswith(("#", "-", "'"))
+            if command and not continued and not command.startswith(CHECKOUT_COMMANDS[block.kind]):
+                stray.append(f"{block}: {command}")
+    assert not stray, stray
