@@ -298,7 +298,7 @@ def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(
+    parser: argparse.ArgumentParser = OneLineParser(  # its subcommands are OneLineParsers too
         prog="phantomtouch", description=__doc__.splitlines()[0].replace("``", "")
     )
     parser.add_argument("--version", action="version", version=f"phantomtouch {__version__}")
