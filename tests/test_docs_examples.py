@@ -17,8 +17,8 @@ would send to the service:
   and each message it sends (its ``json.dumps({...})`` literals, loop variables at 0),
   sent again with an ``id`` and answered ``ok`` (or ``welcome`` for ``hello``).
 
-Commands for a fleet gateway (ports 8100, 8101) need a NATS cluster; they are listed in
-:data:`FLEET_PORTS` and left to ``tests/fleet/``.
+Commands for a fleet gateway (ports 8100, 8101, :data:`FLEET_PORTS`) need a NATS cluster:
+``tests/fleet/test_docs_examples.py`` sends them to a real fleet.
 """
 
 from __future__ import annotations
