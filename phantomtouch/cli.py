@@ -32,8 +32,9 @@ from tqdm import tqdm
 
 from phantomtouch import __version__
 from phantomtouch.calibrate_command import add_calibrate_command
+from phantomtouch.cli_parser import OneLineParser, check_output_file, make_output_folder
 from phantomtouch.device_arg import load_device
-from phantomtouch.errors import ParameterError, PhantomTouchError
+from phantomtouch.errors import ParameterError, PhantomTouchError, install_hint
 from phantomtouch.import_command import add_import_command
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
@@ -54,7 +55,10 @@ def _load_pattern(path: str) -> TouchPattern:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise ParameterError(f"cannot read pattern file {path!r}: {exc.strerror}") from exc
-    return TouchPattern.model_validate_json(text)
+    try:
+        return TouchPattern.model_validate_json(text)
+    except ValidationError as exc:
+        raise ParameterError(f"pattern file {path!r}: {describe_validation_error(exc)}") from exc
 
 
 def write_wav(plan: Plan, out_path: str | Path, *, plot_path: str | Path | None = None) -> float:
@@ -99,7 +103,7 @@ def _check_plot_path(path: str) -> None:
         from matplotlib.backend_bases import FigureCanvasBase
     except ImportError as exc:
         raise PhantomTouchError(
-            "--plot needs matplotlib: install phantomtouch with the plot extra"
+            f"--plot needs matplotlib, the plot extra: {install_hint('plot')}"
         ) from exc
     formats = FigureCanvasBase.get_supported_filetypes()
     suffix = Path(path).suffix.lower().lstrip(".")
@@ -163,6 +167,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     pattern = preset(args.preset) if args.preset else _load_pattern(args.pattern)
     pattern = _with_library_clip(pattern, args.db)
     plan = plan_at(pattern, load_device(args.device), sample_rate_hz=args.sample_rate)
+    check_output_file(args.output, "--output")
     clipped_fraction = write_wav(plan, args.output, plot_path=args.plot)
     if args.json:
         summary = {**plan.summary(), "clipped_fraction": clipped_fraction}
@@ -208,11 +213,10 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
     from phantomtouch.manifest import row, write_manifest
 
     names = [n for n in preset_names() if n.startswith(f"{args.set}/")]
-    out_dir = Path(args.output)
     device = load_device(args.device)
     plans = {name: plan_at(preset(name), device) for name in names}
     needed = sum(wav_bytes(plan) for plan in plans.values())
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = make_output_folder(args.output, "--output")
     free = shutil.disk_usage(out_dir).free
     if needed > free:
         raise ParameterError(
@@ -297,7 +301,7 @@ def _cmd_bench_accuracy(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser: argparse.ArgumentParser = OneLineParser(  # its subcommands are OneLineParsers too
         prog="phantomtouch", description=__doc__.splitlines()[0].replace("``", "")
     )
     parser.add_argument("--version", action="version", version=f"phantomtouch {__version__}")

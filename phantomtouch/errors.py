@@ -15,6 +15,8 @@ to one HTTP status and one WebSocket close code, in one place.
 
 from __future__ import annotations
 
+import sys
+
 
 class PhantomTouchError(Exception):
     """Root of every error raised on purpose by phantomtouch."""
@@ -34,3 +36,17 @@ class EngineBusyError(PhantomTouchError):
 
 class ProtocolError(PhantomTouchError):
     """A client sent a message that the protocol does not allow in its state."""
+
+
+def install_hint(extra: str) -> str:
+    """How to install an optional part (an extra of ``pyproject.toml``) into the checkout's
+    ``.venv``, for an error message: no package index holds phantomtouch, it is installed
+    from its checkout. Runs on any thread."""
+    if sys.platform == "win32":
+        return (
+            "in the checkout, py scripts\\run.py installs it "
+            f"(or .venv\\Scripts\\pip install -e '.[{extra}]')"
+        )
+    return (
+        f"in the checkout, scripts/install installs it (or .venv/bin/pip install -e '.[{extra}]')"
+    )

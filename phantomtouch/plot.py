@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from phantomtouch.errors import ParameterError
+from phantomtouch.errors import ParameterError, install_hint
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.renderer.trajectory import control_gains, envelope_at, positions_at
 
@@ -154,7 +154,9 @@ def build_figure(plan: Plan, traces: TraceEnvelope) -> Any:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError as exc:
-        raise ParameterError("plot needs matplotlib: pip install 'phantomtouch[plot]'") from exc
+        raise ParameterError(
+            f"plot needs matplotlib, the plot extra: {install_hint('plot')}"
+        ) from exc
     times = np.linspace(0.0, plan.duration_s, 2000, endpoint=False)
     envelope = envelope_at(plan, times)
     amplitude = max(plan.amplitude, 1e-12)

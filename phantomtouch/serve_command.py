@@ -8,7 +8,7 @@ import importlib.util
 import sys
 from typing import TYPE_CHECKING
 
-from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError
+from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError, install_hint
 from phantomtouch.fleet import cli as fleet_cli
 from phantomtouch.osc.command import add_osc_command
 from phantomtouch.schema import describe_validation_error
@@ -33,8 +33,7 @@ def _require(extra: str, *modules: str) -> None:
     missing = [m for m in modules if not _importable(m)]
     if missing:
         raise PhantomTouchError(
-            f"{missing[0]} is not installed: this needs the {extra} extra, "
-            f"pip install 'phantomtouch[{extra}]'"
+            f"{missing[0]} is not installed: this needs the {extra} extra; {install_hint(extra)}"
         )
 
 
@@ -48,8 +47,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
     if args.output != "null" and not _importable("sounddevice"):
         print(
-            "phantomtouch serve: sounddevice is not installed (pip install "
-            "'phantomtouch[audio]'): playing to the null output, no sound card",
+            f"phantomtouch {args.command}: sounddevice is not installed ({install_hint('audio')}): "
+            "playing to the null output, no sound card",
             file=sys.stderr,
         )
 
@@ -80,7 +79,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     try:
         check_library(settings)
     except DeviceError as exc:
-        print(f"phantomtouch serve: {exc}", file=sys.stderr)
+        print(f"phantomtouch {args.command}: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     check_port_free(settings.host, settings.port)
     if settings.osc_address is not None:
@@ -99,10 +98,13 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         if settings.bhaptics_map is not None:
             ArmMap.load(settings.bhaptics_map)
         check_port_free(*settings.bhaptics_address)
-    print(f"phantomtouch serve: http://{settings.host}:{settings.port} (API docs at /docs)")
+    print(
+        f"phantomtouch {args.command}: http://{settings.host}:{settings.port} (API docs at "
+        f"/docs); library {settings.db_path} (--db FILE for another)"
+    )
     if settings.bhaptics_address is not None:
         host, port = settings.bhaptics_address
-        print(f"phantomtouch serve: bHaptics stand-in on ws://{host}:{port}/v2/feedbacks")
+        print(f"phantomtouch {args.command}: bHaptics stand-in on ws://{host}:{port}/v2/feedbacks")
     serve(settings, attach=_attachments(settings, fleet))
     return 0
 
@@ -140,7 +142,11 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="open a WASAPI output in exclusive mode (Windows)",
     )
-    parser.add_argument("--db", help="pattern library, SQLite file")
+    parser.add_argument(
+        "--db",
+        help="library of patterns, clips and wearer profiles, SQLite file (default: one per "
+        "user, $XDG_DATA_HOME or ~/.local/share, then phantomtouch/patterns.db)",
+    )
     parser.add_argument("--token", help="bearer token every request must carry")
     parser.add_argument(
         "--wearer",

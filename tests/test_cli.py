@@ -149,7 +149,8 @@ def test_invalid_field_in_a_pattern_file_is_refused_in_one_line(tmp_path):
 
 def test_malformed_json_is_refused_in_one_line(tmp_path):
     (tmp_path / "bad.json").write_text('{"path": ', encoding="utf-8")
-    assert_refused(run("render", "bad.json", "-o", "x.wav", cwd=tmp_path), "Invalid JSON")
+    result = run("render", "bad.json", "-o", "x.wav", cwd=tmp_path)
+    assert_refused(result, "pattern file 'bad.json'", "Invalid JSON")
 
 
 def test_unknown_preset_is_refused_in_one_line(tmp_path):
@@ -186,7 +187,7 @@ def test_degenerate_device_file_is_refused_in_one_line(tmp_path):
 
 def test_unwritable_output_is_refused_in_one_line(tmp_path):
     result = run("render", "--preset", "vr/tap", "-o", "no/such/dir/x.wav", cwd=tmp_path)
-    assert_refused(result, "no/such/dir/x.wav", status=1)
+    assert_refused(result, "no/such/dir/x.wav", "folder 'no/such/dir' does not exist")
 
 
 def test_version(tmp_path):
@@ -231,4 +232,4 @@ def test_serve_without_the_server_extra_names_the_extra(tmp_path):
     )
     assert result.returncode == 1
     assert "Traceback" not in result.stderr
-    assert "pip install 'phantomtouch[server]'" in result.stderr
+    assert "scripts/install installs it (or .venv/bin/pip install -e '.[server]')" in result.stderr

@@ -1,5 +1,6 @@
 """README.md and the pages of docs/: every relative link resolves (files and #anchors),
-and the README fits on a screen or two (at most 250 lines)."""
+a section of another page is named by a link (not by its title in quotes, which nothing
+checks), and the README fits on a screen or two (at most 250 lines)."""
 
 from __future__ import annotations
 
@@ -59,3 +60,20 @@ def test_every_relative_link_resolves(page: Path) -> None:
 def test_the_anchor_rule_matches_githubs() -> None:
     page = ROOT / "docs" / "hardware.md"
     assert {"windows", "block-sizes-per-host-api", "a-quest-scene-on-wi-fi"} <= anchors(page)
+
+
+QUOTED_SECTION = re.compile(r"\b(README|[a-z]+\.md)\b,?\s+\"[^\"]+\"")
+"""A section named in prose by its page and its title in quotes: (README, "VRChat")."""
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_sections_of_other_pages_are_named_by_links(page: Path) -> None:
+    text = CODE.sub("", FENCE.sub("", page.read_text(encoding="utf-8")))
+    found = [m.group(0) for m in QUOTED_SECTION.finditer(text.replace("\n", " "))]
+    assert not found, found
+
+
+def test_a_quoted_section_is_found() -> None:
+    assert QUOTED_SECTION.search('as in (README, "Haptic clips") below')
+    assert QUOTED_SECTION.search('one float each, README "VRChat")')
+    assert not QUOTED_SECTION.search("([clips.md](clips.md#haptic-clips))")

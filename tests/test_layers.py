@@ -47,6 +47,7 @@ LAYER_OF = {
     "phantomtouch.tact_command": "composition",
     "phantomtouch.calibrate_command": "composition",
     "phantomtouch.device_arg": "composition",
+    "phantomtouch.cli_parser": "composition",
     "phantomtouch.analysis": "composition",
     "phantomtouch.plot": "composition",
     "phantomtouch.manifest": "composition",

@@ -13,7 +13,7 @@ import numpy as np
 
 from phantomtouch.analysis.calibration import PlayRecord
 from phantomtouch.analysis.twin import amplitude_m_s2
-from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.errors import DeviceError, ParameterError, install_hint
 
 
 def input_scale(
@@ -62,7 +62,8 @@ def sounddevice_loop(
         import sounddevice as sd
     except (ImportError, OSError) as exc:
         raise DeviceError(
-            f"calibrate needs sounddevice and PortAudio: pip install 'phantomtouch[audio]' ({exc})"
+            f"calibrate needs sounddevice and PortAudio, the audio extra: {install_hint('audio')} "
+            f"({exc})"
         ) from exc
     if input_channel < 1:
         raise ParameterError(f"input_channel={input_channel!r} must be >= 1")

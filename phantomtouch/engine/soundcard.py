@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from phantomtouch.engine.sinks import CaptureSink, NullSink, RenderFn, Sink
-from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.errors import DeviceError, ParameterError, install_hint
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger(__name__)
@@ -31,7 +31,7 @@ def _sounddevice() -> ModuleType:
         import sounddevice
     except ImportError as exc:
         raise DeviceError(
-            "sound card output needs the sounddevice package: pip install 'phantomtouch[audio]'"
+            f"sound card output needs sounddevice, the audio extra: {install_hint('audio')}"
         ) from exc
     except OSError as exc:  # the PortAudio library itself is missing
         raise DeviceError(f"PortAudio is not available: {exc}") from exc

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from contextlib import AbstractAsyncContextManager
 from typing import TYPE_CHECKING, Any
 
-from phantomtouch.errors import ParameterError, PhantomTouchError
+from phantomtouch.errors import ParameterError, PhantomTouchError, install_hint
 
 if TYPE_CHECKING:
     from phantomtouch.fleet.settings import FleetSettings
@@ -56,7 +56,7 @@ def _require_nats() -> None:
 
     if importlib.util.find_spec("nats") is None:
         raise PhantomTouchError(
-            "nats is not installed: this needs the fleet extra, pip install 'phantomtouch[fleet]'"
+            f"nats is not installed: this needs the fleet extra; {install_hint('fleet')}"
         )
 
 
@@ -81,8 +81,8 @@ def attachment(
 
         require_closed(settings.servers, "--fleet-insecure")
     print(
-        f"phantomtouch serve: armband {settings.armband!r} of site {settings.site!r} on the "
-        f"fleet at {', '.join(settings.servers)}"
+        f"phantomtouch {args.command}: armband {settings.armband!r} of site {settings.site!r} "
+        f"on the fleet at {', '.join(settings.servers)}"
     )
     return attach(settings)
 

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from phantomtouch.engine.shares import yielding
-from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError
+from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError, install_hint
 from phantomtouch.osc import messages
 from phantomtouch.osc.counters import OscCounters
 from phantomtouch.osc.mapping import ReceiverMap
@@ -52,7 +52,7 @@ from phantomtouch.service.running import InputHealth
 try:
     from phantomtouch.osc.packets import BadDatagram, messages_of
 except ImportError as exc:  # pragma: no cover - the osc extra is missing
-    raise ImportError("OSC input needs python-osc: pip install 'phantomtouch[osc]'") from exc
+    raise ImportError(f"OSC input needs python-osc, the osc extra: {install_hint('osc')}") from exc
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront

@@ -62,6 +62,16 @@ def test_actuators_are_drawn_to_scale_with_labels_and_ends(
     assert page.locator("#st-rate").inner_text().startswith(f"{device['sample_rate_hz']:,}")
 
 
+def test_the_status_bar_says_what_an_underrun_is_on_this_output(page: Any, server: str) -> None:
+    device = httpx.get(f"{server}/device").json()
+    meaning = page.locator("#st-underruns").locator("..").get_attribute("title") or ""
+    no_card = device["backend"] != "sounddevice"
+    assert ("No sound card" in meaning) is no_card, meaning
+    if no_card:  # the null sink's rule: a block more than one period late
+        period_ms = 1000 * device["block_frames"] / device["sample_rate_hz"]
+        assert f"more than one block ({period_ms:.1f} ms) late" in meaning, meaning
+
+
 def test_drag_moves_the_phantom_from_actuator_4_to_actuator_5(
     page: Any, armband: ArmbandOnPage, observer: StateObserver
 ) -> None:

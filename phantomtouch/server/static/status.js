@@ -10,6 +10,26 @@ function setText(id, text) {
   if (node.textContent !== text) node.textContent = text;
 }
 
+// What the Underruns count means for this output (the sink's own rule): a sound card
+// counts the blocks PortAudio reports it needed before they were ready; the null and
+// capture outputs have no card and keep time with this machine's clock, so they count
+// blocks whose turn came more than one block period late.
+export function underrunMeaning(backend, blockMs) {
+  const block = blockMs ? `${formatNumber(blockMs, 1)} ms` : "a block";
+  if (backend === "sounddevice") {
+    return (
+      "Blocks the sound card needed before they were ready: each is a short gap or click. " +
+      "A rising count means the machine is too busy or the block too small."
+    );
+  }
+  return (
+    "No sound card: this output keeps time with the machine's clock and plays nothing. " +
+    `An underrun is a block whose turn came more than one block (${block}) late: the ` +
+    "machine was too busy to run the engine on time. Nothing is heard either way; with a " +
+    "sound card it would be a gap or a click."
+  );
+}
+
 export class StatusView {
   constructor(armband) {
     this.armband = armband;
@@ -19,6 +39,8 @@ export class StatusView {
   setDevice(device) {
     setText("st-backend", device.backend || "–");
     const rate = device.sample_rate_hz;
+    const blockMs = rate && device.block_frames ? (device.block_frames / rate) * 1000 : null;
+    $("st-underruns").parentElement.title = underrunMeaning(device.backend, blockMs);
     setText("st-rate", rate ? `${rate.toLocaleString("en-US")} Hz` : "–");
     if (device.block_frames) {
       const ms = rate ? ` (${formatNumber((device.block_frames / rate) * 1000, 1)} ms)` : "";
