@@ -90,22 +90,25 @@ def test_an_imported_project_plays_by_rest_and_ws_as_rendered(tmp_path: Path) ->
         assert answer.status_code == 202, answer.text
         plays["rest"] = answer.json()
         begin_s = float(answer.json()["start_at_s"])
+        # the connection stays open while its play sounds: what it started ends with it
         with connect(server.ws_url) as ws:
             message = {"type": "play", "id": 1, "tact": "rubbing", "start_at_s": begin_s + 1.5}
             ws.send(json.dumps(message))
             reply = json.loads(ws.recv(timeout=30.0))
             assert reply["type"] == "ok", reply
             plays["ws"] = reply["result"]
-        answer = httpx.post(
-            f"{server.url}/tact/rubbing/play",
-            json={"duration_scale": 2, "intensity_scale": 0.5, "start_at_s": begin_s + 3.0},
-            timeout=30.0,
-        )
-        assert answer.status_code == 202, answer.text
-        plays["scaled"] = answer.json()
-        end_s = begin_s + 3.0 + 2 * LENGTH_S + 0.5
-        while httpx.get(f"{server.url}/clock", timeout=10.0).json()["server_time_s"] < end_s:
-            time.sleep(0.1)
+            answer = httpx.post(
+                f"{server.url}/tact/rubbing/play",
+                json={"duration_scale": 2, "intensity_scale": 0.5, "start_at_s": begin_s + 3.0},
+                timeout=30.0,
+            )
+            assert answer.status_code == 202, answer.text
+            plays["scaled"] = answer.json()
+            end_s = begin_s + 3.0 + 2 * LENGTH_S + 0.5
+            while httpx.get(f"{server.url}/clock", timeout=10.0).json()["server_time_s"] < end_s:
+                ws.send(json.dumps({"type": "ping"}))
+                json.loads(ws.recv(timeout=30.0))
+                time.sleep(0.1)
         late = [
             job_id
             for play in plays.values()
