@@ -12,19 +12,15 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from phantomtouch.clips.tact_score import light
+
 ARM_MOTORS = 6
-_COLUMNS = (0.0, 0.5, 1.0)
-_ROWS = (0.0, 1.0)
 
 
 def point_levels(x: float, y: float, intensity: float) -> list[float]:
     """The motor levels of one point at ``(x, y)`` (0-1 each) of ``intensity`` (0-100)."""
     levels = [0.0] * ARM_MOTORS
-    for row, row_y in enumerate(_ROWS):
-        across = max(0.0, 1.0 - abs(y - row_y))
-        for col, col_x in enumerate(_COLUMNS):
-            along = max(0.0, 1.0 - abs(x - col_x) / 0.5)
-            levels[row * 3 + col] = intensity * along * across
+    light(levels, x, y, intensity)
     return levels
 
 

@@ -427,7 +427,7 @@ def motor_levels(
                 for point in dots.points:
                     spot = layout.get(point.index)
                     if spot is not None:
-                        _light(motors, *spot, point.intensity * env)
+                        light(motors, *spot, point.intensity * env)
             for path in content.paths:
                 keys = path.keyframes
                 if not keys or not keys[0].time_ms <= local <= keys[-1].time_ms:
@@ -435,15 +435,17 @@ def motor_levels(
                 x, y, i = _path_at(path, [k.time_ms for k in keys], local)
                 span = keys[-1].time_ms - keys[0].time_ms
                 r = 0.0 if span <= 0 else (local - keys[0].time_ms) / span
-                _light(motors, x, y, i * envelope(path.playback, r))
+                light(motors, x, y, i * envelope(path.playback, r))
     return {
         arm: [round(100.0 * min(1.0, v * scale.intensity)) for v in motors]
         for arm, motors in levels.items()
     }
 
 
-def _light(motors: list[float], x: float, y: float, level: float) -> None:
-    """Raise the motors around ``(x, y)`` of the 3 by 2 grid to their bilinear share."""
+def light(motors: list[float], x: float, y: float, level: float) -> None:
+    """Raise the motors around ``(x, y)`` (each clamped to 0-1) of the 3 by 2 grid
+    (``motors``, 6 levels, ``index = row * 3 + col``) to their bilinear share of ``level``
+    (the one rule of the equivalent motor levels; pure, any thread)."""
     col = min(1.0, max(0.0, x)) * 2.0
     row = min(1.0, max(0.0, y))
     c0 = min(int(col), 1)
