@@ -220,6 +220,39 @@ def put_clip_files(client: httpx.Client, tmp_path: Path) -> list[str]:
     return problems
 
 
+TACT_SAMPLES = ROOT / "tests" / "clips" / "samples" / "tact"
+IMPORT_TACT = re.compile(r"\bimport (\S+\.tact)\b(?:.*?--name (\S+))?")
+
+
+def put_tact_projects(client: httpx.Client, tmp_path: Path) -> list[str]:
+    """Each ``.tact`` file the pages import, through ``phantomtouch import -o`` into the
+    library under the name the page gives it (the real file of that name from the
+    samples)."""
+    problems = []
+    for block in blocks("bash"):
+        for command, _ in shell_commands(block.text):
+            found = IMPORT_TACT.search(command)
+            if found is None:
+                continue
+            file_name, name = found.group(1), found.group(2) or Path(found.group(1)).stem
+            sources = sorted(TACT_SAMPLES.rglob(file_name))
+            assert sources, f"{block}: {file_name} is not a sample file"
+            imported = subprocess.run(
+                [str(SCRIPT), "import", str(sources[0]), "-o", str(tmp_path / "project.json")],
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+            assert imported.returncode == 0, f"{block}: {imported.stderr}"
+            project = (tmp_path / "project.json").read_text(encoding="utf-8")
+            answer = client.put(
+                f"/tact/{name}", content=project, headers={"Content-Type": "application/json"}
+            )
+            if answer.status_code not in (200, 201):
+                problems.append(f"{block}: PUT /tact/{name}: {answer.status_code} {answer.text}")
+    return problems
+
+
 def test_every_json_body_is_accepted_by_its_route(live: LiveServer, tmp_path: Path) -> None:
     problems = []
     headers = {"Content-Type": "application/json"}
@@ -266,6 +299,7 @@ def test_every_curl_command_is_answered_as_the_page_says(live: LiveServer, tmp_p
     job_id = None
     with httpx.Client(base_url=live.url, timeout=30.0) as client:
         problems += put_clip_files(client, tmp_path)
+        problems += put_tact_projects(client, tmp_path)
         for curl in commands:
             assert curl.url.startswith(DOC_BASE), f"{curl.where}: {curl.url} is not the service"
             route = curl.route
@@ -275,8 +309,8 @@ def test_every_curl_command_is_answered_as_the_page_says(live: LiveServer, tmp_p
             answer = client.request(
                 curl.method, route, content=curl.body, headers=dict(curl.headers)
             )
-            if answer.status_code == 202:
-                job_id = answer.json()["job_id"]
+            if answer.status_code == 202:  # a touch's job (a .tact play answers job_ids)
+                job_id = answer.json().get("job_id", job_id)
             ok = answer.status_code == curl.status if curl.status else accepted(answer)
             if not ok:
                 problems.append(
