@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from phantomtouch.renderer import OutputStage
+from phantomtouch.renderer.dc_blocker import DcBlocker
 from phantomtouch.schema.device import DeviceProfile
 
 THRESHOLD_RATIO = 0.9
@@ -117,7 +118,9 @@ class WearerGains:
 class Mixer:
     """The chain after the voices, and the level meters.
 
-    The voices' sum goes through :class:`WearerGains`, the :class:`Limiter` (all channels
+    The voices' sum goes through the renderer's
+    :class:`~phantomtouch.renderer.dc_blocker.DcBlocker` (transparent for everything the
+    edge admits, within the ceiling), :class:`WearerGains`, the :class:`Limiter` (all channels
     alike, keeping the phantom's balance) and the renderer's
     :class:`~phantomtouch.renderer.OutputStage` (calibration, optional FIR, NaN/Inf muting,
     the hard clip at the ceiling): the stage of an offline render, so a pattern played
@@ -137,6 +140,7 @@ class Mixer:
     """
 
     def __init__(self, device: DeviceProfile) -> None:
+        self.dc_blocker = DcBlocker(device.channels, device.sample_rate_hz, device.safety.ceiling)
         self.wearer = WearerGains(device)
         self.limiter = Limiter(device)
         self.stage = OutputStage(device)
@@ -147,8 +151,8 @@ class Mixer:
         self._magnitude = np.empty((device.channels, device.block_frames), dtype=np.float32)
 
     def finish(self, block: np.ndarray) -> None:
-        """Fit to the wearer, limit, calibrate and clip the mixed ``block`` in place,
-        then meter it.
+        """Block DC, fit to the wearer, limit, calibrate and clip the mixed ``block`` in
+        place, then meter it.
 
         Most blocks are finite with calibrated peaks within the limiter's threshold while
         its gain is 1: the limiter, the NaN guard and the clip leave them as they are. On a
@@ -156,6 +160,7 @@ class Mixer:
         calibrated peaks, found once. Every other block takes the whole chain, whose
         limiter uses the largest of those peaks. Both ways give the same samples and levels.
         """
+        self.dc_blocker.process(block)
         self.wearer.apply(block)
         levels = self._channel_peaks(block)
         levels *= self.limiter.calibration  # calibrated peaks: rounding keeps the order of |x|
