@@ -173,13 +173,17 @@ class CombinedSource:
         return mixed
 
 
-def make_source(carrier: PatternCarrier, sample_rate_hz: int) -> CarrierSource:
-    """The source for a carrier specification (a clip's ``data`` must be filled in)."""
+def make_source(
+    carrier: PatternCarrier, sample_rate_hz: int, *, transients: object | None = None
+) -> CarrierSource:
+    """The source for a carrier specification (a clip's ``data`` must be filled in; its
+    ``transients``, a plan's ``clip_transients``, are rendered here when not given)."""
     if isinstance(carrier, ClipCarrier):
-        from phantomtouch.renderer.clip import ClipSource
+        from phantomtouch.renderer.clip import ClipSource, TransientTable
 
         assert carrier.data is not None  # the plan refuses a clip without it
-        return ClipSource(carrier.data, sample_rate_hz, loop=carrier.loop)
+        assert transients is None or isinstance(transients, TransientTable)
+        return ClipSource(carrier.data, sample_rate_hz, loop=carrier.loop, transients=transients)
     if isinstance(carrier, SineCarrier):
         return SineSource(carrier.freq_hz, sample_rate_hz)
     noise = NoiseSource(carrier.low_hz, carrier.high_hz, carrier.seed, sample_rate_hz)

@@ -96,6 +96,19 @@ class Plan:
     backward: Timeline | None
 
     @cached_property
+    def clip_transients(self) -> Any:
+        """A clip carrier's transients rendered once at this plan's rate, shared by its
+        voices (a :class:`~phantomtouch.renderer.clip.TransientTable`); None for other
+        carriers. Computed on first use, outside the audio callback (a voice is made
+        before it plays)."""
+        carrier = self.pattern.carrier
+        if not isinstance(carrier, ClipCarrier) or carrier.data is None:
+            return None
+        from phantomtouch.renderer.clip import TransientTable  # it builds on the schema only
+
+        return TransientTable(carrier.data, self.sample_rate_hz)
+
+    @cached_property
     def clipped_fraction(self) -> float:
         from phantomtouch.renderer.headroom import clipped_fraction  # it builds on Plan
 
