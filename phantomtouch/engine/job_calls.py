@@ -208,6 +208,18 @@ class JobCalls:
                 self.plans.release(old)
                 self._audio.post(DropPlan(old.handle))
 
+    def check_quota(self, owner: str, quota: OwnerQuota) -> None:
+        """Raise :class:`QuotaRefused` if ``owner`` has no room left for any job: its jobs
+        not over already number ``quota.voices`` or hold ``quota.seconds`` (host, any
+        thread). Cheap: a caller checks it before it plans a pattern, so a refused touch
+        costs no planning (:meth:`schedule` checks the job itself once it is planned)."""
+        check_id("owner", owner)
+        with self._lock:
+            next_frame = self._audio.next_block_frame()
+            self._jobs.check_quota(
+                owner, quota, next_frame, 0, next_frame=next_frame, rate_hz=self.device.sample_rate_hz
+            )
+
     async def schedule_async(self, pattern: TouchPattern | Plan, **options: Any) -> Job:
         """:meth:`schedule` for a coroutine, with its keywords (host, the event loop; it
         never waits for the audio side)."""

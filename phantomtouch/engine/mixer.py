@@ -73,13 +73,21 @@ class Limiter:
         self.limited_blocks += 1
 
 
+WEARER_RAMP_S = 0.02
+"""Time over which a change of the wearer's gains ramps in, s (960 frames at 48 kHz; two
+cycles of the 100 Hz sine, so no step a wearer could feel as a click)."""
+
+
 class WearerGains:
-    """The wearer's per-channel gains, changed at a block boundary and ramped across it.
+    """The wearer's per-channel gains, changed at a block boundary and ramped over
+    ``WEARER_RAMP_S``.
 
     :meth:`set` leaves the new gains for the next block; :meth:`apply` scales a block:
-    not at all while every gain is 1, by the gains while they hold, and in the block where
-    they change by a line from the old gains to the new, reached on the block's last
-    frame (sample ``n`` of ``frames`` gets ``old + (new - old) * (n + 1) / frames``).
+    not at all while every gain is 1, by the gains while they hold, and from the block
+    where they change by a line from the gains of that moment to the new ones, reached
+    ``R = round(WEARER_RAMP_S * sample_rate_hz)`` frames later (frame ``k`` of the ramp
+    gets ``old + (new - old) * (k + 1) / R``). A change during a ramp starts a new ramp
+    from where the gains are, so no sequence of changes steps them.
 
     Attributes
     ----------
@@ -89,9 +97,14 @@ class WearerGains:
 
     def __init__(self, device: DeviceProfile) -> None:
         self.gains = np.ones(device.channels, dtype=np.float32)
+        self.ramp_frames = max(1, round(WEARER_RAMP_S * device.sample_rate_hz))
         self._pending: np.ndarray | None = None
         self._unity = True
+        self._from = self.gains.copy()
+        self._to = self.gains.copy()
+        self._done = self.ramp_frames  # frames of the ramp applied so far
         self._step = np.arange(1, device.block_frames + 1, dtype=np.float32)[:, None]
+        self._fraction = np.empty((device.block_frames, 1), dtype=np.float32)
         self._curve = np.empty((device.block_frames, device.channels), dtype=np.float32)
 
     def set(self, gains: np.ndarray) -> None:
@@ -102,15 +115,27 @@ class WearerGains:
     def apply(self, block: np.ndarray) -> None:
         """Scale ``block`` (frames, channels), float32, in place."""
         new, self._pending = self._pending, None
-        if new is not None and not np.array_equal(new, self.gains):
+        if new is not None and not np.array_equal(new, self._to):
+            self._from = self.gains.copy()
+            self._to = new.astype(np.float32, copy=True)
+            self._done = 0
+        if self._done < self.ramp_frames:
             frames = block.shape[0]
+            fraction = self._fraction[:frames]
+            np.add(self._step[:frames], np.float32(self._done), out=fraction)
+            fraction *= np.float32(1.0 / self.ramp_frames)
+            np.minimum(fraction, np.float32(1.0), out=fraction)
             curve = self._curve[:frames]
-            np.multiply(self._step[:frames], (new - self.gains) / np.float32(frames), out=curve)
-            curve += self.gains
-            curve[-1] = new
+            np.multiply(fraction, self._to - self._from, out=curve)
+            curve += self._from
+            self._done += frames
+            if self._done >= self.ramp_frames:
+                curve[frames - (self._done - self.ramp_frames) - 1 :] = self._to
+                self.gains = self._to.copy()
+                self._unity = bool(np.all(self.gains == 1.0))
+            else:
+                self.gains = curve[-1].copy()
             block *= curve
-            self.gains = new.astype(np.float32, copy=True)
-            self._unity = bool(np.all(self.gains == 1.0))
         elif not self._unity:
             block *= self.gains
 

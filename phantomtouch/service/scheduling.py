@@ -142,10 +142,15 @@ def quota_error(refused: QuotaRefused, duration_s: float) -> QuotaError:
             field="voices",
             value=refused.jobs,
         )
+    adds = (
+        f"this one would add {refused.ahead_s:.1f} s"
+        if refused.ahead_s > 0
+        else "no time is left for another"
+    )
     return QuotaError(
         f"quota max_voice_seconds_per_client={refused.quota.seconds:g} s: this client's "
-        f"touches hold {refused.held_s:.1f} s still to play and this one would add "
-        f"{refused.ahead_s:.1f} s; long touches count by the time they hold",
+        f"touches hold {refused.held_s:.1f} s still to play and {adds}; long touches count "
+        "by the time they hold",
         field="duration_s",
         value=round(duration_s, 6),
     )
@@ -178,6 +183,10 @@ async def schedule(
     stops = engine.stop_count  # a stop that comes while this one is planned voids it
 
     def plan_and_schedule() -> JobAccepted:
+        try:
+            engine.check_quota(owner, quota)  # before any planning: a refusal costs none
+        except QuotaRefused as refused:
+            raise quota_error(refused, 0.0) from refused
         planned = service.plans.plan(resolve(request, service.store))
         first = start_frame(engine, request.timing())
         try:
