@@ -21,6 +21,12 @@ abuse runs in a process of its own, bounded in count and time:
 - ``osc deep bundles``: bundles nested 500 deep (10 KB each), as fast as they go;
 - ``invalid utf-8``: WebSocket connections each sending one text frame that is not UTF-8
   (closed with 1007, one log line per 10 s).
+- the output stage (:func:`output_abuses`, beside another client's 3 s touch):
+  ``nan clip`` (a looped clip of 5e-324 s), ``transients`` (20,000 at t = 0, then the 1000
+  allowed), ``0.01 Hz sine``, ``quota first`` (an 80,000-point touch from a client at its
+  quota: the time its refusal takes), ``wearer flood`` (``PUT /wearer`` +-20 dB as fast
+  as one client goes); each row says what the attack was answered, how the other touch
+  ended, and whether a vibration stayed on (blocks muted, voices silenced, voices on).
 
 Each line reports the probe's p50, p99 and slowest answer while the abuse ran and the
 underruns the engine counted meanwhile (``/metrics``)::
@@ -47,6 +53,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tests.support.abuse import HealthProbe, hang_ups, in_process, large_bodies, ping_flood
 from tests.support.abuse_inputs import invalid_utf8_frames, osc_bad_datagrams, osc_deep_bundles
+from tests.support.abuse_output import (
+    many_transients,
+    nan_clip,
+    planned_past_quota,
+    sub_band_sine,
+    wearer_switches,
+)
 from tests.support.fairness import (
     contact_hoard,
     http_play_flood,
@@ -127,6 +140,25 @@ def input_abuses(server: LiveServer, osc_port: int) -> dict[str, Callable[[], An
     }
 
 
+def output_abuses(server: LiveServer) -> dict[str, Callable[[], Any]]:
+    """The attacks on the output stage, each beside another client's touch."""
+    attacks: dict[str, Callable[[str], Any]] = {
+        "nan clip": nan_clip,
+        "transients": many_transients,
+        "0.01 Hz sine": sub_band_sine,
+        "quota first": planned_past_quota,
+        "wearer flood": wearer_switches,
+    }
+    return {
+        name: (
+            lambda attack=attack: beside(
+                lambda: in_process(attack, server.url), lambda: victim_touch(server.url)
+            )
+        )
+        for name, attack in attacks.items()
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of the baseline")
@@ -144,6 +176,7 @@ def main(argv: list[str] | None = None) -> int:
             "hang-ups": lambda: in_process(hang_ups, server.port, 500),
             **fairness_abuses(server, args.seconds),
             **input_abuses(server, osc_port),
+            **output_abuses(server),
         }
         inputs = set(input_abuses(server, osc_port))
         print(

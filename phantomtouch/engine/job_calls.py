@@ -217,7 +217,12 @@ class JobCalls:
         with self._lock:
             next_frame = self._audio.next_block_frame()
             self._jobs.check_quota(
-                owner, quota, next_frame, 0, next_frame=next_frame, rate_hz=self.device.sample_rate_hz
+                owner,
+                quota,
+                next_frame,
+                0,
+                next_frame=next_frame,
+                rate_hz=self.device.sample_rate_hz,
             )
 
     async def schedule_async(self, pattern: TouchPattern | Plan, **options: Any) -> Job:

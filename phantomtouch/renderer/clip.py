@@ -165,7 +165,9 @@ class TransientTable:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.values, self.run_first, self.run_offset, self.run_frames))
+        return sum(
+            a.nbytes for a in (self.values, self.run_first, self.run_offset, self.run_frames)
+        )
 
     def add_to(self, signal: np.ndarray, at_frames: np.ndarray) -> None:
         """Add the transients at ``at_frames`` (frames of one pass of the clip, float64,

@@ -101,7 +101,6 @@ class ActiveWearer:
             naming ``field``).
         """
         with self._lock:
-            self._take_switch()
             profile = self._store.get_wearer(name)
             if profile is None:
                 raise MissingReferenceError(
@@ -109,7 +108,9 @@ class ActiveWearer:
                     field=field,
                     value=name,
                 )
-            self._apply(name, profile, band, field)
+            gains = self._gains(name, profile, band, field)
+            self._take_switch()  # a refused choice is no switch
+            self._set(gains)
             self.choice = Choice(name, band)
             return self.choice
 
@@ -154,13 +155,15 @@ class ActiveWearer:
                 self.choice = None
 
     def _apply(self, name: str, profile: WearerProfile, band: Band, field: str) -> None:
+        self._set(self._gains(name, profile, band, field))
+
+    def _gains(self, name: str, profile: WearerProfile, band: Band, field: str) -> np.ndarray:
         try:
-            gains = wearer_gains(self._engine.device, profile, band)
+            return wearer_gains(self._engine.device, profile, band)
         except ParameterError as exc:
             raise MissingReferenceError(
                 f"{field}={name!r} does not fit the device: {exc}", field=field, value=name
             ) from exc
-        self._set(gains)
 
     def _set(self, gains: np.ndarray) -> None:
         self._engine.set_wearer_gains(gains)

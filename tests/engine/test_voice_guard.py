@@ -23,7 +23,8 @@ from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.engine.scheduler import OVERRUN_BLOCKS, Scheduler
 from phantomtouch.engine.voices import Voice, Workspace
-from phantomtouch.renderer import plan
+from phantomtouch.renderer import PatternRenderer, plan
+from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.clip import Breakpoint, ClipCarrier, HapticClip
 from tests.support.waiting import wait_until
 
@@ -40,7 +41,7 @@ GOOD = TouchPattern.model_validate(
 )
 
 
-def nan_plan(seconds: float = 2.0):
+def nan_plan(seconds: float = 2.0) -> Plan:
     """A still touch whose looped clip lasts 5e-324 s: every sample NaN (built past the
     schema, as no request can any more)."""
     clip = HapticClip.model_construct(
@@ -58,9 +59,7 @@ def nan_plan(seconds: float = 2.0):
     return resolved
 
 
-def render_first(resolved) -> np.ndarray:
-    from phantomtouch.renderer import PatternRenderer
-
+def render_first(resolved: Plan) -> np.ndarray:
     return PatternRenderer(resolved).render(BLOCK)
 
 

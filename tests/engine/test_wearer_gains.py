@@ -38,7 +38,9 @@ def test_unity_gains_change_no_sample(rng: np.random.Generator) -> None:
         assert np.array_equal(a, b)
 
 
-def _ratios(fitted: Mixer, blocks: int, rng: np.random.Generator, at: dict[int, np.ndarray]):
+def _ratios(
+    fitted: Mixer, blocks: int, rng: np.random.Generator, at: dict[int, np.ndarray]
+) -> np.ndarray:
     """Per-sample gain of ``fitted`` against an unfitted mixer over ``blocks`` blocks,
     ``at[k]`` set before block ``k``; shape (frames, channels), float64."""
     plain = Mixer(DEVICE)
@@ -64,7 +66,9 @@ def test_a_change_ramps_over_the_ramp_time_then_holds(rng: np.random.Generator) 
     expected = 1.0 + (gains.astype(np.float64) - 1.0) * np.minimum(frames / ramp, 1.0)
     # float32 samples divided by float32 samples: 1e-5 relative
     np.testing.assert_allclose(ratio, expected, rtol=1e-5)
-    np.testing.assert_allclose(ratio[ramp - 1 :], np.broadcast_to(gains, ratio[ramp - 1 :].shape), rtol=1e-6)
+    np.testing.assert_allclose(
+        ratio[ramp - 1 :], np.broadcast_to(gains, ratio[ramp - 1 :].shape), rtol=1e-6
+    )
     largest_step = np.max(np.abs(np.diff(ratio, axis=0)), axis=0)
     # each ratio carries float32 rounding of about 1e-7 (samples near 0.1): 1e-6 absolute
     np.testing.assert_allclose(largest_step, np.abs(gains - 1.0) / ramp, rtol=0, atol=1e-6)
