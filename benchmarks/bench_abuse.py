@@ -140,22 +140,19 @@ def input_abuses(server: LiveServer, osc_port: int) -> dict[str, Callable[[], An
     }
 
 
+def beside_a_touch(server: LiveServer, attack: Callable[[str], Any]) -> Callable[[], Any]:
+    """``attack(server.url)`` in its own process, another client's touch beside it."""
+    return lambda: beside(lambda: in_process(attack, server.url), lambda: victim_touch(server.url))
+
+
 def output_abuses(server: LiveServer) -> dict[str, Callable[[], Any]]:
     """The attacks on the output stage, each beside another client's touch."""
-    attacks: dict[str, Callable[[str], Any]] = {
-        "nan clip": nan_clip,
-        "transients": many_transients,
-        "0.01 Hz sine": sub_band_sine,
-        "quota first": planned_past_quota,
-        "wearer flood": wearer_switches,
-    }
     return {
-        name: (
-            lambda attack=attack: beside(
-                lambda: in_process(attack, server.url), lambda: victim_touch(server.url)
-            )
-        )
-        for name, attack in attacks.items()
+        "nan clip": beside_a_touch(server, nan_clip),
+        "transients": beside_a_touch(server, many_transients),
+        "0.01 Hz sine": beside_a_touch(server, sub_band_sine),
+        "quota first": beside_a_touch(server, planned_past_quota),
+        "wearer flood": beside_a_touch(server, wearer_switches),
     }
 
 

@@ -79,10 +79,11 @@ class DcBlocker:
         if not self._state.any() and not block.any():
             return
         slow, self._state = lfilter(self._b, self._a, block, axis=0, zi=self._state)
-        if not np.isfinite(self._state).all():
+        if not math.isfinite(float(self._state.sum())):
             self._state.fill(0.0)
             return
+        if slow.max() <= self.dead_band and slow.min() >= -self.dead_band:  # nearly every block
+            return
         excess = slow - np.clip(slow, -self.dead_band, self.dead_band)
-        if excess.any():
-            block -= excess.astype(np.float32)
-            self.blocked_blocks += 1
+        block -= excess.astype(np.float32)
+        self.blocked_blocks += 1

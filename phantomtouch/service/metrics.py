@@ -99,6 +99,12 @@ class _EngineCollector(Collector):
         silenced.add_metric(["over_budget"], status["overrun_voices"])
         yield silenced
         yield CounterMetricFamily(
+            "phantomtouch_muted_blocks",
+            "Output blocks the output stage replaced by silence for a NaN or Inf in the mix "
+            "(every voice silent for that block; a voice's own NaN is silenced alone first).",
+            status["muted_blocks"],
+        )
+        yield CounterMetricFamily(
             "phantomtouch_dc_blocked_blocks",
             "Blocks the DC blocker changed (content far below the carriers' band).",
             status["dc_blocked_blocks"],

@@ -71,18 +71,24 @@ def sub_band_sine(url: str) -> dict[str, Any]:
 
 
 def planned_past_quota(url: str) -> dict[str, Any]:
-    """A client holding its whole voice-second quota (two 2 h touches) posts an
-    80,000-point touch: the time its refusal takes (it used to be planned first)."""
+    """A client holding its whole voice quota (quiet 1 h touches until refused) posts an
+    80,000-point touch: the answer and the time it takes (it used to be planned first)."""
     with httpx.Client(base_url=url, timeout=60) as client:
-        for _ in range(2):
-            client.post("/touch", json={**STILL, "duration_s": 7200.0, "intensity": 0.05})
+        held = 0
+        for _ in range(200):
+            quiet = {**STILL, "duration_s": 3600.0, "intensity": 0.01}
+            if client.post("/touch", json=quiet).status_code != 202:
+                break
+            held += 1
         points = [[1.9, 2.4 + 9.6 * (k % 2)] for k in range(80_000)]
         big = {**STILL, "path": {"kind": "polyline", "points_cm": points}, "speed_cm_s": 900.0}
         began = time.perf_counter()
         answer = client.post("/touch", json=big)
         took_ms = (time.perf_counter() - began) * 1e3
         client.post("/stop")
-        return _after(client, {"answer": answer.status_code, "took_ms": round(took_ms)})
+        return _after(
+            client, {"held": held, "answer": answer.status_code, "took_ms": round(took_ms)}
+        )
 
 
 def wearer_switches(url: str, seconds: float = 3.0) -> dict[str, Any]:
