@@ -58,6 +58,7 @@ from tests.support.abuse_output import (
     nan_clip,
     planned_past_quota,
     sub_band_sine,
+    voices_on,
     wearer_switches,
 )
 from tests.support.fairness import (
@@ -142,7 +143,13 @@ def input_abuses(server: LiveServer, osc_port: int) -> dict[str, Callable[[], An
 
 def beside_a_touch(server: LiveServer, attack: Callable[[str], Any]) -> Callable[[], Any]:
     """``attack(server.url)`` in its own process, another client's touch beside it."""
-    return lambda: beside(lambda: in_process(attack, server.url), lambda: victim_touch(server.url))
+
+    def run() -> dict[str, Any]:
+        row = beside(lambda: in_process(attack, server.url), lambda: victim_touch(server.url))
+        time.sleep(0.3)  # the other touch's release
+        return {**row, "voices_on_after": voices_on(server.url)}
+
+    return run
 
 
 def output_abuses(server: LiveServer) -> dict[str, Callable[[], Any]]:

@@ -89,6 +89,14 @@ def plan_for(pattern: TouchPattern, device: DeviceProfile) -> Plan:
     return plan(pattern, device)
 
 
+def least_duration_s(pattern: TouchPattern) -> float:
+    """The least a pattern lasts, known before it is planned: its ``duration_s`` when it
+    gives one (the whole pattern), else its fades, per stroke."""
+    if pattern.duration_s is not None:
+        return float(pattern.duration_s)
+    return (pattern.fade_in_s + pattern.fade_out_s) * pattern.repeat
+
+
 def start_frame(engine: EngineFront, timing: Timing) -> int | None:
     """The engine frame a touch starts at; None: as soon as possible."""
     if timing.start_in_ms:
@@ -183,11 +191,13 @@ async def schedule(
     stops = engine.stop_count  # a stop that comes while this one is planned voids it
 
     def plan_and_schedule() -> JobAccepted:
+        pattern = resolve(request, service.store)
+        least_s = least_duration_s(pattern)
         try:
-            engine.check_quota(owner, quota)  # before any planning: a refusal costs none
+            engine.check_quota(owner, quota, least_s)  # before planning: a refusal costs none
         except QuotaRefused as refused:
-            raise quota_error(refused, 0.0) from refused
-        planned = service.plans.plan(resolve(request, service.store))
+            raise quota_error(refused, least_s) from refused
+        planned = service.plans.plan(pattern)
         first = start_frame(engine, request.timing())
         try:
             job = engine.schedule(

@@ -3,9 +3,9 @@ and time, loopback only; each meant to run in a process of its own
 (:func:`tests.support.abuse.in_process`) beside another client's touch
 (:func:`tests.support.fairness.victim_touch`).
 
-Each returns what the server answered and, read from ``/metrics`` afterwards, whether a
-vibration stayed on: the blocks muted for NaN (another client's touch silent), the voices
-silenced alone, and the voices still sounding once every touch asked for is over.
+Each returns what the server answered and, read from ``/metrics`` afterwards, the blocks
+muted for NaN (another client's touch silent) and the voices silenced alone;
+:func:`voices_on` tells, once every touch asked for is over, whether a vibration stayed on.
 """
 
 from __future__ import annotations
@@ -37,8 +37,12 @@ def _after(client: httpx.Client, answers: dict[str, Any]) -> dict[str, Any]:
         **answers,
         "muted_blocks": _metric(text, "phantomtouch_muted_blocks_total"),
         "silenced": _metric(text, 'phantomtouch_silenced_voices_total{reason="non_finite"}'),
-        "voices_on": _metric(text, "phantomtouch_active_voices"),
     }
+
+
+def voices_on(url: str) -> float:
+    """Voices sounding now (``/metrics``): 0 once every touch asked for is over."""
+    return _metric(httpx.get(f"{url}/metrics", timeout=10).text, "phantomtouch_active_voices")
 
 
 def _clip(**data: Any) -> dict[str, Any]:
@@ -71,8 +75,9 @@ def sub_band_sine(url: str) -> dict[str, Any]:
 
 
 def planned_past_quota(url: str) -> dict[str, Any]:
-    """A client holding its whole voice quota (quiet 1 h touches until refused) posts an
-    80,000-point touch: the answer and the time it takes (it used to be planned first)."""
+    """A client holding its voice-second quota (quiet 1 h touches until refused) posts a
+    15 min touch of 80,000 points: the answer and the time it takes (it used to be planned
+    before the quota was checked)."""
     with httpx.Client(base_url=url, timeout=60) as client:
         held = 0
         for _ in range(200):
@@ -80,8 +85,8 @@ def planned_past_quota(url: str) -> dict[str, Any]:
             if client.post("/touch", json=quiet).status_code != 202:
                 break
             held += 1
-        points = [[1.9, 2.4 + 9.6 * (k % 2)] for k in range(80_000)]
-        big = {**STILL, "path": {"kind": "polyline", "points_cm": points}, "speed_cm_s": 900.0}
+        points = [[1, 2 + 9 * (k % 2)] for k in range(80_000)]
+        big = {**STILL, "path": {"kind": "polyline", "points_cm": points}, "duration_s": 900.0}
         began = time.perf_counter()
         answer = client.post("/touch", json=big)
         took_ms = (time.perf_counter() - began) * 1e3
