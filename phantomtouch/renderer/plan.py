@@ -15,6 +15,7 @@ import numpy as np
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.carriers import NOISE_PERIOD_FRAMES
+from phantomtouch.renderer.clip import TransientTable
 from phantomtouch.renderer.gains import gains_for_points
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.levels import amplitude_for_level, pattern_level_db
@@ -96,7 +97,7 @@ class Plan:
     backward: Timeline | None
 
     @cached_property
-    def clip_transients(self) -> Any:
+    def clip_transients(self) -> TransientTable | None:
         """A clip carrier's transients rendered once at this plan's rate, shared by its
         voices (a :class:`~phantomtouch.renderer.clip.TransientTable`); None for other
         carriers. Computed on first use, outside the audio callback (a voice is made
@@ -104,8 +105,6 @@ class Plan:
         carrier = self.pattern.carrier
         if not isinstance(carrier, ClipCarrier) or carrier.data is None:
             return None
-        from phantomtouch.renderer.clip import TransientTable  # it builds on the schema only
-
         return TransientTable(carrier.data, self.sample_rate_hz)
 
     @cached_property
