@@ -11,15 +11,20 @@ and takes away what of it lies beyond a dead band of ``DC_DEAD_BAND`` times the 
 ``y[n] = x[n] - (m[n] - clip(m[n], -b, b))``.
 
 - Beyond the dead band ``y = x - m + b sign(m)``: the one-pole high-pass ``x - m``,
-  ``H(z) = r (1 - z**-1) / (1 - r z**-1)``, exactly 0 at 0 Hz, within 0.002 dB of 1 from
+  ``H(z) = r (1 - z**-1) / (1 - r z**-1)``, exactly 0 at 0 Hz, within 0.003 dB of 1 from
   20 Hz up; a constant offset decays to the dead band's edge with the time constant
   ``1 / (2 pi DC_BLOCK_HZ)`` (0.32 s).
 - Within the band it changes nothing, bit for bit. Content at ``f`` Hz and peak ``p``
   moves ``m`` by at most ``2 p DC_BLOCK_HZ / f`` (the low-pass integrating half a cycle
   from rest), which for ``f >= MIN_CARRIER_HZ`` and ``p`` at most the ceiling is the dead
-  band: every pattern the edge admits, alone or mixed within the ceiling, passes untouched,
-  so the engine still plays :func:`~phantomtouch.renderer.render`'s samples (the limiter is
-  transparent below its threshold the same way).
+  band: content at 20 Hz and up (the sine and combined carriers the edge admits; clips and
+  modulations whose content stays there), alone or mixed within the ceiling, passes
+  untouched, so the engine still plays
+  :func:`~phantomtouch.renderer.render`'s samples (the limiter is transparent below its
+  threshold the same way). Content below 20 Hz (a noise band reaching below it, since
+  noise bands start at ``limits.MIN_NOISE_BAND_HZ``; sidebands of a modulation deeper
+  than its carrier; a clip envelope that rectifies its sine) may move it past the band:
+  that is what it is there to take away.
 
 The state is one float64 per channel, carried from block to block, so blocks of any size
 give exactly the samples of one whole run.
