@@ -60,7 +60,8 @@ class Scheduler:
     nonfinite_voices, overrun_voices : int
         Voices silenced alone, the others playing on: one whose samples in a block were
         not finite (NaN, Inf; its block is left out of the mix), and one over its render
-        budget (``VOICE_BUDGET_BLOCKS``) in ``OVERRUN_BLOCKS`` blocks in a row.
+        budget (``VOICE_BUDGET_BLOCKS``) in ``OVERRUN_BLOCKS`` blocks in a row (``clocked``
+        only: blocks pulled by hand have no deadline).
     events : deque of tuple
         Reports the control side drains: ``("start", voice, frame, late)``,
         ``("release", voice, frame)``, ``("end", voice, frame)`` (silent from ``frame``),
@@ -184,7 +185,7 @@ class Scheduler:
         The mix before the voice is kept (one copy of the block); when the voice leaves a
         sample that is not finite (the block's sum is then NaN or Inf), the mix is put
         back and the voice silenced, so the others sound as they would without it. Its
-        render time counts against its budget.
+        render time counts against its budget when blocks are due at a clock's pace.
         """
         before = self._before[: out.shape[0]]
         np.copyto(before, out)
@@ -195,7 +196,7 @@ class Scheduler:
             np.copyto(out, before)
             self.nonfinite_voices += 1
             return True
-        if spent_s <= self._budget_s:
+        if spent_s <= self._budget_s or not self.clocked:  # pulled by hand: no deadline
             voice.overruns = 0
             return done
         voice.overruns += 1

@@ -139,7 +139,7 @@ class _Steady(Voice):
 def test_a_voice_past_its_render_budget_is_silenced_after_blocks_in_a_row() -> None:
     queue = CommandQueue(4)
     scheduler = Scheduler(
-        DEVICE, queue, SampleClock(DEVICE.sample_rate_hz), rings=0, chunk_frames=0, clocked=False
+        DEVICE, queue, SampleClock(DEVICE.sample_rate_hz), rings=0, chunk_frames=0, clocked=True
     )
     block_s = BLOCK / DEVICE.sample_rate_hz
     slow, steady = _Slow(3 * block_s), _Steady()
@@ -157,3 +157,16 @@ def test_a_voice_past_its_render_budget_is_silenced_after_blocks_in_a_row() -> N
     np.testing.assert_array_equal(
         after, np.broadcast_to((np.float32(1e-5) * frames)[:, None], after.shape)
     )
+
+
+def test_blocks_pulled_by_hand_have_no_render_deadline() -> None:
+    """An offline pull (a capture, a test) is not real time: a slow voice plays on."""
+    queue = CommandQueue(4)
+    scheduler = Scheduler(
+        DEVICE, queue, SampleClock(DEVICE.sample_rate_hz), rings=0, chunk_frames=0, clocked=False
+    )
+    slow = _Slow(3 * BLOCK / DEVICE.sample_rate_hz)
+    queue.push_start(slow, 0, True)
+    for _ in range(OVERRUN_BLOCKS + 2):
+        scheduler.render(np.zeros((BLOCK, DEVICE.channels), dtype=np.float32))
+    assert slow.blocks == OVERRUN_BLOCKS + 2 and scheduler.overrun_voices == 0
