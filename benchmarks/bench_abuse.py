@@ -29,6 +29,12 @@ abuse runs in a process of its own, bounded in count and time:
   from 127.0.0.2-65), ``contacts crowd x128`` (128 connections hold one silent contact each,
   then a newcomer's ``down``) and ``jobs history flood``; each outcome says whether a
   vibration stayed on (``stayed_on``) and how the newcomer fared.
+- the output stage (:func:`output_abuses`, beside another client's 3 s touch):
+  ``nan clip`` (a looped clip of 5e-324 s), ``transients`` (20,000 at t = 0, then the 1000
+  allowed), ``0.01 Hz sine``, ``quota first`` (an 80,000-point touch from a client at its
+  quota: the time its refusal takes), ``wearer flood`` (``PUT /wearer`` +-20 dB as fast
+  as one client goes); each row says what the attack was answered, how the other touch
+  ended, and whether a vibration stayed on (blocks muted, voices silenced, voices on).
 
 Each line reports the probe's p50, p99 and slowest answer while the abuse ran and the
 underruns the engine counted meanwhile (``/metrics``)::
@@ -55,6 +61,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tests.support.abuse import HealthProbe, hang_ups, in_process, large_bodies, ping_flood
 from tests.support.abuse_inputs import invalid_utf8_frames, osc_bad_datagrams, osc_deep_bundles
+from tests.support.abuse_output import (
+    many_transients,
+    nan_clip,
+    planned_past_quota,
+    sub_band_sine,
+    voices_on,
+    wearer_switches,
+)
 from tests.support.fairness import (
     contact_hoard,
     http_play_flood,
@@ -158,6 +172,28 @@ def owner_abuses(server: LiveServer, osc_port: int) -> dict[str, Callable[[], An
     }
 
 
+def beside_a_touch(server: LiveServer, attack: Callable[[str], Any]) -> Callable[[], Any]:
+    """``attack(server.url)`` in its own process, another client's touch beside it."""
+
+    def run() -> dict[str, Any]:
+        row = beside(lambda: in_process(attack, server.url), lambda: victim_touch(server.url))
+        time.sleep(0.3)  # the other touch's release
+        return {**row, "voices_on_after": voices_on(server.url)}
+
+    return run
+
+
+def output_abuses(server: LiveServer) -> dict[str, Callable[[], Any]]:
+    """The attacks on the output stage, each beside another client's touch."""
+    return {
+        "nan clip": beside_a_touch(server, nan_clip),
+        "transients": beside_a_touch(server, many_transients),
+        "0.01 Hz sine": beside_a_touch(server, sub_band_sine),
+        "quota first": beside_a_touch(server, planned_past_quota),
+        "wearer flood": beside_a_touch(server, wearer_switches),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of the baseline")
@@ -180,6 +216,7 @@ def main(argv: list[str] | None = None) -> int:
             **fairness_abuses(server, args.seconds),
             **input_abuses(server, osc_port),
             **owner_abuses(server, osc_port),
+            **output_abuses(server),
         }
         inputs = set(input_abuses(server, osc_port))
         print(

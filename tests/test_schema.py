@@ -61,7 +61,8 @@ BAD_FIELDS = [
     ("path.points_cm.1.1", INF, "finite"),
     ("path.points_cm.1.1", 1000.5, "less than or equal to 1000"),
     ("carrier.freq_hz", NAN, "finite"),
-    ("carrier.freq_hz", 0.0, "greater than 0"),
+    ("carrier.freq_hz", 0.0, "greater than or equal to 20"),
+    ("carrier.freq_hz", 0.01, "greater than or equal to 20"),
     ("carrier.freq_hz", 96000.0, "less than 96000"),
     ("modulation.index", -0.1, "greater than or equal to 0"),
     ("modulation.index", 1.01, "less than or equal to 1"),
@@ -217,7 +218,11 @@ INVALID = st.one_of(
     ),
     st.tuples(
         st.just("carrier.freq_hz"),
-        st.one_of(_NON_FINITE, st.floats(max_value=0.0), st.floats(min_value=96000.0)),
+        st.one_of(
+            _NON_FINITE,
+            st.floats(max_value=20.0, exclude_max=True),  # below the actuators' band
+            st.floats(min_value=96000.0),
+        ),
     ),
     st.tuples(
         st.just("modulation.index"),

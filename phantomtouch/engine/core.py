@@ -193,6 +193,9 @@ class Core:
             "render_load_max": load_max,
             "callback_errors": scheduler.callback_errors,
             "inline_renders": scheduler.work.inline_renders,
+            "nonfinite_voices": scheduler.nonfinite_voices,
+            "overrun_voices": scheduler.overrun_voices,
+            "dc_blocked_blocks": mixer.dc_blocker.blocked_blocks,
         }
 
 

@@ -208,6 +208,22 @@ class JobCalls:
                 self.plans.release(old)
                 self._audio.post(DropPlan(old.handle))
 
+    def check_quota(self, owner: str, quota: OwnerQuota, least_s: float = 0.0) -> None:
+        """Raise :class:`QuotaRefused` if ``owner`` has no room left for a job of at least
+        ``least_s`` s (>= 0): its jobs not over already number ``quota.voices``, or hold
+        so much of ``quota.seconds`` that ``least_s`` more would pass it (host, any
+        thread). Cheap: a caller checks it before it plans a pattern, with what the
+        pattern says of its length before planning, so a refused touch costs no planning
+        (:meth:`schedule` checks the job itself once it is planned)."""
+        check_id("owner", owner)
+        rate_hz = self.device.sample_rate_hz
+        frames = round(max(0.0, float(least_s)) * rate_hz)
+        with self._lock:
+            next_frame = self._audio.next_block_frame()
+            self._jobs.check_quota(
+                owner, quota, next_frame, frames, next_frame=next_frame, rate_hz=rate_hz
+            )
+
     async def schedule_async(self, pattern: TouchPattern | Plan, **options: Any) -> Job:
         """:meth:`schedule` for a coroutine, with its keywords (host, the event loop; it
         never waits for the audio side)."""

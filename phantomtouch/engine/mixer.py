@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from phantomtouch.renderer import OutputStage
+from phantomtouch.renderer.dc_blocker import DcBlocker
 from phantomtouch.schema.device import DeviceProfile
 
 THRESHOLD_RATIO = 0.9
@@ -72,13 +73,21 @@ class Limiter:
         self.limited_blocks += 1
 
 
+WEARER_RAMP_S = 0.02
+"""Time over which a change of the wearer's gains ramps in, s (960 frames at 48 kHz; two
+cycles of the 100 Hz sine, so no step a wearer could feel as a click)."""
+
+
 class WearerGains:
-    """The wearer's per-channel gains, changed at a block boundary and ramped across it.
+    """The wearer's per-channel gains, changed at a block boundary and ramped over
+    ``WEARER_RAMP_S``.
 
     :meth:`set` leaves the new gains for the next block; :meth:`apply` scales a block:
-    not at all while every gain is 1, by the gains while they hold, and in the block where
-    they change by a line from the old gains to the new, reached on the block's last
-    frame (sample ``n`` of ``frames`` gets ``old + (new - old) * (n + 1) / frames``).
+    not at all while every gain is 1, by the gains while they hold, and from the block
+    where they change by a line from the gains of that moment to the new ones, reached
+    ``R = round(WEARER_RAMP_S * sample_rate_hz)`` frames later (frame ``k`` of the ramp
+    gets ``old + (new - old) * (k + 1) / R``). A change during a ramp starts a new ramp
+    from where the gains are, so no sequence of changes steps them.
 
     Attributes
     ----------
@@ -88,9 +97,14 @@ class WearerGains:
 
     def __init__(self, device: DeviceProfile) -> None:
         self.gains = np.ones(device.channels, dtype=np.float32)
+        self.ramp_frames = max(1, round(WEARER_RAMP_S * device.sample_rate_hz))
         self._pending: np.ndarray | None = None
         self._unity = True
+        self._from = self.gains.copy()
+        self._to = self.gains.copy()
+        self._done = self.ramp_frames  # frames of the ramp applied so far
         self._step = np.arange(1, device.block_frames + 1, dtype=np.float32)[:, None]
+        self._fraction = np.empty((device.block_frames, 1), dtype=np.float32)
         self._curve = np.empty((device.block_frames, device.channels), dtype=np.float32)
 
     def set(self, gains: np.ndarray) -> None:
@@ -101,15 +115,27 @@ class WearerGains:
     def apply(self, block: np.ndarray) -> None:
         """Scale ``block`` (frames, channels), float32, in place."""
         new, self._pending = self._pending, None
-        if new is not None and not np.array_equal(new, self.gains):
+        if new is not None and not np.array_equal(new, self._to):
+            self._from = self.gains.copy()
+            self._to = new.astype(np.float32, copy=True)
+            self._done = 0
+        if self._done < self.ramp_frames:
             frames = block.shape[0]
+            fraction = self._fraction[:frames]
+            np.add(self._step[:frames], np.float32(self._done), out=fraction)
+            fraction *= np.float32(1.0 / self.ramp_frames)
+            np.minimum(fraction, np.float32(1.0), out=fraction)
             curve = self._curve[:frames]
-            np.multiply(self._step[:frames], (new - self.gains) / np.float32(frames), out=curve)
-            curve += self.gains
-            curve[-1] = new
+            np.multiply(fraction, self._to - self._from, out=curve)
+            curve += self._from
+            self._done += frames
+            if self._done >= self.ramp_frames:
+                curve[frames - (self._done - self.ramp_frames) - 1 :] = self._to
+                self.gains = self._to.copy()
+                self._unity = bool(np.all(self.gains == 1.0))
+            else:
+                self.gains = curve[-1].copy()
             block *= curve
-            self.gains = new.astype(np.float32, copy=True)
-            self._unity = bool(np.all(self.gains == 1.0))
         elif not self._unity:
             block *= self.gains
 
@@ -117,7 +143,9 @@ class WearerGains:
 class Mixer:
     """The chain after the voices, and the level meters.
 
-    The voices' sum goes through :class:`WearerGains`, the :class:`Limiter` (all channels
+    The voices' sum goes through the renderer's
+    :class:`~phantomtouch.renderer.dc_blocker.DcBlocker` (transparent for everything the
+    edge admits, within the ceiling), :class:`WearerGains`, the :class:`Limiter` (all channels
     alike, keeping the phantom's balance) and the renderer's
     :class:`~phantomtouch.renderer.OutputStage` (calibration, optional FIR, NaN/Inf muting,
     the hard clip at the ceiling): the stage of an offline render, so a pattern played
@@ -137,6 +165,7 @@ class Mixer:
     """
 
     def __init__(self, device: DeviceProfile) -> None:
+        self.dc_blocker = DcBlocker(device.channels, device.sample_rate_hz, device.safety.ceiling)
         self.wearer = WearerGains(device)
         self.limiter = Limiter(device)
         self.stage = OutputStage(device)
@@ -147,8 +176,8 @@ class Mixer:
         self._magnitude = np.empty((device.channels, device.block_frames), dtype=np.float32)
 
     def finish(self, block: np.ndarray) -> None:
-        """Fit to the wearer, limit, calibrate and clip the mixed ``block`` in place,
-        then meter it.
+        """Block DC, fit to the wearer, limit, calibrate and clip the mixed ``block`` in
+        place, then meter it.
 
         Most blocks are finite with calibrated peaks within the limiter's threshold while
         its gain is 1: the limiter, the NaN guard and the clip leave them as they are. On a
@@ -156,6 +185,7 @@ class Mixer:
         calibrated peaks, found once. Every other block takes the whole chain, whose
         limiter uses the largest of those peaks. Both ways give the same samples and levels.
         """
+        self.dc_blocker.process(block)
         self.wearer.apply(block)
         levels = self._channel_peaks(block)
         levels *= self.limiter.calibration  # calibrated peaks: rounding keeps the order of |x|

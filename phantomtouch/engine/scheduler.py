@@ -4,6 +4,7 @@ callback) unless a docstring names another thread; construction is non real time
 from __future__ import annotations
 
 import heapq
+import math
 import time
 from collections import deque
 from collections.abc import Callable
@@ -21,6 +22,12 @@ from phantomtouch.schema.device import DeviceProfile
 
 RENDER_TIMES = 4096
 """Render times the scheduler keeps (the last 11 s at 128-frame blocks)."""
+VOICE_BUDGET_BLOCKS = 1.0
+"""A voice's render budget in one block, as a share of the block's playing time: one voice
+alone taking this long already makes the sound card underrun."""
+OVERRUN_BLOCKS = 4
+"""Consecutive blocks over its budget after which a voice is silenced (one or two are a
+preempted thread; four in a row are the voice)."""
 
 
 class Scheduler:
@@ -50,6 +57,11 @@ class Scheduler:
     callback_errors : int
         Blocks replaced by silence because rendering raised (the voices are dropped);
         ``last_error`` is the last such exception.
+    nonfinite_voices, overrun_voices : int
+        Voices silenced alone, the others playing on: one whose samples in a block were
+        not finite (NaN, Inf; its block is left out of the mix), and one over its render
+        budget (``VOICE_BUDGET_BLOCKS``) in ``OVERRUN_BLOCKS`` blocks in a row (``clocked``
+        only: blocks pulled by hand have no deadline).
     events : deque of tuple
         Reports the control side drains: ``("start", voice, frame, late)``,
         ``("release", voice, frame)``, ``("end", voice, frame)`` (silent from ``frame``),
@@ -90,6 +102,10 @@ class Scheduler:
         self._drained_frame = -1
         self.active_voices = 0
         self.callback_errors = 0
+        self.nonfinite_voices = 0
+        self.overrun_voices = 0
+        self._budget_s = VOICE_BUDGET_BLOCKS * device.block_frames / device.sample_rate_hz
+        self._before = np.empty((device.block_frames, device.channels), dtype=np.float32)
         self.last_error: BaseException | None = None
         self.events: deque[tuple[Any, ...]] = deque()
         self.intake: Callable[[], None] | None = None
@@ -150,7 +166,7 @@ class Scheduler:
             retarget_contacts(self.geometry, self._voices, start, end, self.work)
             keep: list[Voice] = []
             for voice in self._voices:
-                if voice.render(out, start, self.work):  # silent for good
+                if self._render_guarded(voice, out, start):  # silent for good
                     voice.finish(self.pool)
                     silent_from = voice.silent_from
                     self.events.append(
@@ -162,6 +178,32 @@ class Scheduler:
         self.mixer.finish(out)
         self.active_voices = len(self._voices)
         self.frames = end
+
+    def _render_guarded(self, voice: Voice, out: np.ndarray, start: int) -> bool:
+        """Add ``voice`` into ``out``; True once it is silent for good, or silenced.
+
+        The mix before the voice is kept (one copy of the block); when the voice leaves a
+        sample that is not finite (the block's sum is then NaN or Inf), the mix is put
+        back and the voice silenced, so the others sound as they would without it. Its
+        render time counts against its budget when blocks are due at a clock's pace.
+        """
+        before = self._before[: out.shape[0]]
+        np.copyto(before, out)
+        began_s = time.perf_counter()
+        done = voice.render(out, start, self.work)
+        spent_s = time.perf_counter() - began_s
+        if not math.isfinite(float(np.add.reduce(out, axis=None))):
+            np.copyto(out, before)
+            self.nonfinite_voices += 1
+            return True
+        if spent_s <= self._budget_s or not self.clocked:  # pulled by hand: no deadline
+            voice.overruns = 0
+            return done
+        voice.overruns += 1
+        if voice.overruns >= OVERRUN_BLOCKS:
+            self.overrun_voices += 1
+            return True
+        return done
 
     def _apply_commands(self, start: int, end: int) -> None:
         queue = self.queue

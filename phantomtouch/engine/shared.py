@@ -255,6 +255,9 @@ STATUS_FIELDS = (
     "dropped_reports",
     "refused_commands",
     "inline_renders",
+    "nonfinite_voices",
+    "overrun_voices",
+    "dc_blocked_blocks",
 )
 
 

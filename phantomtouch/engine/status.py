@@ -47,6 +47,11 @@ class EngineStatus:
     inline_renders : int
         Times the audio callback rendered into a voice's ring that ran dry (the
         render-ahead thread fell behind).
+    nonfinite_voices, overrun_voices : int
+        Voices silenced alone while the others played on: for samples that were not
+        finite, and for running past their render budget block after block.
+    dc_blocked_blocks : int
+        Blocks the DC blocker changed (``renderer/dc_blocker.py``).
     """
 
     backend: str
@@ -79,6 +84,9 @@ class EngineStatus:
     restarts: int
     refused_commands: int = 0
     inline_renders: int = 0
+    nonfinite_voices: int = 0
+    overrun_voices: int = 0
+    dc_blocked_blocks: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -69,6 +69,8 @@ class Voice:
     release_frame : int or None
         Frame at which its release begins, once asked for.
     release_frames : int, >= 1
+    overruns : int
+        Blocks in a row in which it took longer than its render budget (the scheduler's).
     """
 
     kind: ClassVar[str]
@@ -81,6 +83,7 @@ class Voice:
         self.start_frame = 0
         self.release_frame: int | None = None
         self.release_frames = max(1, int(release_frames))
+        self.overruns = 0
 
     @property
     def silent_from(self) -> int | None:

@@ -20,7 +20,7 @@ stimuli, so each plays noise that does not repeat, and 4 MB of float32 per loop.
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -31,6 +31,9 @@ NOISE_ORDER = 8
 """Butterworth order of each band edge (48 dB per octave)."""
 NOISE_PERIOD_FRAMES = 2**20
 """Length of the noise loop, frames (21.8 s at 48 kHz; 4 MB of float32)."""
+if TYPE_CHECKING:
+    from phantomtouch.renderer.clip import TransientTable
+
 _NOISE_TABLES = 8
 """Noise loops kept at once (32 MB at most); another band or seed computes its own."""
 _SINE_RMS = 1.0 / np.sqrt(2.0)
@@ -173,13 +176,16 @@ class CombinedSource:
         return mixed
 
 
-def make_source(carrier: PatternCarrier, sample_rate_hz: int) -> CarrierSource:
-    """The source for a carrier specification (a clip's ``data`` must be filled in)."""
+def make_source(
+    carrier: PatternCarrier, sample_rate_hz: int, *, transients: TransientTable | None = None
+) -> CarrierSource:
+    """The source for a carrier specification (a clip's ``data`` must be filled in; its
+    ``transients``, a plan's ``clip_transients``, are rendered here when not given)."""
     if isinstance(carrier, ClipCarrier):
         from phantomtouch.renderer.clip import ClipSource
 
         assert carrier.data is not None  # the plan refuses a clip without it
-        return ClipSource(carrier.data, sample_rate_hz, loop=carrier.loop)
+        return ClipSource(carrier.data, sample_rate_hz, loop=carrier.loop, transients=transients)
     if isinstance(carrier, SineCarrier):
         return SineSource(carrier.freq_hz, sample_rate_hz)
     noise = NoiseSource(carrier.low_hz, carrier.high_hz, carrier.seed, sample_rate_hz)

@@ -15,6 +15,7 @@ import numpy as np
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.carriers import NOISE_PERIOD_FRAMES
+from phantomtouch.renderer.clip import TransientTable
 from phantomtouch.renderer.gains import gains_for_points
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.levels import amplitude_for_level, pattern_level_db
@@ -94,6 +95,17 @@ class Plan:
     max_projection_cm: float
     forward: Timeline
     backward: Timeline | None
+
+    @cached_property
+    def clip_transients(self) -> TransientTable | None:
+        """A clip carrier's transients rendered once at this plan's rate, shared by its
+        voices (a :class:`~phantomtouch.renderer.clip.TransientTable`); None for other
+        carriers. Computed on first use, outside the audio callback (a voice is made
+        before it plays)."""
+        carrier = self.pattern.carrier
+        if not isinstance(carrier, ClipCarrier) or carrier.data is None:
+            return None
+        return TransientTable(carrier.data, self.sample_rate_hz)
 
     @cached_property
     def clipped_fraction(self) -> float:

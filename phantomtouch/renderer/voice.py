@@ -110,7 +110,9 @@ class PatternRenderer:
         self.plan = plan
         self.position_frames = 0
         self.active_span = (0, 0)
-        self._carrier: CarrierSource = make_source(plan.pattern.carrier, plan.sample_rate_hz)
+        self._carrier: CarrierSource = make_source(
+            plan.pattern.carrier, plan.sample_rate_hz, transients=plan.clip_transients
+        )
         self._step = plan.device.gain_step_frames
         self._ramp = plan.device.gain_ramp
         self._frame_s = 1.0 / plan.sample_rate_hz

@@ -17,6 +17,13 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 MAX_CLIP_S = 600.0
 """Longest clip, s."""
+MIN_CLIP_S = 0.001
+"""Shortest clip, s (48 frames at 48 kHz). A looped clip starts again every
+``duration_s``; a shorter one has no sample of its own (5e-324 s made every sample NaN)."""
+MAX_CLIP_TRANSIENTS = 1000
+"""Most transients of one clip (a click every 0.6 s through the longest clip). The renderer
+renders them once, when the clip is planned, into a table of at most 60 ms each (11.5 MB
+of float32 at 48 kHz for a thousand apart)."""
 MAX_CLIP_POINTS = 100_000
 """Most breakpoints of one envelope, and most transients."""
 CLIP_NAME_REGEX = (
@@ -75,14 +82,14 @@ class HapticClip(_Model):
     its first value, after the last its last value, until ``duration_s``.
     """
 
-    duration_s: float = Field(gt=0.0, le=MAX_CLIP_S, allow_inf_nan=False)
+    duration_s: float = Field(ge=MIN_CLIP_S, le=MAX_CLIP_S, allow_inf_nan=False)
     amplitude: list[Breakpoint] = Field(min_length=1, max_length=MAX_CLIP_POINTS)
     frequency: list[Breakpoint] = Field(
         default_factory=lambda: [Breakpoint(t_s=0.0, value=0.5)],
         min_length=1,
         max_length=MAX_CLIP_POINTS,
     )
-    transients: list[Transient] = Field(default_factory=list, max_length=MAX_CLIP_POINTS)
+    transients: list[Transient] = Field(default_factory=list, max_length=MAX_CLIP_TRANSIENTS)
 
     @model_validator(mode="after")
     def _times(self) -> Self:

@@ -40,8 +40,15 @@ MIN_LEVEL_DB = 60.0
 """Lowest acceleration level, dB re 1 µm/s² (far below the vibrotactile threshold)."""
 MAX_LEVEL_DB = 180.0
 """Highest acceleration level any profile may allow, dB re 1 µm/s²."""
+MIN_CARRIER_HZ = 20.0
+"""Lowest sine carrier frequency, Hz (a sine's and a combined carrier's ``freq_hz``). The
+wide-band voice coils reproduce vibration from a few tens of Hz (the paper's carriers span
+50-500 Hz, the calibration 40-500 Hz); far below, the coil only moves off centre and
+back, slower than the skin feels as vibration (0.01 Hz sits near full scale for seconds).
+The mixer's DC blocker (``renderer/dc_blocker.py``) catches what is left below it."""
 MIN_NOISE_BAND_HZ = 1.0
-"""Lowest band edge of a noise carrier, Hz."""
+"""Lowest band edge of a noise carrier, Hz (a band is at least ``MIN_NOISE_LOOP_BINS`` steps
+wide, so its content never sits still)."""
 MIN_NOISE_LOOP_BINS = 16
 """Fewest frequency steps of the noise loop a noise band must span (a step is
 ``sample_rate_hz / 2**20``: 0.046 Hz at 48 kHz, so bands of at least 0.73 Hz). A narrower

@@ -121,7 +121,9 @@ class SineCarrier(_Model):
     """A sine at `freq_hz`."""
 
     kind: Literal["sine"] = "sine"
-    freq_hz: float = Field(default=100.0, gt=0.0, lt=_MAX_CARRIER_HZ, allow_inf_nan=False)
+    freq_hz: float = Field(
+        default=100.0, ge=limits.MIN_CARRIER_HZ, lt=_MAX_CARRIER_HZ, allow_inf_nan=False
+    )
 
 
 class _Band(_Model):
@@ -150,7 +152,9 @@ class CombinedCarrier(_Band):
     """Sine plus noise of equal RMS, the sum scaled back to the sine's RMS (the paper's)."""
 
     kind: Literal["combined"] = "combined"
-    freq_hz: float = Field(default=100.0, gt=0.0, lt=_MAX_CARRIER_HZ, allow_inf_nan=False)
+    freq_hz: float = Field(
+        default=100.0, ge=limits.MIN_CARRIER_HZ, lt=_MAX_CARRIER_HZ, allow_inf_nan=False
+    )
 
 
 Carrier = Annotated[SineCarrier | NoiseCarrier | CombinedCarrier, Field(discriminator="kind")]

@@ -89,6 +89,26 @@ class _EngineCollector(Collector):
             "render-ahead thread had not kept its ring filled.",
             status["inline_renders"],
         )
+        silenced = CounterMetricFamily(
+            "phantomtouch_silenced_voices",
+            "Voices silenced alone while the others played on, by reason (non_finite: a "
+            "sample NaN or Inf; over_budget: past the render budget block after block).",
+            labels=["reason"],
+        )
+        silenced.add_metric(["non_finite"], status["nonfinite_voices"])
+        silenced.add_metric(["over_budget"], status["overrun_voices"])
+        yield silenced
+        yield CounterMetricFamily(
+            "phantomtouch_muted_blocks",
+            "Output blocks the output stage replaced by silence for a NaN or Inf in the mix "
+            "(every voice silent for that block; a voice's own NaN is silenced alone first).",
+            status["muted_blocks"],
+        )
+        yield CounterMetricFamily(
+            "phantomtouch_dc_blocked_blocks",
+            "Blocks the DC blocker changed (content far below the carriers' band).",
+            status["dc_blocked_blocks"],
+        )
         yield CounterMetricFamily(
             "phantomtouch_limited_blocks",
             "Blocks the safety limiter had to scale down.",

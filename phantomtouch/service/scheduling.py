@@ -89,6 +89,14 @@ def plan_for(pattern: TouchPattern, device: DeviceProfile) -> Plan:
     return plan(pattern, device)
 
 
+def least_duration_s(pattern: TouchPattern) -> float:
+    """The least a pattern lasts, known before it is planned: its ``duration_s`` when it
+    gives one (the whole pattern), else its fades, per stroke."""
+    if pattern.duration_s is not None:
+        return float(pattern.duration_s)
+    return (pattern.fade_in_s + pattern.fade_out_s) * pattern.repeat
+
+
 def start_frame(engine: EngineFront, timing: Timing) -> int | None:
     """The engine frame a touch starts at; None: as soon as possible."""
     if timing.start_in_ms:
@@ -158,10 +166,15 @@ def quota_error(
             field="voices",
             value=refused.jobs,
         )
+    adds = (
+        f"this one would add {refused.ahead_s:.1f} s"
+        if refused.ahead_s > 0
+        else "no time is left for another"
+    )
     return QuotaError(
         f"quota {names[1]}={refused.quota.seconds:g} s: this client's "
-        f"touches hold {refused.held_s:.1f} s still to play and this one would add "
-        f"{refused.ahead_s:.1f} s; long touches count by the time they hold",
+        f"touches hold {refused.held_s:.1f} s still to play and {adds}; long touches count "
+        "by the time they hold",
         field="duration_s",
         value=round(duration_s, 6),
     )
@@ -198,7 +211,13 @@ async def schedule(
     stops = engine.stop_count  # a stop that comes while this one is planned voids it
 
     def plan_and_schedule() -> JobAccepted:
-        planned = service.plans.plan(resolve(request, service.store))
+        pattern = resolve(request, service.store)
+        least_s = least_duration_s(pattern)
+        try:
+            engine.check_quota(owner, quota, least_s)  # before planning: a refusal costs none
+        except QuotaRefused as refused:
+            raise quota_error(refused, least_s) from refused
+        planned = service.plans.plan(pattern)
         first = start_frame(engine, request.timing())
         try:
             job = engine.schedule(

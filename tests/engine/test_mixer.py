@@ -11,6 +11,7 @@ from phantomtouch import DeviceProfile, TouchPattern
 from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.engine.mixer import THRESHOLD_RATIO, Limiter, Mixer
 from phantomtouch.renderer import OutputStage
+from phantomtouch.renderer.dc_blocker import DcBlocker
 from phantomtouch.schema import Calibration, SafetyLimits
 
 DEVICE = DeviceProfile(safety=SafetyLimits(ceiling=0.8))
@@ -159,9 +160,11 @@ def test_the_mixer_gives_the_whole_chains_samples_and_levels_for_every_block(
     device = DEVICE.model_copy(update={"calibration": calibration})
     mixer = Mixer(device)
     limiter, stage = Limiter(device), OutputStage(device)  # the whole chain, every block
+    blocker = DcBlocker(device.channels, device.sample_rate_hz, device.safety.ceiling)
     peak = 0.0
     for block in blocks_of_every_kind(rng):
         expected = block.copy()
+        blocker.process(expected)
         limiter.process(expected)
         stage.process(expected)
         levels = np.abs(expected).max(axis=0)

@@ -1,5 +1,5 @@
 """The wearer's per-channel gains at the output stage: set at a block boundary, ramped
-across that block, bit for bit absent while every gain is 1."""
+over ``WEARER_RAMP_S``, bit for bit absent while every gain is 1."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 from phantomtouch import DeviceProfile
 from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.engine.messages import AudioState, SetWearerGains, perform
-from phantomtouch.engine.mixer import Mixer
+from phantomtouch.engine.mixer import WEARER_RAMP_S, Mixer
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.errors import ParameterError
 
@@ -38,24 +38,53 @@ def test_unity_gains_change_no_sample(rng: np.random.Generator) -> None:
         assert np.array_equal(a, b)
 
 
-def test_a_change_ramps_across_one_block_then_holds(rng: np.random.Generator) -> None:
-    gains = np.linspace(0.5, 2.0, CHANNELS).astype(np.float32)
-    plain, fitted = Mixer(DEVICE), Mixer(DEVICE)
-    fitted.wearer.set(gains)
+def _ratios(
+    fitted: Mixer, blocks: int, rng: np.random.Generator, at: dict[int, np.ndarray]
+) -> np.ndarray:
+    """Per-sample gain of ``fitted`` against an unfitted mixer over ``blocks`` blocks,
+    ``at[k]`` set before block ``k``; shape (frames, channels), float64."""
+    plain = Mixer(DEVICE)
     ratios = []
-    for _ in range(3):
+    for k in range(blocks):
+        if k in at:
+            fitted.wearer.set(at[k])
         block = quiet_block(rng)
         a, b = block.copy(), block.copy()
         plain.finish(a)
         fitted.finish(b)
         ratios.append(b.astype(np.float64) / a)
-    frames = np.arange(1, BLOCK + 1)[:, None]
-    expected = 1.0 + (gains.astype(np.float64) - 1.0) * frames / BLOCK
-    np.testing.assert_allclose(ratios[0], expected, rtol=1e-5)
-    np.testing.assert_allclose(ratios[1], np.broadcast_to(gains, ratios[1].shape), rtol=1e-6)
-    np.testing.assert_allclose(ratios[2], np.broadcast_to(gains, ratios[2].shape), rtol=1e-6)
-    largest_step = np.max(np.abs(np.diff(ratios[0], axis=0)), axis=0)
-    np.testing.assert_allclose(largest_step, np.abs(gains - 1.0) / BLOCK, rtol=1e-3)
+    return np.concatenate(ratios)
+
+
+def test_a_change_ramps_over_the_ramp_time_then_holds(rng: np.random.Generator) -> None:
+    gains = np.linspace(0.5, 2.0, CHANNELS).astype(np.float32)
+    fitted = Mixer(DEVICE)
+    ramp = fitted.wearer.ramp_frames
+    assert ramp == round(WEARER_RAMP_S * DEVICE.sample_rate_hz) > BLOCK  # several blocks
+    ratio = _ratios(fitted, -(-ramp // BLOCK) + 2, rng, {0: gains})
+    frames = np.arange(1, len(ratio) + 1)[:, None]
+    expected = 1.0 + (gains.astype(np.float64) - 1.0) * np.minimum(frames / ramp, 1.0)
+    # float32 samples divided by float32 samples: 1e-5 relative
+    np.testing.assert_allclose(ratio, expected, rtol=1e-5)
+    np.testing.assert_allclose(
+        ratio[ramp - 1 :], np.broadcast_to(gains, ratio[ramp - 1 :].shape), rtol=1e-6
+    )
+    largest_step = np.max(np.abs(np.diff(ratio, axis=0)), axis=0)
+    # each ratio carries float32 rounding of about 1e-7 (samples near 0.1): 1e-6 absolute
+    np.testing.assert_allclose(largest_step, np.abs(gains - 1.0) / ramp, rtol=0, atol=1e-6)
+
+
+def test_changes_at_every_block_never_step_the_gain(rng: np.random.Generator) -> None:
+    """975 switches a second swung the gains by 40 dB at block rate: now each change ramps
+    from where the gains are, so no frame moves by more than the swing over the ramp."""
+    loud = np.full(CHANNELS, 10.0, dtype=np.float32)  # +20 dB
+    soft = np.full(CHANNELS, 0.1, dtype=np.float32)  # -20 dB
+    fitted = Mixer(DEVICE)
+    at = {k: loud if k % 2 == 0 else soft for k in range(40)}
+    ratio = _ratios(fitted, 40, rng, at)
+    steps = np.abs(np.diff(ratio, axis=0))
+    # the largest move a ramp allows per frame, 9.9 / ramp, with float32 rounding
+    assert steps.max() <= (10.0 - 0.1) / fitted.wearer.ramp_frames * (1 + 1e-4)
 
 
 def test_the_applier_sets_the_gains_even_after_a_stop() -> None:
@@ -64,8 +93,8 @@ def test_the_applier_sets_the_gains_even_after_a_stop() -> None:
         gains = np.full(CHANNELS, 2.0, dtype=np.float32)
         perform(state, SetWearerGains(gains), void=True)
         mixer = engine._audio.core.scheduler.mixer  # type: ignore[union-attr]
-        block = np.full((BLOCK, CHANNELS), 0.1, dtype=np.float32)
-        mixer.wearer.apply(block)
+        for _ in range(-(-mixer.wearer.ramp_frames // BLOCK)):  # through the ramp
+            mixer.wearer.apply(np.full((BLOCK, CHANNELS), 0.1, dtype=np.float32))
         assert np.array_equal(mixer.wearer.gains, gains)
 
 

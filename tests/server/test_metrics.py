@@ -13,7 +13,11 @@ STATUS = {
     "underruns": 2,
     "late_commands": 5,
     "inline_renders": 7,
+    "nonfinite_voices": 2,
+    "overrun_voices": 1,
+    "dc_blocked_blocks": 9,
     "limited_blocks": 0,
+    "muted_blocks": 4,
     "peak": 0.25,
     "queue_depth": 1,
     "levels": [0.25, 0.0],
@@ -66,6 +70,10 @@ def test_engine_figures_are_read_at_scrape_time() -> None:
     assert "phantomtouch_underruns_total 2.0" in text
     assert "phantomtouch_late_commands_total 5.0" in text
     assert "phantomtouch_inline_renders_total 7.0" in text
+    assert 'phantomtouch_silenced_voices_total{reason="non_finite"} 2.0' in text
+    assert 'phantomtouch_silenced_voices_total{reason="over_budget"} 1.0' in text
+    assert "phantomtouch_dc_blocked_blocks_total 9.0" in text
+    assert "phantomtouch_muted_blocks_total 4.0" in text
     assert "phantomtouch_peak_level 0.25" in text
     assert 'phantomtouch_channel_peak_level{channel="1"} 0.25' in text
     assert 'phantomtouch_render_load{quantile="0.99"} 0.125' in text

@@ -8,10 +8,10 @@ the RMS of each whole cycle is constant while the gains hold. The capture then s
 
 - three stretches of constant cycle RMS (no wearer, ``ann``, ``bob``), each channel's
   ratio to the first being the profile's offset exactly, ``10 ** (dB / 20)`` to float32
-  rounding, with at most two cycles between stretches (the ramp spans one block of 256
-  frames, so it touches at most two cycles);
+  rounding, with at most three cycles between stretches (the ramp spans ``WEARER_RAMP_S``,
+  960 frames, so it touches at most three 480-frame cycles);
 - no sample step larger than the ramp allows: for ``x = g(n) * A * sin(w n)``,
-  ``|x[n+1] - x[n]| <= A * (max(g) * w + |g_new - g_old| / block_frames)``, where a step
+  ``|x[n+1] - x[n]| <= A * (max(g) * w + |g_new - g_old| / ramp_frames)``, where a step
   of the gain would give ``A * |g_new - g_old|``;
 - no sample beyond the ceiling.
 """
@@ -30,11 +30,13 @@ import soundfile
 from websockets.sync.client import connect
 
 from phantomtouch import DeviceProfile
+from phantomtouch.engine.mixer import WEARER_RAMP_S
 from tests.support.live_server import LiveServer
 
 DEVICE = DeviceProfile.default()
 FREQ_HZ = 100.0
 CYCLE = round(DEVICE.sample_rate_hz / FREQ_HZ)
+RAMP_FRAMES = round(WEARER_RAMP_S * DEVICE.sample_rate_hz)
 HOLD_S = 6.0
 ANN_DB = {1: 3.0, 2: -2.5, 3: 6.0, 4: -6.0, 5: 1.5, 6: -4.0, 7: 2.0, 8: 0.0}
 BOB_DB = {1: -3.0, 2: 4.0, 3: -6.0, 4: 5.0, 5: 0.0, 6: 2.5, 7: -1.0, 8: 6.0}
@@ -138,8 +140,8 @@ def test_a_wearer_chosen_at_run_time_applies_exactly_ramped_under_the_ceiling(
     runs = _steady_runs(cycle_rms)
     assert len(runs) == 3, f"expected no wearer, ann, bob; steady runs {runs}"
     for (_, end), (start, _) in itertools.pairwise(runs):
-        # the ramp (256 frames) touches at most two 480-frame cycles
-        assert start - end - 1 <= 2, "the switch takes at most one block"
+        # the ramp (960 frames) touches at most three 480-frame cycles
+        assert start - end - 1 <= RAMP_FRAMES // CYCLE + 1, "the switch takes one ramp"
     plain, ann, bob = (cycle_rms[a] for a, _ in runs)
     assert np.all(plain > 0.0), "every actuator sounds"
     np.testing.assert_allclose(ann / plain, _gains(ANN_DB), rtol=1e-5)
@@ -152,7 +154,7 @@ def test_a_wearer_chosen_at_run_time_applies_exactly_ramped_under_the_ceiling(
     largest = np.max([ones, _gains(ANN_DB), _gains(BOB_DB)], axis=0)
     ramp = np.maximum(
         np.abs(_gains(ANN_DB) - ones), np.abs(_gains(BOB_DB) - _gains(ANN_DB))
-    ) / float(DEVICE.block_frames)
+    ) / float(RAMP_FRAMES)
     allowed = amplitude * (largest * w + ramp) * 1.01
     span = recorded[first + runs[0][0] * CYCLE : first + (runs[2][1] + 1) * CYCLE]
     steps = np.max(np.abs(np.diff(span, axis=0)), axis=0)

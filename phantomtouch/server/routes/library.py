@@ -46,7 +46,12 @@ def get_item(
 
 
 def put_item(
-    router: APIRouter, model: Any, summary: str, body_openapi: dict[str, Any], path: str = "/{name}"
+    router: APIRouter,
+    model: Any,
+    summary: str,
+    body_openapi: dict[str, Any],
+    path: str = "/{name}",
+    also: tuple[int, ...] = (),
 ) -> Callable[[DecoratedCallable], DecoratedCallable]:
     """``PUT path``: store the item of a strict JSON body.
 
@@ -60,11 +65,13 @@ def put_item(
     path : str
         ``/{name}``, a path below it (``/{name}/run``), or ``""`` where the router's prefix
         names the one item (``/wearer``).
+    also : tuple of int
+        Further status codes the route answers (``/wearer``: 429, its switch rate).
     """
     return router.put(
         path,
         response_model=model,
-        responses=responses(401, 413, 415, 422, 503),
+        responses=responses(401, 413, 415, 422, *also, 503),
         summary=summary,
         openapi_extra=body_openapi,
     )

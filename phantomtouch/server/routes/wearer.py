@@ -49,20 +49,24 @@ def get_active_wearer(service: ServiceDep) -> ActiveWearerInfo:
     return active_wearer(service)
 
 
-@library.put_item(router, ActiveWearerInfo, "Choose the wearer", CHOICE_BODY_OPENAPI, path="")
+@library.put_item(
+    router, ActiveWearerInfo, "Choose the wearer", CHOICE_BODY_OPENAPI, path="", also=(429,)
+)
 def put_active_wearer(
     choice: Annotated[WearerChoice, Depends(choice_body)], service: ServiceDep
 ) -> ActiveWearerInfo:
     """Fit the output stage to the stored profile `name` (its band `band`, default
-    `sine_100hz`) from the next block on, ramped across that block, for everything the
-    service plays. A name not in the library, or a profile naming a channel the device
-    lacks, is refused (422, field `name`)."""
+    `sine_100hz`) from the next block on, ramped over 20 ms, for everything the service
+    plays. A name not in the library, or a profile naming a channel the device lacks, is
+    refused (422, field `name`); more than 2 switches a second (after a burst of 5) are
+    refused (429, naming the limit)."""
     service.wearer.choose(choice.name, choice.band)
     return active_wearer(service)
 
 
-@router.delete("", status_code=204, responses=responses(401, 503), summary="No wearer")
+@router.delete("", status_code=204, responses=responses(401, 429, 503), summary="No wearer")
 def delete_active_wearer(service: ServiceDep) -> Response:
-    """Take the wearer off: the device's calibration alone from the next block on."""
+    """Take the wearer off: the device's calibration alone from the next block on (a
+    switch: more than 2 a second, after a burst of 5, are refused with 429)."""
     service.wearer.clear()
     return Response(status_code=204)

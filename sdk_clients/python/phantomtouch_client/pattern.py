@@ -23,6 +23,7 @@ _MAX_SAMPLE_RATE_HZ = 192_000
 _MAX_SEED = 2**32 - 1
 _MAX_SPEED_CM_S = 1000.0
 _MIN_LEVEL_DB = 60.0
+_MIN_CARRIER_HZ = 20.0
 _MIN_NOISE_BAND_HZ = 1.0
 _MIN_SPEED_CM_S = 0.0
 
@@ -126,7 +127,9 @@ class SineCarrier(_Model):
     """A sine at `freq_hz`."""
 
     kind: Literal["sine"] = "sine"
-    freq_hz: float = Field(default=100.0, gt=0.0, lt=_MAX_CARRIER_HZ, allow_inf_nan=False)
+    freq_hz: float = Field(
+        default=100.0, ge=_MIN_CARRIER_HZ, lt=_MAX_CARRIER_HZ, allow_inf_nan=False
+    )
 
 
 class _Band(_Model):
@@ -155,7 +158,9 @@ class CombinedCarrier(_Band):
     """Sine plus noise of equal RMS, the sum scaled back to the sine's RMS (the paper's)."""
 
     kind: Literal["combined"] = "combined"
-    freq_hz: float = Field(default=100.0, gt=0.0, lt=_MAX_CARRIER_HZ, allow_inf_nan=False)
+    freq_hz: float = Field(
+        default=100.0, ge=_MIN_CARRIER_HZ, lt=_MAX_CARRIER_HZ, allow_inf_nan=False
+    )
 
 
 Carrier = Annotated[SineCarrier | NoiseCarrier | CombinedCarrier, Field(discriminator="kind")]
@@ -163,6 +168,8 @@ Carrier = Annotated[SineCarrier | NoiseCarrier | CombinedCarrier, Field(discrimi
 
 _MAX_CLIP_S = 600.0
 _MAX_CLIP_POINTS = 100_000
+_MIN_CLIP_S = 0.001
+_MAX_CLIP_TRANSIENTS = 1000
 _CLIP_NAME_REGEX = (
     r"^(?:[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}"
     r"|\.[A-Za-z0-9_-][A-Za-z0-9._-]{0,62}"
@@ -204,14 +211,14 @@ class HapticClip(_ClipPart):
     """An amplitude envelope, a frequency envelope and transients, all 0-1 (a ``.haptic``
     or ``.ahap`` file imported with ``phantomtouch import``)."""
 
-    duration_s: float = Field(gt=0.0, le=_MAX_CLIP_S, allow_inf_nan=False)
+    duration_s: float = Field(ge=_MIN_CLIP_S, le=_MAX_CLIP_S, allow_inf_nan=False)
     amplitude: list[Breakpoint] = Field(min_length=1, max_length=_MAX_CLIP_POINTS)
     frequency: list[Breakpoint] = Field(
         default_factory=lambda: [Breakpoint(t_s=0.0, value=0.5)],
         min_length=1,
         max_length=_MAX_CLIP_POINTS,
     )
-    transients: list[Transient] = Field(default_factory=list, max_length=_MAX_CLIP_POINTS)
+    transients: list[Transient] = Field(default_factory=list, max_length=_MAX_CLIP_TRANSIENTS)
 
     @model_validator(mode="after")
     def _times(self) -> Self:

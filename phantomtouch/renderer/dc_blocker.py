@@ -1,0 +1,94 @@
+"""The DC blocker: a one-pole high-pass on the summed signal, per channel, with a dead band.
+
+A voice-coil actuator held off centre by a constant or slowly moving drive heats its coil
+and the skin feels nothing of it; the carriers start at ``limits.MIN_CARRIER_HZ`` (refused
+below at the edge), so whatever lies far below that band is an error. Per channel the
+blocker tracks the slow part of its input with a one-pole low-pass,
+
+``m[n] = (1 - r) x[n] + r m[n-1]``, ``r = exp(-2 pi DC_BLOCK_HZ / sample_rate_hz)``,
+
+and takes away what of it lies beyond a dead band of ``DC_DEAD_BAND`` times the ceiling:
+``y[n] = x[n] - (m[n] - clip(m[n], -b, b))``.
+
+- Beyond the dead band ``y = x - m + b sign(m)``: the one-pole high-pass ``x - m``,
+  ``H(z) = r (1 - z**-1) / (1 - r z**-1)``, exactly 0 at 0 Hz, within 0.003 dB of 1 from
+  20 Hz up; a constant offset decays to the dead band's edge with the time constant
+  ``1 / (2 pi DC_BLOCK_HZ)`` (0.32 s).
+- Within the band it changes nothing, bit for bit. Content at ``f`` Hz and peak ``p``
+  moves ``m`` by at most ``2 p DC_BLOCK_HZ / f`` (the low-pass integrating half a cycle
+  from rest), which for ``f >= MIN_CARRIER_HZ`` and ``p`` at most the ceiling is the dead
+  band: content at 20 Hz and up (the sine and combined carriers the edge admits; clips and
+  modulations whose content stays there), alone or mixed within the ceiling, passes
+  untouched, so the engine still plays
+  :func:`~phantomtouch.renderer.render`'s samples (the limiter is transparent below its
+  threshold the same way). Content below 20 Hz (a noise band reaching below it, since
+  noise bands start at ``limits.MIN_NOISE_BAND_HZ``; sidebands of a modulation deeper
+  than its carrier; a clip envelope that rectifies its sine) may move it past the band:
+  that is what it is there to take away.
+
+The state is one float64 per channel, carried from block to block, so blocks of any size
+give exactly the samples of one whole run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.signal import lfilter
+
+from phantomtouch.schema import limits
+
+DC_BLOCK_HZ = 0.5
+"""Corner of the DC blocker's low-pass, Hz (time constant 0.32 s)."""
+DC_DEAD_BAND = 2.0 * DC_BLOCK_HZ / limits.MIN_CARRIER_HZ
+"""Dead band of the tracked offset, a fraction of the ceiling (0.05): the most a carrier
+at ``MIN_CARRIER_HZ`` or above at full scale moves the low-pass."""
+
+
+class DcBlocker:
+    """One-pole high-pass per channel beyond a dead band (module docstring).
+
+    Parameters
+    ----------
+    channels : int, >= 1
+    sample_rate_hz : int, > 0
+    ceiling : float, > 0
+        The device's ceiling; the dead band is ``DC_DEAD_BAND * ceiling``.
+
+    Attributes
+    ----------
+    blocked_blocks : int
+        Blocks it changed.
+    """
+
+    def __init__(self, channels: int, sample_rate_hz: int, ceiling: float) -> None:
+        self.pole = math.exp(-2.0 * math.pi * DC_BLOCK_HZ / sample_rate_hz)
+        self.dead_band = DC_DEAD_BAND * float(ceiling)
+        self.blocked_blocks = 0
+        self._b = np.array([1.0 - self.pole])
+        self._a = np.array([1.0, -self.pole])
+        self._state = np.zeros((1, channels))
+
+    def response(self, freq_hz: np.ndarray, sample_rate_hz: int) -> np.ndarray:
+        """Magnitude of the high-pass beyond the dead band at ``freq_hz`` (shape (n,), Hz),
+        shape (n,), float64."""
+        z = np.exp(-2j * np.pi * np.asarray(freq_hz, dtype=np.float64) / sample_rate_hz)
+        return np.abs(self.pole * (1.0 - z) / (1.0 - self.pole * z))
+
+    def process(self, block: np.ndarray) -> None:
+        """Block DC in ``block`` (frames, channels), float32, in place (real time: the
+        callback; or the offline caller). A silent block while the state is at rest is
+        left as it is at once (an idle armband); a NaN in the block resets the state (the
+        output stage mutes that block)."""
+        if not self._state.any() and not block.any():
+            return
+        slow, self._state = lfilter(self._b, self._a, block, axis=0, zi=self._state)
+        if not math.isfinite(float(self._state.sum())):
+            self._state.fill(0.0)
+            return
+        if slow.max() <= self.dead_band and slow.min() >= -self.dead_band:  # nearly every block
+            return
+        excess = slow - np.clip(slow, -self.dead_band, self.dead_band)
+        block -= excess.astype(np.float32)
+        self.blocked_blocks += 1
