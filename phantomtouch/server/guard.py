@@ -169,6 +169,11 @@ class GuardedHttpProtocol(JsonErrorProtocol):
         self._awaiting_headers = True
         self._arm_deadline()
 
+    def on_message_complete(self) -> None:
+        super().on_message_complete()
+        self._awaiting_headers = True  # what comes next is the next request's
+        self._header_bytes = 0
+
     def on_headers_complete(self) -> None:
         self._awaiting_headers = False
         self._header_bytes = 0
