@@ -25,10 +25,9 @@ import pytest
 import soundfile
 
 from tests.support.abuse import in_process
-from tests.support.exhaust import crowd
+from tests.support.exhaust import LimitedServer, crowd
 from tests.support.live_server import LiveServer
 
-OPEN_FILES = 256
 TOKEN = "stop-token-0123456789abcdef"
 TOUCH = {"path": {"kind": "polyline", "points_cm": [[1.9, 6.0]]}, "duration_s": 40.0}
 IDLE_WEBSOCKETS = 1000
@@ -37,18 +36,6 @@ FADE_AND_BLOCKS_S = 0.25
 """What may still sound after the stop's frame, generously: the engine's stop fade (5 ms),
 the blocks the output holds ahead of the host's clock (16 blocks of 256 frames here, 85 ms)
 and a loaded machine's delay in handing the stop to the audio side."""
-
-
-class LimitedServer(LiveServer):
-    """A server whose open-file limit is ``OPEN_FILES`` (soft and hard): a small machine."""
-
-    def command(self) -> list[str]:
-        shim = (
-            "import os, resource, sys; "
-            f"resource.setrlimit(resource.RLIMIT_NOFILE, ({OPEN_FILES}, {OPEN_FILES})); "
-            "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])"
-        )
-        return [sys.executable, "-c", shim, *super().command()[1:]]
 
 
 def _stop_with_cli(server: LiveServer, runtime: Path) -> dict[str, float]:

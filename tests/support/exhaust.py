@@ -16,12 +16,26 @@ import time
 from pathlib import Path
 from typing import Any
 
-from tests.support.live_server import HOST
+from tests.support.live_server import HOST, LiveServer
 
 UPGRADE = (
     "GET /ws{query} HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
     "Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
 )
+
+
+class LimitedServer(LiveServer):
+    """A server whose open-file limit is ``open_files`` (soft and hard): a small machine."""
+
+    open_files = 256
+
+    def command(self) -> list[str]:
+        shim = (
+            "import os, resource, sys; "
+            f"resource.setrlimit(resource.RLIMIT_NOFILE, ({self.open_files}, {self.open_files})); "
+            "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])"
+        )
+        return [sys.executable, "-c", shim, *super().command()[1:]]
 
 
 def _raise_own_limit() -> None:
