@@ -35,6 +35,10 @@ from phantomtouch.service.descriptors import ConnectionBudget
 from phantomtouch.service.errors import ErrorCode, Problem
 from phantomtouch.service.metrics import CONNECTION_REFUSALS
 
+LINGER_S = 1.0
+"""How long a refused connection is read (and what it sends dropped) before it is closed."""
+LINGER_BYTES = 1 << 20
+"""How much a refused connection may send before it is closed anyway."""
 LANE_HEADER_TIMEOUT_S = 2.0
 """How long a connection of the stop lane may take to send its headers."""
 STOP_REQUEST = ("POST", "/stop")
@@ -78,6 +82,7 @@ class GuardedHttpProtocol(JsonErrorProtocol):
         self._header_bytes = 0
         self._deadline: asyncio.TimerHandle | None = None
         self._refused = False
+        self._linger_bytes = 0
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         served = len(self.connections) - len(self.lane.members)
@@ -125,9 +130,14 @@ class GuardedHttpProtocol(JsonErrorProtocol):
             )
 
     def _refuse(self, status: int, reason: str, message: str) -> None:
-        """Answer ``status`` with the error body, count ``reason`` and close."""
+        """Answer ``status`` with the error body, count ``reason`` and close: a
+        connection of the stop lane at once, any other when the client stops sending,
+        once :data:`LINGER_BYTES` more were read and dropped, or after :data:`LINGER_S`
+        (closing with the client's bytes unread would reset the connection, and the
+        client lose the answer)."""
         CONNECTION_REFUSALS[reason] += 1
         self._refused = True
+        self._linger_bytes = LINGER_BYTES
         self._disarm_deadline()
         body = _error_body(status, message)
         self.transport.write(
@@ -145,10 +155,19 @@ class GuardedHttpProtocol(JsonErrorProtocol):
                 ]
             )
         )
-        self.transport.close()
+        if self._in_lane:  # beyond the budget: its descriptor is wanted at once
+            self.lane.members.pop(self, None)
+            self.transport.close()
+            return
+        if self.transport.can_write_eof():
+            self.transport.write_eof()
+        self._deadline = self.loop.call_later(LINGER_S, self.transport.close)
 
     def data_received(self, data: bytes) -> None:
-        if self._refused:
+        if self._refused:  # answered: read and dropped, up to a point
+            self._linger_bytes -= len(data)
+            if self._linger_bytes <= 0:
+                self.transport.close()
             return
         if self._awaiting_headers:
             self._header_bytes += len(data)

@@ -48,7 +48,10 @@ def raise_open_file_limit() -> tuple[int, int] | None:
     """
     if sys.platform == "win32":  # sockets are not bounded by an open-file limit there
         return None
-    import resource
+    try:
+        import resource
+    except ImportError:  # a platform without it
+        return None
 
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     target = hard
