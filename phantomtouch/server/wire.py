@@ -76,7 +76,8 @@ _REFUSALS_LOG = LimitedLog(logging.getLogger("phantomtouch.server"), 10.0)
 """Frames refused by the protocol log one line per reason every 10 s at most."""
 
 PARSE_SLICE_BYTES = 4096
-"""Most received bytes parsed at once (some 180 small frames, a few milliseconds)."""
+"""Most received bytes parsed in one turn of the event loop (some 180 small frames or
+680 pings, a few milliseconds)."""
 
 
 class FairWebSocketProtocol(WebSocketsSansIOProtocol):
@@ -91,6 +92,7 @@ class FairWebSocketProtocol(WebSocketsSansIOProtocol):
         super().__init__(*args, **kwargs)
         self._unparsed = bytearray()
         self._closed_by_the_app = False
+        self._parse_pending = False
 
     async def send(self, message: ASGISendEvent) -> None:
         """As uvicorn's; once the session has closed, the connection is ended at once.
@@ -119,10 +121,23 @@ class FairWebSocketProtocol(WebSocketsSansIOProtocol):
             self.transport.pause_reading()
 
     def _parse_until_a_message(self) -> None:
-        while self._unparsed and self.queue.empty() and not self.disconnected:
-            chunk = bytes(self._unparsed[:PARSE_SLICE_BYTES])
-            del self._unparsed[:PARSE_SLICE_BYTES]
-            super().data_received(chunk)
+        """Parse one slice; while no message is ready, the next slice waits for the event
+        loop's next turn (:meth:`_parse_on`): control frames, which make no message, are
+        parsed a slice per turn too."""
+        if not self._unparsed or not self.queue.empty() or self.disconnected:
+            return
+        chunk = bytes(self._unparsed[:PARSE_SLICE_BYTES])
+        del self._unparsed[:PARSE_SLICE_BYTES]
+        super().data_received(chunk)
+        if self._unparsed and self.queue.empty() and not self._parse_pending:
+            self._parse_pending = True
+            self.loop.call_soon(self._parse_on)
+
+    def _parse_on(self) -> None:
+        self._parse_pending = False
+        if not self._closed_by_the_app:
+            self._parse_until_a_message()
+            self._read_more_if_all_parsed()
 
     async def receive(self) -> ASGIReceiveEvent:
         if self.queue.empty():
