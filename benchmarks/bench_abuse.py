@@ -20,7 +20,7 @@ abuse runs in a process of its own, bounded in count and time:
   follows, random bytes);
 - ``osc deep bundles``: bundles nested 500 deep (10 KB each), as fast as they go;
 - ``invalid utf-8``: WebSocket connections each sending one text frame that is not UTF-8
-  (closed with 1007, one log line per 10 s).
+  (closed with 1007, one log line per 10 s);
 - owners and shares (:func:`owner_abuses`, :mod:`tests.support.owner_attacks`):
   ``osc other sender`` (sender B's messages while silent sender A's contact is down),
   ``osc 10 contacts`` (sender A holds the bridge's 10 contacts, B asks for one), ``ws closes``
@@ -34,7 +34,18 @@ abuse runs in a process of its own, bounded in count and time:
   allowed), ``0.01 Hz sine``, ``quota first`` (an 80,000-point touch from a client at its
   quota: the time its refusal takes), ``wearer flood`` (``PUT /wearer`` +-20 dB as fast
   as one client goes); each row says what the attack was answered, how the other touch
-  ended, and whether a vibration stayed on (blocks muted, voices silenced, voices on).
+  ended, and whether a vibration stayed on (blocks muted, voices silenced, voices on);
+- transport (:func:`transport_abuses`): ``endless header`` (one header value of 40 MB:
+  431 after 64 KB), ``slow headers x300`` (300 connections sending one header line a
+  second for 5 s, each reopened when closed: 408 after ``header_timeout_s``) and ``ping
+  frames`` (WebSocket ping control frames at full speed: closed with 1008 like a flood
+  of messages);
+- the stop through a crowd (:func:`stop_rows`), against a server limited to 256 open
+  files: a 40 s touch plays, 1,000 idle WebSockets and 300 slow-header connections hold
+  the connections, and ``phantomtouch stop`` (``stop cli, crowd``) or the token holder's
+  ``POST /stop`` (``stop http, crowd``) is sent; the row gives the stop's answer time and
+  whether the touch stayed on (``stayed_on``; False is what the stop promises). Its
+  probe's keep-alive connection was opened before the crowd.
 
 Each line reports the probe's p50, p99 and slowest answer while the abuse ran and the
 underruns the engine counted meanwhile (``/metrics``)::
@@ -45,8 +56,12 @@ underruns the engine counted meanwhile (``/metrics``)::
 from __future__ import annotations
 
 import argparse
+import functools
+import itertools
+import os
 import re
 import socket
+import subprocess
 import sys
 import tempfile
 import time
@@ -69,6 +84,7 @@ from tests.support.abuse_output import (
     voices_on,
     wearer_switches,
 )
+from tests.support.exhaust import LimitedServer, crowd, endless_header, ping_frames
 from tests.support.fairness import (
     contact_hoard,
     http_play_flood,
@@ -88,14 +104,17 @@ from tests.support.owner_attacks import (
 )
 
 
-def underruns(server: LiveServer) -> float:
-    text = httpx.get(f"{server.url}/metrics", timeout=10).text
+def underruns(server: LiveServer, token: str | None = None) -> float:
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    text = httpx.get(f"{server.url}/metrics", headers=headers, timeout=10).text
     match = re.search(r"^phantomtouch_underruns_total (\S+)$", text, re.MULTILINE)
     return float(match.group(1)) if match else float("nan")
 
 
-def measure(server: LiveServer, abuse: Callable[[], Any]) -> dict[str, Any]:
-    before = underruns(server)
+def measure(
+    server: LiveServer, abuse: Callable[[], Any], *, auth: str | None = None
+) -> dict[str, Any]:
+    before = underruns(server, auth)
     with HealthProbe(server.url) as probe:
         time.sleep(0.2)
         started = time.perf_counter()
@@ -108,7 +127,7 @@ def measure(server: LiveServer, abuse: Callable[[], Any]) -> dict[str, Any]:
         "p50_ms": probe.quantile_s(0.5) * 1e3,
         "p99_ms": probe.quantile_s(0.99) * 1e3,
         "max_ms": max(probe.latencies_s) * 1e3,
-        "underruns": underruns(server) - before,
+        "underruns": underruns(server, auth) - before,
         "outcome": outcome,
     }
 
@@ -194,6 +213,70 @@ def output_abuses(server: LiveServer) -> dict[str, Callable[[], Any]]:
     }
 
 
+STOP_TOKEN = "bench-stop-token-0123456789"
+LONG_TOUCH = {"path": {"kind": "polyline", "points_cm": [[1.9, 6.0]]}, "duration_s": 40.0}
+
+
+def stop_through_crowd(server: LiveServer, runtime: Path, via: str) -> dict[str, Any]:
+    """A 40 s touch plays; a crowd (1,000 idle WebSockets, 300 slow-header connections,
+    each reopened when closed) holds the server's connections for 12 s; 4 s into it the
+    stop is sent (``via`` ``cli``: ``phantomtouch stop``; ``http``: ``POST /stop`` with
+    the token). The outcome: the stop's answer time and whether the touch stayed on."""
+    auth = {"Authorization": f"Bearer {STOP_TOKEN}"}
+    job = httpx.post(f"{server.url}/touch", json=LONG_TOUCH, headers=auth, timeout=10).json()
+    with ThreadPoolExecutor(1) as pool:
+        crowding = pool.submit(in_process, crowd, server.port, 1000, 300, 12.0, None, STOP_TOKEN)
+        time.sleep(4.0)
+        if via == "cli":
+            done = subprocess.run(
+                [sys.executable, "-m", "phantomtouch", "stop", "--port", str(server.port)],
+                env={**os.environ, "XDG_RUNTIME_DIR": str(runtime)},
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+            answered = re.search(r"answered in ([0-9.]+) ms", done.stdout)
+            answer_ms = float(answered.group(1)) if answered else float("nan")
+        else:
+            started = time.perf_counter()
+            reply = httpx.post(f"{server.url}/stop", headers=auth, timeout=30)
+            answer_ms = (
+                (time.perf_counter() - started) * 1e3 if reply.status_code == 200 else float("nan")
+            )
+        crowding.result()
+    state = httpx.get(f"{server.url}/jobs/{job['job_id']}", headers=auth, timeout=10).json()
+    return {"stop_answer_ms": round(answer_ms, 1), "stayed_on": state["state"] != "stopped"}
+
+
+def transport_abuses(server: LiveServer) -> dict[str, Callable[[], Any]]:
+    """Attacks on the transport of the main server: headers that never end or never
+    come, and WebSocket ping control frames at full speed."""
+    return {
+        "endless header": lambda: in_process(endless_header, server.port, 40),
+        "slow headers x300": lambda: in_process(crowd, server.port, 0, 300, 5.0),
+        "ping frames": lambda: in_process(ping_frames, server.port, 6.0),
+    }
+
+
+def stop_rows(folder: Path) -> dict[str, dict[str, Any]]:
+    """The stop through a crowd, against a server limited to 256 open files (a small
+    machine), once per way of stopping; each row measured as the others are."""
+    rows = {}
+    for via in ("cli", "http"):
+        runtime = Path(folder) / f"run-{via}"
+        with LimitedServer(
+            Path(folder) / f"stop-{via}.db",
+            args=("--token", STOP_TOKEN),
+            env={"XDG_RUNTIME_DIR": str(runtime)},
+        ) as limited:
+            rows[f"stop {via}, crowd"] = measure(
+                limited,
+                functools.partial(stop_through_crowd, limited, runtime, via),
+                auth=STOP_TOKEN,
+            )
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of the baseline")
@@ -217,13 +300,14 @@ def main(argv: list[str] | None = None) -> int:
             **input_abuses(server, osc_port),
             **owner_abuses(server, osc_port),
             **output_abuses(server),
+            **transport_abuses(server),
         }
-        inputs = set(input_abuses(server, osc_port))
+        inputs = set(input_abuses(server, osc_port)) | set(transport_abuses(server))
         print(
             f"{'abuse':<18} {'s':>5} {'n':>6} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} underruns"
         )
-        for name, abuse in abuses.items():
-            row = measure(server, abuse)
+        rows = ((name, measure(server, abuse)) for name, abuse in abuses.items())
+        for name, row in itertools.chain(rows, stop_rows(Path(folder)).items()):
             print(
                 f"{name:<18} {row['took_s']:5.2f} {row['answers']:6d} {row['p50_ms']:7.2f} "
                 f"{row['p99_ms']:7.2f} {row['max_ms']:7.1f} {row['underruns']:9.0f}"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import sys
+import time
 from typing import TYPE_CHECKING
 
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError, install_hint
@@ -169,12 +170,47 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
     fleet_cli.add_serve_options(parser)
 
 
+def _cmd_stop(args: argparse.Namespace) -> int:
+    """``phantomtouch stop``: everything off through the service's own stop channel."""
+    import os
+    from pathlib import Path
+
+    from phantomtouch.service.stop_channel import StopChannelError, send_stop, stop_file
+
+    if not 1 <= args.port <= 65535:
+        raise ParameterError(f"--port={args.port}: must be a port from 1 to 65535")
+    folder = args.dir or os.environ.get("PHANTOMTOUCH_STOP_CHANNEL_DIR")
+    path = stop_file(args.port, Path(folder) if folder else None)
+    started_s = time.monotonic()
+    try:
+        answer = send_stop(path)
+    except StopChannelError as exc:
+        print(f"phantomtouch stop: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    took_ms = (time.monotonic() - started_s) * 1e3
+    print(
+        f"phantomtouch stop: everything off at server time {answer['server_time_s']:.3f} s "
+        f"(answered in {took_ms:.1f} ms; frame {answer['frames']})"
+    )
+    return 0
+
+
 def add_serve_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Register ``serve``, ``osc`` and the fleet's ``gateway``."""
+    """Register ``serve``, ``osc``, ``stop`` and the fleet's ``gateway``."""
     serve = sub.add_parser("serve", help="run the touch service (REST and WebSocket)")
     _serve_arguments(serve)
     serve.add_argument("--osc", help="also receive OSC on this UDP HOST:PORT (loopback)")
     serve.add_argument("--osc-map", help="OSC map file (TOML), with --osc")
     serve.set_defaults(func=_cmd_serve)
     add_osc_command(sub, _serve_arguments, _cmd_serve)
+    stop = sub.add_parser(
+        "stop",
+        help="turn everything off on the service of this machine at --port, through its own "
+        "channel (works when its connections are exhausted)",
+    )
+    stop.add_argument("--port", type=int, default=8000, help="the service's HTTP port (8000)")
+    stop.add_argument(
+        "--dir", help="folder of its stop file (default: as the service's stop_channel_dir)"
+    )
+    stop.set_defaults(func=_cmd_stop)
     fleet_cli.register(sub)

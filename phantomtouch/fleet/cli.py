@@ -4,8 +4,9 @@
 service to a fleet as an armband node; ``phantomtouch gateway --fleet nats://...`` runs a
 gateway; ``phantomtouch fleet-config`` writes a closed NATS configuration for them. NATS
 credentials come from the environment (docs/fleet.md), never from a flag. Both refuse a
-NATS server open to anonymous publishers unless told they may
-(:mod:`phantomtouch.fleet.openness`).
+NATS server open to anonymous publishers, or a cluster whose route ports admit a server
+without credentials, unless told they may (:mod:`phantomtouch.fleet.openness`,
+:mod:`phantomtouch.fleet.route_probe`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,28 @@ if TYPE_CHECKING:
     from phantomtouch.service.running import Service
 
 
+ROUTES_HELP = (
+    "the cluster's NATS route ports, comma-separated (HOST:6222): checked to admit no server "
+    "without credentials"
+)
+
+
+def _routes(given: str | None) -> list[str]:
+    return [part.strip() for part in (given or "").split(",") if part.strip()]
+
+
+def _require_closed(servers: list[str], routes: list[str], flag: str, command: str) -> None:
+    """Refuse NATS open to anonymous clients or servers (:mod:`~phantomtouch.fleet.openness`,
+    :mod:`~phantomtouch.fleet.route_probe`); say in one line what cannot be told."""
+    from phantomtouch.fleet.openness import require_closed
+    from phantomtouch.fleet.route_probe import check_routes
+
+    require_closed(servers, flag)
+    note = check_routes(servers, routes, flag)
+    if note is not None:
+        print(f"phantomtouch {command}: {note}", file=sys.stderr)
+
+
 def add_serve_options(serve: argparse.ArgumentParser) -> None:
     """``--fleet``, ``--armband`` and ``--site`` of ``phantomtouch serve``."""
     serve.add_argument(
@@ -30,6 +53,7 @@ def add_serve_options(serve: argparse.ArgumentParser) -> None:
     )
     serve.add_argument("--armband", help="this armband's id in the fleet (with --fleet)")
     serve.add_argument("--site", help="this armband's site in the fleet (default: 'default')")
+    serve.add_argument("--fleet-routes", help=ROUTES_HELP)
     serve.add_argument(
         "--fleet-insecure",
         action="store_true",
@@ -69,6 +93,8 @@ def attachment(
             raise ParameterError("--armband and --site need --fleet nats://HOST:4222")
         if args.fleet_insecure:
             raise ParameterError("--fleet-insecure needs --fleet nats://HOST:4222")
+        if args.fleet_routes is not None:
+            raise ParameterError("--fleet-routes needs --fleet nats://HOST:4222")
         return None
     if args.armband is None:
         raise ParameterError("--fleet needs --armband ID: the id this armband has in the fleet")
@@ -77,9 +103,7 @@ def attachment(
 
     settings = _fleet_settings(args, armband=args.armband, site=args.site)
     if not args.fleet_insecure:
-        from phantomtouch.fleet.openness import require_closed
-
-        require_closed(settings.servers, "--fleet-insecure")
+        _require_closed(settings.servers, _routes(args.fleet_routes), "--fleet-insecure", "serve")
     print(
         f"phantomtouch {args.command}: armband {settings.armband!r} of site {settings.site!r} "
         f"on the fleet at {', '.join(settings.servers)}"
@@ -105,9 +129,7 @@ def _cmd_gateway(args: argparse.Namespace) -> int:
     fleet = _fleet_settings(args)
     check_port_free(settings.host, settings.port)
     if not args.insecure_nats:
-        from phantomtouch.fleet.openness import require_closed
-
-        require_closed(fleet.servers, "--insecure-nats")
+        _require_closed(fleet.servers, _routes(args.fleet_routes), "--insecure-nats", "gateway")
     print(
         f"phantomtouch gateway: http://{settings.host}:{settings.port} for the fleet at "
         f"{', '.join(fleet.servers)}",
@@ -129,6 +151,7 @@ def register(sub: Any) -> None:
     gateway.add_argument(
         "--token", help="a token of every armband (also PHANTOMTOUCH_GATEWAY_TOKEN)"
     )
+    gateway.add_argument("--fleet-routes", help=ROUTES_HELP)
     gateway.add_argument(
         "--insecure-nats",
         action="store_true",
@@ -157,17 +180,19 @@ def register(sub: Any) -> None:
 def _cmd_fleet_config(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from phantomtouch.fleet.nats_config import plan, write
+    from phantomtouch.fleet.nats_config import RouteUser, plan, write
 
     armbands = []
     for given in args.armband:
         armband, _, site = given.partition(":")
         armbands.append((armband, site or "default"))
     users = plan(armbands, args.gateway)
-    for path in write(Path(args.out), users):
+    for path in write(Path(args.out), users, RouteUser.new()):
         print(f"phantomtouch fleet-config: wrote {path}")
     print(
-        "include authorization.conf in every NATS server's configuration; start each node "
-        "and gateway with the variables of its USER.env (docs/fleet.md)"
+        "include authorization.conf in every NATS server's configuration and "
+        "route-authorization.conf in its cluster block, with route URLs "
+        "nats-route://USER:PASSWORD@HOST:PORT from route.env; start each node and gateway "
+        "with the variables of its USER.env (docs/fleet.md)"
     )
     return 0

@@ -12,6 +12,12 @@
 - a gateway publishes on ``phantomtouch.>`` (what it serves: touches, contacts, stops and
   clock requests of every armband) and reads the registry; it cannot write in it.
 
+The cluster's route ports are closed too: ``route-authorization.conf``, to be ``include``d
+in every server's ``cluster { }`` block, admits only servers that give the route user
+and password of ``route.env`` in their route URLs (``nats-route://USER:PASSWORD@HOST:PORT``),
+so a server started by anyone else cannot join the cluster and publish on the armbands'
+subjects past every client permission.
+
 Both reach the registry's JetStream API (stream info and creation, consumers for their
 watches) of the registry's stream only, and receive replies and watch deliveries on an
 inbox prefix of their own (``_INBOX_USER``), so no user reads another's replies.
@@ -86,6 +92,31 @@ class FleetUser:
         return f"PHANTOMTOUCH_FLEET_USER={self.name}\nPHANTOMTOUCH_FLEET_PASSWORD={self.password}\n"
 
 
+@dataclass(frozen=True)
+class RouteUser:
+    """The one user servers of the cluster give each other on their route ports."""
+
+    password: str
+    name: str = "route"
+
+    @classmethod
+    def new(cls) -> RouteUser:
+        return cls(secrets.token_urlsafe(24))
+
+    def authorization(self) -> str:
+        """The ``authorization`` of a server's ``cluster { }`` block."""
+        entry = {"user": self.name, "password": self.password, "timeout": 2}
+        return "authorization: " + json.dumps(entry) + "\n"
+
+    def route_url(self, host: str, port: int) -> str:
+        """A route URL to another server of the cluster, with the route credentials."""
+        return f"nats-route://{self.name}:{self.password}@{host}:{port}"
+
+    def env(self) -> str:
+        """What a script writing the servers' configurations builds route URLs from."""
+        return f"PHANTOMTOUCH_ROUTE_USER={self.name}\nPHANTOMTOUCH_ROUTE_PASSWORD={self.password}\n"
+
+
 def plan(armbands: list[tuple[str, str]], gateways: list[str]) -> list[FleetUser]:
     """A user per armband (``(id, site)``; user name = the id) and per gateway, each with
     a fresh random password.
@@ -123,13 +154,16 @@ def authorization(users: list[FleetUser]) -> str:
     return "authorization: " + json.dumps({"users": entries}, indent=2) + "\n"
 
 
-def write(folder: Path, users: list[FleetUser]) -> list[Path]:
-    """Write ``authorization.conf`` and one ``USER.env`` per user into ``folder``."""
+def write(folder: Path, users: list[FleetUser], route: RouteUser) -> list[Path]:
+    """Write ``authorization.conf``, one ``USER.env`` per user, ``route-authorization.conf``
+    and ``route.env`` into ``folder``."""
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     for name, text in [
         ("authorization.conf", authorization(users)),
         *((f"{user.name}.env", user.env()) for user in users),
+        ("route-authorization.conf", route.authorization()),
+        ("route.env", route.env()),
     ]:
         path = folder / name
         path.touch(mode=0o600)

@@ -1,4 +1,4 @@
-"""What the OSC bridge accepted and what it dropped, and why.
+"""What the OSC bridge accepted and what it dropped, and why; and what the kernel dropped.
 
 Every received message is counted once: ``accepted``, or dropped for one reason. A
 datagram dropped as a whole (not OSC, too deep, ...) counts once. Drops are logged one
@@ -8,7 +8,9 @@ line each, at most one line per reason and interval
 
 from __future__ import annotations
 
+import socket
 import threading
+from pathlib import Path
 
 REASONS = (
     "malformed",
@@ -57,3 +59,36 @@ class OscCounters:
         """Every count, ``accepted`` and each reason."""
         with self._lock:
             return dict(self._counts)
+
+
+PROC_NET = Path("/proc/net")
+
+
+def _proc_address(host: str, port: int) -> tuple[str, str]:
+    """The ``/proc/net`` file and the local-address column of ``(host, port)``: the
+    address's 32-bit words in the host's (little-endian) order, in hex, then the port."""
+    if ":" in host:
+        packed = socket.inet_pton(socket.AF_INET6, host)
+        words = [packed[i : i + 4][::-1] for i in range(0, 16, 4)]
+        return "udp6", "".join(w.hex().upper() for w in words) + f":{port:04X}"
+    return "udp", socket.inet_aton(host)[::-1].hex().upper() + f":{port:04X}"
+
+
+def kernel_drops(address: tuple[str, int], proc_net: Path = PROC_NET) -> int | None:
+    """Datagrams the kernel dropped for the UDP socket bound to ``address`` because its
+    receive buffer was full: they never reached the bridge, so no other count sees them
+    (a lift lost this way would leave a contact down until the watchdog).
+
+    Read from the ``drops`` column of ``/proc/net/udp`` (``udp6`` for an IPv6 address);
+    None where there is no such file (macOS, Windows) or no socket bound there. Any thread.
+    """
+    try:
+        table, local = _proc_address(*address)
+        lines = (proc_net / table).read_text().splitlines()
+    except (OSError, ValueError):
+        return None
+    for line in lines[1:]:
+        fields = line.split()
+        if len(fields) >= 13 and fields[1] == local:
+            return int(fields[12])
+    return None

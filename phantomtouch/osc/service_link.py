@@ -8,7 +8,9 @@ one of ``POST /touch`` is not); the bridge's thread waits for it (planning takes
 millisecond or so, a new noise band about 60 ms the first time), at most ``PLAY_TIMEOUT_S``.
 ``/phantomtouch/stop`` is :meth:`Service.stop_everything`. The bridge's
 counts appear in ``/metrics`` as ``phantomtouch_osc_messages_total{outcome}`` (with
-``phantomtouch_osc_restarts_total``), and its health in ``/health`` under ``inputs``.
+``phantomtouch_osc_restarts_total`` and, on Linux, the datagrams the kernel dropped before
+the bridge read them, ``phantomtouch_osc_kernel_drops_total``), and its health in
+``/health`` under ``inputs``.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pydantic import ValidationError
 
 from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.osc.bridge import INPUT, OscBridge
+from phantomtouch.osc.counters import kernel_drops
 from phantomtouch.osc.mapping import load_map
 from phantomtouch.schema import describe_validation_error
 from phantomtouch.service import scheduling
@@ -54,6 +57,14 @@ class _Counts(Collector):
             "Times silence on OSC released the bridge's contacts.",
             value=self.bridge.watchdog_releases,
         )
+        drops = kernel_drops(self.bridge.address)
+        if drops is not None:
+            yield CounterMetricFamily(
+                "phantomtouch_osc_kernel_drops",
+                "OSC datagrams the kernel dropped before the bridge read them (its receive "
+                "buffer was full; Linux only).",
+                value=drops,
+            )
         yield CounterMetricFamily(
             "phantomtouch_osc_restarts",
             "Times the OSC receive thread died and was started again (its contacts released).",

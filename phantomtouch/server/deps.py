@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Annotated, Any
 
-from fastapi import Depends, Path
+from fastapi import Depends, Path, Query
 from starlette.requests import HTTPConnection
 
 from phantomtouch.service.app_state import app_state
@@ -46,3 +46,9 @@ else:
     EngineDep = Annotated[Any, Depends(get_engine)]
 StoreDep = Annotated[PatternStore, Depends(get_store)]
 PatternNameParam = Annotated[str, Path(**name_rules(PATTERN_NAME_REGEX, "my-stroke"))]
+LimitParam = Annotated[int, Query(ge=1, le=1000, description="Most entries of the page (1-1000).")]
+"""The size of a page of a list (``GET /clips``, ``GET /wearers``)."""
+OffsetParam = Annotated[
+    int, Query(ge=0, le=1 << 31, description="Entries skipped before the page (0 or more).")
+]
+"""Where a page of a list starts."""

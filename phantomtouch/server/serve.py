@@ -103,7 +103,11 @@ def serve(settings: Settings, *, attach: Sequence[Attachment] = ()) -> None:
 
     Requests uvicorn cannot parse are answered with the service's JSON error body, and
     WebSocket frames are parsed at the pace their session handles them
-    (:mod:`phantomtouch.server.wire`).
+    (:mod:`phantomtouch.server.wire`). The open-file limit is raised to what the system
+    allows and shared out as a connection budget with a lane kept for ``POST /stop``
+    (:mod:`phantomtouch.service.descriptors`, :mod:`phantomtouch.server.guard`); the
+    emergency stop's own channel opens before anything else
+    (:mod:`phantomtouch.service.stop_channel`).
 
     Raises
     ------
@@ -111,11 +115,34 @@ def serve(settings: Settings, *, attach: Sequence[Attachment] = ()) -> None:
         The service could not start (the engine, the fleet) or stop cleanly; see
         :func:`~phantomtouch.service.listen.run_http`.
     """
-    from phantomtouch.server.wire import FairWebSocketProtocol, JsonErrorProtocol
+    import functools
 
+    from phantomtouch.server.guard import guarded_protocol
+    from phantomtouch.server.wire import FairWebSocketProtocol
+    from phantomtouch.service import stop_channel
+    from phantomtouch.service.descriptors import (
+        ConnectionBudget,
+        descriptors_in_use,
+        raise_open_file_limit,
+    )
+    from phantomtouch.service.metrics import CONNECTION_BUDGET
+
+    limits = raise_open_file_limit()
+    budget = ConnectionBudget.plan(limits[1] if limits else None, descriptors_in_use())
+    CONNECTION_BUDGET.update(
+        open_files=budget.limit or 0, connections=budget.connections, stop_lane=budget.stop_lane
+    )
     run_http(
-        create_app(settings, attach=attach),
+        create_app(
+            settings,
+            attach=(functools.partial(stop_channel.attach, announce=budget.describe()), *attach),
+        ),
         settings,
-        http=JsonErrorProtocol,
+        http=guarded_protocol(
+            budget,
+            header_timeout_s=settings.header_timeout_s,
+            max_header_bytes=settings.max_header_bytes,
+        ),
         ws=FairWebSocketProtocol,
+        backlog=budget.backlog,
     )

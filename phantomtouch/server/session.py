@@ -53,7 +53,7 @@ from phantomtouch.service.errors import (
     QuotaError,
     describe,
 )
-from phantomtouch.service.flood import FloodGuard
+from phantomtouch.service.flood import SCOPE_KEY, FloodGuard
 from phantomtouch.service.limits import token_matches
 from phantomtouch.service.running import Service
 from phantomtouch.service.ws_messages import (
@@ -103,6 +103,7 @@ class Session:
         self.watchdog_s = settings.watchdog_s
         self.max_message_bytes = settings.max_ws_message_bytes
         self.limiter = FloodGuard(settings.ws_messages_per_s)
+        websocket.scope[SCOPE_KEY] = self.limiter  # ping frames count too (server.wire)
         self.owner = service.new_owner()
         self.state = SessionState.CONNECTING
         self.sender = JsonSender(

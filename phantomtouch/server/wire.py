@@ -15,19 +15,27 @@ session closes, the close frame ends the stream and what the client still sends 
 dropped unparsed. A text frame that is not UTF-8 is closed with 1007 as uvicorn does,
 but logged in one line instead of a traceback, and counted
 (``phantomtouch_ws_refused_frames_total{reason="invalid_utf8"}``).
+
+Ping frames never reach the session, so uvicorn answered every one of them: millions a
+second of them held the event loop. Each ping now counts in the session's flood rule
+(the connection's :class:`~phantomtouch.service.flood.FloodGuard`, which the session
+puts in the scope under :data:`~phantomtouch.service.flood.SCOPE_KEY`) as a message
+does: over the rate it is dropped unanswered (``reason="ping_over_rate"``), and a
+connection that stays over its rate is closed with 1008, as a flood of messages is.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import time
 from typing import TYPE_CHECKING, Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from phantomtouch.service.errors import Problem
-from phantomtouch.service.flood import LimitedLog
+from phantomtouch.service.flood import SCOPE_KEY, FloodGuard, LimitedLog
 from phantomtouch.service.metrics import FRAME_REFUSALS
 
 if TYPE_CHECKING:
@@ -63,11 +71,13 @@ class JsonErrorProtocol(HttpToolsProtocol):
 
 
 WS_CLOSE_INVALID_PAYLOAD = 1007
+WS_CLOSE_POLICY_VIOLATION = 1008
 _REFUSALS_LOG = LimitedLog(logging.getLogger("phantomtouch.server"), 10.0)
 """Frames refused by the protocol log one line per reason every 10 s at most."""
 
 PARSE_SLICE_BYTES = 4096
-"""Most received bytes parsed at once (some 180 small frames, a few milliseconds)."""
+"""Most received bytes parsed in one turn of the event loop (some 180 small frames or
+680 pings, a few milliseconds)."""
 
 
 class FairWebSocketProtocol(WebSocketsSansIOProtocol):
@@ -82,6 +92,7 @@ class FairWebSocketProtocol(WebSocketsSansIOProtocol):
         super().__init__(*args, **kwargs)
         self._unparsed = bytearray()
         self._closed_by_the_app = False
+        self._parse_pending = False
 
     async def send(self, message: ASGISendEvent) -> None:
         """As uvicorn's; once the session has closed, the connection is ended at once.
@@ -110,10 +121,23 @@ class FairWebSocketProtocol(WebSocketsSansIOProtocol):
             self.transport.pause_reading()
 
     def _parse_until_a_message(self) -> None:
-        while self._unparsed and self.queue.empty() and not self.disconnected:
-            chunk = bytes(self._unparsed[:PARSE_SLICE_BYTES])
-            del self._unparsed[:PARSE_SLICE_BYTES]
-            super().data_received(chunk)
+        """Parse one slice; while no message is ready, the next slice waits for the event
+        loop's next turn (:meth:`_parse_on`): control frames, which make no message, are
+        parsed a slice per turn too."""
+        if not self._unparsed or not self.queue.empty() or self.disconnected:
+            return
+        chunk = bytes(self._unparsed[:PARSE_SLICE_BYTES])
+        del self._unparsed[:PARSE_SLICE_BYTES]
+        super().data_received(chunk)
+        if self._unparsed and self.queue.empty() and not self._parse_pending:
+            self._parse_pending = True
+            self.loop.call_soon(self._parse_on)
+
+    def _parse_on(self) -> None:
+        self._parse_pending = False
+        if not self._closed_by_the_app:
+            self._parse_until_a_message()
+            self._read_more_if_all_parsed()
 
     async def receive(self) -> ASGIReceiveEvent:
         if self.queue.empty():
@@ -143,6 +167,32 @@ class FairWebSocketProtocol(WebSocketsSansIOProtocol):
                 self.handle_parser_exception()
                 return
         super().send_receive_event_to_app()
+
+    def handle_ping(self) -> None:
+        """As uvicorn's (a pong), if the connection's flood rule admits the ping; over the
+        rate the pong is dropped, and a flood lasting ``close_after_s`` closes with 1008."""
+        guard = self.scope.get(SCOPE_KEY) if self.scope else None
+        if not isinstance(guard, FloodGuard) or self.close_sent:
+            super().handle_ping()
+            return
+        now_s = time.monotonic()
+        if guard.admit(now_s):
+            super().handle_ping()
+            return
+        self.conn.data_to_send()  # the pong the parser queued: dropped
+        FRAME_REFUSALS["ping_over_rate"] += 1
+        if guard.sustained(now_s):
+            _REFUSALS_LOG.warning(
+                "ping_flood",
+                f"websocket: {self._peer()} sent pings over {guard.rate_per_s:g}/s for "
+                f"{guard.close_after_s:g} s; closed with 1008",
+            )
+            self.conn.send_close(
+                WS_CLOSE_POLICY_VIOLATION,
+                f"over the message rate limit of {guard.rate_per_s:g}/s (pings count)",
+            )
+            self._unparsed.clear()
+            self.handle_parser_exception()
 
     def _peer(self) -> str:
         client = self.client

@@ -12,12 +12,17 @@ from phantomtouch.errors import PhantomTouchError
 
 def log_config() -> dict[str, Any]:
     """uvicorn's logging, plus the ``phantomtouch`` logger (start-up lines, errors), less
-    uvicorn's "Application startup failed" lines (the command says what failed)."""
+    uvicorn's "Application startup failed" lines (the command says what failed); every
+    line without secrets and on one line (:class:`~phantomtouch.service.log_lines.SafeLines`)."""
     from uvicorn.config import LOGGING_CONFIG
 
     config = copy.deepcopy(LOGGING_CONFIG)
-    config["filters"] = {"failures": {"()": "phantomtouch.service.runner.DropFailureLines"}}
-    config["handlers"]["default"]["filters"] = ["failures"]
+    config["filters"] = {
+        "failures": {"()": "phantomtouch.service.runner.DropFailureLines"},
+        "safe": {"()": "phantomtouch.service.log_lines.SafeLines"},
+    }
+    config["handlers"]["default"]["filters"] = ["failures", "safe"]
+    config["handlers"]["access"]["filters"] = ["safe"]
     config["loggers"]["phantomtouch"] = {
         "handlers": ["default"],
         "level": "INFO",

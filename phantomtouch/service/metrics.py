@@ -46,6 +46,35 @@ counted by the server's protocol (:mod:`phantomtouch.server.wire`, on the event 
 one count per process, which serves one app."""
 
 
+CONNECTION_REFUSALS: collections.Counter[str] = collections.Counter()
+"""Connections refused by the HTTP protocol before the app saw a request, by reason
+(``header_timeout``, ``header_too_large``, ``budget``): counted by
+:mod:`phantomtouch.server.guard` on the event loop, one count per process."""
+CONNECTION_BUDGET: dict[str, int] = {}
+"""The open-file limit and the connection budget the server runs with (``open_files``,
+``connections``, ``stop_lane``), set once at start (:mod:`phantomtouch.server.serve`)."""
+
+
+class _ConnectionCollector(Collector):
+    def collect(self) -> Iterator[Metric]:
+        family = CounterMetricFamily(
+            "phantomtouch_connections_refused",
+            "Connections refused before a request reached the app, by reason (header_timeout: "
+            "408, header_too_large: 431, budget: over the connection budget).",
+            labels=["reason"],
+        )
+        for reason in ("budget", "header_timeout", "header_too_large"):
+            family.add_metric([reason], CONNECTION_REFUSALS[reason])
+        yield family
+        for name, value in sorted(CONNECTION_BUDGET.items()):
+            yield GaugeMetricFamily(
+                f"phantomtouch_connection_budget_{name}",
+                "The connection budget the server started with (open_files: the open-file "
+                "limit; connections: served at once; stop_lane: more for POST /stop only).",
+                value=value,
+            )
+
+
 class _FrameCollector(Collector):
     def collect(self) -> Iterator[Metric]:
         family = CounterMetricFamily(
@@ -232,6 +261,7 @@ class Metrics:
         self._engine = _EngineCollector()
         self.registry.register(self._engine)
         self.registry.register(_FrameCollector())
+        self.registry.register(_ConnectionCollector())
 
     def watch_engine(self, read: StatusReader | None) -> None:
         """Read the engine's figures with ``read`` at scrape time (None: stop)."""

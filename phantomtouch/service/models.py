@@ -369,6 +369,9 @@ class JobInfo(BaseModel):
 class StopAnswer(BaseModel):
     stopped: Literal[True] = True
     server_time_s: float
+    frames: int
+    """The engine's sample frame when the stop was applied (what a capture output recorded
+    before it)."""
 
 
 class PatternInfo(BaseModel):

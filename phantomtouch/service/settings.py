@@ -99,6 +99,13 @@ class Settings(ClientLimits):
     max_ws_connections_per_address: int = Field(default=16, ge=1, le=100_000)
     """WebSocket connections open at once from one address other than loopback (close 1013 beyond
     it)."""
+    header_timeout_s: float = Field(default=10.0, ge=0.5, le=300.0)
+    """Longest wait for a request's headers, in seconds (408 and closed beyond it)."""
+    max_header_bytes: int = Field(default=64 << 10, ge=4096, le=1 << 20)
+    """Largest request line and headers, in bytes (431 and closed beyond it)."""
+    stop_channel_dir: Path | None = None
+    """Folder of the stop file ``phantomtouch stop`` reads (None: ``$XDG_RUNTIME_DIR/phantomtouch``,
+    else ``~/.phantomtouch/run``, on Windows ``%LOCALAPPDATA%\\phantomtouch\\run``)."""
     max_contacts_per_connection: int = Field(default=10, ge=1, le=256)
     """Contacts one WebSocket connection may hold down at once (two hands); the engine holds 128, so
     a dozen clients at their quota still leave room."""

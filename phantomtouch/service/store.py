@@ -28,7 +28,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Any, Literal, NamedTuple, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
@@ -41,6 +41,18 @@ from phantomtouch.service.models import PlanSummary
 logger = logging.getLogger("phantomtouch.server.store")
 Table = Literal["patterns", "clips", "wearers", "wearer_runs", "tact"]
 """The tables whose rows are written and deleted by name (never a value from a request)."""
+
+
+class ClipSize(NamedTuple):
+    """A stored clip's name and size, read without loading it (:meth:`PatternStore.clip_sizes`)."""
+
+    name: str
+    duration_s: float
+    amplitude_points: int
+    frequency_points: int
+    transients: int
+
+
 _DOCUMENT: dict[Table, str] = {
     "patterns": "pattern",
     "clips": "clip",
@@ -66,6 +78,18 @@ CREATE TABLE IF NOT EXISTS clips (
     updated_unix_s REAL NOT NULL
 )
 """
+_CLIP_SIZES_SCHEMA = """
+CREATE TABLE IF NOT EXISTS clip_sizes (
+    name TEXT PRIMARY KEY,
+    duration_s REAL NOT NULL,
+    amplitude_points INTEGER NOT NULL,
+    frequency_points INTEGER NOT NULL,
+    transients INTEGER NOT NULL,
+    updated_unix_s REAL NOT NULL
+)
+"""
+"""What ``GET /clips`` lists of each clip, kept when it is stored; a row counts only while
+its ``updated_unix_s`` is the clip's (:meth:`PatternStore.clip_sizes`)."""
 _WEARER_SCHEMA = """
 CREATE TABLE IF NOT EXISTS wearers (
     name TEXT PRIMARY KEY,
@@ -147,6 +171,7 @@ class PatternStore:
             db.execute("PRAGMA busy_timeout=5000")
             db.execute(_SCHEMA)
             db.execute(_CLIP_SCHEMA)
+            db.execute(_CLIP_SIZES_SCHEMA)
             db.execute(_WEARER_SCHEMA)
             db.execute(_WEARER_RUN_SCHEMA)
             db.execute(_TACT_SCHEMA)
@@ -240,12 +265,16 @@ class PatternStore:
         except ValidationError as exc:
             raise StoredPatternError(unreadable(name, exc), field=field, value=name) from exc
 
-    def _read_all(self, table: Table, model: type[Document]) -> builtins.list[tuple[str, Document]]:
+    def _read_all(
+        self, table: Table, model: type[Document], *, limit: int | None = None, offset: int = 0
+    ) -> builtins.list[tuple[str, Document]]:
         """Every readable document of ``table`` by name, sorted by name (a row that no
-        longer reads is logged and left out)."""
+        longer reads is logged and left out); with ``limit``, at most that many from the
+        ``offset``-th row."""
         with self._using(writes=False) as db:
             rows = db.execute(
-                f"SELECT name, {_DOCUMENT[table]} FROM {table} ORDER BY name"
+                f"SELECT name, {_DOCUMENT[table]} FROM {table} ORDER BY name LIMIT ? OFFSET ?",
+                (-1 if limit is None else limit, offset),
             ).fetchall()
         listed = []
         for name, text in rows:
@@ -278,28 +307,81 @@ class PatternStore:
 
     # -- haptic clips (a pattern's ``{"kind": "clip", "clip": name}`` carrier) -------------
 
-    def list_clips(self) -> builtins.list[tuple[str, HapticClip]]:
-        """Every readable clip, sorted by name (a row that no longer reads is logged)."""
-        return self._read_all("clips", HapticClip)
+    def clip_sizes(self, *, limit: int, offset: int = 0) -> builtins.list[ClipSize]:
+        """Names and sizes of the clips, sorted by name: at most ``limit`` (>= 1) from
+        the ``offset``-th (>= 0). The sizes are kept beside each clip when it is stored
+        (table ``clip_sizes``), so no clip is loaded and a page costs the same however
+        large the clips are; a clip stored before (or whose sizes are stale) has them
+        read once from its JSON by SQLite, one clip at a time. A row that is not JSON is
+        logged and left out."""
+        with self._using(writes=False) as db:
+            rows = db.execute(
+                "SELECT c.name, c.updated_unix_s, s.duration_s, s.amplitude_points, "
+                "s.frequency_points, s.transients FROM clips AS c LEFT JOIN clip_sizes AS s "
+                "ON s.name = c.name AND s.updated_unix_s = c.updated_unix_s "
+                "ORDER BY c.name LIMIT ? OFFSET ?",
+                (limit, offset),
+            ).fetchall()
+        sizes = []
+        for name, updated_unix_s, *known in rows:
+            size = (
+                ClipSize(name, *known) if known[0] is not None else self._size(name, updated_unix_s)
+            )
+            if size is not None:
+                sizes.append(size)
+        return sizes
+
+    def _size(self, name: str, updated_unix_s: float) -> ClipSize | None:
+        """Read the sizes of the stored clip ``name`` from its JSON and keep them."""
+        with self._using(writes=True) as db:
+            row = db.execute(
+                "SELECT json_valid(clip), json_extract(clip, '$.duration_s'), "
+                "json_array_length(clip, '$.amplitude'), json_array_length(clip, '$.frequency'), "
+                "json_array_length(clip, '$.transients') FROM clips WHERE name = ?",
+                (name,),
+            ).fetchone()
+            if row is None or not row[0] or not isinstance(row[1], (int, float)):
+                logger.warning("clip %r no longer reads (not JSON); left out of GET /clips", name)
+                return None
+            size = ClipSize(name, float(row[1]), row[2] or 0, row[3] or 0, row[4] or 0)
+            db.execute(
+                "INSERT OR REPLACE INTO clip_sizes VALUES (?, ?, ?, ?, ?, ?)",
+                (*size, updated_unix_s),
+            )
+        return size
 
     def get_clip(self, name: str) -> HapticClip | None:
         """The clip stored as ``name``, or None (StoredPatternError: it no longer reads)."""
         return self._read("clips", HapticClip, name, field="clip")
 
     def put_clip(self, name: str, clip: HapticClip) -> bool:
-        """Store ``clip`` under ``name``; True if the name was new."""
-        return self._replace("clips", name, (clip.model_dump_json(), time.time()))
+        """Store ``clip`` under ``name``, and its sizes beside it; True if the name was new."""
+        updated_unix_s = time.time()
+        new = self._replace("clips", name, (clip.model_dump_json(), updated_unix_s))
+        size = ClipSize(
+            name, clip.duration_s, len(clip.amplitude), len(clip.frequency), len(clip.transients)
+        )
+        with self._using(writes=True) as db:
+            db.execute(
+                "INSERT OR REPLACE INTO clip_sizes VALUES (?, ?, ?, ?, ?, ?)",
+                (*size, updated_unix_s),
+            )
+        return new
 
     def delete_clip(self, name: str) -> bool:
-        """Remove the clip ``name``; False if it was not stored."""
+        """Remove the clip ``name`` (and its sizes); False if it was not stored."""
+        with self._using(writes=True) as db:
+            db.execute("DELETE FROM clip_sizes WHERE name = ?", (name,))
         return self._delete("clips", name)
 
     # -- wearer profiles (offsets in dB per carrier band and actuator) ----------------------
 
-    def list_wearers(self) -> builtins.list[tuple[str, WearerProfile]]:
-        """Every readable wearer profile, sorted by name (a row that no longer reads is
-        logged and left out)."""
-        return self._read_all("wearers", WearerProfile)
+    def list_wearers(
+        self, *, limit: int | None = None, offset: int = 0
+    ) -> builtins.list[tuple[str, WearerProfile]]:
+        """The readable wearer profiles, sorted by name (a row that no longer reads is
+        logged and left out): every one, or at most ``limit`` from the ``offset``-th."""
+        return self._read_all("wearers", WearerProfile, limit=limit, offset=offset)
 
     def get_wearer(self, name: str) -> WearerProfile | None:
         """The wearer profile stored as ``name``, or None (StoredPatternError: it no longer

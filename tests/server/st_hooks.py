@@ -43,6 +43,7 @@ DOCUMENTED_RULES: dict[str, str] = {
     "a .tact project of at most 100,000 points": r"brings the project past",
     # What depends on the library's contents.
     "a wearer chosen (PUT /wearer) among the stored profiles": r"is not a stored wearer",
+    "a clip carrier naming a stored clip (GET /clips)": r"is not in the clip library",
     "a path inside the device's layout with outside='error'": r"outside the actuator layout",
     "a WAV render within max_render_duration_s": r"max_render_duration_s",
     # Comparisons between fields and sums over them, which a JSON Schema cannot make.

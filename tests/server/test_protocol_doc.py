@@ -40,7 +40,11 @@ VOLATILE = {
     "output_latency_s",
 }
 """Keys whose values depend on when the example runs: compared by type only."""
-VOLATILE_BY_ROUTE = {"/clock": {"frames"}, "/health": {"underruns", "render_load_p99"}}
+VOLATILE_BY_ROUTE = {
+    "/clock": {"frames"},
+    "/stop": {"frames"},
+    "/health": {"underruns", "render_load_p99"},
+}
 RECEIVE_TIMEOUT_S = 5.0
 """Longest wait for a documented frame (the watchdog example waits 2 s)."""
 STATE_TIMEOUT_S = 3.0

@@ -94,3 +94,30 @@ def test_unreadable_row_is_the_library_fault_and_the_rest_stays_usable(
         assert refused.value.status_code == 500
     assert store.delete("bad") is True
     store.close()
+
+
+def test_clip_sizes_are_kept_and_read_once_for_a_clip_stored_before(tmp_path: Path) -> None:
+    """A library written before the sizes were kept (no ``clip_sizes`` rows) lists the
+    same sizes, read from the clips' JSON, and a replaced clip never shows its old ones."""
+    from phantomtouch.schema import HapticClip
+    from phantomtouch.service.store import ClipSize
+
+    path = tmp_path / "p.db"
+    store = PatternStore.open(path)
+    clip = HapticClip.model_validate(
+        {"duration_s": 2.0, "amplitude": [{"t_s": 0.0, "value": 1.0}, {"t_s": 1.0, "value": 0.0}]}
+    )
+    store.put_clip("a", clip)
+    store.put_clip("b", clip)
+    store.put_clip("b", clip.model_copy(update={"duration_s": 3.0}))
+    expected = [ClipSize("a", 2.0, 2, 1, 0), ClipSize("b", 3.0, 2, 1, 0)]
+    assert store.clip_sizes(limit=10) == expected
+    store.close()
+    with sqlite3.connect(path) as db:
+        db.execute("DELETE FROM clip_sizes")
+    again = PatternStore.open(path)
+    assert again.clip_sizes(limit=10) == expected
+    assert again.clip_sizes(limit=1, offset=1) == expected[1:]
+    again.close()
+    with sqlite3.connect(path) as db:
+        assert db.execute("SELECT COUNT(*) FROM clip_sizes").fetchone() == (2,)

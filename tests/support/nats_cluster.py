@@ -2,7 +2,9 @@
 
 Three servers by default, each with its own store folder, client port, cluster port and
 monitoring port, all on 127.0.0.1. JetStream may be left off (a server with no registry);
-``users`` closes the cluster with the configuration ``phantomtouch fleet-config`` writes.
+``users`` closes the cluster with the configuration ``phantomtouch fleet-config`` writes,
+its route ports included (``open_routes`` leaves those open, as a cluster built before
+route authorization was).
 :meth:`NatsCluster.kill` ends one with SIGKILL, as in a crash, and
 :meth:`NatsCluster.restart` brings it back. Missing ``nats-server`` fails the test under
 ``CI=true`` and skips it elsewhere (:func:`require_nats_server`).
@@ -19,7 +21,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from phantomtouch.fleet.nats_config import FleetUser, authorization
+from phantomtouch.fleet.nats_config import FleetUser, RouteUser, authorization
 from tests.support.live_server import HOST, free_ports
 
 START_TIMEOUT_S = 20.0
@@ -54,12 +56,15 @@ class NatsCluster:
         password: str | None = None,
         jetstream: bool = True,
         users: list[FleetUser] | None = None,
+        open_routes: bool = False,
     ) -> None:
         self.binary = require_nats_server()
         self.folder = folder
         self.size = size
         self.jetstream = jetstream
         self.users = {user.name: user for user in users or []}
+        self.route = RouteUser.new() if users and not open_routes else None
+        """The route user of a closed cluster (None: its route ports admit anyone)."""
         self.user = user
         self.password = password
         ports = free_ports(3 * size)
@@ -84,13 +89,20 @@ class NatsCluster:
         return {"PHANTOMTOUCH_FLEET_USER": user.name, "PHANTOMTOUCH_FLEET_PASSWORD": user.password}
 
     @property
+    def route_ports(self) -> str:
+        """The route ports as ``--fleet-routes`` takes them."""
+        return ",".join(f"{HOST}:{port}" for port in self.cluster_ports)
+
+    @property
     def servers(self) -> str:
         """The URLs as ``--fleet`` takes them."""
         return ",".join(self.urls)
 
     def _config(self, index: int) -> Path:
         routes = ", ".join(
-            f"nats-route://{HOST}:{port}" for i, port in enumerate(self.cluster_ports) if i != index
+            self.route.route_url(HOST, port) if self.route else f"nats-route://{HOST}:{port}"
+            for i, port in enumerate(self.cluster_ports)
+            if i != index
         )
         store = self.folder / f"n{index}"
         store.mkdir(parents=True, exist_ok=True)
@@ -114,6 +126,7 @@ cluster {{
   name: phantomtouch-test
   listen: {HOST}:{self.cluster_ports[index]}
   routes: [{routes}]
+  {self.route.authorization() if self.route else ""}
 }}
 """
         if self.user is not None:

@@ -14,7 +14,7 @@ from pydantic import TypeAdapter
 
 from phantomtouch.schema import HapticClip
 from phantomtouch.schema.clip import CLIP_NAME_REGEX
-from phantomtouch.server.deps import StoreDep
+from phantomtouch.server.deps import LimitParam, OffsetParam, StoreDep
 from phantomtouch.server.routes import library
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import responses
@@ -37,10 +37,21 @@ def clip_info(name: str, clip: HapticClip) -> ClipInfo:
     )
 
 
-@router.get("", response_model=list[ClipInfo], responses=responses(401, 503), summary="Clips")
-def list_clips(store: StoreDep) -> list[ClipInfo]:
-    """Every stored clip with its duration and size, sorted by name."""
-    return [clip_info(name, clip) for name, clip in store.list_clips()]
+@router.get("", response_model=list[ClipInfo], responses=responses(401, 422, 503), summary="Clips")
+def list_clips(store: StoreDep, limit: LimitParam = 100, offset: OffsetParam = 0) -> list[ClipInfo]:
+    """The stored clips with their duration and size, sorted by name, a page at a time:
+    at most `limit` from the `offset`-th (a page shorter than `limit` is the last). The
+    sizes are read without loading any clip."""
+    return [
+        ClipInfo(
+            name=size.name,
+            duration_s=size.duration_s,
+            amplitude_points=size.amplitude_points,
+            frequency_points=size.frequency_points,
+            transients=size.transients,
+        )
+        for size in store.clip_sizes(limit=limit, offset=offset)
+    ]
 
 
 NOT_STORED = "in the clip library (GET /clips)"

@@ -73,7 +73,9 @@ async def post_stop(service: ServiceDep) -> StopAnswer:
     `busy`.
     """
     service.stop_everything()
-    return StopAnswer(server_time_s=service.engine.server_time_s())
+    return StopAnswer(
+        server_time_s=service.engine.server_time_s(), frames=service.engine.now_frames
+    )
 
 
 JOB_ANSWER: dict[str, Any] = {

@@ -22,7 +22,7 @@ from phantomtouch.schema.wearer import (
     check_channels,
     check_run_channels,
 )
-from phantomtouch.server.deps import ServiceDep, StoreDep
+from phantomtouch.server.deps import LimitParam, OffsetParam, ServiceDep, StoreDep
 from phantomtouch.server.routes import library
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import responses
@@ -67,15 +67,20 @@ NOT_STORED = "a stored wearer (GET /wearers)"
 NO_RUN = "a wearer with a stored matching run (PUT /wearers/{name}/run)"
 
 
-@router.get("", response_model=list[WearerInfo], responses=responses(401, 503), summary="Wearers")
-def list_wearers(service: ServiceDep) -> list[WearerInfo]:
-    """Every stored wearer profile, sorted by name; `active` marks the one the output
-    stage applies now (`GET /wearer`)."""
+@router.get(
+    "", response_model=list[WearerInfo], responses=responses(401, 422, 503), summary="Wearers"
+)
+def list_wearers(
+    service: ServiceDep, limit: LimitParam = 100, offset: OffsetParam = 0
+) -> list[WearerInfo]:
+    """The stored wearer profiles, sorted by name, a page at a time: at most `limit`
+    from the `offset`-th (a page shorter than `limit` is the last); `active` marks the
+    one the output stage applies now (`GET /wearer`)."""
     choice = service.wearer.choice
     active = None if choice is None else choice.name
     return [
         WearerInfo(name=name, active=name == active, profile=profile)
-        for name, profile in service.store.list_wearers()
+        for name, profile in service.store.list_wearers(limit=limit, offset=offset)
     ]
 
 

@@ -62,6 +62,8 @@ class StopAnswer(_Answer):
     """``POST /stop``."""
 
     server_time_s: float
+    frames: int | None = None
+    """The engine's sample frame when the stop was applied (None from an older server)."""
     stopped: bool = True
 
 
