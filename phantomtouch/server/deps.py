@@ -47,7 +47,7 @@ else:
 StoreDep = Annotated[PatternStore, Depends(get_store)]
 PatternNameParam = Annotated[str, Path(**name_rules(PATTERN_NAME_REGEX, "my-stroke"))]
 LimitParam = Annotated[int, Query(ge=1, le=1000, description="Most entries of the page (1-1000).")]
-"""The size of a page of a list (``GET /clips``, ``GET /wearers``)."""
+"""The size of a page of a list (``GET /clips``, ``GET /wearers``, ``GET /tact``)."""
 OffsetParam = Annotated[
     int, Query(ge=0, le=1 << 31, description="Entries skipped before the page (0 or more).")
 ]

@@ -10,8 +10,6 @@ from phantomtouch.clips.tact_score import MAX_SCALE, MIN_DURATION_SCALE
 from phantomtouch.service.models import PATTERN_NAME_REGEX, Timing, name_rules
 
 TactName = Annotated[str, Field(**name_rules(PATTERN_NAME_REGEX, "Stab_ArmL"))]
-MAX_PAGE = 1000
-"""Most projects one ``GET /tact`` lists."""
 
 
 class TactPlay(Timing):

@@ -10,17 +10,17 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Path, Query, Request, Response
+from fastapi import APIRouter, Depends, Path, Request, Response
 from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
-from phantomtouch.server.deps import ClientDep, ServiceDep, StoreDep
+from phantomtouch.server.deps import ClientDep, LimitParam, OffsetParam, ServiceDep, StoreDep
 from phantomtouch.server.routes import library
 from phantomtouch.service import tact_library
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import responses
 from phantomtouch.service.models import PATTERN_NAME_REGEX, name_rules
-from phantomtouch.service.tact_models import MAX_PAGE, ScoreAccepted, TactInfo, TactPlay
+from phantomtouch.service.tact_models import ScoreAccepted, TactInfo, TactPlay
 
 router = APIRouter(prefix="/tact", tags=["patterns"])
 
@@ -101,8 +101,8 @@ async def project_body(request: Request) -> tuple[str, Any]:
 )
 def list_tact(
     store: StoreDep,
-    limit: Annotated[int, Query(ge=1, le=MAX_PAGE, description="Most projects listed.")] = 100,
-    offset: Annotated[int, Query(ge=0, le=1 << 62, description="Projects skipped.")] = 0,
+    limit: LimitParam = 100,
+    offset: OffsetParam = 0,
 ) -> list[TactInfo]:
     """One page of the stored projects, sorted by name, with their size and length; fewer
     than `limit` means the last page. The projects themselves are not read."""
