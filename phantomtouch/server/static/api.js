@@ -30,13 +30,15 @@ async function errorFrom(response) {
 // A service started with a token serves this page at /?token=...; every call carries it.
 export const token = new URLSearchParams(location.search).get("token");
 
-async function request(method, path, { json, accept = "application/json", signal } = {}) {
+// `text` sends a body that is already JSON text as it is (a file's own bytes, which the
+// service parses itself: a byte order mark, any spelling).
+async function request(method, path, { json, text, accept = "application/json", signal } = {}) {
   const headers = { Accept: accept };
   if (token) headers.Authorization = `Bearer ${token}`;
   const init = { method, headers, signal };
-  if (json !== undefined) {
+  if (json !== undefined || text !== undefined) {
     headers["Content-Type"] = "application/json";
-    init.body = JSON.stringify(json);
+    init.body = text !== undefined ? text : JSON.stringify(json);
   }
   let response;
   try {
@@ -67,6 +69,9 @@ export const api = {
   touch: (touchRequest) => json("POST", "/touch", { json: touchRequest }),
   plan: (touchRequest, signal) => json("POST", "/render", { json: touchRequest, signal }),
   stop: () => json("POST", "/stop"),
+  tactList: (limit) => json("GET", `/tact?limit=${limit}&offset=0`),
+  putTact: (name, text) => json("PUT", `/tact/${encodeURIComponent(name)}`, { text }),
+  playTact: (name) => json("POST", `/tact/${encodeURIComponent(name)}/play`, { json: {} }),
   health: () => json("GET", "/health"),
   putWearer: (name, profile) =>
     json("PUT", `/wearers/${encodeURIComponent(name)}`, { json: profile }),

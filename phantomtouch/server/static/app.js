@@ -1,5 +1,5 @@
-// The page: wires the armband, the live contacts, the designer, the status view and the
-// stop button to the service.
+// The page: wires the armband, the live contacts, the designer, the status view, the
+// .tact panel and the stop button to the service.
 
 import { api, token } from "./api.js";
 import { Armband } from "./armband.js";
@@ -8,6 +8,7 @@ import { Designer } from "./designer.js";
 import { LiveTouch } from "./live.js";
 import { Session } from "./socket.js";
 import { StatusView } from "./status.js";
+import { TactPanel } from "./tact.js";
 import { formatNumber } from "./units.js";
 import { WearerPanel } from "./wearer.js";
 
@@ -140,12 +141,14 @@ async function main() {
   };
   designer = new Designer({ armband, chart: new GainChart($("chart")), session, showError, channelLabels });
   new WearerPanel({ device, showError });
+  const tact = new TactPanel({ showError });
   session.start();
   try {
     await designer.load();
   } catch (exc) {
     showError(`Cannot load the presets: ${exc.message}`);
   }
+  await tact.loadList();
   document.body.dataset.ready = "true";
 }
 
