@@ -16,6 +16,8 @@ CORPUS = Path(__file__).parents[1] / "clips" / "samples" / "tact" / "bhaptics-po
 ARM_FILE = CORPUS / "Arm" / "RubbingDefib.tact"
 VEST_FILE = CORPUS / "Vest" / "ActiveBuff.tact"
 ARMS = {"ForearmL", "ForearmR"}
+LIST_LIMIT = 20
+"""How many stored projects the panel lists (the first page of GET /tact)."""
 REFUSED = r"Failed to load resource: the server responded with a status of 422"
 
 
@@ -95,7 +97,10 @@ def test_a_chosen_arm_file_is_stored_summarised_and_played(
     )
     # "See": the page's armband shows the live levels as it plays.
     wait_until(page, lambda: max(page_levels(page)) > 0)
-    assert page.inner_text("#tact-message").startswith("Playing my_defib__1_")
+    page.wait_for_function(
+        "() => document.getElementById('tact-message').textContent"
+        ".startsWith('Playing my_defib__1_: 1.00 s, 6 voices')"
+    )
     screenshot(page, "tact_playing")
     observer.wait_for(
         lambda s: s["active_voices"] == 0, since=start, timeout_s=10.0, what="the end"
@@ -162,3 +167,54 @@ def test_a_file_that_is_not_json_is_refused_in_one_line(
     assert line.startswith("broken.tact not stored: ")
     assert "\n" not in line
     assert httpx.get(f"{server}/tact/broken").status_code == 404
+
+
+def test_the_list_shows_the_first_page_only(page: Any, server: str) -> None:
+    tap = {
+        "project": {
+            "tracks": [
+                {
+                    "effects": [
+                        {
+                            "startTime": 0,
+                            "offsetTime": 300,
+                            "modes": {
+                                "ForearmL": {
+                                    "mode": "DOT_MODE",
+                                    "dotMode": {
+                                        "feedback": [
+                                            {
+                                                "startTime": 0,
+                                                "endTime": 300,
+                                                "playbackType": "NONE",
+                                                "pointList": [{"index": 1, "intensity": 1}],
+                                            }
+                                        ]
+                                    },
+                                }
+                            },
+                        }
+                    ]
+                }
+            ]
+        }
+    }
+    names = [f"web-tap-{i:02d}" for i in range(LIST_LIMIT + 1)]
+    for name in names:
+        httpx.put(f"{server}/tact/{name}", json=tap).raise_for_status()
+    try:
+        page.click("#tact-refresh")
+        page.wait_for_selector("#tact-more:not([hidden])")
+        first_page = [e["name"] for e in httpx.get(f"{server}/tact?limit={LIST_LIMIT}").json()]
+        shown = page.eval_on_selector_all(
+            "#tact-list li", "items => items.map(i => i.dataset.name)"
+        )
+        assert shown == first_page
+        assert len(shown) == LIST_LIMIT
+        assert f"first {LIST_LIMIT}" in page.inner_text("#tact-more")
+        assert page.inner_text('#tact-list li[data-name="web-tap-00"] span') == (
+            "0.30 s · ForearmL · 1 effect"
+        )
+    finally:
+        for name in names:
+            httpx.delete(f"{server}/tact/{name}")

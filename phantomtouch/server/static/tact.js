@@ -128,6 +128,8 @@ export class TactPanel {
     const list = $("tact-list");
     list.replaceChildren(...entries.map((entry) => this.item(entry)));
     $("tact-empty").hidden = entries.length > 0;
+    $("tact-more").textContent = `The first ${LIST_LIMIT} by name; GET /tact pages through `
+      + "the rest.";
     $("tact-more").hidden = entries.length < LIST_LIMIT;
   }
 
