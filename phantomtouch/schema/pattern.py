@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Self
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictInt, model_validator
 from pydantic.config import JsonValue
 
 from phantomtouch.schema import limits
@@ -32,6 +32,8 @@ def _whole_number(value: Any) -> Any:
 
 JsonInt = Annotated[int, BeforeValidator(_whole_number)]
 """An integer as JSON Schema counts them: ``3`` and ``3.0`` alike (even when strict)."""
+StrictJsonInt = Annotated[StrictInt, BeforeValidator(_whole_number)]
+"""The same in a model that is not strict: ``3`` and ``3.0``, never ``"3"`` or ``true``."""
 
 Law = Literal["linear", "log", "power"]
 Mode = Literal["1d", "2d"]

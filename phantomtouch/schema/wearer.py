@@ -28,13 +28,13 @@ from pydantic import (
     ConfigDict,
     Field,
     StrictBool,
-    StrictInt,
     StringConstraints,
     WithJsonSchema,
 )
 
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema.clip import CLIP_NAME_REGEX
+from phantomtouch.schema.pattern import StrictJsonInt
 
 MAX_OFFSET_DB = 20.0
 """Largest offset, either sign, dB."""
@@ -100,7 +100,7 @@ class WearerTrial(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    channel: StrictInt = Field(ge=1, le=64, description="The test actuator's output channel.")
+    channel: StrictJsonInt = Field(ge=1, le=64, description="The test actuator's output channel.")
     level_db: OffsetDb = Field(
         description=(
             "Level of the test interval as played, dB re the reference interval, within "
@@ -117,7 +117,7 @@ class WearerRun(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     band: Band = Field(description="The carrier band the run matches in.")
-    reference_channel: StrictInt = Field(
+    reference_channel: StrictJsonInt = Field(
         ge=1, le=64, description="The reference actuator's output channel."
     )
     trials: list[WearerTrial] = Field(

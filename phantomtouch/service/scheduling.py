@@ -216,7 +216,7 @@ async def schedule(
         try:
             engine.check_quota(owner, quota, least_s)  # before planning: a refusal costs none
         except QuotaRefused as refused:
-            raise quota_error(refused, least_s) from refused
+            raise quota_error(refused, least_s, names) from refused
         planned = service.plans.plan(pattern)
         first = start_frame(engine, request.timing())
         try:

@@ -223,7 +223,9 @@ def test_contacts_past_the_limit_are_refused() -> None:
         engine.contact_down("b", "1", 1.0, 1.0)
         engine.contact_down("b", "1", 2.0, 2.0)  # replacing one is fine
         with pytest.raises(EngineBusyError, match="max_contacts=2"):
-            engine.contact_down("c", "1", 1.0, 1.0)
+            engine.contact_down("a", "2", 1.0, 1.0)  # a holder of one, all others hold one
+        engine.contact_down("c", "1", 1.0, 1.0)  # a newcomer always gets one: the oldest yields
+        assert engine.contacts_of("c") == ["1"] and engine.contacts_of("a") == []
 
 
 @pytest.mark.parametrize(

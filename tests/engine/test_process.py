@@ -198,7 +198,7 @@ def test_contacts_get_slots_up_to_max_contacts() -> None:
         engine.contact_down("a", "1", 1.5, 2.0)  # down again: the same contact, one slot
         engine.contact_down("b", "1", 1.0, 3.0)
         with pytest.raises(EngineBusyError, match="max_contacts=2"):
-            engine.contact_down("c", "1", 1.0, 4.0)
+            engine.contact_down("b", "2", 1.0, 4.0)  # b holds one, and so does every other
         engine.contact_up("a", "1")
         engine.contact_down("c", "1", 1.0, 4.0)
         engine.contact_move("c", "1", 2.0, 5.0)

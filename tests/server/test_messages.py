@@ -119,13 +119,11 @@ def changed(document: dict[str, Any], keys: tuple[str | int, ...], value: Any) -
     [
         (("version",), ..., "version: Field required"),
         (("version", "major"), 2, "version.major=2"),
-        ((*ENVELOPES, "frequency"), ..., "signals.continuous.envelopes.frequency: Field required"),
-        ((*ENVELOPES, "frequency"), [], "signals.continuous.envelopes.frequency=[]"),
-        (
+        (  # Lofelt's data model: times never decrease (an equal time is a step, allowed)
             (*ENVELOPES, "amplitude", 2, "time"),
-            1.0,
-            "signals.continuous.envelopes.amplitude[2].time=1.0 must be after "
-            "amplitude[1].time=1.0 (times strictly increase)",
+            0.5,
+            "signals.continuous.envelopes.amplitude[2].time=0.5 must not be before "
+            "amplitude[1].time=1.0",
         ),
     ],
 )
