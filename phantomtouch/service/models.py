@@ -28,7 +28,6 @@ from pydantic.config import JsonDict
 from phantomtouch.schema import TouchPattern
 from phantomtouch.schema.device import Actuator
 from phantomtouch.schema.pattern import TIMING_RULES, not_both
-from phantomtouch.schema.wearer import WEARER_NAME_REGEX, Band, WearerProfile
 
 PATTERN_NAME_REGEX = (
     r"^(?:[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}"
@@ -387,42 +386,6 @@ class ClipInfo(BaseModel):
     amplitude_points: int
     frequency_points: int
     transients: int
-
-
-class WearerInfo(BaseModel):
-    """A wearer profile of the library, and whether the output stage applies it."""
-
-    name: str
-    active: bool = Field(description="The output stage is fitted to this wearer now (GET /wearer).")
-    profile: WearerProfile
-
-
-class WearerChoice(BaseModel):
-    """Which stored wearer profile the output stage applies, and in which band."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    name: str = Field(
-        min_length=1,
-        max_length=64,
-        pattern=WEARER_NAME_REGEX,
-        description="A stored wearer profile (GET /wearers).",
-    )
-    band: Band = Field(
-        default="sine_100hz",
-        description="The carrier band of the profile to apply (one band for the whole mix).",
-    )
-
-
-class ActiveWearerInfo(BaseModel):
-    """The wearer the output stage is fitted to, and the gains that makes per channel."""
-
-    name: str | None = Field(description="The wearer profile in force, or null: none.")
-    band: Band | None = Field(description="The band of that profile applied, or null.")
-    offsets_db: list[float] = Field(
-        description="Per output channel (index 0 is channel 1) the offset applied after the "
-        "device's calibration, dB (all 0 without a wearer)."
-    )
 
 
 class PresetInfo(BaseModel):

@@ -20,8 +20,8 @@ from phantomtouch.server.deps import ServiceDep
 from phantomtouch.server.routes import library
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import responses
-from phantomtouch.service.models import ActiveWearerInfo, WearerChoice
 from phantomtouch.service.running import Service
+from phantomtouch.service.wearer_models import ActiveWearerInfo, WearerChoice
 
 router = APIRouter(prefix="/wearer", tags=["wearers"])
 

@@ -26,7 +26,7 @@ from phantomtouch.server.deps import LimitParam, OffsetParam, ServiceDep, StoreD
 from phantomtouch.server.routes import library
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import responses
-from phantomtouch.service.models import WearerInfo
+from phantomtouch.service.wearer_models import WearerInfo
 
 router = APIRouter(prefix="/wearers", tags=["wearers"])
 
