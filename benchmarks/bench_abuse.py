@@ -47,8 +47,11 @@ abuse runs in a process of its own, bounded in count and time:
   whether the touch stayed on (``stayed_on``; False is what the stop promises). Its
   probe's keep-alive connection was opened before the crowd.
 
-Each line reports the probe's p50, p99 and slowest answer while the abuse ran and the
-underruns the engine counted meanwhile (``/metrics``)::
+Each line reports the probe's p50, p99 and slowest answer while the abuse ran, the
+underruns the engine counted meanwhile (``/metrics``) and, beside them, the machine's own
+stalls: ``cyclictest`` (:class:`realtime_floor.LatencyProbe`, one period a block of the
+service) counts its wake-ups at least one block late (``late``) and its latest (``late
+ms``), so an underrun the machine caused is told from one the service caused::
 
     python benchmarks/bench_abuse.py [--seconds 3]
 """
@@ -71,6 +74,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+from realtime_floor import LatencyProbe
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -114,14 +118,23 @@ def underruns(server: LiveServer, token: str | None = None) -> float:
 def measure(
     server: LiveServer, abuse: Callable[[], Any], *, auth: str | None = None
 ) -> dict[str, Any]:
+    headers = {"Authorization": f"Bearer {auth}"} if auth else {}
+    device = httpx.get(f"{server.url}/device", headers=headers, timeout=10).json()
+    block_us = round(1e6 * device["block_frames"] / device["sample_rate_hz"])
     before = underruns(server, auth)
-    with HealthProbe(server.url) as probe:
-        time.sleep(0.2)
-        started = time.perf_counter()
-        outcome = abuse()
-        took_s = time.perf_counter() - started
-        time.sleep(0.2)
+    machine = LatencyProbe(block_us).start()
+    try:
+        with HealthProbe(server.url) as probe:
+            time.sleep(0.2)
+            started = time.perf_counter()
+            outcome = abuse()
+            took_s = time.perf_counter() - started
+            time.sleep(0.2)
+    finally:
+        floor = machine.stop()
     return {
+        "machine_late": floor["late_wakeups"],
+        "machine_max_ms": floor["max_latency_us"] / 1e3,
         "took_s": took_s,
         "answers": len(probe.latencies_s),
         "p50_ms": probe.quantile_s(0.5) * 1e3,
@@ -304,13 +317,15 @@ def main(argv: list[str] | None = None) -> int:
         }
         inputs = set(input_abuses(server, osc_port)) | set(transport_abuses(server))
         print(
-            f"{'abuse':<18} {'s':>5} {'n':>6} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} underruns"
+            f"{'abuse':<18} {'s':>5} {'n':>6} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} "
+            f"underruns {'late':>5} {'late ms':>7}"
         )
         rows = ((name, measure(server, abuse)) for name, abuse in abuses.items())
         for name, row in itertools.chain(rows, stop_rows(Path(folder)).items()):
             print(
                 f"{name:<18} {row['took_s']:5.2f} {row['answers']:6d} {row['p50_ms']:7.2f} "
-                f"{row['p99_ms']:7.2f} {row['max_ms']:7.1f} {row['underruns']:9.0f}"
+                f"{row['p99_ms']:7.2f} {row['max_ms']:7.1f} {row['underruns']:9.0f} "
+                f"{row['machine_late']:5d} {row['machine_max_ms']:7.2f}"
                 + (
                     f"   {row['outcome']}"
                     if isinstance(row["outcome"], dict) or name == "ping flood" or name in inputs
