@@ -184,13 +184,17 @@ def _answer(page: Any, wearer: Wearer, answer: Answer, *, stop_after: int | None
     pending = page.get_attribute("#wearer-trial", "data-state") == "asking"
     first_number = asked if pending else asked + 1
     while stop_after is None or answered < stop_after:
-        page.wait_for_function(
-            f"""() => {{
-                const trial = document.getElementById('wearer-trial');
-                return trial.dataset.done === 'match'
-                    || trial.dataset.question === '{first_number + answered}';
-            }}"""
-        )
+        try:
+            page.wait_for_function(
+                f"""() => {{
+                    const trial = document.getElementById('wearer-trial');
+                    return trial.dataset.done === 'match'
+                        || trial.dataset.question === '{first_number + answered}';
+                }}"""
+            )
+        except Exception as exc:  # the page's own line says why the run stopped
+            message = page.text_content("#wearer-message")
+            raise AssertionError(f"trial {first_number + answered}: {message!r}") from exc
         if page.get_attribute("#wearer-trial", "data-done") == "match":
             break
         view = _trial_view(page)

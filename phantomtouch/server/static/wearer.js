@@ -35,6 +35,21 @@ function stillTouch(point, levelDb, carrier, durationS, startInMs = 0) {
   };
 }
 
+// A touch the engine refuses for a moment (503 busy: its render budget is taken) is asked
+// again a few times before the run stops: a wearer's run should not end on a passing load.
+const BUSY_RETRIES = 3;
+
+async function touchWhenFree(body) {
+  for (let attempt = 0; ; attempt += 1) {
+    try {
+      return await api.touch(body);
+    } catch (exc) {
+      if (exc.status !== 503 || attempt >= BUSY_RETRIES) throw exc;
+      await new Promise((resolve) => setTimeout(resolve, 250 * (attempt + 1)));
+    }
+  }
+}
+
 export class WearerPanel {
   constructor({ device, showError }) {
     this.device = device;
@@ -282,8 +297,8 @@ export class WearerPanel {
     const touch = ([actuator, levelDb], atMs) => stillTouch(
       [actuator.x_cm, actuator.y_cm], levelDb, carrier, this.durationS, atMs,
     );
-    await api.touch(touch(intervals[0], 0));
-    await api.touch(touch(intervals[1], secondAtMs));
+    await touchWhenFree(touch(intervals[0], 0));
+    await touchWhenFree(touch(intervals[1], secondAtMs));
   }
 
   async replay() {
@@ -387,7 +402,9 @@ export class WearerPanel {
     const points = checkPoints(this.device).sort(() => Math.random() - 0.5);
     const rows = [];
     for (const [number, point] of points.entries()) {
-      await api.touch(stillTouch(point, this.levels.referenceDb, CARRIERS[this.band], this.durationS));
+      await touchWhenFree(
+        stillTouch(point, this.levels.referenceDb, CARRIERS[this.band], this.durationS),
+      );
       $("wearer-progress-bar").max = points.length;
       $("wearer-progress-bar").value = number;
       $("wearer-progress-text").textContent = `Point ${number + 1} of ${points.length}`;
