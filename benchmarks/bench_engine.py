@@ -57,10 +57,11 @@ class TimedSink:
     output_device = None
     underruns = 0
     output_latency_s = 0.0
+    period_source = "profile"
 
     def __init__(self, device: pt.DeviceProfile) -> None:
         self.sample_rate_hz = device.sample_rate_hz
-        self.block_frames = device.block_frames
+        self.block_frames = self.period_frames = device.block_frames
         self.channels = device.channels
         self._render: RenderFn | None = None
         self._buffer = np.zeros((device.block_frames, device.channels), dtype=np.float32)
@@ -175,6 +176,8 @@ class ProbedSink:
         self.realtime = inner.realtime
         self.sample_rate_hz = inner.sample_rate_hz
         self.block_frames = inner.block_frames
+        self.period_frames = inner.period_frames
+        self.period_source = inner.period_source
         self.channels = inner.channels
 
     @property

@@ -63,6 +63,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         "osc_listen": args.osc,
         "osc_map": args.osc_map,
         "wasapi_exclusive": args.exclusive or None,
+        "period_frames": args.period,
         "wearer": args.wearer,
         "wearer_band": args.wearer_band,
         "bhaptics_listen": args.bhaptics,
@@ -142,6 +143,14 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
         "--exclusive",
         action="store_true",
         help="open a WASAPI output in exclusive mode (Windows)",
+    )
+    parser.add_argument(
+        "--period",
+        type=int,
+        metavar="FRAMES",
+        help="the engine's block, frames (16 to 8192): on JACK a divisor of the server's "
+        "period (e.g. 64 with 'jackd -p 64'), elsewhere each callback's frames (default: the "
+        "sound card's period, else the device profile's block_frames)",
     )
     parser.add_argument(
         "--db",

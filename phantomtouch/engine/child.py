@@ -174,11 +174,12 @@ def serve(
         until the sink starts, then by the inbox's thread).
     reports : Connection
         Where the engine reports (write end): first ``("ready", (voice_cost,
-        start_cost, prerendered_cost), backend, output_device)`` or ``("failed",
-        exception)``, then lists of events (:mod:`phantomtouch.engine.messages`), sent
-        by the report box's thread.
+        start_cost, prerendered_cost), backend, output_device, (block_frames,
+        period_frames, period_source))`` or ``("failed", exception)``, then lists of
+        events (:mod:`phantomtouch.engine.messages`), sent by the report box's thread.
     device_json : str
-        The device profile as JSON.
+        The device profile as JSON; the engine plays it at the block its sink found
+        (the sound card's period, :class:`~phantomtouch.engine.sinks.Sink`).
     spec : SinkSpec
     options : dict
         ``queue_capacity``, ``max_voices``, ``contact`` (one move slot per
@@ -189,8 +190,8 @@ def serve(
     priority : int or None
         SCHED_FIFO priority for this process's threads.
     shared : dict
-        The shared memory: ``clock``, ``slots``, ``status``, ``loads``
-        (the scheduler's render loads).
+        The shared memory: ``clock``, ``slots``, ``status``, ``loads`` and
+        ``seconds`` (the scheduler's render loads and callback times).
     """
     # Ctrl+C and a SIGTERM to the group (`timeout`, a service manager) reach this process
     # too: the host closes the engine (with its fade-out); without a host, the closed pipe
@@ -206,7 +207,8 @@ def serve(
         )
         slots = MoveSlots(options["contact"].max_contacts, shared["slots"])
         status = StatusBlock(device.channels, shared["status"])
-        sink = spec.open(device)
+        sink = spec.open(device)  # first: the sound card's period is the engine's block
+        device = device.at_block(sink.block_frames)
         core = Core(
             device,
             sink,
@@ -217,6 +219,7 @@ def serve(
             chunk_frames=RENDER_AHEAD_FRAMES,
             clock=clock,
             render_loads=np.frombuffer(shared["loads"], dtype=np.float64),
+            render_seconds=np.frombuffer(shared["seconds"], dtype=np.float64),
         )
         costs = options["costs"]
         if costs is None:
@@ -225,7 +228,8 @@ def serve(
         reports.send(("failed", exc))
         return
     refuse_building()  # from now on a noise loop is only what the host hands over
-    reports.send(("ready", costs, sink.backend, sink.output_device))
+    period = (sink.block_frames, sink.period_frames, sink.period_source)
+    reports.send(("ready", costs, sink.backend, sink.output_device, period))
     intake = Intake(
         core,
         Inbox(commands, poll_s=device.block_frames / device.sample_rate_hz),

@@ -16,7 +16,7 @@ from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
 from phantomtouch.engine.prerender import Prerendered
-from phantomtouch.engine.scheduler import Scheduler, load_percentiles
+from phantomtouch.engine.scheduler import Scheduler, load_percentiles, ring_percentiles
 from phantomtouch.engine.sinks import CaptureSink, Sink
 from phantomtouch.engine.voices import DONE, PatternVoice
 from phantomtouch.errors import DeviceError
@@ -36,7 +36,7 @@ class Core:
         How live contacts start, end and strike.
     queue_capacity : int, >= 1
         Voices that may wait to start at once (see :class:`CommandQueue`).
-    rings, chunk_frames, clock, render_loads
+    rings, chunk_frames, clock, render_loads, render_seconds
         As for :class:`Scheduler`.
 
     Raises
@@ -56,6 +56,7 @@ class Core:
         chunk_frames: int,
         clock: SampleClock,
         render_loads: np.ndarray | None = None,
+        render_seconds: np.ndarray | None = None,
     ) -> None:
         for name in ("sample_rate_hz", "block_frames", "channels"):
             if getattr(sink, name) != getattr(device, name):
@@ -77,6 +78,7 @@ class Core:
             chunk_frames=chunk_frames,
             clocked=sink.realtime,
             render_loads=render_loads,
+            render_seconds=render_seconds,
         )
         self.scheduler.dac_delay = getattr(sink, "dac_delay_s", None)
         self._block_s = device.block_frames / device.sample_rate_hz
@@ -177,6 +179,7 @@ class Core:
         scheduler = self.scheduler
         mixer = scheduler.mixer
         load_p99, load_max = load_percentiles(scheduler.render_loads) if loads else (0.0, 0.0)
+        times = ring_percentiles(scheduler.render_seconds) if loads else (0.0, 0.0, 0.0)
         return {
             "now_frames": scheduler.frames,
             "active_voices": scheduler.active_voices,
@@ -191,6 +194,11 @@ class Core:
             "running": self.running,
             "render_load_p99": load_p99,
             "render_load_max": load_max,
+            "callback_p50_s": times[0],
+            "callback_p99_s": times[1],
+            "callback_max_s": times[2],
+            "period_frames": self.sink.period_frames,
+            "period_source": self.sink.period_source,
             "callback_errors": scheduler.callback_errors,
             "inline_renders": scheduler.work.inline_renders,
             "nonfinite_voices": scheduler.nonfinite_voices,

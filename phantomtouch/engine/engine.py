@@ -50,6 +50,8 @@ class LocalAudio:
         self, device: DeviceProfile, sink: Sink, links: Links, chunk_frames: int, clock: SampleClock
     ) -> None:
         self._links = links
+        self.device = device
+        """The device the engine plays: the profile at the sink's block."""
         self.core = Core(
             device,
             sink,
@@ -183,10 +185,12 @@ class Engine(EngineFront):
     Parameters
     ----------
     device : DeviceProfile
-        Layout, sample rate, block size, calibration and safety limits.
+        Layout, sample rate, calibration and safety limits; its ``block_frames`` is the
+        block where the sink has no period of its own.
     sink : Sink or None
-        Where the blocks go; the engine owns it from now on and closes it. None: a
-        :class:`~phantomtouch.engine.sinks.NullSink` (use
+        Where the blocks go; the engine owns it from now on and closes it, and renders
+        in its ``block_frames`` (the sound card's period: :attr:`device` is the profile
+        at that block). None: a :class:`~phantomtouch.engine.sinks.NullSink` (use
         :func:`~phantomtouch.engine.soundcard.open_default_sink` for the sound card).
     render_ahead_frames : int, >= 0
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
@@ -200,7 +204,7 @@ class Engine(EngineFront):
     ParameterError
         An argument is out of range.
     DeviceError
-        The sink's sample rate, block size or channels differ from the device's.
+        The sink's sample rate or channels differ from the device's.
     """
 
     def __init__(
@@ -219,11 +223,12 @@ class Engine(EngineFront):
                 f"clock={clock!r} must be a SampleClock at {device.sample_rate_hz} Hz or None"
             )
         check_int("render_ahead_frames", render_ahead_frames, 0, 1 << 20)
+        played = sink if sink is not None else NullSink(device)
         super().__init__(
             device,
             lambda links: LocalAudio(
-                device,
-                sink if sink is not None else NullSink(device),
+                device.at_block(played.block_frames),
+                played,
                 links,
                 render_ahead_frames,
                 clock if clock is not None else SampleClock(device.sample_rate_hz),

@@ -101,7 +101,8 @@ class EngineFront(JobCalls, ContactCalls):
     device : DeviceProfile
     audio : callable
         ``audio(links)`` makes the audio side (:class:`Links`), once the arguments below
-        were checked.
+        were checked; its ``device`` (the profile at the block its sink found, the sound
+        card's period) is the engine's :attr:`device`.
     queue_capacity : int, 1 <= queue_capacity <= 1_000_000
         Most jobs scheduled or playing at once, and most voices waiting to start.
     max_voices : int, 1 <= max_voices <= 1_000_000
@@ -151,19 +152,9 @@ class EngineFront(JobCalls, ContactCalls):
         costs = None  # measured by the audio side, unless given
         if voice_cost is not None or start_cost is not None:
             costs = (voice_cost or 0.0, start_cost or 0.0, voice_cost or 0.0)
-        self.device = device
-        """The device profile, and its figures below (host, any thread)."""
-        self.sample_rate_hz = device.sample_rate_hz
-        self.block_frames = device.block_frames
-        self.channels = device.channels
         settings = contact or ContactSettings()
         self._queue_capacity = queue_capacity
-        self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
         self._policy = self._check_policy(voice_policy)
-        self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
-        self.plans = PlanCache(device, prerender_max_s=prerender_max_s)
-        """The one plan cache (host, any thread): the service plans through it."""
-        self._touchdowns = Touchdowns(device, settings)
         self._lock = threading.RLock()
         self._jobs = JobTable()
         self._contacts = OwnerTable(settings.max_contacts)
@@ -174,6 +165,18 @@ class EngineFront(JobCalls, ContactCalls):
         self._audio: LocalAudio | ChildAudio = audio(
             Links(settings, queue_capacity, max_voices, costs, self._apply_events, self._lost)
         )
+        device = self._audio.device  # at the block the sink found: the sound card's period
+        self.device = device
+        """The device profile at the engine's block, and its figures below (host, any
+        thread)."""
+        self.sample_rate_hz = device.sample_rate_hz
+        self.block_frames = device.block_frames
+        self.channels = device.channels
+        self._admission = Admission(device, max_voices=max_voices, render_budget=render_budget)
+        self._steal_fade_frames = max(1, round(STEAL_FADE_S * device.sample_rate_hz))
+        self.plans = PlanCache(device, prerender_max_s=prerender_max_s)
+        """The one plan cache (host, any thread): the service plans through it."""
+        self._touchdowns = Touchdowns(device, settings)
         self._admission.take_costs(self._audio.costs)
 
     def start(self) -> None:

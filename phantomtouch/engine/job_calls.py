@@ -39,7 +39,8 @@ promised: its voice is prepared outside the callback meanwhile (``docs/engine.md
 
 
 def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
-    """The plan of a pattern for ``device`` (a given plan must be made for ``device``).
+    """The plan of a pattern for ``device`` (a given plan must be made for ``device``, at
+    any block size: a plan's samples do not depend on it).
 
     Raises
     ------
@@ -47,7 +48,7 @@ def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
         The pattern cannot be planned, or the plan is for another device.
     """
     if isinstance(pattern, Plan):
-        if pattern.device != device:
+        if pattern.device.at_block(device.block_frames) != device:
             raise ParameterError(
                 f"pattern is a Plan for device {pattern.device.name!r} at "
                 f"{pattern.sample_rate_hz} Hz; plan it for this engine's device"

@@ -6,6 +6,7 @@ interpreter lock the audio callback needs. Nothing here waits for the engine pro
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import threading
@@ -28,7 +29,7 @@ from phantomtouch.engine.messages import (
 )
 from phantomtouch.engine.noise import SharedLoops, loop_key
 from phantomtouch.engine.plan_memory import SharedPlans
-from phantomtouch.engine.scheduler import load_percentiles
+from phantomtouch.engine.scheduler import load_percentiles, ring_percentiles
 from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess
 from phantomtouch.errors import DeviceError, EngineBusyError
@@ -87,6 +88,19 @@ class ChildAudio:
         self.costs = self._options["costs"] = self._child.costs  # a restart measures nothing
         self.backend = self._child.backend
         self.output_device = self._child.output_device
+        self.device = self._device = device.at_block(self._child.block_frames)
+        """The device at the block the engine process's sink found (its period)."""
+        self.period_frames = self._child.period_frames
+        self.period_source = self._child.period_source
+        # a restarted engine process keeps this block (or fails to start, and is retried)
+        self._spawn = functools.partial(
+            ChildProcess,
+            self.device,
+            dataclasses.replace(spec, period_frames=self.device.block_frames),
+            self._options,
+            priority,
+            self._read_reports,
+        )
         self._watchdog = threading.Thread(
             target=self._watch, name="phantomtouch-engine-watchdog", daemon=True
         )
@@ -316,9 +330,15 @@ class ChildAudio:
     def figures(self) -> dict[str, Any]:
         figures = self._child.status.read()
         load_p99, load_max = load_percentiles(self._child.loads)
+        times = ring_percentiles(self._child.seconds)
         figures.update(
             render_load_p99=load_p99,
             render_load_max=load_max,
+            callback_p50_s=times[0],
+            callback_p99_s=times[1],
+            callback_max_s=times[2],
+            period_frames=self.period_frames,
+            period_source=self.period_source,
             backend=self.backend,
             output_device=self.output_device,
             state=self.state,

@@ -68,8 +68,11 @@ class Scheduler:
         ``("cancel", voice, frame)`` (voided before it started), ``("stop_all", frame)``.
     render_loads : ndarray, shape (RENDER_TIMES,), float64
         Wall time of each of the last calls of :meth:`render` over the playing time of
-        the frames it rendered (a ring; NaN where no call was timed yet; in the engine
-        process, shared memory the host reads).
+        the frames it rendered (the sink's period: the time the callback really has; a
+        ring; NaN where no call was timed yet; in the engine process, shared memory the
+        host reads).
+    render_seconds : ndarray, shape (RENDER_TIMES,), float64
+        Wall time of the same calls, s (a ring beside ``render_loads``, like it).
     intake : callable or None
         Called at the start of every block, before its commands apply (the engine
         process's ``Intake.run``; set before the sink starts).
@@ -88,6 +91,7 @@ class Scheduler:
         chunk_frames: int,
         clocked: bool = True,
         render_loads: np.ndarray | None = None,
+        render_seconds: np.ndarray | None = None,
     ) -> None:
         self.block_frames = device.block_frames
         self.queue = queue
@@ -117,6 +121,10 @@ class Scheduler:
             render_loads = np.empty(RENDER_TIMES)
         render_loads.fill(np.nan)
         self.render_loads = render_loads
+        if render_seconds is None:
+            render_seconds = np.empty(RENDER_TIMES)
+        render_seconds.fill(np.nan)
+        self.render_seconds = render_seconds
         self._timed = 0
 
     def next_block_frame(self) -> int:
@@ -145,8 +153,10 @@ class Scheduler:
                 self._voices = []
                 self.active_voices = 0
                 self.frames += block.shape[0]
-        playing_s = out.shape[0] / self.clock.sample_rate_hz
-        self.render_loads[self._timed % RENDER_TIMES] = (time.monotonic() - began_s) / playing_s
+        spent_s = time.monotonic() - began_s
+        slot = self._timed % RENDER_TIMES
+        self.render_seconds[slot] = spent_s
+        self.render_loads[slot] = spent_s * self.clock.sample_rate_hz / out.shape[0]
         self._timed += 1
 
     def _block(self, out: np.ndarray) -> None:
@@ -270,7 +280,15 @@ class Scheduler:
 
 def load_percentiles(loads: np.ndarray) -> tuple[float, float]:
     """p99 and largest of a ring of render loads, NaN entries left out (0, 0 when empty)."""
-    timed = loads[~np.isnan(loads)]
+    _, p99, largest = ring_percentiles(loads)
+    return p99, largest
+
+
+def ring_percentiles(ring: np.ndarray) -> tuple[float, float, float]:
+    """p50, p99 and largest of a ring (render loads or seconds), NaN entries left out
+    (zeros when empty). Any thread, outside the callback."""
+    timed = ring[~np.isnan(ring)]
     if timed.size == 0:
-        return 0.0, 0.0
-    return float(np.percentile(timed, 99)), float(timed.max())
+        return 0.0, 0.0, 0.0
+    p50, p99 = np.percentile(timed, [50, 99])
+    return float(p50), float(p99), float(timed.max())

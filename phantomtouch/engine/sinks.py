@@ -20,8 +20,9 @@ RenderFn = Callable[[np.ndarray], None]
 
 
 class Sink(Protocol):
-    """Where the engine's blocks go: once per block, the sink calls the engine's render
-    function with a float32 buffer of shape (block_frames, channels) that it fills."""
+    """Where the engine's blocks go: once per period, the sink calls the engine's render
+    function with a float32 buffer of shape (period_frames, channels) that it fills; the
+    engine renders it in blocks of ``block_frames``, which divides ``period_frames``."""
 
     backend: str
     """``"sounddevice"``, ``"null"`` or ``"capture"``."""
@@ -29,6 +30,14 @@ class Sink(Protocol):
     """Blocks are pulled at the pace of a clock (not by the caller)."""
     sample_rate_hz: int
     block_frames: int
+    """The engine's block: ``period_frames`` or a fixed divisor of it."""
+    period_frames: int
+    """Frames of each call of the render function: the sound card's period (its whole
+    playing time is the callback's budget)."""
+    period_source: str
+    """Where ``period_frames`` came from: ``"backend"`` (the audio server's or the host
+    API's buffer), ``"option"`` (asked for) or ``"profile"`` (the device profile's
+    ``block_frames``, for an output without a period of its own)."""
     channels: int
 
     @property
@@ -61,6 +70,13 @@ class NullSink:
     ----------
     device : DeviceProfile
         Sample rate, block size and channels.
+    period_frames : int or None, 16 <= period_frames <= 8192
+        Frames per block asked for (``--period``); None: the profile's ``block_frames``.
+
+    Raises
+    ------
+    ParameterError
+        ``period_frames`` is out of range.
     """
 
     backend = "null"
@@ -68,12 +84,15 @@ class NullSink:
     output_device: str | None = None
     output_latency_s = 0.0
 
-    def __init__(self, device: DeviceProfile) -> None:
+    def __init__(self, device: DeviceProfile, *, period_frames: int | None = None) -> None:
+        self.period_source = "profile" if period_frames is None else "option"
+        if period_frames is not None:
+            device = device.at_block(period_frames)
         self.sample_rate_hz = device.sample_rate_hz
-        self.block_frames = device.block_frames
+        self.block_frames = self.period_frames = device.block_frames
         self.channels = device.channels
         self.underruns = 0
-        self._period_s = device.block_frames / device.sample_rate_hz
+        self._period_s = self.period_frames / device.sample_rate_hz
         self._buffer = np.zeros((device.block_frames, device.channels), dtype=np.float32)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -131,6 +150,8 @@ class CaptureSink(NullSink):
         Stop recording (but keep pulling) after this many frames; None: no limit.
     wav_path : str, Path or None
         Write the recording to this float32 WAV when the sink closes.
+    period_frames : int or None
+        As for :class:`NullSink`.
 
     Attributes
     ----------
@@ -147,10 +168,11 @@ class CaptureSink(NullSink):
         realtime: bool = False,
         max_frames: int | None = None,
         wav_path: str | Path | None = None,
+        period_frames: int | None = None,
     ) -> None:
         if max_frames is not None and (isinstance(max_frames, bool) or max_frames < 0):
             raise ParameterError(f"max_frames={max_frames!r} must be None or >= 0")
-        super().__init__(device)
+        super().__init__(device, period_frames=period_frames)
         self.wav_path = None if wav_path is None else Path(wav_path)
         self.realtime = bool(realtime)
         self.max_frames = max_frames

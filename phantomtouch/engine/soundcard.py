@@ -18,6 +18,7 @@ import numpy as np
 
 from phantomtouch.engine.sinks import CaptureSink, NullSink, RenderFn, Sink
 from phantomtouch.errors import DeviceError, ParameterError, install_hint
+from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
 
 logger = logging.getLogger(__name__)
@@ -46,7 +47,8 @@ def list_output_devices() -> list[dict[str, Any]]:
     list of dict
         ``index`` (int, for ``output=``), ``name`` (str), ``max_output_channels`` (int),
         ``default_samplerate`` (float, Hz), ``hostapi`` (str), ``default`` (bool: the
-        system's default output).
+        system's default output), ``low_latency_s`` (float: PortAudio's default low
+        output latency, s; on JACK one server period).
 
     Raises
     ------
@@ -68,6 +70,7 @@ def list_output_devices() -> list[dict[str, Any]]:
             "default_samplerate": float(info["default_samplerate"]),
             "hostapi": str(hostapis[info["hostapi"]]["name"]),
             "default": index == default_output,
+            "low_latency_s": float(info["default_low_output_latency"]),
         }
         for index, info in enumerate(devices)
         if info["max_output_channels"] > 0
@@ -152,16 +155,96 @@ def find_output_device(output: int | str | None, channels: int) -> dict[str, Any
     return found
 
 
+PERIOD_HOST_APIS = {
+    "JACK Audio Connection Kit": True,
+    "ASIO": False,
+    "Core Audio": False,
+    "Windows WASAPI": False,
+}
+"""Host APIs whose reported low output latency is one buffer of the sound card (its
+period), and whether the audio server fixes it (True: JACK's ``-p``, which PortAudio
+cannot change; False: PortAudio opens the buffer at the block size asked). Others (ALSA,
+MME, DirectSound, ...) report a latency that is no buffer: the profile's block is used."""
+
+
+def host_period_frames(found: dict[str, Any]) -> int | None:
+    """The period of an output device of :func:`list_output_devices`, frames at its
+    default sample rate: its low latency when its host API reports a buffer there
+    (:data:`PERIOD_HOST_APIS`) and it is a block size the engine can play, else None."""
+    if found["hostapi"] not in PERIOD_HOST_APIS:
+        return None
+    frames = round(found["low_latency_s"] * found["default_samplerate"])
+    return frames if limits.MIN_BLOCK_FRAMES <= frames <= limits.MAX_BLOCK_FRAMES else None
+
+
+def resolve_period(
+    host_api: str, host_period: int | None, asked: int | None, preferred: int
+) -> tuple[int, int, str]:
+    """The frames of each callback and of the engine's block on a PortAudio device.
+
+    Parameters
+    ----------
+    host_api : str
+        The device's host API (a key of :data:`PERIOD_HOST_APIS` or another).
+    host_period : int or None
+        Its period, frames (:func:`host_period_frames`); None: it has none.
+    asked : int or None, 16 <= asked <= 8192
+        The block asked for (``--period``); None: the device's period, else ``preferred``.
+    preferred : int
+        The device profile's ``block_frames``.
+
+    Returns
+    -------
+    tuple
+        ``(period_frames, block_frames, source)``: frames per callback, frames per
+        engine block (``period_frames`` or, on JACK, a divisor of it), and where the
+        period came from (``"backend"``, ``"option"`` or ``"profile"``).
+
+    Raises
+    ------
+    ParameterError
+        ``asked`` is out of range.
+    DeviceError
+        ``asked`` does not divide the period JACK's server runs at.
+    """
+    if asked is not None:
+        valid = isinstance(asked, int) and not isinstance(asked, bool)
+        if not valid or not limits.MIN_BLOCK_FRAMES <= asked <= limits.MAX_BLOCK_FRAMES:
+            raise ParameterError(
+                f"period_frames={asked!r} must be an integer in "
+                f"[{limits.MIN_BLOCK_FRAMES}, {limits.MAX_BLOCK_FRAMES}]"
+            )
+    fixed = PERIOD_HOST_APIS.get(host_api, False)
+    if host_period is not None and fixed:
+        if asked is None:
+            return host_period, host_period, "backend"
+        if host_period % asked:
+            raise DeviceError(
+                f"period_frames={asked} must divide the {host_api} server's period, "
+                f"{host_period} frames (start the server with that period: jackd -p {asked})"
+            )
+        return host_period, asked, "option"
+    if asked is not None:
+        return asked, asked, "option"
+    if host_period is not None:
+        return host_period, host_period, "backend"
+    return preferred, preferred, "profile"
+
+
 class SoundDeviceSink:
     """A PortAudio output stream (``sounddevice.OutputStream``), float32.
 
     The stream is opened here (so its ports exist, e.g. for JACK connections) and
     started by :meth:`start`.
 
+    Its period (PortAudio ``blocksize``: the frames of each callback) and the engine's
+    block are found by :func:`resolve_period`: on JACK the server's period, on ASIO, Core
+    Audio and WASAPI the buffer PortAudio reports, elsewhere the profile's block.
+
     Parameters
     ----------
     device : DeviceProfile
-        Sample rate, block size (PortAudio ``blocksize``) and channels.
+        Sample rate, preferred block size and channels.
     output : int, str or None
         Device index, part of its name, or None (see :func:`find_output_device`).
     channel_map : sequence of int or None
@@ -173,12 +256,18 @@ class SoundDeviceSink:
     exclusive : bool
         WASAPI exclusive mode (``sounddevice.WasapiSettings(exclusive=True)``): the
         stream alone on the device, at its own block size, bypassing Windows' mixer.
+    period_frames : int or None, 16 <= period_frames <= 8192
+        The engine's block asked for (``--period``): on JACK a divisor of the server's
+        period, elsewhere the callback's frames; None: the device's period.
 
     Raises
     ------
     DeviceError
-        The device is missing, has too few outputs, PortAudio cannot open it, or
-        ``exclusive`` is asked of a device that is not a WASAPI one.
+        The device is missing, has too few outputs, PortAudio cannot open it,
+        ``exclusive`` is asked of a device that is not a WASAPI one, or
+        ``period_frames`` does not divide JACK's period.
+    ParameterError
+        ``channel_map``, ``latency`` or ``period_frames`` is out of range.
     """
 
     backend = "sounddevice"
@@ -192,9 +281,9 @@ class SoundDeviceSink:
         channel_map: Sequence[int] | None = None,
         latency: float | str = "low",
         exclusive: bool = False,
+        period_frames: int | None = None,
     ) -> None:
         self.sample_rate_hz = device.sample_rate_hz
-        self.block_frames = device.block_frames
         self.channels = device.channels
         self._map = self._check_map(channel_map, device.channels)
         self._check_latency(latency)
@@ -202,7 +291,10 @@ class SoundDeviceSink:
         sd = _sounddevice()
         found = find_output_device(output, stream_channels)
         self.output_device: str = found["name"]
-        self._buffer = np.zeros((self.block_frames, self.channels), dtype=np.float32)
+        self.period_frames, self.block_frames, self.period_source = resolve_period(
+            found["hostapi"], host_period_frames(found), period_frames, device.block_frames
+        )
+        self._buffer = np.zeros((self.period_frames, self.channels), dtype=np.float32)
         self._render: RenderFn | None = None
         self.underruns = 0
         self._dac_delay_s: float | None = None
@@ -217,7 +309,7 @@ class SoundDeviceSink:
         try:
             self._stream = sd.OutputStream(
                 samplerate=self.sample_rate_hz,
-                blocksize=self.block_frames,
+                blocksize=self.period_frames,
                 device=found["index"],
                 channels=stream_channels,
                 dtype="float32",
@@ -268,7 +360,7 @@ class SoundDeviceSink:
         elif self._map is None:
             render(outdata)
         else:
-            if frames <= self.block_frames:
+            if frames <= self.period_frames:
                 block = self._buffer[:frames]
             else:  # PortAudio keeps the fixed blocksize; this is only a safety net
                 block = np.empty((frames, self.channels), dtype=np.float32)
@@ -301,24 +393,28 @@ class SoundDeviceSink:
 
 
 def open_default_sink(
-    device: DeviceProfile, output: int | str | None = None, *, exclusive: bool = False
+    device: DeviceProfile,
+    output: int | str | None = None,
+    *,
+    exclusive: bool = False,
+    period_frames: int | None = None,
 ) -> Sink:
     """The sound card with enough outputs if there is one, else the null sink.
 
     Parameters
     ----------
-    output, exclusive
+    output, exclusive, period_frames
         As for :class:`SoundDeviceSink`: a device asked for opens or raises
         :class:`DeviceError`; with None, no device with enough outputs (or no PortAudio)
-        gives a :class:`NullSink`.
+        gives a :class:`NullSink` (at ``period_frames`` when given).
     """
     try:
-        return SoundDeviceSink(device, output, exclusive=exclusive)
+        return SoundDeviceSink(device, output, exclusive=exclusive, period_frames=period_frames)
     except DeviceError as exc:
         if output is not None:
             raise
         logger.info("no usable sound card (%s); using the null sink", exc)
-        return NullSink(device)
+        return NullSink(device, period_frames=period_frames)
 
 
 @dataclass(frozen=True)
@@ -334,6 +430,9 @@ class SinkSpec:
     wav_path : str or None
         For "capture": a real-time capture sink whose recording is written to this
         float32 WAV when the engine closes.
+    period_frames : int or None
+        The engine's block asked for (``--period``; :class:`SoundDeviceSink`,
+        :class:`NullSink`); None: the sound card's period, or the profile's block.
     """
 
     backend: str = "default"
@@ -342,6 +441,7 @@ class SinkSpec:
     latency: float | str = "low"
     wav_path: str | None = None
     exclusive: bool = False
+    period_frames: int | None = None
 
     def __post_init__(self) -> None:
         if self.backend not in ("default", "sounddevice", "null", "capture"):
@@ -351,10 +451,11 @@ class SinkSpec:
 
     def open(self, device: DeviceProfile) -> Sink:
         """Open the sink (in the engine process)."""
+        period = self.period_frames
         if self.backend == "null":
-            return NullSink(device)
+            return NullSink(device, period_frames=period)
         if self.backend == "capture":
-            return CaptureSink(device, realtime=True, wav_path=self.wav_path)
+            return CaptureSink(device, realtime=True, wav_path=self.wav_path, period_frames=period)
         if self.backend == "sounddevice":
             return SoundDeviceSink(
                 device,
@@ -362,5 +463,8 @@ class SinkSpec:
                 channel_map=self.channel_map,
                 latency=self.latency,
                 exclusive=self.exclusive,
+                period_frames=period,
             )
-        return open_default_sink(device, self.output, exclusive=self.exclusive)
+        return open_default_sink(
+            device, self.output, exclusive=self.exclusive, period_frames=period
+        )

@@ -30,7 +30,9 @@ class ChildProcess:
     """An engine process, started and ready, and what the host shares with it: the
     ``outbox`` of its commands, its ``reports`` (read by a thread that runs
     ``read_reports(child)``), and in shared memory its ``clock``, move ``slots``,
-    ``status``, stop ``mark`` and render ``loads``. Host.
+    ``status``, stop ``mark``, render ``loads`` and callback ``seconds``; and what its
+    sink found at start: ``block_frames``, ``period_frames`` and ``period_source``
+    (:class:`~phantomtouch.engine.sinks.Sink`). Host.
 
     Parameters
     ----------
@@ -63,7 +65,15 @@ class ChildProcess:
         self.mark = context.Value("q", 0, lock=False)
         loads = context.RawArray("d", RENDER_TIMES)
         self.loads = np.frombuffer(loads, dtype=np.float64)
-        raw = dict(clock=self.clock.raw, slots=self.slots.raw, status=self.status.raw, loads=loads)
+        seconds = context.RawArray("d", RENDER_TIMES)
+        self.seconds = np.frombuffer(seconds, dtype=np.float64)
+        raw = dict(
+            clock=self.clock.raw,
+            slots=self.slots.raw,
+            status=self.status.raw,
+            loads=loads,
+            seconds=seconds,
+        )
         commands_in, commands_out = context.Pipe(duplex=False)
         self.reports, reports_out = context.Pipe(duplex=False)
         device_json = device.model_dump_json()
@@ -95,6 +105,7 @@ class ChildProcess:
         self.costs = (float(ready[1][0]), float(ready[1][1]), float(ready[1][2]))
         self.backend = str(ready[2])
         self.output_device: str | None = ready[3]
+        self.block_frames, self.period_frames, self.period_source = ready[4]
         self.reader = threading.Thread(
             target=read_reports, args=(self,), name="phantomtouch-reports", daemon=True
         )

@@ -29,9 +29,18 @@ class EngineStatus:
         the limiter, replaced by silence because rendering raised.
     queue_depth, queue_capacity : int
         Voices waiting to start, and how many may wait.
+    period_frames : int
+        Frames of each callback: the sound card's period (``block_frames`` is it or a
+        fixed divisor of it).
+    period_source : str
+        Where the period came from: ``"backend"`` (the audio server's or the host API's
+        buffer), ``"option"`` (``--period``) or ``"profile"`` (the profile's
+        ``block_frames``: an output without a period of its own).
     render_load_p99, render_load_max : float
-        p99 and largest time the callback took for a block over the last 4096 blocks, as
-        a share of the block's playing time (1.0: the output underruns).
+        p99 and largest time the callback took over the last 4096 callbacks, as a share
+        of the time it had: its period's playing time (1.0: the output underruns).
+    callback_p50_s, callback_p99_s, callback_max_s : float
+        The callback's own time over the same callbacks, s: median, p99 and largest.
     state, running, restarts
         ``"running"``, ``"starting"``, ``"stalled"`` or ``"gone"`` (until a restart),
         ``"restarting"`` (a new engine process is opening its sink), ``"closed"``; times
@@ -58,6 +67,8 @@ class EngineStatus:
     output_device: str | None
     sample_rate_hz: int
     block_frames: int
+    period_frames: int
+    period_source: str
     channels: int
     now_frames: int
     active_voices: int
@@ -74,6 +85,9 @@ class EngineStatus:
     running: bool
     render_load_p99: float
     render_load_max: float
+    callback_p50_s: float
+    callback_p99_s: float
+    callback_max_s: float
     state: str
     voice_capacity: int
     voice_cost: float

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from phantomtouch.errors import DeviceError
+from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.schema import limits
 from phantomtouch.schema.validation import read_model_file
 
@@ -163,7 +163,12 @@ class DeviceProfile(_Frozen):
         default=256,
         ge=limits.MIN_BLOCK_FRAMES,
         le=limits.MAX_BLOCK_FRAMES,
-        description="Frames per audio block of the real-time engine.",
+        description=(
+            "Frames per audio block of the real-time engine where its output has no period "
+            "of its own (the null and capture outputs, host APIs without a fixed buffer); "
+            "on JACK, ASIO, Core Audio and WASAPI the engine's block is the sound card's "
+            "period instead (`GET /device` shows both)."
+        ),
     )
     gain_update_s: float = Field(
         default=DEFAULT_GAIN_UPDATE_S,
@@ -205,6 +210,25 @@ class DeviceProfile(_Frozen):
         if self.gain_update_frames is not None:
             return self.gain_update_frames
         return max(1, round(self.gain_update_s * self.sample_rate_hz))
+
+    def at_block(self, block_frames: int) -> DeviceProfile:
+        """This profile with ``block_frames`` changed (the sound card's period), the same
+        profile when it is already that.
+
+        Raises
+        ------
+        ParameterError
+            ``block_frames`` is not an integer in [MIN_BLOCK_FRAMES, MAX_BLOCK_FRAMES].
+        """
+        if block_frames == self.block_frames and not isinstance(block_frames, bool):
+            return self
+        valid = isinstance(block_frames, int) and not isinstance(block_frames, bool)
+        if not valid or not limits.MIN_BLOCK_FRAMES <= block_frames <= limits.MAX_BLOCK_FRAMES:
+            raise ParameterError(
+                f"block_frames={block_frames!r} must be an integer in "
+                f"[{limits.MIN_BLOCK_FRAMES}, {limits.MAX_BLOCK_FRAMES}]"
+            )
+        return self.model_copy(update={"block_frames": block_frames})
 
     @classmethod
     def default(cls) -> DeviceProfile:

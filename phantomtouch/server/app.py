@@ -74,7 +74,7 @@ def _lifespan(settings: Settings, metrics: Metrics, attach: Sequence[Attachment]
         except BaseException:
             store.close()
             raise
-        service = Service(settings, device, engine, store, metrics)
+        service = Service(settings, engine.device, engine, store, metrics)
         if settings.wearer is not None:
             service.wearer.choose(settings.wearer, settings.wearer_band, field="wearer")
         service.loop = asyncio.get_running_loop()

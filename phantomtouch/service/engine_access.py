@@ -58,22 +58,27 @@ def open_engine(
         "voice_policy": settings.voice_policy,
     }
     capture = settings.capture_path
+    period = settings.period_frames
     if settings.engine_process:
         if capture is not None:
-            spec = SinkSpec("capture", wav_path=str(capture))
+            spec = SinkSpec("capture", wav_path=str(capture), period_frames=period)
         elif output == NULL_OUTPUT:
-            spec = SinkSpec("null")
+            spec = SinkSpec("null", period_frames=period)
         else:
-            spec = SinkSpec("default", output=output, exclusive=settings.wasapi_exclusive)
+            spec = SinkSpec(
+                "default", output=output, exclusive=settings.wasapi_exclusive, period_frames=period
+            )
         engine = ProcessEngine(device, spec, on_fault=on_fault, **common)  # type: ignore[arg-type]
     else:
         sink: Sink
         if capture is not None:
-            sink = CaptureSink(device, realtime=True, wav_path=capture)
+            sink = CaptureSink(device, realtime=True, wav_path=capture, period_frames=period)
         elif output == NULL_OUTPUT:
-            sink = NullSink(device)
+            sink = NullSink(device, period_frames=period)
         else:
-            sink = open_default_sink(device, output, exclusive=settings.wasapi_exclusive)
+            sink = open_default_sink(
+                device, output, exclusive=settings.wasapi_exclusive, period_frames=period
+            )
         engine = Engine(device, sink, **common)  # type: ignore[arg-type]
     engine.start()
     return engine

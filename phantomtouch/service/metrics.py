@@ -155,13 +155,27 @@ class _EngineCollector(Collector):
         )
         load = GaugeMetricFamily(
             "phantomtouch_render_load",
-            "Audio callback time per block over the last 4096 blocks, as a fraction of the "
-            "block's playing time.",
+            "Audio callback time over the last 4096 blocks, as a fraction of the time each "
+            "callback had (the sound card's period).",
             labels=["quantile"],
         )
         load.add_metric(["0.99"], status["render_load_p99"])
         load.add_metric(["1"], status["render_load_max"])
         yield load
+        callback = GaugeMetricFamily(
+            "phantomtouch_callback_seconds",
+            "Audio callback time over the last 4096 blocks, s.",
+            labels=["quantile"],
+        )
+        callback.add_metric(["0.5"], status["callback_p50_s"])
+        callback.add_metric(["0.99"], status["callback_p99_s"])
+        callback.add_metric(["1"], status["callback_max_s"])
+        yield callback
+        yield GaugeMetricFamily(
+            "phantomtouch_period_frames",
+            "Frames of each audio callback: the sound card's period.",
+            status["period_frames"],
+        )
         yield GaugeMetricFamily(
             "phantomtouch_voice_capacity",
             "Pattern voices admitted at once: the render budget over one voice's cost.",

@@ -401,7 +401,26 @@ class DeviceInfo(BaseModel):
     output_device: str | None
     channels: int
     sample_rate_hz: int
-    block_frames: int
+    block_frames: int = Field(
+        description=(
+            "Frames the engine renders at a time: the sound card's period, or a fixed "
+            "divisor of it asked for with `--period`."
+        )
+    )
+    period_frames: int = Field(
+        description=(
+            "Frames of each audio callback: the sound card's period (its playing time is "
+            "the callback's budget, against which `render_load` is measured)."
+        )
+    )
+    period_source: Literal["backend", "option", "profile"] = Field(
+        description=(
+            "Where the period came from: `backend` (JACK's server period, or the buffer "
+            "ASIO, Core Audio or WASAPI reports), `option` (`--period`), or `profile` (the "
+            "device profile's `block_frames`, for an output without a period of its own: "
+            "the null and capture outputs, other host APIs)."
+        )
+    )
     output_latency_s: float
     actuators: list[Actuator]
     triangles: list[tuple[int, int, int]]

@@ -14,6 +14,7 @@ from typing import Annotated, Literal, Self
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from phantomtouch.schema import limits
 from phantomtouch.schema.wearer import WEARER_NAME_REGEX, Band
 
 CAPTURE_PREFIX = "capture:"
@@ -78,6 +79,13 @@ class Settings(ClientLimits):
     wasapi_exclusive: bool = False
     """Open the WASAPI output in exclusive mode (Windows; the output must be a WASAPI device, e.g.
     'WASAPI:Speakers')."""
+    period_frames: int | None = Field(
+        default=None, ge=limits.MIN_BLOCK_FRAMES, le=limits.MAX_BLOCK_FRAMES
+    )
+    """The engine's block, frames (``--period``): on JACK a divisor of the server's period
+    (``jackd -p``), on other outputs the frames of each callback; None: the sound card's
+    period (JACK's, or the buffer ASIO, Core Audio or WASAPI reports), else the device
+    profile's ``block_frames``."""
     db_path: Path = Field(default_factory=default_db_path)
     """SQLite pattern store."""
     wearer: str | None = Field(default=None, pattern=WEARER_NAME_REGEX)

@@ -307,9 +307,16 @@ def test_arguments_out_of_range_are_refused_with_their_name(
         Engine(DEVICE, queue_capacity=0)
 
 
-def test_a_sink_that_does_not_match_the_device_is_refused() -> None:
-    with pytest.raises(DeviceError, match="block_frames"):
-        Engine(DEVICE, NullSink(DeviceProfile(block_frames=128)))
+def test_a_sink_at_another_rate_is_refused_and_a_sinks_block_is_the_engines() -> None:
+    with pytest.raises(DeviceError, match="sample_rate_hz=44100"):
+        Engine(DEVICE, NullSink(DeviceProfile(sample_rate_hz=44100)))
+    engine = Engine(DEVICE, NullSink(DeviceProfile(block_frames=128)))
+    try:  # the sink's period is the engine's block, whatever the profile said
+        assert DEVICE.block_frames != 128
+        assert engine.block_frames == engine.device.block_frames == 128
+        assert engine.device == DEVICE.at_block(128)
+    finally:
+        engine.close()
 
 
 def test_close_is_idempotent_and_a_closed_engine_refuses_work() -> None:

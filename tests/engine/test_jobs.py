@@ -49,7 +49,10 @@ def test_resolve_plan_refuses_plans_of_other_devices_and_other_types() -> None:
     device = DeviceProfile.default()
     assert resolve_plan(pattern, device).frames == plan(pattern, device).frames
     with pytest.raises(ParameterError, match="Plan for device"):
-        resolve_plan(plan(pattern, DeviceProfile(block_frames=128)), device)
+        resolve_plan(plan(pattern, DeviceProfile(sample_rate_hz=44100)), device)
+    # the block size changes no sample of a plan: one made at another block is this device's
+    at_period = plan(pattern, DeviceProfile(block_frames=128))
+    assert resolve_plan(at_period, device) is at_period
     with pytest.raises(ParameterError, match="got dict"):
         resolve_plan({"path": {}}, device)  # type: ignore[arg-type]
 

@@ -38,6 +38,8 @@ async def get_device(engine: EngineDep) -> DeviceInfo:
         channels=status["channels"],
         sample_rate_hz=status["sample_rate_hz"],
         block_frames=status["block_frames"],
+        period_frames=status["period_frames"],
+        period_source=status["period_source"],
         output_latency_s=status["output_latency_s"],
         actuators=list(device.actuators),
         triangles=list(engine_triangles(device)),

@@ -221,6 +221,10 @@ class DeviceInfo(_Answer):
     channels: int
     sample_rate_hz: int
     block_frames: int
+    period_frames: int | None = None
+    """Frames of each audio callback, the sound card's period (None: an older server)."""
+    period_source: str | None = None
+    """``backend``, ``option`` (``--period``) or ``profile`` (None: an older server)."""
     output_latency_s: float
     actuators: list[dict[str, Any]]
     triangles: list[tuple[int, int, int]]
