@@ -68,7 +68,7 @@ from typing import Any
 import numpy as np
 from realtime_floor import LatencyProbe, floor
 from realtime_http import REQUEST_TIMEOUT_S, render_load_window_s
-from realtime_load import stop
+from realtime_load import flood, stop
 from realtime_measure import measure
 from realtime_report import TITLES, print_report
 from realtime_scenarios import MEMORY_EVERY_S, scenario_loads
@@ -81,14 +81,35 @@ from tests.support.live_server import HOST, LiveServer
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_RATE_HZ = 48000
 CHANNELS = 8
+YARDSTICK_FRAMES = 128
+"""The yardstick is a numpy copy of one 128 x 8 float32 block, whatever the period."""
+
+
+class Install:
+    """A checkout of phantomtouch to measure: its root and the Python of its ``.venv``
+    (this benchmark's own Python for the checkout it belongs to)."""
+
+    def __init__(self, name: str, root: Path, python: Path) -> None:
+        self.name, self.root, self.python = name, root, python
+
+    @classmethod
+    def pair(cls, root: Path) -> Install:
+        python = root / ".venv" / "bin" / "python"
+        if not python.exists():
+            raise SystemExit(f"bench_realtime: --pair {root}: no .venv/bin/python there")
+        return cls("pair", root.resolve(), python)
 
 
 class Service(LiveServer):
-    """``phantomtouch serve --output system`` started as a user starts it (console script)."""
+    """``phantomtouch serve --output system`` started as a user starts it (console script)
+    from one :class:`Install`."""
+
+    install: Install
 
     def command(self) -> list[str]:
-        script = Path(sys.executable).with_name("phantomtouch")
-        head = [str(script)] if script.exists() else [sys.executable, "-m", "phantomtouch"]
+        python = self.install.python
+        script = python.with_name("phantomtouch")
+        head = [str(script)] if script.exists() else [str(python), "-m", "phantomtouch"]
         return [
             *head,
             "serve",
@@ -134,7 +155,7 @@ def parse_args() -> argparse.Namespace:
         "--quick", action="store_true", help="short scenarios and rests (a smoke run)"
     )
     parser.add_argument(
-        "--seconds", type=within(float, 0.5, 600), help="length of scenarios a and b (default 60)"
+        "--seconds", type=within(float, 0.5, 600), help="length of scenarios a and b (default 20)"
     )
     parser.add_argument(
         "--flood-seconds", type=within(float, 1, 120), help="length of scenario c (default 10)"
@@ -147,12 +168,24 @@ def parse_args() -> argparse.Namespace:
         type=within(float, 0, 120),
         help="rest before each scenario (default: the render load window plus 1 s)",
     )
-    parser.add_argument("--scenarios", default="d,a,b,c", help="which, in order (default d,a,b,c)")
+    parser.add_argument("--scenarios", default="a,c,n", help="which, in order (default a,c,n)")
     parser.add_argument(
+        "--period",
         "--period-frames",
+        dest="period_frames",
         type=within(int, 16, 4096),
         default=128,
-        help="JACK period = engine block",
+        help="JACK's period, frames (default 128)",
+    )
+    parser.add_argument(
+        "--profile-block",
+        type=within(int, 16, 4096),
+        help="block_frames of the device profile the service is given (default: the period)",
+    )
+    parser.add_argument(
+        "--pair",
+        type=Path,
+        help="another checkout (with its own .venv) to run alternately, scenario by scenario",
     )
     parser.add_argument("--soak-rate", type=within(float, 0.1, 50), default=5.0)
     parser.add_argument("--soak-points", type=within(int, 2, 100_000), default=12_000)
@@ -181,7 +214,7 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--json", type=Path, help="also write the results to this file")
     args = parser.parse_args()
     scale = 0.1 if args.quick else 1.0
-    args.seconds = args.seconds or 60.0 * scale
+    args.seconds = args.seconds or 20.0 * scale
     args.flood_seconds = args.flood_seconds or max(1.0, 10.0 * scale)
     args.quiet_seconds = args.quiet_seconds or max(1.0, 10.0 * scale)
     args.floor_seconds = args.floor_seconds or max(1.0, 10.0 * scale)
@@ -193,6 +226,11 @@ def parse_args() -> argparse.Namespace:
         parser.error(f"--json: {args.json}: the folder {args.json.parent} does not exist")
     if args.quick and args.rest_seconds is None:
         args.rest_seconds = 1.0
+    args.profile_block = args.profile_block or args.period_frames
+    installs = [Install("this", ROOT, Path(sys.executable))]
+    if args.pair is not None:
+        installs.append(Install.pair(args.pair))
+    args.installs = installs
     return args
 
 
@@ -205,8 +243,9 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
     results: dict[str, Any] = {
         "cpus": os.cpu_count(),
         "load_avg_1min": os.getloadavg()[0],
-        "block_copy_us": block_copy_us(args.period_frames),
+        "block_copy_us": block_copy_us(YARDSTICK_FRAMES),
         "period_frames": args.period_frames,
+        "profile_block_frames": args.profile_block,
         "sample_rate_hz": SAMPLE_RATE_HZ,
         "config": {
             name: getattr(args, name)
@@ -231,55 +270,99 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
     block_s = args.period_frames / SAMPLE_RATE_HZ
     profile = folder / "device.toml"
     profile.write_text(
-        f"sample_rate_hz = {SAMPLE_RATE_HZ}\nblock_frames = {args.period_frames}\n", "utf-8"
+        f"sample_rate_hz = {SAMPLE_RATE_HZ}\nblock_frames = {args.profile_block}\n", "utf-8"
     )
-    env = {
-        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
-        # wrk is one client standing for a whole scene: its touches may fill the voice cap
-        # (64), not only the per-client quota (three quarters of it)
-        "PHANTOMTOUCH_MAX_VOICES_PER_CLIENT": "64",
-    }
     jack = JackServer(sample_rate_hz=SAMPLE_RATE_HZ, period_frames=args.period_frames).start()
-    xruns = service = None
+    xruns = None
     try:
         xruns = JackXrunCounter(jack)
         results["floor"] = floor(jack, xruns, args.floor_seconds, block_s * 1e6)
-        service = Service(
-            folder / "patterns.db",
-            env=env,
-            args=("--device", str(profile)),
-            log_path=folder / "service.log",
-        )
-        service.start()
-        port = service.port
         results["jack_server"] = jack.name
-        results["device"] = check_device(port, args.period_frames)
-        window_s = render_load_window_s(metrics_text(port), block_s)
-        results["render_load_window_s"] = window_s
-        if args.rest_seconds is None:
-            args.rest_seconds = (window_s or 11.0) + 1.0
-        results["config"]["rest_seconds"] = args.rest_seconds
-        assert service.process is not None
-        loads = scenario_loads(port, service.process.pid, wrk or "wrk", folder, hogs, args)
-        for key in args.scenarios:
-            seconds, make_load = loads[key]
-            print(f"({key}) {TITLES[key]}: {seconds:g} s ...", file=sys.stderr, flush=True)
-            results["scenarios"][key] = asyncio.run(
-                measure(port, xruns, jack, seconds, make_load, args)
-            )
+        for index, key in enumerate(args.scenarios):
+            # alternate which install goes first, so a drift of the machine favours neither
+            turn = args.installs if index % 2 == 0 else args.installs[::-1]
+            for install in turn:
+                print(f"({key}) {TITLES[key]} [{install.name}]: ...", file=sys.stderr, flush=True)
+                figures = run_scenario(install, key, args, folder, profile, jack, xruns, hogs)
+                results.update(figures.pop("window"))
+                place = results if install.name == "this" else results.setdefault("pair", {})
+                place["device"] = figures.pop("device")
+                results["config"]["rest_seconds"] = figures["rest_seconds"]
+                place.setdefault("scenarios", {})[key] = figures
+        if args.pair is not None:
+            results["pair"]["checkout"] = str(args.installs[1].root)
         results["load_avg_1min_after"] = os.getloadavg()[0]
-    except Exception:
-        if service is not None:
-            print(service.log()[-3000:], file=sys.stderr)
-        raise
     finally:
         stop(hogs)
-        if service is not None:
-            service.stop()
         if xruns is not None:
             xruns.close()
         jack.stop()
     return results
+
+
+def run_scenario(
+    install: Install,
+    key: str,
+    args: argparse.Namespace,
+    folder: Path,
+    profile: Path,
+    jack: JackServer,
+    xruns: JackXrunCounter,
+    hogs: list[Any],
+) -> dict[str, Any]:
+    """Start ``install``'s service on ``jack``, run scenario ``key`` on it, stop it."""
+    wrk = shutil.which("wrk") or "wrk"
+    env = {
+        "PYTHONPATH": os.pathsep.join([str(install.root), os.environ.get("PYTHONPATH", "")]),
+        # wrk is one client standing for a whole scene: its touches may fill the voice cap
+        # (64), not only the per-client quota (three quarters of it)
+        "PHANTOMTOUCH_MAX_VOICES_PER_CLIENT": "64",
+    }
+    service = Service(
+        folder / f"patterns-{install.name}.db",
+        env=env,
+        args=("--device", str(profile)),
+        log_path=folder / f"service-{install.name}.log",
+    )
+    service.install = install
+    try:
+        service.start()
+        port = service.port
+        device = check_device(port, args.period_frames)
+        window_s = render_load_window_s(metrics_text(port), device["block_frames"] / SAMPLE_RATE_HZ)
+        rest_s = args.rest_seconds if args.rest_seconds is not None else (window_s or 11.0) + 1.0
+        args_now = argparse.Namespace(**{**vars(args), "rest_seconds": rest_s})
+        figures_rest = {"rest_seconds": rest_s}
+        assert service.process is not None
+        loads = scenario_loads(port, service.process.pid, wrk, folder, hogs, args_now)
+        seconds, make_load = loads[key]
+        figures = {
+            **figures_rest,
+            **asyncio.run(measure(port, xruns, jack, seconds, make_load, args_now)),
+        }
+        if key == "c":  # GET /health's rate beside the flood's, same connections and length
+            figures["health_wrk"] = asyncio.run(
+                flood(
+                    wrk,
+                    port,
+                    folder,
+                    connections=args.flood_connections,
+                    seconds=args.flood_seconds,
+                    path="/health",
+                )
+            )
+        if figures.get("callback_p99_us") is None and figures["render_load_p99"] is not None:
+            # a service without the callback's own time: its load times its callback's frames
+            frames = device.get("period_frames", device["block_frames"])
+            figures["callback_p99_us_from_load"] = (
+                figures["render_load_p99"] * frames / SAMPLE_RATE_HZ * 1e6
+            )
+    except Exception:
+        print(service.log()[-3000:], file=sys.stderr)
+        raise
+    finally:
+        service.stop()
+    return {"device": device, **figures, "window": {"render_load_window_s": window_s}}
 
 
 def metrics_text(port: int) -> str:
@@ -289,16 +372,18 @@ def metrics_text(port: int) -> str:
 
 
 def check_device(port: int, period_frames: int) -> dict[str, Any]:
-    """The service's ``GET /device``; refuses to go on unless it plays on JACK at our period."""
+    """The service's ``GET /device``; refuses to go on unless it plays on JACK's output and
+    each callback is one JACK period (``period_frames`` where the service reports it, else
+    its block: PortAudio then calls back with one block)."""
     import httpx
 
     device: dict[str, Any] = httpx.get(f"http://{HOST}:{port}/device", timeout=5.0).json()
-    found = (device.get("backend"), device.get("output_device"), device.get("block_frames"))
-    if found != ("sounddevice", "system", period_frames):
-        raise RuntimeError(
-            f"the service is not on JACK's system output at {period_frames}: {found}"
-        )
-    return {k: device[k] for k in ("backend", "output_device", "block_frames", "sample_rate_hz")}
+    frames = device.get("period_frames", device.get("block_frames"))
+    found = (device.get("backend"), device.get("output_device"), frames)
+    if found[:2] != ("sounddevice", "system"):
+        raise RuntimeError(f"the service is not on JACK's system output: {found}")
+    keys = ("backend", "output_device", "block_frames", "sample_rate_hz", "period_frames")
+    return {k: device[k] for k in keys if k in device}
 
 
 def main() -> None:

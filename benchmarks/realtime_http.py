@@ -93,16 +93,24 @@ _SAMPLE = re.compile(r"^([a-zA-Z_:][\w:]*)(?:\{([^}]*)\})? (\S+)$", re.MULTILINE
 _LABEL = re.compile(r'(\w+)="([^"]*)"')
 
 
+CALLBACK = {"0.5": "callback_p50_s", "0.99": "callback_p99_s", "1": "callback_max_s"}
+"""The quantiles of ``phantomtouch_callback_seconds`` and the figures they become."""
+
+
 def parse_metrics(text: str) -> dict[str, Any]:
     """The figures the benchmark reads from Prometheus text (None where one is missing).
 
     ``underruns`` (counter ``phantomtouch_underruns``), ``inline_renders`` (counter
     ``phantomtouch_inline_renders``), ``render_load_p99`` and
     ``render_load_max`` (gauge ``phantomtouch_render_load`` at quantiles 0.99 and 1),
-    ``active_voices``, and ``requests``: ``{"route status": count}`` from
-    ``phantomtouch_http_requests``.
+    ``active_voices``, ``callback_p50_s``, ``callback_p99_s`` and ``callback_max_s``
+    (gauge ``phantomtouch_callback_seconds``, a service that has it), and ``requests``:
+    ``{"route status": count}`` from ``phantomtouch_http_requests``.
     """
     figures: dict[str, Any] = {
+        "callback_p50_s": None,
+        "callback_p99_s": None,
+        "callback_max_s": None,
         "underruns": None,
         "inline_renders": None,
         "render_load_p99": None,
@@ -120,6 +128,8 @@ def parse_metrics(text: str) -> dict[str, Any]:
             figures["render_load_p99"] = float(value)
         elif name == "phantomtouch_render_load" and labels.get("quantile") in ("1", "1.0"):
             figures["render_load_max"] = float(value)
+        elif name == "phantomtouch_callback_seconds" and labels.get("quantile") in CALLBACK:
+            figures[CALLBACK[labels["quantile"]]] = float(value)
         elif name == "phantomtouch_active_voices":
             figures["active_voices"] = float(value)
         elif name == "phantomtouch_http_requests_total":

@@ -238,14 +238,18 @@ def parse_wrk(output: str) -> dict[str, Any]:
 
 
 async def flood(
-    wrk: str, port: int, folder: Path, *, connections: int, seconds: float
+    wrk: str, port: int, folder: Path, *, connections: int, seconds: float, path: str = "/touch"
 ) -> dict[str, Any]:
-    """``wrk -t1 -c<connections> -d<seconds>s`` posting ``TOUCH_BODY`` to ``/touch``."""
-    script = folder / "post_touch.lua"
-    script.write_text(WRK_SCRIPT % TOUCH_BODY.decode(), encoding="utf-8")
+    """``wrk -t1 -c<connections> -d<seconds>s`` posting ``TOUCH_BODY`` to ``/touch``, or
+    (another ``path``) getting ``path``; ``accepted_per_s`` is the rate of 2xx answers."""
+    body = TOUCH_BODY.decode() if path == "/touch" else ""
+    script = folder / ("post_touch.lua" if body else "get.lua")
+    script.write_text(
+        (WRK_SCRIPT % body).replace('"POST"', '"POST"' if body else '"GET"'), encoding="utf-8"
+    )
     command = [wrk, "-t1", f"-c{connections}", f"-d{max(1, round(seconds))}s"]
     command += ["--timeout", f"{REQUEST_TIMEOUT_S:g}s", "-s", str(script)]
-    command.append(f"http://{HOST}:{port}/touch")
+    command.append(f"http://{HOST}:{port}{path}")
     process = await asyncio.create_subprocess_exec(
         *command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
     )
@@ -259,7 +263,11 @@ async def flood(
     if process.returncode != 0:
         raise RuntimeError(f"wrk exited with {process.returncode}:\n{text}")
     shown = [Path(command[0]).name, *command[1:-2], script.name, command[-1]]
-    return {"command": " ".join(shown), **parse_wrk(text)}
+    figures = parse_wrk(text)
+    accepted = sum(n for status, n in figures["statuses"].items() if status.startswith("2"))
+    per_s, total = figures["requests_per_s"], figures["requests"]
+    figures["accepted_per_s"] = per_s * accepted / total if per_s and total else None
+    return {"command": " ".join(shown), **figures}
 
 
 # -- CPU hog ---------------------------------------------------------------------------

@@ -15,6 +15,7 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from realtime_floor import LatencyProbe, in_stalls, xrun_causes, xrun_kinds
 from realtime_http import HttpConnection, metrics, sample_health, sample_metrics, timed_request
 from realtime_usage import cpu_seconds
@@ -51,6 +52,19 @@ def counter_delta(before: dict[str, int], after: dict[str, int]) -> dict[str, in
 def highest(samples: list[dict[str, Any]], key: str) -> float | None:
     values = [s[key] for s in samples if s[key] is not None]
     return max(values) if values else None
+
+
+def callback_us(samples: list[dict[str, Any]]) -> dict[str, float | None]:
+    """The audio callback's own time, µs, from ``/metrics`` sampled during a scenario: the
+    median of the sampled medians, and the highest p99 and largest (None: a service that
+    does not report ``phantomtouch_callback_seconds``)."""
+    medians = [s["callback_p50_s"] for s in samples if s["callback_p50_s"] is not None]
+    p99, largest = highest(samples, "callback_p99_s"), highest(samples, "callback_max_s")
+    return {
+        "callback_p50_us": float(np.median(medians)) * 1e6 if medians else None,
+        "callback_p99_us": None if p99 is None else p99 * 1e6,
+        "callback_max_us": None if largest is None else largest * 1e6,
+    }
 
 
 async def rest(port: int, seconds: float) -> None:
@@ -133,6 +147,7 @@ async def measure(
         "machine_floor": machine,
         "render_load_p99": highest(samples, "render_load_p99"),
         "render_load_max": highest(samples, "render_load_max"),
+        **callback_us(samples),
         "voices_max": highest(samples, "active_voices"),
         "server_requests": counter_delta(before["requests"], after["requests"]),
         "health": {

@@ -98,6 +98,52 @@ def stalls_text(result: dict[str, Any]) -> str:
     )
 
 
+def callback_text(result: dict[str, Any], yardstick_us: float) -> str:
+    """``p50 / p99 µs (p50 / p99 yardsticks)`` of the callback's own time; a service that
+    does not report it: its p99 from its render load, marked ``≈``."""
+    p50, p99 = result.get("callback_p50_us"), result.get("callback_p99_us")
+    if p99 is None and result.get("callback_p99_us_from_load") is not None:
+        p99 = result["callback_p99_us_from_load"]
+        return f"— / ≈{p99:.0f} µs (— / ≈{p99 / yardstick_us:.0f})"
+    if p99 is None:
+        return "—"
+    ratio = "—" if p50 is None else f"{p50 / yardstick_us:.0f}"
+    return f"{number(p50, 0)} / {p99:.0f} µs ({ratio} / {p99 / yardstick_us:.0f})"
+
+
+def flood_text(result: dict[str, Any]) -> str:
+    """``POST /touch accepted/s vs GET /health req/s (ratio)`` of scenario c."""
+    touch, health = result.get("wrk"), result.get("health_wrk")
+    if touch is None or health is None:
+        return "—"
+    accepted, per_s = touch.get("accepted_per_s"), health.get("requests_per_s")
+    if accepted is None or not per_s:
+        return "—"
+    return f"{accepted:.0f} vs {per_s:.0f} ({accepted / per_s:.2f})"
+
+
+def pair_table(results: dict[str, Any]) -> str:
+    """This checkout beside the other one (``--pair``), scenario by scenario."""
+    yardstick_us = results["block_copy_us"]
+    installs = [("this", results)]
+    if "pair" in results:
+        installs.append(("pair", results["pair"]))
+    lines = [
+        "| scenario | install | underruns | JACK xruns | callback p50 / p99 (yardsticks) "
+        "| render load p99 | /touch accepted/s vs /health req/s | RT probe late (max) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for key in results["scenarios"]:
+        for name, figures in installs:
+            r = figures["scenarios"][key]
+            lines.append(
+                f"| ({key}) {TITLES[key]} | {name} | {number(r['underruns'], 0)} "
+                f"| {xruns_text(r)} | {callback_text(r, yardstick_us)} "
+                f"| {percent(r['render_load_p99'])} | {flood_text(r)} | {floor_text(r)} |"
+            )
+    return "\n".join(lines)
+
+
 def table(results: dict[str, Any]) -> str:
     lines = [
         "| scenario | s | underruns (inline renders) | JACK xruns (timer / slow) "
@@ -130,10 +176,11 @@ def print_report(results: dict[str, Any], channels: int, memory_every_s: float) 
         f"{period_frames}-frame periods ({period_frames / sample_rate_hz * 1e3:.2f} ms)"
     )
     print(
-        f"yardstick: numpy copy of one {period_frames} x {channels} block "
+        f"yardstick: numpy copy of one 128 x {channels} block "
         f"{results['block_copy_us']:.2f} µs; render load window "
         f"{number(results['render_load_window_s'])} s, "
-        f"rest {results['config']['rest_seconds']:g} s\n"
+        f"rest {results['config']['rest_seconds']:g} s; device profile block "
+        f"{results['profile_block_frames']} frames\n"
     )
     base = results["floor"]
     print(
@@ -142,6 +189,10 @@ def print_report(results: dict[str, Any], channels: int, memory_every_s: float) 
         f"a do-nothing SCHED_FIFO thread: {floor_text(base)} wake-ups a period or more late\n"
     )
     print(table(results))
+    if "pair" in results:
+        print(f"\npaired with {results['pair']['checkout']}: {results['pair']['device']}")
+    print(f"\nthis checkout: {results['device']}\n")
+    print(pair_table(results))
     for key, result in results["scenarios"].items():
         if "rss_bytes" in result:
             series = result["rss_bytes"]["series"]

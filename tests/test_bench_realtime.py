@@ -49,12 +49,17 @@ def test_the_realtime_benchmark_measures_every_figure(tmp_path: Path) -> None:
         "output_device": "system",
         "block_frames": 128,
         "sample_rate_hz": 48000,
+        "period_frames": 128,
     }
+    assert results["block_copy_us"] > 0.0  # the yardstick, a 128 x 8 copy
     for key in ("a", "c"):
         scenario = results["scenarios"][key]
         assert scenario["underruns"] >= 0 and scenario["inline_renders"] >= 0
         assert scenario["jack_xruns"] >= 0
         assert 0.0 < scenario["render_load_p99"] <= scenario["render_load_max"]
+        # the callback's own time, read from /metrics while the scenario ran
+        assert 0.0 < scenario["callback_p50_us"] <= scenario["callback_p99_us"]
+        assert scenario["callback_p99_us"] <= scenario["callback_max_us"]
         assert scenario["health"]["samples"] > 0
         assert scenario["health"]["p50_ms"] <= scenario["health"]["p99_ms"]
         floor = scenario["machine_floor"]  # cyclictest ran beside the scenario
@@ -77,7 +82,14 @@ def test_the_realtime_benchmark_measures_every_figure(tmp_path: Path) -> None:
     assert sum(flood["statuses"].values()) == flood["requests"]
     answered = sum(n for s, n in flood["statuses"].items() if not s.startswith(("2", "3")))
     assert answered == flood["non_2xx_3xx"]
+    accepted = sum(n for s, n in flood["statuses"].items() if s.startswith("2"))
+    assert flood["accepted_per_s"] == pytest.approx(
+        flood["requests_per_s"] * accepted / flood["requests"]
+    )
+    health = results["scenarios"]["c"]["health_wrk"]  # GET /health flooded the same way
+    assert health["requests_per_s"] > 0 and set(health["statuses"]) == {"200"}
     assert "| (a) " in result.stdout and "| (c) " in result.stdout
+    assert "| (c) wrk flood of POST /touch | this |" in result.stdout  # the side-by-side table
 
 
 def test_an_xrun_is_the_machines_only_within_a_stall_the_probe_saw() -> None:
@@ -109,3 +121,39 @@ def test_an_xrun_is_the_machines_only_within_a_stall_the_probe_saw() -> None:
     # overlapping stalls cover their union once
     merged = in_stalls([], [[10.0, 3000.0], [10.001, 3000.0]], seconds=1.0)
     assert merged["stall_share"] == pytest.approx(0.004 + before_s + after_s)
+
+
+def test_the_callbacks_time_is_read_from_metrics_and_set_beside_the_pairs() -> None:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from realtime_http import parse_metrics
+        from realtime_measure import callback_us
+        from realtime_report import callback_text, flood_text
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    text = (
+        'phantomtouch_callback_seconds{quantile="0.5"} 0.0002\n'
+        'phantomtouch_callback_seconds{quantile="0.99"} 0.0011\n'
+        'phantomtouch_callback_seconds{quantile="1"} 0.003\n'
+    )
+    first = parse_metrics(text)
+    assert (first["callback_p50_s"], first["callback_p99_s"], first["callback_max_s"]) == (
+        0.0002,
+        0.0011,
+        0.003,
+    )
+    later = {**first, "callback_p50_s": 0.0004, "callback_p99_s": 0.0009}
+    older = parse_metrics('phantomtouch_render_load{quantile="0.99"} 0.5\n')
+    assert older["callback_p99_s"] is None  # a service without the metric
+    figures = callback_us([first, later, older])
+    # the median of the sampled medians; the highest p99 and largest
+    assert figures["callback_p50_us"] == pytest.approx(300.0)
+    assert figures["callback_p99_us"] == pytest.approx(1100.0)
+    assert figures["callback_max_us"] == pytest.approx(3000.0)
+    assert callback_text(figures, yardstick_us=0.5) == "300 / 1100 µs (600 / 2200)"
+    # a service without it: its p99 from its render load, marked as such
+    derived = {"callback_p50_us": None, "callback_p99_us": None, "callback_p99_us_from_load": 500.0}
+    assert callback_text(derived, yardstick_us=0.5) == "— / ≈500 µs (— / ≈1000)"
+    flood = {"wrk": {"accepted_per_s": 800.0}, "health_wrk": {"requests_per_s": 1000.0}}
+    assert flood_text(flood) == "800 vs 1000 (0.80)"
+    assert flood_text({"wrk": {"accepted_per_s": 800.0}}) == "—"
