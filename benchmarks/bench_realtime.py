@@ -1,53 +1,66 @@
 """Glitches of the whole path under load: the service on a real audio server, as users run it.
 
-The benchmark starts its own JACK server (dummy driver, 48 kHz, 128-frame periods, 8
-outputs, a name of its own) and ``phantomtouch serve --output system`` on it, as a
-subprocess on a free loopback port with a device profile whose block is the JACK period.
-It talks to the service only over HTTP and WebSocket (``docs/protocol.md``) and counts
-JACK's xruns with a client of its own that runs no Python code in JACK's cycle.
+The benchmark starts its own JACK server (dummy driver, 48 kHz, ``--period`` frames, 128
+by default, 8 outputs, a name of its own) and ``phantomtouch serve --output system`` on
+it, as a subprocess on a free loopback port with a device profile whose block is the JACK
+period (``--profile-block`` gives it another: a tree that renders its profile's block
+rather than the sound card's period then does two cycles' work in one). It talks to the
+service only over HTTP and WebSocket (``docs/protocol.md``) and counts JACK's xruns with a
+client of its own that runs no Python code in JACK's cycle. Each scenario gets a service
+of its own, started before it and stopped after it.
 
-Scenarios (run in the order given by ``--scenarios``; default ``d,a,b,c``):
+Scenarios (run in the order given by ``--scenarios``; default ``a,c,n``):
 
 - ``d`` quiet: no load (10 s), for comparison;
-- ``a`` hands + touches: 4 WebSocket hands moving along ellipses at 90 Hz, and 50
-  ``POST /touch`` ``vr/tap`` per second over 2 connections (60 s);
+- ``a`` VR load: 4 WebSocket hands moving along ellipses at 90 Hz, and 50 ``POST /touch``
+  ``vr/tap`` per second over 2 connections (20 s);
 - ``b`` the same while busy Python loops, one per core at normal priority, keep every
   core busy (a stand-in for a VR game on the same PC);
 - ``c`` flood: ``wrk -t1 -c16`` posts ``vr/tap`` touches as fast as it can (10 s); the
   excess must be refused (503 ``busy``) or stolen, never heard as a glitch. The per-client
-  voice quota is lifted to the voice cap, so the flood keeps 64 voices sounding;
+  voice quota is lifted to the voice cap, so the flood keeps 64 voices sounding. Right
+  after it ``wrk`` gets ``GET /health`` the same way: the flood's throughput (``POST
+  /touch`` accepted per second) is set beside that rate;
 - ``s`` soak (not in the default order): ``POST /touch`` of patterns no request repeats,
   each a 12,000-point path of about 1.5 s with noise of its own seed (a noise loop the
   engine process is handed for it alone), 5 per second (60 s); it also reports the
   resident memory of the service and of its engine process every 10 s;
-- ``n`` new noise bands (not in the default order): eight 1.5 s noise touches in eight
-  bands, then seven in bands the engine process does not hold yet, 0.3 s apart: each new
-  band's loop is built by the host and handed over, never built in the audio callback;
+- ``n`` new noise bands: eight 1.5 s noise touches in eight bands, then seven in bands the
+  engine process does not hold yet, 0.3 s apart: each new band's loop is built by the host
+  and handed over, never built in the audio callback;
 - ``o`` the disagreeing order (not in the default order): eight bands, the first again, a
   ninth, the first (``docs/engine.md``, noise loops).
 
 Each reports the engine's underruns (the delta of ``phantomtouch_underruns`` in
-``/metrics``), JACK's xruns, the engine's render load (``phantomtouch_render_load``: the
-highest p99 and max scraped once a second during the scenario; it is a trailing window of
-the engine, so before each scenario the service rests until that window has forgotten the
-previous one), the most voices seen, requests answered by status (the client's count for
-``/touch``, and the server's own counters), ``GET /health`` latency sampled at 10 Hz, and
-how many cores were busy, in all and with programs other than the benchmark's (another
-user of the machine makes every figure worse), and a ``cyclictest`` probe's late wake-ups
-beside it, with each of JACK's xruns set beside what the probe saw at that moment: an
-xrun during a stall of the probe's is the machine's (``realtime_floor.in_stalls``, which
-also says how many would fall in one by chance). The yardstick, measured in this process,
-is a numpy copy of one 128 x 8 block.
+``/metrics``), JACK's xruns, the audio callback's own time at p50 and p99 in µs and in
+yardsticks (``phantomtouch_callback_seconds``; a service without that metric: its p99 from
+its render load), the engine's render load (``phantomtouch_render_load``: the highest p99
+and max scraped once a second during the scenario; it is a trailing window of the engine,
+so before each scenario the service rests until that window has forgotten its start), the
+most voices seen, requests answered by status (the client's count for ``/touch``, and the
+server's own counters), ``GET /health`` latency sampled at 10 Hz, and how many cores were
+busy, in all and with programs other than the benchmark's (another user of the machine
+makes every figure worse), and a ``cyclictest`` probe's late wake-ups beside it, with each
+of JACK's xruns set beside what the probe saw at that moment: an xrun during a stall of
+the probe's is the machine's (``realtime_floor.in_stalls``, which also says how many would
+fall in one by chance). The yardstick, measured in this process, is a numpy copy of one
+128 x 8 float32 block.
 
-Run: ``python benchmarks/bench_realtime.py [--quick] [--seconds 60] [--scenarios d,a,b,c]
-[--json PATH]`` (about 4 minutes with the defaults; ``--quick``: well under a minute, with
-short rests, so its render load figures overlap). Needs ``jackd`` (Debian ``jackd2``),
-``wrk`` for scenario c, and JACK-Client. Nothing is asserted: the figures depend on the
-machine and on what else it runs (see the load average printed with them). Each
-scenario's load is in ``realtime_scenarios.py`` (its users and programs in
-``realtime_load.py``), how one is measured in ``realtime_measure.py`` (the service read
-over HTTP in ``realtime_http.py``, CPU time and memory in ``realtime_usage.py``), and what
-is printed in ``realtime_report.py``.
+Paired mode, ``--pair CHECKOUT``: another checkout, served by the Python of its own
+``.venv``, runs each scenario right after (or, every other scenario, right before) this
+one, on the same JACK server, so a machine that drifts favours neither; both are printed
+side by side.
+
+Run: ``python benchmarks/bench_realtime.py [--quick] [--period 128|64] [--pair CHECKOUT]
+[--seconds 20] [--scenarios a,c,n] [--json PATH]`` (about 2 minutes per install with the
+defaults; ``--quick``: a few seconds per scenario, with short rests, so its render load
+figures overlap). Needs ``jackd`` (Debian ``jackd2``), ``wrk`` for scenario c, and
+JACK-Client. Nothing is asserted: the figures depend on the machine and on what else it
+runs (see the load average printed with them). Each scenario's load is in
+``realtime_scenarios.py`` (its users and programs in ``realtime_load.py``), how one is
+measured in ``realtime_measure.py`` (the service read over HTTP in ``realtime_http.py``,
+CPU time and memory in ``realtime_usage.py``), and what is printed in
+``realtime_report.py``.
 """
 
 from __future__ import annotations
@@ -317,6 +330,8 @@ def run_scenario(
         # wrk is one client standing for a whole scene: its touches may fill the voice cap
         # (64), not only the per-client quota (three quarters of it)
         "PHANTOMTOUCH_MAX_VOICES_PER_CLIENT": "64",
+        # the other checkout is only read: no byte code is written into it
+        **({"PYTHONDONTWRITEBYTECODE": "1"} if install.name == "pair" else {}),
     }
     service = Service(
         folder / f"patterns-{install.name}.db",

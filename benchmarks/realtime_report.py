@@ -200,6 +200,9 @@ def print_report(results: dict[str, Any], channels: int, memory_every_s: float) 
             for name in series[0][1]:
                 print(f"  {name}: " + " ".join(f"{mb(rss[name])}" for _, rss in series))
     print(
-        "\ntarget: 0 underruns and 0 xruns in a, b and c; the flood's excess refused (503) or "
-        "stolen; render load p99 <= 25 % of the period"
+        "\ntarget (docs/engine.md, Where to measure): at 128 frames at most 2 underruns "
+        "in each of a, c and n (a: at most 4 at 64 frames); under a at 128 frames the "
+        "callback's p50 <= 200 and "
+        "p99 <= 1,100 yardsticks; the flood's excess refused (503) or stolen, and POST /touch "
+        "accepted per second at least 0.8 of GET /health's"
     )

@@ -167,6 +167,15 @@ def test_a_null_output_plays_the_period_asked_or_the_profiles_block() -> None:
         assert (engine.block_frames, engine.status().period_source) == (64, "option")
     with Engine(PROFILE, NullSink(PROFILE), voice_cost=0.01) as engine:
         assert (engine.block_frames, engine.status().period_source) == (256, "profile")
+    spec = SinkSpec("null", period_frames=64)  # in an engine process: told with its ready
+    with ProcessEngine(PROFILE, spec, voice_cost=0.01) as engine:
+        status = engine.status()
+        assert engine.device == PROFILE.at_block(64)
+        assert (status.block_frames, status.period_frames, status.period_source) == (
+            64,
+            64,
+            "option",
+        )
 
 
 def test_the_engine_process_plays_at_the_period_its_sink_found(jack_at: JackServer) -> None:

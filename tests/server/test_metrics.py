@@ -23,6 +23,10 @@ STATUS = {
     "levels": [0.25, 0.0],
     "render_load_p99": 0.125,
     "render_load_max": 0.5,
+    "callback_p50_s": 0.0002,
+    "callback_p99_s": 0.001,
+    "callback_max_s": 0.004,
+    "period_frames": 64,
     "voice_capacity": 40,
     "voice_cost": 0.0125,
     "render_budget": 0.5,
@@ -78,6 +82,10 @@ def test_engine_figures_are_read_at_scrape_time() -> None:
     assert 'phantomtouch_channel_peak_level{channel="1"} 0.25' in text
     assert 'phantomtouch_render_load{quantile="0.99"} 0.125' in text
     assert 'phantomtouch_render_load{quantile="1"} 0.5' in text
+    assert 'phantomtouch_callback_seconds{quantile="0.5"} 0.0002' in text
+    assert 'phantomtouch_callback_seconds{quantile="0.99"} 0.001' in text
+    assert 'phantomtouch_callback_seconds{quantile="1"} 0.004' in text
+    assert "phantomtouch_period_frames 64.0" in text
     assert "phantomtouch_voice_capacity 40.0" in text
     assert "phantomtouch_voice_cost 0.0125" in text
     assert "phantomtouch_render_budget 0.5" in text
