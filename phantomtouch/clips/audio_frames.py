@@ -1,0 +1,190 @@
+"""A deployment's ``audioFilePatterns`` clip as a ``.tact`` project of dot frames.
+
+Newer SDK2 deployments describe an event not as a ``.tact`` project but as the motor levels
+a device shows every 20 ms, per device (docs/bhaptics.md, "SDK2")::
+
+    {"position": "Vest",                      # a label: not where it plays
+     "clip": {"duration": 125,                # not a length (seen 4 for 1 s): ignored
+              "patterns": {"ForearmL": ["WlpaWlpaAAAAAAAAAAAAAAAAAAA=", ...],
+                           "VestFront": [...]}}}
+
+Each string is base64 of :data:`FRAME_BYTES` bytes, one per motor (index order of the
+device's layout), each a level 0-100; frame ``k`` holds from ``k * FRAME_MS`` to
+``(k + 1) * FRAME_MS``. A frame of an arm (``ForearmL``, ``ForearmR``) is read as SDK1's dot
+mode reads a ``frame`` submit: motor ``i`` (0-5, Tactosy for arms; the other 14 bytes are
+not motors of an arm and are ignored) is a dot at its layout place with intensity
+``level / 100`` (more than 100 is clamped to 1). The frames become one effect whose
+:class:`~phantomtouch.clips.tact.DotFeedback` are each a motor's run of frames at one
+level, so that the score of a ``.tact`` project
+(:func:`phantomtouch.clips.tact_score.score`) plays them: each motor place one phantom at
+its level. Devices named by something that is no position are ignored; other
+devices (vest, head, hands) are kept, and play nothing on the band. Pure; any thread.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+from collections.abc import Mapping
+from typing import Any
+
+from phantomtouch.clips.tact import (
+    ARM_POSITIONS,
+    MAX_PROJECT_MS,
+    DotFeedback,
+    DotPoint,
+    Effect,
+    PositionContent,
+    TactProject,
+    position_name,
+)
+from phantomtouch.errors import ParameterError
+
+FRAME_MS = 20
+"""Each frame holds this long, ms."""
+FRAME_BYTES = 20
+"""Bytes (motor levels) in one decoded frame."""
+ARM_MOTORS = 6
+"""Motors of an arm (Tactosy for arms): the first bytes of an arm's frame."""
+MAX_LEVEL = 100
+"""A motor level of 100 is intensity 1; more is clamped to it."""
+MAX_FRAMES = int(MAX_PROJECT_MS) // FRAME_MS
+"""Most frames one device's list may hold (a ``.tact`` project's longest, 10 minutes)."""
+MAX_POINTS = 200_000
+"""Most motor levels above 0 one clip may hold by default, all devices together."""
+
+
+def audio_project(
+    clip: Mapping[str, Any], where: str, *, name: str = "", max_points: int = MAX_POINTS
+) -> TactProject:
+    """The project of one ``audioFilePatterns[].clip``: a dot effect per device.
+
+    Parameters
+    ----------
+    clip : mapping
+        The ``clip`` object; its ``patterns`` (keys matched without regard to case) maps a
+        device name (``ForearmL``, ``VestFront``, the C++ SDK's integers) to a list of
+        base64 frames. Missing ``patterns``: an empty project.
+    where : str
+        The clip's field path, for messages (``message.hapticMappings[3].audioFilePatterns
+        [0].clip``).
+    name : str
+        The project's name.
+    max_points : int
+        Most motor levels above 0 it may hold, all devices together (a caller reading
+        several clips passes what is left of its budget).
+
+    Returns
+    -------
+    TactProject
+        One effect from 0 to the longest device list's ``frames * FRAME_MS`` ms; per device
+        one ``DOT_MODE`` content with a feedback per run of frames in which a motor keeps
+        one level above 0 (``NONE`` playback: the level holds, then steps).
+
+    Raises
+    ------
+    ParameterError
+        ``patterns`` not an object, a device's frames not a list of strings, more than
+        :data:`MAX_FRAMES` frames or ``max_points`` levels above 0, a frame that is not
+        base64 of :data:`FRAME_BYTES` bytes; the message names the field path, the value
+        and what is allowed.
+
+    Notes
+    -----
+    Any thread; pure.
+    """
+    patterns = _field(clip, "patterns")
+    if patterns is None:
+        patterns = {}
+    if not isinstance(patterns, Mapping):
+        raise ParameterError(
+            f"{where}.patterns must be an object of device -> frames, got {type(patterns).__name__}"
+        )
+    contents: list[PositionContent] = []
+    longest = 0
+    points_left = max_points
+    for device, frames in patterns.items():
+        at = f"{where}.patterns.{device}"
+        position = position_name(device)
+        if position is None:
+            continue
+        if not isinstance(frames, list):
+            raise ParameterError(
+                f"{at} must be a list of base64 frames, got {type(frames).__name__}"
+            )
+        if len(frames) > MAX_FRAMES:
+            raise ParameterError(
+                f"{at} holds {len(frames)} frames; at most {MAX_FRAMES} "
+                f"({MAX_FRAMES * FRAME_MS} ms) are allowed"
+            )
+        motors = ARM_MOTORS if position in ARM_POSITIONS else FRAME_BYTES
+        rows = []
+        for k, frame in enumerate(frames):
+            levels = [min(level, MAX_LEVEL) for level in decode_frame(frame, f"{at}[{k}]")[:motors]]
+            points_left -= sum(1 for level in levels if level > 0)
+            if points_left < 0:
+                raise ParameterError(
+                    f"{at}[{k}] brings the clip past {max_points} motor levels above 0; "
+                    f"at most {max_points} are allowed"
+                )
+            rows.append(levels)
+        feedback = tuple(_runs(rows, motors))
+        longest = max(longest, len(frames))
+        contents.append(PositionContent(position, "DOT_MODE", feedback, ()))
+    effects = (Effect(0.0, float(longest * FRAME_MS), tuple(contents)),) if longest else ()
+    return TactProject(name=name, effects=effects, layouts={})
+
+
+def _runs(rows: list[list[int]], motors: int) -> list[DotFeedback]:
+    """Per motor, each run of frames at one level above 0 as one feedback, in time order."""
+    found = []
+    for i in range(motors):
+        start, level = 0, 0
+        for k, row in enumerate([*rows, [0] * motors]):
+            now = row[i] if i < len(row) else 0
+            if now == level:
+                continue
+            if level > 0:
+                point = DotPoint(i, level / MAX_LEVEL)
+                found.append(DotFeedback(start * FRAME_MS, k * FRAME_MS, "NONE", (point,)))
+            start, level = k, now
+    found.sort(key=lambda fb: (fb.start_ms, fb.points[0].index))
+    return found
+
+
+def decode_frame(frame: object, where: str) -> bytes:
+    """The :data:`FRAME_BYTES` motor levels of one base64 frame.
+
+    Raises
+    ------
+    ParameterError
+        Not a string, not base64, or not :data:`FRAME_BYTES` bytes once decoded; the
+        message names ``where`` and the value.
+    """
+    if not isinstance(frame, str):
+        raise ParameterError(
+            f"{where}={frame!r} must be a base64 string of {FRAME_BYTES} motor bytes"
+        )
+    try:
+        levels = base64.b64decode(frame, validate=True)
+    except (binascii.Error, ValueError):
+        raise ParameterError(
+            f"{where}={_short(frame)} is not base64; each frame is base64 of {FRAME_BYTES} bytes"
+        ) from None
+    if len(levels) != FRAME_BYTES:
+        raise ParameterError(
+            f"{where}={_short(frame)} decodes to {len(levels)} bytes; a frame has "
+            f"exactly {FRAME_BYTES}"
+        )
+    return levels
+
+
+def _field(obj: Mapping[str, Any], name: str) -> Any:
+    if name in obj:
+        return obj[name]
+    low = name.lower()
+    return next((v for k, v in obj.items() if str(k).lower() == low), None)
+
+
+def _short(text: str) -> str:
+    return repr(text) if len(text) <= 40 else repr(text[:40]) + "..."
