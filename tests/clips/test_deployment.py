@@ -322,8 +322,8 @@ def broken(path: list[Any], value: Any) -> dict[str, Any]:
                 ],
                 "later",
             ),
-            "message.hapticMappings[0].tactFilePatterns[0].tactFile",
-            r"tracks\[0\]\.effects\[0\]\.startTime='later' must be a number",
+            "message.hapticMappings[0].tactFilePatterns[0].tactFile.tracks[0].effects[0].startTime",
+            r"tactFile: tracks\[0\]\.effects\[0\]\.startTime='later' must be a number",
         ),
         (
             broken(["hapticMappings", 2, "audioFilePatterns", 0, "clip"], None),
@@ -332,32 +332,32 @@ def broken(path: list[Any], value: Any) -> dict[str, Any]:
         ),
         (
             broken(["hapticMappings", 2, "audioFilePatterns", 0, "clip", "patterns"], ["AAAA"]),
-            "message.hapticMappings[2].audioFilePatterns[0].clip",
-            r"clip\.patterns must be an object",
+            "message.hapticMappings[2].audioFilePatterns[0].clip.patterns",
+            "must be an object of device -> frames",
         ),
         (
             broken(
                 ["hapticMappings", 2, "audioFilePatterns", 0, "clip", "patterns", "ForearmL"],
                 [frame(1), "AAEC"],
             ),
-            "message.hapticMappings[2].audioFilePatterns[0].clip",
-            r"patterns\.ForearmL\[1\]='AAEC' decodes to 3 bytes; a frame has exactly 20",
+            "message.hapticMappings[2].audioFilePatterns[0].clip.patterns.ForearmL[1]",
+            "='AAEC' decodes to 3 bytes; a frame has exactly 20",
         ),
         (
             broken(
                 ["hapticMappings", 2, "audioFilePatterns", 0, "clip", "patterns", "ForearmL"],
                 ["not base64!"],
             ),
-            "message.hapticMappings[2].audioFilePatterns[0].clip",
-            r"patterns\.ForearmL\[0\]='not base64!' is not base64",
+            "message.hapticMappings[2].audioFilePatterns[0].clip.patterns.ForearmL[0]",
+            "='not base64!' is not base64",
         ),
         (
             broken(
                 ["hapticMappings", 2, "audioFilePatterns", 0, "clip", "patterns", "ForearmL"],
                 [12],
             ),
-            "message.hapticMappings[2].audioFilePatterns[0].clip",
-            r"patterns\.ForearmL\[0\]=12 must be a base64 string",
+            "message.hapticMappings[2].audioFilePatterns[0].clip.patterns.ForearmL[0]",
+            "=12 must be a base64 string",
         ),
     ],
 )
@@ -368,8 +368,8 @@ def test_a_refused_deployment_names_the_field_and_its_value(
         parse_deployment(document)
     assert caught.value.field == field
     assert isinstance(caught.value, ParameterError)
-    if field:
-        assert field in str(caught.value)
+    if field:  # the message names the field (a tact file's inner path after its own)
+        assert field.replace(".tactFile.", ".tactFile: ") in str(caught.value)
 
 
 def test_ten_thousand_events_are_refused_at_once() -> None:
@@ -377,6 +377,13 @@ def test_ten_thousand_events_are_refused_at_once() -> None:
     with pytest.raises(DeploymentError, match=f"10000 mappings; at most {MAX_EVENTS}") as caught:
         parse_deployment({"hapticMappings": many})
     assert caught.value.field == "hapticMappings"
+
+
+def test_a_huge_frame_list_is_refused_with_its_path() -> None:
+    clip = {"patterns": {"ForearmL": [frame()] * 30_001}}
+    with pytest.raises(DeploymentError, match="30001 frames; at most 30000") as caught:
+        parse_deployment([mapping("long", clips=[clip])])
+    assert caught.value.field == "[0].audioFilePatterns[0].clip.patterns.ForearmL"
 
 
 def test_nan_is_refused_wherever_it_is() -> None:
