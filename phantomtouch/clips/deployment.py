@@ -268,6 +268,20 @@ def parse_deployment(
     )
 
 
+def is_deployment(document: Any) -> bool:
+    """Whether a JSON value is shaped as a deployment rather than a clip: a
+    ``hapticMappings`` list at its top or in its ``message`` (keys in any case), or a
+    list of objects. Any thread; pure; it does not read the events."""
+    if isinstance(document, list):
+        return all(isinstance(item, Mapping) for item in document)
+    if not isinstance(document, Mapping):
+        return False
+    message = _field(document, "message")
+    return isinstance(_field(document, "hapticMappings"), list) or (
+        isinstance(message, Mapping) and isinstance(_field(message, "hapticMappings"), list)
+    )
+
+
 def load_deployment(path: str | Path) -> Deployment:
     """Read a deployment file (see :func:`parse_deployment`); an unreadable file is a
     :class:`DeploymentError` naming it. Runs in the caller's thread (file I/O)."""
