@@ -135,6 +135,7 @@ class Sdk2Session:
         for play in self.plays.values():
             play.stop()
         self.plays.clear()
+        self.owner.engine.stop_owner(self.owner.owner, "closed")
         self.owner.engine.release_owner(self.owner.owner, "closed")
 
     # -- what the client is told -----------------------------------------------------------

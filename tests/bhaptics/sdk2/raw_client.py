@@ -49,6 +49,10 @@ class RawClient:
         return self
 
     async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        """Close (the server has answered the close when this returns)."""
         assert self._connection is not None and self._reader is not None
         await self._connection.close()
         with contextlib.suppress(asyncio.CancelledError):
