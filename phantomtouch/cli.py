@@ -2,7 +2,7 @@
 
 ``phantomtouch serve``    the touch service: REST and WebSocket API on 127.0.0.1:8000
 ``phantomtouch osc``      the same with OSC input (VRChat contact receivers) on UDP 9001
-``phantomtouch import``   a haptic clip (.haptic, .ahap) into the clip library
+``phantomtouch import``   a clip (.haptic, .ahap), .tact project or SDK2 deployment into the library
 ``phantomtouch render``   one pattern (JSON file, preset or .tact) to an 8-channel WAV
 ``phantomtouch presets``  list the named patterns
 ``phantomtouch stimuli``  render a whole stimulus set of the paper to a folder

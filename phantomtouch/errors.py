@@ -4,6 +4,7 @@
 
     PhantomTouchError              root: every error the package raises on purpose
     ├── ParameterError(ValueError) a value is outside its allowed range
+    │   └── FieldError             ... of a document, at a field path it names
     ├── DeviceError                a device profile or the sound card is unusable
     ├── EngineBusyError            the engine's bounded command queue is full
     └── ProtocolError              a client broke the WebSocket protocol
@@ -24,6 +25,21 @@ class PhantomTouchError(Exception):
 
 class ParameterError(PhantomTouchError, ValueError):
     """A parameter is outside its allowed range; the message names it and its value."""
+
+
+class FieldError(ParameterError):
+    """A document (a ``.tact`` project, a deployment) refused at one of its fields.
+
+    ``field`` is the path of the field at fault inside the document as given
+    (``tracks[0].effects[2].startTime``; ``""``: the document as a whole) and ``value`` its
+    value (None when it is missing or too large to repeat); the message names both and
+    what is allowed. The server answers it naming ``field``.
+    """
+
+    def __init__(self, message: str, *, field: str, value: object = None) -> None:
+        super().__init__(message)
+        self.field = field
+        self.value = value
 
 
 class DeviceError(PhantomTouchError):

@@ -10,11 +10,19 @@ A bHaptics Designer project, ``phantomtouch import Stab_ArmL.tact``, is stored i
 ``.tact`` library the same way (``-o``: the body of ``PUT /tact/{name}``), and played by
 ``POST /tact/{name}/play`` or the WebSocket's ``play`` with ``"tact": NAME``; a project
 with nothing for an arm is refused in one line (exit 2).
+
+An SDK2 game's deployment (the Developer Portal's JSON a game ships as its "default
+config"; told by its ``hapticMappings``), ``phantomtouch import default-config.json
+[--workspace ID]``, is stored in the workspace library under the id the game connects
+with: ``--workspace``, else the deployment's own ``workspaceId`` (``-o``: the body of ``PUT
+/bhaptics/workspaces/{id}``); the SDK2 stand-in then plays its events by name. A
+deployment that does not read is refused in one line naming the field at fault (exit 2).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import sys
 import warnings
@@ -46,6 +54,8 @@ def _run(args: argparse.Namespace) -> int:
     path = Path(args.file)
     if path.suffix.lower() == ".tact":
         return _import_tact(args, path)
+    if args.workspace is not None or _holds_deployment(path):
+        return _import_deployment(args, path)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ClipWarning)
         clip = load_clip(path)
@@ -117,16 +127,88 @@ def _import_tact(args: argparse.Namespace, path: Path) -> int:
     return 0
 
 
+def _holds_deployment(path: Path) -> bool:
+    """Whether the JSON file ``path`` is shaped as a deployment (False: not JSON, or
+    unreadable; the clip reader then says why)."""
+    from phantomtouch.clips.deployment import MAX_DEPLOYMENT_BYTES, is_deployment
+
+    try:
+        if path.stat().st_size > MAX_DEPLOYMENT_BYTES:
+            return False
+        document = json.loads(path.read_bytes().decode("utf-8-sig", errors="replace"))
+    except (OSError, ValueError, RecursionError):
+        return False
+    if isinstance(document, str):  # a game's config holding the JSON as a string
+        try:
+            document = json.loads(document)
+        except (ValueError, RecursionError):
+            return False
+    return is_deployment(document)
+
+
+def _import_deployment(args: argparse.Namespace, path: Path) -> int:
+    from phantomtouch.clips.deployment import MAX_DEPLOYMENT_BYTES
+    from phantomtouch.service.settings import default_db_path
+    from phantomtouch.service.store import PatternStore
+    from phantomtouch.service.workspace_library import read_deployment, summary
+
+    try:
+        if path.stat().st_size > MAX_DEPLOYMENT_BYTES:
+            raise ParameterError(f"{path.name}: a deployment may have {MAX_DEPLOYMENT_BYTES} bytes")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ParameterError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from exc
+    try:
+        text, deployment = read_deployment(data)
+    except ParameterError as exc:
+        raise ParameterError(f"{path.name}: {exc}") from exc
+    about = summary(deployment)
+    described = (
+        f"{about['game'] or 'a game'}: {about['events']} events, {about['arm_events']} of "
+        "them on an arm"
+    )
+    if args.output is not None:
+        Path(args.output).write_text(text + "\n", encoding="utf-8")
+        print(f"{path.name}: {described}; written to {args.output}")
+        return 0
+    workspace = args.workspace or deployment.workspace_id
+    if workspace is None:
+        raise ParameterError(f"{path.name}: the deployment names no workspaceId; give --workspace")
+    if not _NAME.fullmatch(workspace) or workspace in (".", ".."):
+        raise ParameterError(
+            f"--workspace={workspace!r} must be 1-64 letters, digits, '.', '_' or '-'"
+        )
+    db_path = Path(args.db) if args.db else default_db_path()
+    store = PatternStore.open(db_path)
+    try:
+        new = store.put_workspace(workspace, text, about)
+    finally:
+        store.close()
+    verb = "imported" if new else "replaced"
+    print(
+        f"{verb} workspace {workspace!r} from {path.name} ({described}), in {db_path}; a game "
+        "connecting with this workspace_id plays its events"
+    )
+    return 0
+
+
 def add_import_command(sub: argparse._SubParsersAction) -> None:
     """Register ``phantomtouch import``."""
     command = sub.add_parser(
         "import",
-        help="import a haptic clip (.haptic, .ahap) or a bHaptics project (.tact) into the library",
+        help="import a haptic clip (.haptic, .ahap), a bHaptics project (.tact) or an SDK2 "
+        "game's deployment (.json) into the library",
     )
     command.add_argument(
-        "file", help="a Meta Haptics Studio .haptic, Apple .ahap or bHaptics Designer .tact file"
+        "file",
+        help="a Meta Haptics Studio .haptic, Apple .ahap or bHaptics Designer .tact file, or "
+        "a bHaptics Developer Portal deployment (a game's default config, JSON)",
     )
     command.add_argument("--name", help="its name in the library (default: file stem)")
+    command.add_argument(
+        "--workspace",
+        help="a deployment: the workspace id a game connects with (default: its workspaceId)",
+    )
     command.add_argument("--db", help="the library, SQLite file (default: the service's)")
     command.add_argument("-o", "--output", help="write it as JSON here instead of into the library")
     command.set_defaults(func=_run)

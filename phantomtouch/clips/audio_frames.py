@@ -38,7 +38,7 @@ from phantomtouch.clips.tact import (
     TactProject,
     position_name,
 )
-from phantomtouch.errors import ParameterError
+from phantomtouch.errors import FieldError
 
 FRAME_MS = 20
 """Each frame holds this long, ms."""
@@ -83,7 +83,7 @@ def audio_project(
 
     Raises
     ------
-    ParameterError
+    FieldError
         ``patterns`` not an object, a device's frames not a list of strings, more than
         :data:`MAX_FRAMES` frames or ``max_points`` levels above 0, a frame that is not
         base64 of :data:`FRAME_BYTES` bytes; the message names the field path, the value
@@ -97,8 +97,10 @@ def audio_project(
     if patterns is None:
         patterns = {}
     if not isinstance(patterns, Mapping):
-        raise ParameterError(
-            f"{where}.patterns must be an object of device -> frames, got {type(patterns).__name__}"
+        raise FieldError(
+            f"{where}.patterns must be an object of device -> frames, got "
+            f"{type(patterns).__name__}",
+            field=f"{where}.patterns",
         )
     contents: list[PositionContent] = []
     longest = 0
@@ -109,13 +111,14 @@ def audio_project(
         if position is None:
             continue
         if not isinstance(frames, list):
-            raise ParameterError(
-                f"{at} must be a list of base64 frames, got {type(frames).__name__}"
+            raise FieldError(
+                f"{at} must be a list of base64 frames, got {type(frames).__name__}", field=at
             )
         if len(frames) > MAX_FRAMES:
-            raise ParameterError(
+            raise FieldError(
                 f"{at} holds {len(frames)} frames; at most {MAX_FRAMES} "
-                f"({MAX_FRAMES * FRAME_MS} ms) are allowed"
+                f"({MAX_FRAMES * FRAME_MS} ms) are allowed",
+                field=at,
             )
         motors = ARM_MOTORS if position in ARM_POSITIONS else FRAME_BYTES
         rows = []
@@ -123,9 +126,10 @@ def audio_project(
             levels = [min(level, MAX_LEVEL) for level in decode_frame(frame, f"{at}[{k}]")[:motors]]
             points_left -= sum(1 for level in levels if level > 0)
             if points_left < 0:
-                raise ParameterError(
+                raise FieldError(
                     f"{at}[{k}] brings the clip past {max_points} motor levels above 0; "
-                    f"at most {max_points} are allowed"
+                    f"at most {max_points} are allowed",
+                    field=f"{at}[{k}]",
                 )
             rows.append(levels)
         feedback = tuple(_runs(rows, motors))
@@ -157,24 +161,30 @@ def decode_frame(frame: object, where: str) -> bytes:
 
     Raises
     ------
-    ParameterError
+    FieldError
         Not a string, not base64, or not :data:`FRAME_BYTES` bytes once decoded; the
         message names ``where`` and the value.
     """
     if not isinstance(frame, str):
-        raise ParameterError(
-            f"{where}={frame!r} must be a base64 string of {FRAME_BYTES} motor bytes"
+        raise FieldError(
+            f"{where}={frame!r} must be a base64 string of {FRAME_BYTES} motor bytes",
+            field=where,
+            value=frame,
         )
     try:
         levels = base64.b64decode(frame, validate=True)
     except (binascii.Error, ValueError):
-        raise ParameterError(
-            f"{where}={_short(frame)} is not base64; each frame is base64 of {FRAME_BYTES} bytes"
+        raise FieldError(
+            f"{where}={_short(frame)} is not base64; each frame is base64 of {FRAME_BYTES} bytes",
+            field=where,
+            value=frame[:40],
         ) from None
     if len(levels) != FRAME_BYTES:
-        raise ParameterError(
+        raise FieldError(
             f"{where}={_short(frame)} decodes to {len(levels)} bytes; a frame has "
-            f"exactly {FRAME_BYTES}"
+            f"exactly {FRAME_BYTES}",
+            field=where,
+            value=frame[:40],
         )
     return levels
 

@@ -58,7 +58,7 @@ from phantomtouch.clips.audio_frames import audio_project
 from phantomtouch.clips.tact import MAX_PROJECT_MS, TactProject, parse_tact
 from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.clips.tact_score import ScaleOption, Score, score
-from phantomtouch.errors import ParameterError
+from phantomtouch.errors import FieldError, ParameterError
 from phantomtouch.schema import DeviceProfile
 
 MAX_DEPLOYMENT_BYTES = 16 << 20
@@ -73,16 +73,11 @@ MAX_EVENT_TIME_MS = int(MAX_PROJECT_MS)
 """Largest ``eventTime`` accepted, ms (a pattern's longest, 10 minutes)."""
 
 
-class DeploymentError(ParameterError):
+class DeploymentError(FieldError):
     """A deployment refused: ``field`` is the path of the field at fault in the document
     as given (``message.hapticMappings[3].eventTime``; ``""``: the document itself),
-    ``value`` its value (None when it is too large to repeat). The message names both and
-    what is allowed."""
-
-    def __init__(self, field: str, value: Any, message: str) -> None:
-        super().__init__(message)
-        self.field = field
-        self.value = value
+    ``value`` its value (None when it is missing or too large to repeat). The message
+    names both and what is allowed."""
 
 
 @dataclass(frozen=True)
@@ -227,10 +222,9 @@ def parse_deployment(
     prefix, mappings = _mappings(top)
     if len(mappings) > MAX_EVENTS:
         raise DeploymentError(
-            prefix,
-            None,
             f"{prefix or 'the document'} holds {len(mappings)} mappings; at most {MAX_EVENTS} "
             "are allowed",
+            field=prefix,
         )
     events: dict[str, Event] = {}
     where_of: dict[str, str] = {}
@@ -239,25 +233,24 @@ def parse_deployment(
         where = f"{prefix}[{i}]" if prefix else f"[{i}]"
         if not isinstance(mapping, Mapping):
             raise DeploymentError(
-                where, None, f"{where} must be an object (a mapping), got {type(mapping).__name__}"
+                f"{where} must be an object (a mapping), got {type(mapping).__name__}", field=where
             )
         if _field(mapping, "enable") is False:
             continue
         event = _event(mapping, where, points_left=MAX_POINTS - points)
         if event.name in events:
             raise DeploymentError(
-                f"{where}.key",
-                event.name,
                 f"{where}.key={event.name!r} repeats {where_of[event.name]}.key; "
                 "event names must be unique",
+                field=f"{where}.key",
+                value=event.name,
             )
         points += sum(_points(p) for p in event.patterns)
         if points > MAX_POINTS:
             raise DeploymentError(
-                where,
-                None,
                 f"{where} brings the deployment past {MAX_POINTS} points; at most "
                 f"{MAX_POINTS} are allowed",
+                field=where,
             )
         events[event.name] = event
         where_of[event.name] = where
@@ -275,6 +268,20 @@ def parse_deployment(
     )
 
 
+def is_deployment(document: Any) -> bool:
+    """Whether a JSON value is shaped as a deployment rather than a clip: a
+    ``hapticMappings`` list at its top or in its ``message`` (keys in any case), or a
+    list of objects. Any thread; pure; it does not read the events."""
+    if isinstance(document, list):
+        return all(isinstance(item, Mapping) for item in document)
+    if not isinstance(document, Mapping):
+        return False
+    message = _field(document, "message")
+    return isinstance(_field(document, "hapticMappings"), list) or (
+        isinstance(message, Mapping) and isinstance(_field(message, "hapticMappings"), list)
+    )
+
+
 def load_deployment(path: str | Path) -> Deployment:
     """Read a deployment file (see :func:`parse_deployment`); an unreadable file is a
     :class:`DeploymentError` naming it. Runs in the caller's thread (file I/O)."""
@@ -283,12 +290,12 @@ def load_deployment(path: str | Path) -> Deployment:
         size = path.stat().st_size
         if size > MAX_DEPLOYMENT_BYTES:
             raise DeploymentError(
-                "", None, f"{path}: {size} bytes; a deployment may have {MAX_DEPLOYMENT_BYTES}"
+                f"{path}: {size} bytes; a deployment may have {MAX_DEPLOYMENT_BYTES}", field=""
             )
         data = path.read_bytes()
     except OSError as exc:
         raise DeploymentError(
-            "", None, f"cannot read {str(path)!r}: {exc.strerror or exc}"
+            f"cannot read {str(path)!r}: {exc.strerror or exc}", field=""
         ) from exc
     return parse_deployment(data)
 
@@ -300,10 +307,9 @@ def _decoded(document: Any) -> Any:
             return document
         if len(document) > MAX_DEPLOYMENT_BYTES:
             raise DeploymentError(
-                "",
-                None,
                 f"the deployment is {len(document)} bytes; at most {MAX_DEPLOYMENT_BYTES} "
                 "are allowed",
+                field="",
             )
         text = (
             bytes(document).decode("utf-8-sig", errors="replace")
@@ -311,15 +317,17 @@ def _decoded(document: Any) -> Any:
             else document.removeprefix("\ufeff")
         )
         if not text.strip():
-            raise DeploymentError("", "", "the deployment is empty; it must be a JSON object")
+            raise DeploymentError(
+                "the deployment is empty; it must be a JSON object", field="", value=""
+            )
         try:
             document = json.loads(text)
         except ValueError as exc:
-            raise DeploymentError("", None, f"the deployment is not JSON ({exc})") from exc
+            raise DeploymentError(f"the deployment is not JSON ({exc})", field="") from exc
         except RecursionError:
-            raise DeploymentError("", None, "the deployment's JSON is nested too deep") from None
+            raise DeploymentError("the deployment's JSON is nested too deep", field="") from None
     if isinstance(document, str):
-        raise DeploymentError("", None, "the deployment is a JSON string; it must be an object")
+        raise DeploymentError("the deployment is a JSON string; it must be an object", field="")
     return document
 
 
@@ -329,7 +337,7 @@ def _mappings(top: Any) -> tuple[str, list[Any]]:
         return "", top
     if not isinstance(top, Mapping):
         raise DeploymentError(
-            "", None, f"the deployment must be a JSON object, got {type(top).__name__}"
+            f"the deployment must be a JSON object, got {type(top).__name__}", field=""
         )
     prefix = ""
     body: Mapping[str, Any] = top
@@ -337,14 +345,14 @@ def _mappings(top: Any) -> tuple[str, list[Any]]:
     if _field(top, "hapticMappings") is None and message is not None:
         if not isinstance(message, Mapping):
             raise DeploymentError(
-                "message", None, f"message must be an object, got {type(message).__name__}"
+                f"message must be an object, got {type(message).__name__}", field="message"
             )
         prefix, body = "message.", message
     mappings = _field(body, "hapticMappings")
     field = f"{prefix}hapticMappings"
     if not isinstance(mappings, list):
         got = "nothing" if mappings is None else type(mappings).__name__
-        raise DeploymentError(field, None, f"{field} must be a list of mappings, got {got}")
+        raise DeploymentError(f"{field} must be a list of mappings, got {got}", field=field)
     return field, mappings
 
 
@@ -353,9 +361,9 @@ def _event(mapping: Mapping[str, Any], where: str, *, points_left: int) -> Event
     if not isinstance(name, str) or not 1 <= len(name) <= MAX_NAME_CHARS:
         shown = name if not isinstance(name, str) else name[:40]
         raise DeploymentError(
-            f"{where}.key",
-            shown,
             f"{where}.key={shown!r} must be a string of 1-{MAX_NAME_CHARS} characters",
+            field=f"{where}.key",
+            value=shown,
         )
     patterns: list[TactProject] = []
     for j, item in enumerate(_list(mapping, "tactFilePatterns", where)):
@@ -363,17 +371,20 @@ def _event(mapping: Mapping[str, Any], where: str, *, points_left: int) -> Event
         tact = _field(item, "tactFile") if isinstance(item, Mapping) else None
         if not isinstance(tact, Mapping | str):
             raise DeploymentError(
-                f"{at}.tactFile", None, f"{at}.tactFile must be a .tact project object"
+                f"{at}.tactFile must be a .tact project object", field=f"{at}.tactFile"
             )
         try:
             patterns.append(parse_tact(tact, source=f"{at}.tactFile"))
         except ParameterError as exc:
-            raise DeploymentError(f"{at}.tactFile", None, str(exc)) from exc
+            inner = exc.field if isinstance(exc, FieldError) else ""
+            raise DeploymentError(
+                str(exc), field=_joined(f"{at}.tactFile", inner), value=_value(exc)
+            ) from exc
     for j, item in enumerate(_list(mapping, "audioFilePatterns", where)):
         at = f"{where}.audioFilePatterns[{j}]"
         clip = _field(item, "clip") if isinstance(item, Mapping) else None
         if not isinstance(clip, Mapping):
-            raise DeploymentError(f"{at}.clip", None, f"{at}.clip must be an object")
+            raise DeploymentError(f"{at}.clip must be an object", field=f"{at}.clip")
         left = points_left - sum(_points(p) for p in patterns)
         try:
             patterns.append(
@@ -382,7 +393,8 @@ def _event(mapping: Mapping[str, Any], where: str, *, points_left: int) -> Event
                 )
             )
         except ParameterError as exc:
-            raise DeploymentError(f"{at}.clip", None, str(exc)) from exc
+            field = exc.field if isinstance(exc, FieldError) else f"{at}.clip"
+            raise DeploymentError(str(exc), field=field, value=_value(exc)) from exc
     category = _field(mapping, "category")
     return Event(
         name=name,
@@ -400,7 +412,7 @@ def _list(mapping: Mapping[str, Any], name: str, where: str) -> list[Any]:
         return []
     if not isinstance(value, list):
         raise DeploymentError(
-            f"{where}.{name}", None, f"{where}.{name} must be a list, got {type(value).__name__}"
+            f"{where}.{name} must be a list, got {type(value).__name__}", field=f"{where}.{name}"
         )
     return value
 
@@ -421,7 +433,9 @@ def _intensity(value: Any, field: str) -> float:
         return 1.0
     number = _number(value)
     if number is None or not 0.0 <= number <= 100.0:
-        raise DeploymentError(field, value, f"{field}={value!r} must be a number within [0, 100]")
+        raise DeploymentError(
+            f"{field}={value!r} must be a number within [0, 100]", field=field, value=value
+        )
     return number / 100.0
 
 
@@ -431,7 +445,9 @@ def _event_time(value: Any, field: str) -> int | None:
     number = _number(value)
     if number is None or not number.is_integer() or not 0 <= number <= MAX_EVENT_TIME_MS:
         raise DeploymentError(
-            field, value, f"{field}={value!r} must be an integer within [0, {MAX_EVENT_TIME_MS}] ms"
+            f"{field}={value!r} must be an integer within [0, {MAX_EVENT_TIME_MS}] ms",
+            field=field,
+            value=value,
         )
     return int(number)
 
@@ -440,6 +456,17 @@ def _points(project: TactProject) -> int:
     return sum(
         len(dots.points) for e in project.effects for c in e.contents for dots in c.dots
     ) + sum(len(path.keyframes) for e in project.effects for c in e.contents for path in c.paths)
+
+
+def _joined(path: str, inner: str) -> str:
+    """``inner`` (a path inside the field ``path``) as a path of the whole document."""
+    if not inner:
+        return path
+    return path + inner if inner.startswith("[") else f"{path}.{inner}"
+
+
+def _value(exc: ParameterError) -> Any:
+    return exc.value if isinstance(exc, FieldError) else None
 
 
 def _lowered(obj: Any) -> dict[str, Any]:

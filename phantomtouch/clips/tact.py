@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from phantomtouch.errors import ParameterError
+from phantomtouch.errors import FieldError, ParameterError
 
 Playback = Literal["NONE", "FADE_IN", "FADE_OUT", "FADE_IN_OUT"]
 MAX_TACT_BYTES = 16 << 20
@@ -258,7 +258,9 @@ def parse_tact(document: str | bytes | Mapping[str, Any], *, source: str = "tact
         Not JSON, not an object, larger than :data:`MAX_TACT_BYTES`, more than
         :data:`MAX_POINTS` points, an effect ending after :data:`MAX_PROJECT_MS`, or a
         field of the wrong type (a number that is not one, a list that is not a list);
-        the message names the field by its path (``tracks[0].effects[2].startTime``).
+        the message names the field by its path (``tracks[0].effects[2].startTime``),
+        and but for the size it is a :class:`~phantomtouch.errors.FieldError` whose
+        ``field`` is that path (``""``: the document).
 
     Notes
     -----
@@ -277,12 +279,16 @@ def parse_tact(document: str | bytes | Mapping[str, Any], *, source: str = "tact
         try:
             document = json.loads(text)
         except ValueError as exc:
-            raise ParameterError(f"{source}: not JSON ({exc})") from exc
+            raise FieldError(f"{source}: not JSON ({exc})", field="") from exc
         except RecursionError:
-            raise ParameterError(f"{source}: JSON nested too deep for a .tact file") from None
+            raise FieldError(f"{source}: JSON nested too deep for a .tact file", field="") from None
     reader = _Reader(source)
     top = reader.obj(document, "")
-    project = reader.obj(_get(top, "project"), "project") if _has(top, "project") else top
+    key = next((k for k in top if str(k).lower() == "project"), None)
+    if key is None:
+        return reader.project(top)
+    project = reader.obj(top[key], str(key))
+    reader.prefix = f"{key}."
     return reader.project(project)
 
 
@@ -303,10 +309,6 @@ def _lowered(obj: Mapping[str, Any]) -> dict[str, Any]:
     return {str(k).lower(): v for k, v in obj.items()}
 
 
-def _has(obj: Mapping[str, Any], name: str) -> bool:
-    return name in obj or name.lower() in _lowered(obj)
-
-
 def _get(obj: Mapping[str, Any], name: str, default: Any = None) -> Any:
     if name in obj:
         return obj[name]
@@ -319,10 +321,13 @@ class _Reader:
     def __init__(self, source: str) -> None:
         self.source = source
         self.points = 0
+        self.prefix = ""
+        """The project object's path in the document (``project.``; ``""``: it is the top)."""
 
-    def fail(self, field: str, message: str) -> ParameterError:
+    def fail(self, field: str, message: str) -> FieldError:
         joint = "" if message.startswith("=") else " "
-        return ParameterError(f"{self.source}: {field or 'the document'}{joint}{message}")
+        field = self.prefix + field if field else self.prefix.rstrip(".")
+        return FieldError(f"{self.source}: {field or 'the document'}{joint}{message}", field=field)
 
     def obj(self, value: Any, field: str) -> Mapping[str, Any]:
         if value is None:

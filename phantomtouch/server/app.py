@@ -31,6 +31,7 @@ from phantomtouch.server.routes import (
     wearer,
     wearers,
     web,
+    workspaces,
     ws,
 )
 from phantomtouch.service import errors
@@ -136,6 +137,7 @@ def create_app(settings: Settings | None = None, *, attach: Sequence[Attachment]
         openapi_tags=[
             {"name": "touch", "description": "Play and stop touches."},
             {"name": "patterns", "description": "The pattern library (SQLite)."},
+            {"name": "bhaptics", "description": "bHaptics SDK2 workspaces: games' events."},
             {"name": "wearers", "description": "Wearer profiles: felt intensity per actuator."},
             {"name": "render", "description": "Offline rendering."},
             {"name": "info", "description": "Device, presets, clock, health, metrics."},
@@ -143,7 +145,20 @@ def create_app(settings: Settings | None = None, *, attach: Sequence[Attachment]
     )
     app.state.settings = settings
     errors.install(app)
-    for module in (touch, patterns, clips, tact, wearers, wearer, render, info, ws, web, docs):
+    for module in (
+        touch,
+        patterns,
+        clips,
+        tact,
+        workspaces,
+        wearers,
+        wearer,
+        render,
+        info,
+        ws,
+        web,
+        docs,
+    ):
         app.include_router(module.router)
     app.mount(docs.ASSETS_PATH, StaticFiles(directory=docs.ASSETS_DIR), name="docs-assets")
     if web.STATIC_DIR.is_dir():

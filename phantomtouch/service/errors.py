@@ -4,6 +4,7 @@ The exception tree the server adds below the package root::
 
     PhantomTouchError                    phantomtouch.errors
     ├── ParameterError                   422 invalid
+    │   └── FieldError                   422 invalid     (fields: the path it names, or body)
     ├── EngineBusyError                  503 busy
     ├── DeviceError                      503 device
     ├── ProtocolError                    422 invalid
@@ -48,6 +49,7 @@ from starlette.routing import Match
 from phantomtouch.errors import (
     DeviceError,
     EngineBusyError,
+    FieldError,
     ParameterError,
     PhantomTouchError,
     ProtocolError,
@@ -345,6 +347,9 @@ def describe(exc: BaseException) -> Problem:
         return Problem(503, "busy", str(exc) or "the engine is busy", headers=_RETRY_SOON)
     if isinstance(exc, DeviceError):
         return Problem(503, "device", str(exc))
+    if isinstance(exc, FieldError):
+        message = str(exc)
+        return Problem(422, "invalid", message, [_problem(exc.field or "body", exc.value, message)])
     if isinstance(exc, ParameterError | ProtocolError | PhantomTouchError):
         message = str(exc)
         field, value = _field_and_value(message)

@@ -1,5 +1,5 @@
 """The library: named ``TouchPattern`` s, haptic clips, wearer profiles, the answers of
-their matching runs and ``.tact`` projects in one SQLite file.
+their matching runs, ``.tact`` projects and bHaptics SDK2 workspaces in one SQLite file.
 
 WAL journal and ``synchronous=FULL``: a committed ``PUT`` survives the process being
 killed (and a power cut). One connection shared by the worker threads, guarded by a lock;
@@ -28,7 +28,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, TypeVar
+from typing import Any, NamedTuple, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
@@ -37,10 +37,9 @@ from phantomtouch.schema import HapticClip, TouchPattern
 from phantomtouch.schema.wearer import WearerProfile, WearerRun
 from phantomtouch.service.errors import StorageError, StoredPatternError
 from phantomtouch.service.models import PlanSummary
+from phantomtouch.service.store_tables import DOCUMENT, TABLES, SizedTable, Table
 
 logger = logging.getLogger("phantomtouch.server.store")
-Table = Literal["patterns", "clips", "wearers", "wearer_runs", "tact"]
-"""The tables whose rows are written and deleted by name (never a value from a request)."""
 
 
 class ClipSize(NamedTuple):
@@ -53,70 +52,7 @@ class ClipSize(NamedTuple):
     transients: int
 
 
-_DOCUMENT: dict[Table, str] = {
-    "patterns": "pattern",
-    "clips": "clip",
-    "wearers": "profile",
-    "wearer_runs": "run",
-    "tact": "project",
-}
-"""The column holding each table's document as JSON."""
 Document = TypeVar("Document", bound=BaseModel)
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS patterns (
-    name TEXT PRIMARY KEY,
-    pattern TEXT NOT NULL,
-    summary TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-_CLIP_SCHEMA = """
-CREATE TABLE IF NOT EXISTS clips (
-    name TEXT PRIMARY KEY,
-    clip TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-_CLIP_SIZES_SCHEMA = """
-CREATE TABLE IF NOT EXISTS clip_sizes (
-    name TEXT PRIMARY KEY,
-    duration_s REAL NOT NULL,
-    amplitude_points INTEGER NOT NULL,
-    frequency_points INTEGER NOT NULL,
-    transients INTEGER NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-"""What ``GET /clips`` lists of each clip, kept when it is stored; a row counts only while
-its ``updated_unix_s`` is the clip's (:meth:`PatternStore.clip_sizes`)."""
-_WEARER_SCHEMA = """
-CREATE TABLE IF NOT EXISTS wearers (
-    name TEXT PRIMARY KEY,
-    profile TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-_WEARER_RUN_SCHEMA = """
-CREATE TABLE IF NOT EXISTS wearer_runs (
-    name TEXT PRIMARY KEY,
-    run TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-
-
-_TACT_SCHEMA = """
-CREATE TABLE IF NOT EXISTS tact (
-    name TEXT PRIMARY KEY,
-    project TEXT NOT NULL,
-    bytes INTEGER NOT NULL,
-    summary TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-"""``.tact`` projects: the project's JSON as stored, its size and a summary, so that a
-listing never reads a project."""
 
 
 class DamagedStoreError(DeviceError):
@@ -169,12 +105,8 @@ class PatternStore:
             db.execute("PRAGMA journal_mode=WAL")
             db.execute("PRAGMA synchronous=FULL")
             db.execute("PRAGMA busy_timeout=5000")
-            db.execute(_SCHEMA)
-            db.execute(_CLIP_SCHEMA)
-            db.execute(_CLIP_SIZES_SCHEMA)
-            db.execute(_WEARER_SCHEMA)
-            db.execute(_WEARER_RUN_SCHEMA)
-            db.execute(_TACT_SCHEMA)
+            for table in TABLES:
+                db.execute(table)
         except sqlite3.DatabaseError as exc:
             if isinstance(exc, sqlite3.OperationalError):
                 raise DeviceError(
@@ -256,7 +188,7 @@ class PatternStore:
         """
         with self._using(writes=False) as db:
             row = db.execute(
-                f"SELECT {_DOCUMENT[table]} FROM {table} WHERE name = ?", (name,)
+                f"SELECT {DOCUMENT[table]} FROM {table} WHERE name = ?", (name,)
             ).fetchone()
         if row is None:
             return None
@@ -273,7 +205,7 @@ class PatternStore:
         ``offset``-th row."""
         with self._using(writes=False) as db:
             rows = db.execute(
-                f"SELECT name, {_DOCUMENT[table]} FROM {table} ORDER BY name LIMIT ? OFFSET ?",
+                f"SELECT name, {DOCUMENT[table]} FROM {table} ORDER BY name LIMIT ? OFFSET ?",
                 (-1 if limit is None else limit, offset),
             ).fetchall()
         listed = []
@@ -416,28 +348,63 @@ class PatternStore:
     def list_tact(self, limit: int, offset: int) -> builtins.list[tuple[str, int, str]]:
         """One page of stored projects by name: ``(name, bytes, summary JSON)``, at most
         ``limit`` from the ``offset``-th on (the projects themselves are not read)."""
-        with self._using(writes=False) as db:
-            rows = db.execute(
-                "SELECT name, bytes, summary FROM tact ORDER BY name LIMIT ? OFFSET ?",
-                (limit, offset),
-            ).fetchall()
-        return [(str(name), int(size), str(summary)) for name, size, summary in rows]
+        return self._list_sized("tact", limit, offset)
 
     def get_tact(self, name: str) -> str | None:
         """The project JSON stored as ``name``, or None."""
-        with self._using(writes=False) as db:
-            row = db.execute("SELECT project FROM tact WHERE name = ?", (name,)).fetchone()
-        return None if row is None else str(row[0])
+        return self._text("tact", name)
 
     def put_tact(self, name: str, project: str, summary: dict[str, Any]) -> bool:
         """Store the project JSON ``project`` under ``name`` with its ``summary``; True if
         the name was new."""
-        size = len(project.encode("utf-8"))
-        return self._replace("tact", name, (project, size, json.dumps(summary), time.time()))
+        return self._put_sized("tact", name, project, summary)
 
     def delete_tact(self, name: str) -> bool:
         """Remove the project ``name``; False if it was not stored."""
         return self._delete("tact", name)
+
+    # -- bHaptics SDK2 workspaces (a game's deployment: its events by name) ---------------
+
+    def list_workspaces(self, limit: int, offset: int) -> builtins.list[tuple[str, int, str]]:
+        """One page of stored workspaces by id: ``(id, bytes, summary JSON)``, at most
+        ``limit`` from the ``offset``-th on (the deployments themselves are not read)."""
+        return self._list_sized("workspaces", limit, offset)
+
+    def get_workspace(self, workspace_id: str) -> str | None:
+        """The deployment JSON stored for ``workspace_id``, or None."""
+        return self._text("workspaces", workspace_id)
+
+    def put_workspace(self, workspace_id: str, deployment: str, summary: dict[str, Any]) -> bool:
+        """Store the deployment JSON ``deployment`` for ``workspace_id`` with its
+        ``summary``; True if the workspace was new."""
+        return self._put_sized("workspaces", workspace_id, deployment, summary)
+
+    def delete_workspace(self, workspace_id: str) -> bool:
+        """Remove the workspace ``workspace_id``; False if it was not stored."""
+        return self._delete("workspaces", workspace_id)
+
+    # -- documents kept as text with their size and a summary (tact, workspaces) ---------
+
+    def _list_sized(
+        self, table: SizedTable, limit: int, offset: int
+    ) -> builtins.list[tuple[str, int, str]]:
+        with self._using(writes=False) as db:
+            rows = db.execute(
+                f"SELECT name, bytes, summary FROM {table} ORDER BY name LIMIT ? OFFSET ?",
+                (limit, offset),
+            ).fetchall()
+        return [(str(name), int(size), str(summary)) for name, size, summary in rows]
+
+    def _text(self, table: SizedTable, name: str) -> str | None:
+        with self._using(writes=False) as db:
+            row = db.execute(
+                f"SELECT {DOCUMENT[table]} FROM {table} WHERE name = ?", (name,)
+            ).fetchone()
+        return None if row is None else str(row[0])
+
+    def _put_sized(self, table: SizedTable, name: str, text: str, summary: dict[str, Any]) -> bool:
+        size = len(text.encode("utf-8"))
+        return self._replace(table, name, (text, size, json.dumps(summary), time.time()))
 
 
 FULL_DISK_BYTES = 1 << 20

@@ -21,7 +21,7 @@ from pydantic import ValidationError
 from phantomtouch.clips.tact import ARM_POSITIONS, TactProject, parse_tact
 from phantomtouch.clips.tact_score import ScaleOption, score
 from phantomtouch.engine.jobs import QuotaRefused
-from phantomtouch.errors import ParameterError
+from phantomtouch.errors import FieldError, ParameterError
 from phantomtouch.service.errors import NotFoundError, StoredPatternError
 from phantomtouch.service.scheduling import client_quota, quota_error, start_frame
 from phantomtouch.service.scores import schedule_score
@@ -41,24 +41,42 @@ def read_project(document: bytes | str, *, source: str) -> tuple[str, TactProjec
 
     Raises
     ------
-    ParameterError
-        It does not read as a project (the message names the field by its path), or it
-        has no content for an arm (``ForearmL``, ``ForearmR``): one line, naming
-        ``source`` and the positions it does play on.
+    FieldError
+        It does not read as a project (``field`` is the path at fault), or it has no
+        content for an arm (``ForearmL``, ``ForearmR``; ``field`` is its ``tracks``): one
+        line, naming ``source`` and the positions it does play on.
     """
     project = parse_tact(document, source=source)
-    if not project.has_arm_content:
-        found = sorted(project.positions()) or ["none"]
-        raise ParameterError(
-            f"{source}: no arm content: it plays on {', '.join(found)}; an arm band plays "
-            f"{', '.join(ARM_POSITIONS)}"
-        )
     text = (
         bytes(document).decode("utf-8-sig", errors="replace")
         if isinstance(document, bytes | bytearray)
         else document.removeprefix("\ufeff")
     )
-    return json.dumps(json.loads(text), separators=(",", ":"), ensure_ascii=False), project
+    value = json.loads(text)
+    if not project.has_arm_content:
+        found = sorted(project.positions()) or ["none"]
+        field = _tracks_path(value)
+        raise FieldError(
+            f"{source}: {field}: no arm content: it plays on {', '.join(found)}; an arm band "
+            f"plays {', '.join(ARM_POSITIONS)}",
+            field=field,
+        )
+    return json.dumps(value, separators=(",", ":"), ensure_ascii=False), project
+
+
+def _tracks_path(document: Any) -> str:
+    """Where a project's ``tracks`` are in ``document`` (the file, or its project object),
+    spelled as it spells them: the field at fault when nothing plays on an arm."""
+
+    def key(obj: Any, name: str) -> str | None:
+        if not isinstance(obj, dict):
+            return None
+        return next((str(k) for k in obj if str(k).lower() == name), None)
+
+    project = key(document, "project")
+    inner = document[project] if project is not None else document
+    tracks = key(inner, "tracks") or "tracks"
+    return f"{project}.{tracks}" if project is not None else tracks
 
 
 def summary(project: TactProject) -> dict[str, Any]:

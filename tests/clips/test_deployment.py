@@ -1,16 +1,14 @@
 """SDK2 deployments: a game's events read from the Developer Portal's JSON.
 
-No deployment under a licence that allows copying is known, so the deployments here are
-built in the portal's shape (docs/bhaptics.md, "SDK2") from the corpus's real ``.tact``
-files (``samples/tact/bhaptics-popone-support``, MIT) and from audio frames written here.
-Expected lengths are worked out from the JSON alone (an effect's end is ``startTime +
-offsetTime``, an audio clip's length its frames times 20 ms); expected places from the
-band's actuator span, as the arm map states it.
+The deployments are built in the portal's shape (``tests/support/deployments.py``) from
+the corpus's real ``.tact`` files and audio frames written there. Expected lengths are
+worked out from the JSON alone (an effect's end is ``startTime + offsetTime``, an audio
+clip's length its frames times 20 ms); expected places from the band's actuator span, as
+the arm map states it.
 """
 
 from __future__ import annotations
 
-import base64
 import copy
 import json
 import math
@@ -32,92 +30,19 @@ from phantomtouch.clips.tact_score import ScaleOption, frame_score
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.schema.pattern import KeyframePath
+from tests.support.deployments import (
+    ARM_CLIP,
+    BOTH,
+    CLIMB,
+    RECOIL,
+    VEST_CLIP,
+    effects_end_ms,
+    frame,
+    mapping,
+)
 
-CORPUS = Path(__file__).parent / "samples" / "tact" / "bhaptics-popone-support"
 DEVICE = DeviceProfile.default()
 ARM_MAP = ArmMap()
-
-
-def tact(name: str) -> dict[str, Any]:
-    """The ``project`` object of a corpus file (what a deployment's ``tactFile`` holds)."""
-    path = CORPUS / "Arm" / f"{name}.tact"
-    return json.loads(path.read_text(encoding="utf-8-sig"))["project"]
-
-
-def effects_end_ms(project: dict[str, Any]) -> float:
-    """The latest ``startTime + offsetTime`` of an enabled track's effect, from the JSON."""
-    ends = [
-        float(e["startTime"]) + float(e["offsetTime"])
-        for track in project["tracks"]
-        if track.get("enable", True) is not False
-        for e in track["effects"]
-    ]
-    return max(ends, default=0.0)
-
-
-def frame(*levels: int) -> str:
-    """One audio frame: ``levels`` for the first motors, the rest of the 20 bytes 0."""
-    return base64.b64encode(bytes(levels) + bytes(20 - len(levels))).decode()
-
-
-def mapping(key: str, *, tact_files=(), clips=(), **extra: Any) -> dict[str, Any]:
-    return {
-        "enable": True,
-        "intensity": 100,
-        "key": key,
-        "category": "Gameplay",
-        "description": "",
-        "updateTime": 1694710443550,
-        "tactFilePatterns": [{"position": label, "tactFile": t} for label, t in tact_files],
-        "audioFilePatterns": [
-            {"patternId": "", "snapshotId": "", "position": "Vest", "clip": copy.deepcopy(c)}
-            for c in clips
-        ],
-        "eventTime": 100,
-        **extra,
-    }
-
-
-def portal(*mappings: dict[str, Any], workspace: str = "ws-123") -> dict[str, Any]:
-    """The Developer Portal's answer around ``mappings``."""
-    return {
-        "status": True,
-        "code": 200,
-        "errorMessage": None,
-        "timestamp": 1694710443550,
-        "message": {
-            "id": "dep-1",
-            "createTime": 1694710443550,
-            "name": "A Game",
-            "creator": "someone",
-            "workspaceId": workspace,
-            "version": 7,
-            "disableValidation": False,
-            "hapticMappings": list(mappings),
-            "categoryOptions": ["Gameplay"],
-            "description": "",
-        },
-    }
-
-
-RECOIL = tact("RecoilLevel2_R")
-CLIMB = tact("Climbing_L")
-ARM_CLIP = {
-    "id": "",
-    "name": "hit",
-    "version": -1,
-    "duration": 4,  # seen in real deployments: not a length
-    "patterns": {
-        "ForearmL": [frame(0, 0, 50), frame(0, 0, 50), frame(0, 0, 50)],
-        "ForearmR": [frame()] * 5,
-        "VestFront": [frame(100, 100)] * 2,
-    },
-}
-BOTH = portal(
-    mapping("recoil", tact_files=[("LeftArm", RECOIL)]),
-    mapping("climb", tact_files=[("Vest", CLIMB)], clips=[ARM_CLIP]),
-    mapping("hit", clips=[ARM_CLIP]),
-)
 
 
 def test_events_by_name_with_both_pattern_kinds_and_their_lengths() -> None:
@@ -216,9 +141,8 @@ def test_intensity_and_duration_scale_an_event() -> None:
 
 
 def test_a_disabled_mapping_is_no_event_and_a_vest_only_one_plays_nothing_here() -> None:
-    vest = {"patterns": {"VestFront": [frame(100)] * 3}}
     deployment = parse_deployment(
-        [mapping("off", clips=[ARM_CLIP], enable=False), mapping("vest", clips=[vest])]
+        [mapping("off", clips=[ARM_CLIP], enable=False), mapping("vest", clips=[VEST_CLIP])]
     )
     assert list(deployment.events) == ["vest"]
     event = deployment.events["vest"]
@@ -322,8 +246,8 @@ def broken(path: list[Any], value: Any) -> dict[str, Any]:
                 ],
                 "later",
             ),
-            "message.hapticMappings[0].tactFilePatterns[0].tactFile",
-            r"tracks\[0\]\.effects\[0\]\.startTime='later' must be a number",
+            "message.hapticMappings[0].tactFilePatterns[0].tactFile.tracks[0].effects[0].startTime",
+            r"tactFile: tracks\[0\]\.effects\[0\]\.startTime='later' must be a number",
         ),
         (
             broken(["hapticMappings", 2, "audioFilePatterns", 0, "clip"], None),
@@ -332,32 +256,32 @@ def broken(path: list[Any], value: Any) -> dict[str, Any]:
         ),
         (
             broken(["hapticMappings", 2, "audioFilePatterns", 0, "clip", "patterns"], ["AAAA"]),
-            "message.hapticMappings[2].audioFilePatterns[0].clip",
-            r"clip\.patterns must be an object",
+            "message.hapticMappings[2].audioFilePatterns[0].clip.patterns",
+            "must be an object of device -> frames",
         ),
         (
             broken(
                 ["hapticMappings", 2, "audioFilePatterns", 0, "clip", "patterns", "ForearmL"],
                 [frame(1), "AAEC"],
             ),
-            "message.hapticMappings[2].audioFilePatterns[0].clip",
-            r"patterns\.ForearmL\[1\]='AAEC' decodes to 3 bytes; a frame has exactly 20",
+            "message.hapticMappings[2].audioFilePatterns[0].clip.patterns.ForearmL[1]",
+            "='AAEC' decodes to 3 bytes; a frame has exactly 20",
         ),
         (
             broken(
                 ["hapticMappings", 2, "audioFilePatterns", 0, "clip", "patterns", "ForearmL"],
                 ["not base64!"],
             ),
-            "message.hapticMappings[2].audioFilePatterns[0].clip",
-            r"patterns\.ForearmL\[0\]='not base64!' is not base64",
+            "message.hapticMappings[2].audioFilePatterns[0].clip.patterns.ForearmL[0]",
+            "='not base64!' is not base64",
         ),
         (
             broken(
                 ["hapticMappings", 2, "audioFilePatterns", 0, "clip", "patterns", "ForearmL"],
                 [12],
             ),
-            "message.hapticMappings[2].audioFilePatterns[0].clip",
-            r"patterns\.ForearmL\[0\]=12 must be a base64 string",
+            "message.hapticMappings[2].audioFilePatterns[0].clip.patterns.ForearmL[0]",
+            "=12 must be a base64 string",
         ),
     ],
 )
@@ -368,8 +292,8 @@ def test_a_refused_deployment_names_the_field_and_its_value(
         parse_deployment(document)
     assert caught.value.field == field
     assert isinstance(caught.value, ParameterError)
-    if field:
-        assert field in str(caught.value)
+    if field:  # the message names the field (a tact file's inner path after its own)
+        assert field.replace(".tactFile.", ".tactFile: ") in str(caught.value)
 
 
 def test_ten_thousand_events_are_refused_at_once() -> None:
@@ -377,6 +301,13 @@ def test_ten_thousand_events_are_refused_at_once() -> None:
     with pytest.raises(DeploymentError, match=f"10000 mappings; at most {MAX_EVENTS}") as caught:
         parse_deployment({"hapticMappings": many})
     assert caught.value.field == "hapticMappings"
+
+
+def test_a_huge_frame_list_is_refused_with_its_path() -> None:
+    clip = {"patterns": {"ForearmL": [frame()] * 30_001}}
+    with pytest.raises(DeploymentError, match="30001 frames; at most 30000") as caught:
+        parse_deployment([mapping("long", clips=[clip])])
+    assert caught.value.field == "[0].audioFilePatterns[0].clip.patterns.ForearmL"
 
 
 def test_nan_is_refused_wherever_it_is() -> None:

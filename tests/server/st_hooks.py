@@ -41,6 +41,12 @@ DOCUMENTED_RULES: dict[str, str] = {
     ),
     "a .tact project's effects within 0 to 600 s": r"the effect must end by",
     "a .tact project of at most 100,000 points": r"brings the project past",
+    # A game's deployment (PUT /bhaptics/workspaces/{workspace_id}) is the Developer
+    # Portal's JSON, read with its keys in any case and in the spellings games send
+    # (docs/bhaptics.md, SDK2): the schema says "an object", the parser names the field.
+    "a deployment holding its events as hapticMappings, at the top or in its message": (
+        r"^(message\.)?hapticMappings must be a list of mappings|^message must be an object"
+    ),
     # What depends on the library's contents.
     "a wearer chosen (PUT /wearer) among the stored profiles": r"is not a stored wearer",
     "a clip carrier naming a stored clip (GET /clips)": r"is not in the clip library",

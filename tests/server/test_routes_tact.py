@@ -63,12 +63,21 @@ def test_what_is_no_arm_project_is_refused_naming_why(client: TestClient) -> Non
     vest = client.put("/tact/vest", json=one_dot("VestFront", 200))
     assert vest.status_code == 422
     assert "no arm content: it plays on VestFront" in vest.json()["error"]["message"]
+    assert vest.json()["error"]["fields"][0]["field"] == "project.tracks"
+    bare = client.put("/tact/bare", json={"Tracks": []})  # the project object, no content
+    assert bare.status_code == 422
+    assert bare.json()["error"]["fields"][0]["field"] == "Tracks"
+    assert "no arm content: it plays on none" in bare.json()["error"]["message"]
+    empty = client.put("/tact/empty", json={})
+    assert empty.json()["error"]["fields"][0]["field"] == "tracks"
     wrong = client.put("/tact/bad", json={"project": {"tracks": [{"effects": "x"}]}})
     assert wrong.status_code == 422
-    assert "tracks[0].effects must be an array" in wrong.json()["error"]["message"]
+    assert "project.tracks[0].effects must be an array" in wrong.json()["error"]["message"]
+    assert wrong.json()["error"]["fields"][0]["field"] == "project.tracks[0].effects"
     not_json = client.put("/tact/bad", content=b"{nope", headers=JSON)
     assert not_json.status_code == 422
     assert "not JSON" in not_json.json()["error"]["message"]
+    assert not_json.json()["error"]["fields"][0]["field"] == "body"
     assert client.get("/tact").json() == []
     limits = client.get("/tact", params={"limit": 0})
     assert limits.status_code == 422

@@ -1,0 +1,116 @@
+"""The bHaptics SDK2 workspace library: a game's deployment kept by its workspace id.
+
+A game on bHaptics' SDK2 plays events by name; what they play is its *deployment* (the
+Developer Portal's JSON, a game's "default config"; :mod:`phantomtouch.clips.deployment`).
+``phantomtouch import DEPLOYMENT.json`` and ``PUT /bhaptics/workspaces/{id}`` store it,
+read by the same parser as an ``SdkRequestAuthInit``'s ``haptic``, as compact JSON with a
+summary, under the id the game connects with (``workspace_id`` of ``/v3/feedback``); the
+SDK2 stand-in reads it back with :func:`stored_deployment`. A deployment that does not read
+is refused naming the field at fault; one whose events play on no arm is kept (its events
+are answered and play nothing on the band).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from typing import TYPE_CHECKING, Any
+
+from pydantic import ValidationError
+
+from phantomtouch.clips.deployment import Deployment, DeploymentError, parse_deployment
+from phantomtouch.service.errors import StoredPatternError
+from phantomtouch.service.workspace_models import WorkspaceInfo
+
+if TYPE_CHECKING:
+    from phantomtouch.service.store import PatternStore
+
+logger = logging.getLogger("phantomtouch.server.store")
+NOT_STORED = "in the workspace library (GET /bhaptics/workspaces)"
+
+
+def read_deployment(document: bytes | str) -> tuple[str, Deployment]:
+    """A deployment document as the compact JSON to store and the deployment it
+    describes (any thread; pure).
+
+    Parameters
+    ----------
+    document : bytes or str
+        The JSON text: the Developer Portal's whole answer, its ``message`` or the bare
+        ``hapticMappings`` list (:func:`~phantomtouch.clips.deployment.parse_deployment`).
+
+    Raises
+    ------
+    DeploymentError
+        It does not read as a deployment; ``field`` is the path of the field at fault.
+    """
+    deployment = parse_deployment(document)
+    text = (
+        bytes(document).decode("utf-8-sig", errors="replace")
+        if isinstance(document, bytes | bytearray)
+        else document.removeprefix("\ufeff")
+    )
+    value = json.loads(text)
+    if isinstance(value, str):  # the text sent once more as a JSON string: keep the text
+        value = json.loads(value)
+    return json.dumps(value, separators=(",", ":"), ensure_ascii=False), deployment
+
+
+def summary(deployment: Deployment) -> dict[str, Any]:
+    """What ``GET /bhaptics/workspaces`` lists of a deployment, besides its id and size."""
+    events = deployment.events.values()
+    return {
+        "game": deployment.name,
+        "version": deployment.version,
+        "events": len(deployment.events),
+        "arm_events": sum(1 for e in events if e.has_arm_content),
+        "longest_ms": max((e.length_ms for e in events), default=0),
+    }
+
+
+def listed(store: PatternStore, *, limit: int, offset: int) -> list[WorkspaceInfo]:
+    """One page of the stored workspaces, sorted by id (any thread); a row whose summary
+    no longer reads is logged and left out."""
+    page = []
+    for workspace_id, size, stored in store.list_workspaces(limit, offset):
+        try:
+            page.append(
+                WorkspaceInfo.model_validate(
+                    {**json.loads(stored), "workspace_id": workspace_id, "bytes": size}
+                )
+            )
+        except (ValueError, ValidationError) as exc:
+            logger.warning(
+                "workspace=%r: its stored summary no longer reads (%s); left out",
+                workspace_id,
+                exc,
+            )
+    return page
+
+
+def stored_deployment(
+    store: PatternStore, workspace_id: str, *, field: str = "workspace_id"
+) -> Deployment | None:
+    """The deployment stored for ``workspace_id``, or None (any thread: it reads the
+    store and parses, tens of ms for a real deployment).
+
+    Raises
+    ------
+    StoredPatternError
+        The row is there but no longer reads as a deployment; ``field`` is what the
+        request called the id.
+    StorageError
+        The store failed.
+    """
+    text = store.get_workspace(workspace_id)
+    if text is None:
+        return None
+    try:
+        return parse_deployment(text)
+    except DeploymentError as exc:
+        raise StoredPatternError(
+            f"workspace={workspace_id!r}: {exc}; the stored row no longer reads as a "
+            "deployment: PUT it again or DELETE it",
+            field=field,
+            value=workspace_id,
+        ) from exc
