@@ -9,12 +9,13 @@ query ``workspace_id``, ``api_key`` and ``version``; each connection is one
 :class:`~phantomtouch.bhaptics.sdk2.session.Sdk2Session`, an owner of its own in the
 engine (``bhaptics-sdk2-N-WORKSPACE``).
 
-What it allows (``docs/security.md``): the Host and Origin rule of ``/ws``; no RFC 6455
-pings (the clients answer them, but the Player sends none), no compression; messages up
-to :data:`MAX_MESSAGE_BYTES` (a game's init carries its deployment: 1009 beyond); the
-``/ws`` message rate (1008 when exceeded for a second on end); at most
-:data:`MAX_CONNECTIONS` connections (1013 beyond). A message that cannot be read is
-answered with the active lists, logged and counted
+Each connection is one source at the service's admission (kind ``bhaptics-sdk2``), which
+holds what it allows from the policy table (``docs/security.md``): message size (1009
+beyond) and rate (1008 when exceeded for a second on end), the connection slots (when
+they are full the source silent longest yields its slot, closed 1013), quotas and the
+emergency stop's voiding. Here only the Host and Origin rule of ``/ws`` is checked (the
+handshake), no RFC 6455 pings are sent (the Player sends none), no compression. A message
+that cannot be read is answered with the active lists, logged and counted
 (``phantomtouch_bhaptics_sdk2_messages_total{outcome}``).
 """
 
@@ -26,7 +27,6 @@ import itertools
 import json
 import logging
 import re
-import time
 from collections.abc import AsyncIterator, Iterator
 from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING, Any
@@ -38,33 +38,31 @@ from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
-from phantomtouch.bhaptics.sdk2.plays import Owner
 from phantomtouch.bhaptics.sdk2.session import Sdk2Session
 from phantomtouch.bhaptics.sdk2.tls import server_context
 from phantomtouch.bhaptics.sdk2.workspaces import Workspaces
 from phantomtouch.errors import DeviceError
+from phantomtouch.service.admission import Kind, principal_for
 from phantomtouch.service.errors import (
+    WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
     WS_CLOSE_TRY_AGAIN_LATER,
     ServiceError,
+    TooLargeError,
     describe,
 )
-from phantomtouch.service.flood import FloodGuard
 from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
 from phantomtouch.service.running import InputHealth
-from phantomtouch.service.scheduling import client_quota
 
 if TYPE_CHECKING:
     from phantomtouch.service.running import Service
 
 logger = logging.getLogger("phantomtouch.bhaptics")
 
+KIND: Kind = "bhaptics-sdk2"
+"""The input's row of the admission's policy table."""
 PATHS = ("/v3/feedback", "/v3/feedback/")
 """Where SDK2 clients connect."""
-MAX_MESSAGE_BYTES = 16 << 20
-"""Largest message, bytes: an init carries the game's whole deployment."""
-MAX_CONNECTIONS = 8
-"""Connections open at once."""
 SEND_TIMEOUT_S = 10.0
 """A client that reads nothing for this long while a message waits to be sent is closed."""
 OUTCOMES = ("accepted", "not_json", "bad_request", "refused", "flood")
@@ -113,7 +111,6 @@ class Sdk2Listener:
         self.host, self.port = address
         self.workspaces = workspaces
         self.counts = dict.fromkeys(OUTCOMES, 0)
-        self.open = 0
         self._serials = itertools.count(1)
         settings = service.settings
         self._origin = HostOriginMiddleware(
@@ -150,7 +147,7 @@ class Sdk2Listener:
                 compression=None,
                 ping_interval=None,
                 ping_timeout=None,
-                max_size=MAX_MESSAGE_BYTES,
+                max_size=self.service.admission.policy(KIND).max_message_bytes + 1,
                 max_queue=4,
                 server_header=None,
                 logger=logging.getLogger("phantomtouch.bhaptics.websockets"),
@@ -203,30 +200,23 @@ class Sdk2Listener:
         return response
 
     async def _connection(self, connection: ServerConnection) -> None:
-        peer = connection.remote_address
-        host = None if peer is None else str(peer[0])
-        if self.open >= MAX_CONNECTIONS:
-            await connection.close(
-                WS_CLOSE_TRY_AGAIN_LATER,
-                f"{self.open} bHaptics SDK2 clients are connected, the most at once; retry later",
-            )
-            return
-        refused = self.service.connections.enter(host)
-        if refused is not None:
-            await connection.close(WS_CLOSE_TRY_AGAIN_LATER, refused[1])
-            return
-        self.open += 1
-        try:
-            await self._serve(connection)
-        finally:
-            self.open -= 1
-            self.service.connections.leave(host)
-
-    async def _serve(self, connection: ServerConnection) -> None:
         service = self.service
+        peer = connection.remote_address
         workspace = workspace_of(connection.request.path if connection.request else "")
-        owner = f"bhaptics-sdk2-{next(self._serials)}-{_NAME.sub('_', workspace)[:32] or 'none'}"
-        limiter = FloodGuard(service.settings.ws_messages_per_s)
+        source = f"{next(self._serials)}-{_NAME.sub('_', workspace)[:24] or 'none'}"
+        loop = asyncio.get_running_loop()
+
+        def yielded(reason: str) -> None:
+            loop.call_soon_threadsafe(
+                lambda: loop.create_task(connection.close(WS_CLOSE_TRY_AGAIN_LATER, reason))
+            )
+
+        handle = service.admission.open(
+            KIND,
+            source,
+            principal=principal_for(KIND, host=None if peer is None else str(peer[0])),
+            on_yield=yielded,
+        )
 
         async def send(text: str) -> None:
             try:
@@ -239,33 +229,34 @@ class Sdk2Listener:
                 )
 
         session = Sdk2Session(
-            Owner(service.engine, owner, client_quota(service.settings)),
-            service.arm_map,
-            workspace=workspace,
-            workspaces=self.workspaces,
-            send=send,
+            handle, service.arm_map, workspace=workspace, workspaces=self.workspaces, send=send
         )
-        logger.info("bhaptics-sdk2: workspace %r connected as %s", workspace, owner)
+        logger.info("bhaptics-sdk2: workspace %r connected as %s", workspace, handle.owner)
         try:
             await session.open()
             async for data in connection:
-                now_s = time.monotonic()
-                if not limiter.admit(now_s):
-                    self.counts["flood"] += 1
-                    if limiter.sustained(now_s):
-                        await connection.close(
-                            WS_CLOSE_POLICY_VIOLATION,
-                            f"over the message rate limit of {limiter.rate_per_s:g}/s for "
-                            f"{limiter.close_after_s:g} s",
-                        )
-                    continue
-                text = data if isinstance(data, str) else data.decode("utf-8", errors="replace")
-                self.counts[await session.handle(text)] += 1
+                await self._message(connection, session, data)
         except ConnectionClosed:
             pass
         finally:
             session.close()
-            logger.info("bhaptics-sdk2: %s disconnected", owner)
+            logger.info("bhaptics-sdk2: %s disconnected", handle.owner)
+
+    async def _message(
+        self, connection: ServerConnection, session: Sdk2Session, data: str | bytes
+    ) -> None:
+        try:
+            verdict = session.handle.receive(len(data))
+        except TooLargeError as exc:
+            await connection.close(WS_CLOSE_MESSAGE_TOO_BIG, str(exc)[:120])
+            return
+        if verdict.arrival is None:
+            self.counts["flood"] += 1
+            if verdict.sustained:
+                await connection.close(WS_CLOSE_POLICY_VIOLATION, verdict.reason[:120])
+            return
+        text = data if isinstance(data, str) else data.decode("utf-8", errors="replace")
+        self.counts[await session.receive(text, verdict.arrival)] += 1
 
 
 @asynccontextmanager

@@ -1,9 +1,10 @@
 """One SDK2 play: an event (or dot/path points) as engine jobs, repeated, paused, stopped.
 
-A :class:`Play` is one request id of one connection. Its task schedules the score
-(:func:`~phantomtouch.service.scores.schedule_score`, in a worker thread: planning takes a
-millisecond or so per voice) as jobs of the connection's owner, under its quota, voided by
-any emergency stop heard since the request arrived; waits for it to end; and for a loop
+A :class:`Play` is one request id of one connection. Its task schedules the score through
+the connection's admission handle (:meth:`~phantomtouch.service.admission.Handle.
+play_score`, in a worker thread: planning takes a millisecond or so per voice): jobs of the
+connection's owner, under its quota, voided by any emergency stop heard since the request
+arrived; waits for it to end; and for a loop
 (``SdkPlayLoop``) plays it again ``interval_ms`` after each end, ``count`` times in all
 (``interval`` is the silence between two repetitions, sample-exact when it is at least
 :data:`~phantomtouch.service.scores.START_AHEAD_S`). After an emergency stop
@@ -19,15 +20,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from phantomtouch.service.scores import START_AHEAD_S, ScoreJobs, schedule_score
+from phantomtouch.service.scores import START_AHEAD_S, ScoreJobs
 
 if TYPE_CHECKING:
     from phantomtouch.clips.tact_score import Score
-    from phantomtouch.engine import EngineFront
-    from phantomtouch.engine.jobs import OwnerQuota
+    from phantomtouch.service.admission import Arrival, Handle
 
 POLL_S = 0.05
 """While a play sounds, how often it looks whether an emergency stop was heard, s."""
@@ -36,21 +35,15 @@ LEAD_S = 0.15
 exactly ``interval_ms`` after the previous one ended."""
 
 
-@dataclass(frozen=True)
-class Owner:
-    """Whose jobs a play's are: the engine, the connection's owner id and its quota."""
-
-    engine: EngineFront
-    owner: str
-    quota: OwnerQuota
-
-
 class Play:
     """One request id's playback; :meth:`start`, then it ends by itself or by :meth:`stop`.
 
     Parameters
     ----------
-    owner : Owner
+    handle : Handle
+        The connection's source at the admission: whose jobs they are.
+    arrival : Arrival
+        When the request arrived: an emergency stop since voids every repetition.
     request_id : int
     event : str or None
         The event's name (``ServerActiveEventNameList``); None for dot and path points.
@@ -68,7 +61,8 @@ class Play:
 
     def __init__(
         self,
-        owner: Owner,
+        handle: Handle,
+        arrival: Arrival,
         request_id: int,
         event: str | None,
         played: Score,
@@ -78,7 +72,8 @@ class Play:
         skip_s: float = 0.0,
         changed: Callable[[], None],
     ) -> None:
-        self.owner = owner
+        self.handle = handle
+        self.arrival = arrival
         self.request_id = request_id
         self.event = event
         self.played = played
@@ -86,7 +81,6 @@ class Play:
         self.interval_s = interval_s
         self.skip_s = skip_s
         self._changed = changed
-        self._stops = owner.engine.stop_count
         self._scheduled: ScoreJobs | None = None
         self._paused = False
         self._resumed = asyncio.Event()
@@ -110,6 +104,8 @@ class Play:
 
     def stop(self) -> None:
         """Silence it now: its jobs fade out over the release (event loop; never refused)."""
+        if self._scheduled is not None:
+            self._scheduled.stop(self.handle.engine)
         if self._task is not None:
             self._task.cancel()
 
@@ -133,7 +129,7 @@ class Play:
                 await asyncio.shield(self._task)
 
     async def _run(self) -> None:
-        engine = self.owner.engine
+        engine = self.handle.engine
         skip_s = self.skip_s
         next_s: float | None = None
         try:
@@ -165,21 +161,17 @@ class Play:
         """The score's jobs from ``skip_s`` on, starting at server time ``at_s`` (None or
         past: as soon as possible); if cancelled meanwhile, the jobs the worker thread still
         makes are stopped as soon as it has made them."""
-        owner = self.owner
-        engine = owner.engine
+        engine = self.handle.engine
         start_frame = None
         if at_s is not None and at_s > engine.server_time_s() + START_AHEAD_S:
             start_frame = engine.frames_at(at_s)
         work = asyncio.ensure_future(
             asyncio.to_thread(
-                schedule_score,
-                owner.engine,
+                self.handle.play_score,
                 self.played,
-                owner=owner.owner,
-                quota=owner.quota,
+                arrival=self.arrival,
                 start_frame=start_frame,
                 skip_s=skip_s,
-                stop_count=self._stops,
                 partial=True,
             )
         )
@@ -191,17 +183,17 @@ class Play:
 
     def _stop_late(self, work: asyncio.Future[ScoreJobs]) -> None:
         if not work.cancelled() and work.exception() is None:
-            work.result().stop(self.owner.engine)
+            work.result().stop(self.handle.engine)
 
     def _voided(self) -> bool:
-        return self.owner.engine.stop_count != self._stops
+        return self.handle.arrival().stop_count != self.arrival.stop_count
 
     async def _sleep(self, duration_s: float) -> bool:
-        return await self._sleep_until(self.owner.engine.server_time_s() + duration_s)
+        return await self._sleep_until(self.handle.engine.server_time_s() + duration_s)
 
     async def _sleep_until(self, end_s: float) -> bool:
         """Until ``end_s`` (server time) or a pause: True; an emergency stop: False."""
-        engine = self.owner.engine
+        engine = self.handle.engine
         self._wake.clear()
         while not self._paused:
             if self._voided():

@@ -26,7 +26,7 @@ from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING
 
 from phantomtouch.bhaptics.requests import BadRequest
-from phantomtouch.bhaptics.sdk2.plays import Owner, Play
+from phantomtouch.bhaptics.sdk2.plays import Play
 from phantomtouch.bhaptics.sdk2.wire import (
     POSITIONS,
     Auth,
@@ -47,6 +47,7 @@ from phantomtouch.service.flood import LimitedLog
 
 if TYPE_CHECKING:
     from phantomtouch.clips.tact_map import ArmMap
+    from phantomtouch.service.admission import Arrival, Handle
 
 logger = logging.getLogger("phantomtouch.bhaptics")
 
@@ -84,8 +85,9 @@ class Sdk2Session:
 
     Parameters
     ----------
-    owner : Owner
-        The engine, the connection's owner id and quota.
+    handle : Handle
+        The connection's source at the admission (``bhaptics-sdk2``): everything it plays
+        goes through it.
     arm_map : ArmMap
         Where arm positions land on the band (the arms it plays are the devices).
     workspace : str
@@ -98,14 +100,14 @@ class Sdk2Session:
 
     def __init__(
         self,
-        owner: Owner,
+        handle: Handle,
         arm_map: ArmMap,
         *,
         workspace: str,
         workspaces: Workspaces,
         send: Send,
     ) -> None:
-        self.owner = owner
+        self.handle = handle
         self.arm_map = arm_map
         self.workspace = workspace
         self.workspaces = workspaces
@@ -135,8 +137,7 @@ class Sdk2Session:
         for play in self.plays.values():
             play.stop()
         self.plays.clear()
-        self.owner.engine.stop_owner(self.owner.owner, "closed")
-        self.owner.engine.release_owner(self.owner.owner, "closed")
+        self.handle.close()
 
     # -- what the client is told -----------------------------------------------------------
 
@@ -191,32 +192,32 @@ class Sdk2Session:
 
     # -- requests --------------------------------------------------------------------------
 
-    async def handle(self, text: str) -> str:
-        """Apply one message; returns its outcome (``accepted``, ``not_json``,
-        ``bad_request``, ``refused``) for the metrics. Whatever it was, the client hears
-        an answer."""
+    async def receive(self, text: str, arrival: Arrival) -> str:
+        """Apply one message the admission let in at ``arrival``; returns its outcome
+        (``accepted``, ``not_json``, ``bad_request``, ``refused``) for the metrics.
+        Whatever it was, the client hears an answer."""
         try:
             request = (
                 parse(text) if len(text) <= INLINE_BYTES else await asyncio.to_thread(parse, text)
             )
-            await self._apply(request)
+            await self._apply(request, arrival)
         except BadRequest as exc:
-            self.log.warning(exc.reason, f"bhaptics-sdk2: {self.owner.owner}: {exc}")
+            self.log.warning(exc.reason, f"bhaptics-sdk2: {self.handle.owner}: {exc}")
             await self.send_active()
             return exc.reason
         except PhantomTouchError as exc:
-            self.log.warning("refused", f"bhaptics-sdk2: {self.owner.owner}: refused {exc}")
+            self.log.warning("refused", f"bhaptics-sdk2: {self.handle.owner}: refused {exc}")
             await self.send_active()
             return "refused"
         return "accepted"
 
-    async def _apply(self, request: Request) -> None:
+    async def _apply(self, request: Request, arrival: Arrival) -> None:
         if isinstance(request, Auth):
             await self._auth(request)
         elif isinstance(request, PlayEvent):
-            await self._play_event(request)
+            await self._play_event(request, arrival)
         elif isinstance(request, PlayPoints):
-            self._play_points(request)
+            self._play_points(request, arrival)
         elif isinstance(request, StopRequest):
             self._stop(request)
         elif isinstance(request, PauseRequest):
@@ -236,24 +237,27 @@ class Sdk2Session:
             self._events_changed = False  # sent below
             logger.info(
                 "bhaptics-sdk2: %s defined %d events of workspace %r",
-                self.owner.owner,
+                self.handle.owner,
                 len(deployment.events),
                 self.workspace,
             )
         await self._greet()
         await self.send_active()
 
-    async def _play_event(self, request: PlayEvent) -> None:
+    async def _play_event(self, request: PlayEvent, arrival: Arrival) -> None:
         event = self.workspaces.events(self.workspace).get(request.event)
         if event is None:
-            self.workspaces.unknown(self.workspace, request.event, self.owner.owner)
+            self.workspaces.unknown(self.workspace, request.event, self.handle.owner)
             await self.send_active()
             return
         scale = ScaleOption.of(request.intensity, request.duration)
-        played = event_score(event, self.arm_map, self.owner.engine.device, scale)
+        played = await asyncio.to_thread(
+            event_score, event, self.arm_map, self.handle.engine.device, scale
+        )
         self._begin(
             Play(
-                self.owner,
+                self.handle,
+                arrival,
                 request.request_id,
                 request.event,
                 played,
@@ -264,7 +268,7 @@ class Sdk2Session:
             )
         )
 
-    def _play_points(self, request: PlayPoints) -> None:
+    def _play_points(self, request: PlayPoints, arrival: Arrival) -> None:
         if request.position is None:
             return
         played = frame_score(
@@ -273,9 +277,11 @@ class Sdk2Session:
             [(x, y, level / 100.0) for x, y, level in request.paths],
             request.duration_ms,
             self.arm_map,
-            self.owner.engine.device,
+            self.handle.engine.device,
         )
-        self._begin(Play(self.owner, request.request_id, None, played, changed=self._changed))
+        self._begin(
+            Play(self.handle, arrival, request.request_id, None, played, changed=self._changed)
+        )
 
     def _begin(self, play: Play) -> None:
         previous = self.plays.pop(play.request_id, None)
