@@ -53,6 +53,7 @@ from phantomtouch.service.errors import (
 )
 from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
 from phantomtouch.service.running import InputHealth
+from phantomtouch.service.workspace_library import stored_deployment
 
 if TYPE_CHECKING:
     from phantomtouch.service.running import Service
@@ -266,7 +267,9 @@ async def attach(service: Service) -> AsyncIterator[None]:
     SDK2 left out; a busy address asked for with ``--bhaptics-sdk2`` stops the start."""
     address = service.settings.bhaptics_sdk2_address
     assert address is not None
-    listener = Sdk2Listener(service, address, Workspaces())
+    listener = Sdk2Listener(
+        service, address, Workspaces(lambda workspace: stored_deployment(service.store, workspace))
+    )
     try:
         await listener.start()
     except DeviceError as exc:

@@ -126,6 +126,7 @@ class Sdk2Session:
         """Greet the client and begin pushing what changes."""
         self._unsubscribe = self.workspaces.subscribe(self.workspace, self._workspace_changed)
         self._pusher = asyncio.get_running_loop().create_task(self._push())
+        await self.workspaces.refresh(self.workspace)
         await self._greet()
 
     def close(self) -> None:
@@ -241,6 +242,8 @@ class Sdk2Session:
                 len(deployment.events),
                 self.workspace,
             )
+        else:
+            await self.workspaces.refresh(self.workspace)
         await self._greet()
         await self.send_active()
 

@@ -1,6 +1,8 @@
 """SDK2 connections as owners, and bad input, against a real ``phantomtouch serve
 --bhaptics ... --output capture:FILE.wav`` (raw clients: no bHaptics library needed).
 
+- a workspace stored in the library (``PUT /bhaptics/workspaces/{id}``) is a connecting
+  game's events, and plays where the mapping puts them;
 - the emergency stop (``POST /stop``) silences a connection's plays and loops within the
   next block and the release, and nothing re-triggers after it; the active lists say so;
 - a connection that closes mid-play leaves nothing on;
@@ -27,10 +29,11 @@ from websockets.exceptions import InvalidStatus
 
 from tests.bhaptics.sdk2.deployments import auth_init_game, deployment, game_events, mapping
 from tests.bhaptics.sdk2.raw_client import RawClient, envelope
-from tests.bhaptics.test_standin_live import RELEASE_S, SILENT, Capture
+from tests.bhaptics.test_standin_live import RELEASE_S, SILENT, Capture, place
 from tests.support.live_server import HOST, LiveServer, free_ports
 
 WORKSPACE = "limits"
+STORED = "from-the-library"
 
 
 def play(event: str, request_id: int, **extra: Any) -> str:
@@ -40,6 +43,15 @@ def play(event: str, request_id: int, **extra: Any) -> str:
 
 
 async def scenario(base: str, server_url: str, marks: dict[str, Any]) -> None:
+    stored = httpx.put(
+        f"{server_url}/bhaptics/workspaces/{STORED}", json=game_events(STORED), timeout=10.0
+    )
+    assert stored.status_code == 200, stored.text
+    async with RawClient(f"{base}?workspace_id={STORED}&api_key=k&version=0.0.4") as library:
+        events = await library.expect("ServerEventList", 0.0)
+        assert {e["eventName"]: e["eventTime"] for e in events}["buzz"] == 300
+        marks["stored_buzz"] = await library.send(play("buzz", 1))
+        await asyncio.sleep(0.6)
     url = f"{base}?workspace_id={WORKSPACE}&api_key=k&version=0.0.4"
     async with RawClient(url) as game, RawClient(url) as leaver:
         await game.expect("ServerEventNameList", 0.0)
@@ -144,6 +156,9 @@ def test_stop_leave_and_bad_input_leave_nothing_on(tmp_path: Path) -> None:
     assert "Traceback" not in server.log()
     band = Capture(wav, clock, device)
     stop_s = band.block_s * 2 + RELEASE_S
+
+    t = marks["stored_buzz"]
+    assert np.linalg.norm(band.centroid(t + 0.1, t + 0.25) - place(device, 0.5, 1.0)) < 0.5
 
     t = marks["stop"]
     assert band.peak(t - 0.4, t - 0.05) > SILENT, "nothing played before the stop"
