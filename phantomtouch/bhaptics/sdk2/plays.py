@@ -22,7 +22,7 @@ import contextlib
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from phantomtouch.service.scores import START_AHEAD_S, ScoreJobs
+from phantomtouch.service.scores import ScoreJobs
 
 if TYPE_CHECKING:
     from phantomtouch.clips.tact_score import Score
@@ -33,6 +33,11 @@ POLL_S = 0.05
 LEAD_S = 0.15
 """A loop's next repetition is planned this long before it starts, s, so that it starts
 exactly ``interval_ms`` after the previous one ended."""
+POINTS_AHEAD_S = 0.01
+"""Dot and path points start this long after they arrive, s: their voices all start
+together (no offsets to keep), so they need not wait
+:data:`~phantomtouch.service.scores.START_AHEAD_S` as an event's do; a voice planned later
+than that starts at once, a few ms late."""
 
 
 class Play:
@@ -55,6 +60,9 @@ class Play:
         Silence between two repetitions, s.
     skip_s : float, >= 0
         How far into the score the first repetition starts (``SdkPlayWithStartTime``).
+    ahead_s : float or None
+        How long after it is asked for the first repetition starts, s; None:
+        :data:`~phantomtouch.service.scores.START_AHEAD_S` after its voices are planned.
     changed : callable
         Called (event loop) when it starts sounding, pauses, resumes or ends.
     """
@@ -70,6 +78,7 @@ class Play:
         count: int = 1,
         interval_s: float = 0.0,
         skip_s: float = 0.0,
+        ahead_s: float | None = None,
         changed: Callable[[], None],
     ) -> None:
         self.handle = handle
@@ -80,6 +89,7 @@ class Play:
         self.count = count
         self.interval_s = interval_s
         self.skip_s = skip_s
+        self.ahead_s = ahead_s
         self._changed = changed
         self._scheduled: ScoreJobs | None = None
         self._paused = False
@@ -122,16 +132,10 @@ class Play:
             self._paused = False
             self._resumed.set()
 
-    async def wait(self) -> None:
-        """Until it has ended (event loop)."""
-        if self._task is not None:
-            with contextlib.suppress(asyncio.CancelledError):
-                await asyncio.shield(self._task)
-
     async def _run(self) -> None:
         engine = self.handle.engine
         skip_s = self.skip_s
-        next_s: float | None = None
+        next_s = None if self.ahead_s is None else engine.server_time_s() + self.ahead_s
         try:
             for _ in range(self.count):
                 if next_s is not None and not await self._sleep_until(next_s - LEAD_S):
@@ -163,7 +167,7 @@ class Play:
         makes are stopped as soon as it has made them."""
         engine = self.handle.engine
         start_frame = None
-        if at_s is not None and at_s > engine.server_time_s() + START_AHEAD_S:
+        if at_s is not None and at_s > engine.server_time_s():
             start_frame = engine.frames_at(at_s)
         work = asyncio.ensure_future(
             asyncio.to_thread(

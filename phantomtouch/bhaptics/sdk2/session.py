@@ -26,7 +26,7 @@ from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING
 
 from phantomtouch.bhaptics.requests import BadRequest
-from phantomtouch.bhaptics.sdk2.plays import Play
+from phantomtouch.bhaptics.sdk2.plays import POINTS_AHEAD_S, Play
 from phantomtouch.bhaptics.sdk2.wire import (
     POSITIONS,
     Auth,
@@ -283,7 +283,15 @@ class Sdk2Session:
             self.handle.engine.device,
         )
         self._begin(
-            Play(self.handle, arrival, request.request_id, None, played, changed=self._changed)
+            Play(
+                self.handle,
+                arrival,
+                request.request_id,
+                None,
+                played,
+                ahead_s=POINTS_AHEAD_S,
+                changed=self._changed,
+            )
         )
 
     def _begin(self, play: Play) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import json
+from collections.abc import Sequence
 from typing import Any
 
 from tests.bhaptics.test_standin_live import dot_project
@@ -25,7 +26,7 @@ def audio_frames(motor: int, level: int, frames: int) -> list[str]:
 def mapping(
     key: str,
     *,
-    tact: list[dict[str, Any]] = (),
+    tact: Sequence[dict[str, Any]] = (),
     audio: dict[str, list[str]] | None = None,
     event_time: int = 0,
 ) -> dict[str, Any]:

@@ -163,11 +163,14 @@ def test_stop_leave_and_bad_input_leave_nothing_on(tmp_path: Path) -> None:
     t = marks["stop"]
     assert band.peak(t - 0.4, t - 0.05) > SILENT, "nothing played before the stop"
     silent_from = marks["stop_frame"] + round(stop_s * band.rate_hz)
-    after = band.samples[silent_from : band.index(marks["stop_end"])]
+    # up to 0.3 s before the next client plays: the capture's clock may lag a loaded machine's
+    after = band.samples[silent_from : band.index(marks["stop_end"] - 0.3)]
     assert np.max(np.abs(after)) <= SILENT, "a play or loop went on"
     t = marks["leave"]
     assert band.peak(t - 0.4, marks["playing"]) > SILENT, "nothing played before the close"
-    assert band.peak(t + stop_s, marks["bad"]) <= SILENT, "the closed connection's play went on"
+    assert band.peak(t + stop_s, marks["bad"] - 0.3) <= SILENT, (
+        "the closed connection's play went on"
+    )
     assert band.peak(marks["bad"], marks["end"]) <= 1.0
     assert band.peak(marks["end"] - 0.3, marks["after"] + 1.0) <= SILENT
     assert marks["huge_close"][0] == 1009
