@@ -11,8 +11,10 @@ arrived; waits for it to end; and for a loop
 (``POST /stop``, ``phantomtouch stop``) it plays nothing more: a loop ends at once.
 
 A pause stops the jobs and remembers how far into the score it was; a resume plays the rest
-from there. Cancelling the task (a stop, the connection closing) stops its jobs, including
-those a worker thread was scheduling at that moment. Host, the event loop.
+from there as a start time does (:func:`~phantomtouch.service.scores.schedule_score`'s
+``skip_s``: the voices that had not begun yet). Cancelling the task (a stop, the
+connection closing) stops its jobs, including those a worker thread was scheduling at that
+moment. Host, the event loop.
 """
 
 from __future__ import annotations
