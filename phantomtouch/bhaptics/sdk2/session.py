@@ -223,16 +223,19 @@ class Sdk2Session:
             self._stop(request)
         elif isinstance(request, PauseRequest):
             for play in self.plays.values():
-                if request.event is None or play.event == request.event:
-                    play.resume() if request.resume else play.pause()
+                if request.event is not None and play.event != request.event:
+                    continue
+                if request.resume:
+                    play.resume()
+                else:
+                    play.pause()
             self._changed()
         elif isinstance(request, DeviceRequest):
             await self._send(server_message("ServerDevices", devices(list(self.arm_map.arms))))
 
     async def _auth(self, request: Auth) -> None:
         haptic = request.haptic
-        if haptic not in (None, "", [], {}):
-            assert haptic is not None
+        if haptic is not None and haptic not in ("", [], {}):
             deployment = await asyncio.to_thread(parse_deployment, haptic)
             self.workspaces.define(self.workspace, deployment)
             self._events_changed = False  # sent below
