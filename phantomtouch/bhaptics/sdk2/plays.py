@@ -21,14 +21,21 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from phantomtouch.errors import PhantomTouchError
+from phantomtouch.service.flood import LimitedLog
 from phantomtouch.service.scores import ScoreJobs
 
 if TYPE_CHECKING:
     from phantomtouch.clips.tact_score import Score
     from phantomtouch.service.admission import Arrival, Handle
+
+logger = logging.getLogger("phantomtouch.bhaptics")
+_log = LimitedLog(logger, 10.0)
+"""Refused plays: one line per interval."""
 
 POLL_S = 0.05
 """While a play sounds, how often it looks whether an emergency stop was heard, s."""
@@ -92,6 +99,8 @@ class Play:
         self.interval_s = interval_s
         self.skip_s = skip_s
         self.ahead_s = ahead_s
+        self.announced = False
+        """Whether the client has been shown it as playing (set by the session)."""
         self._changed = changed
         self._scheduled: ScoreJobs | None = None
         self._paused = False
@@ -101,8 +110,14 @@ class Play:
 
     @property
     def sounding(self) -> bool:
-        """Listed as playing: started, not paused, not over."""
+        """Started, not paused, not over."""
         return self._scheduled is not None and not self._paused and not self.done
+
+    @property
+    def listed(self) -> bool:
+        """In the active lists: sounding, or started and not yet shown to the client (a
+        play that begins and ends between two pushes is still shown once)."""
+        return self.sounding or (self._scheduled is not None and not self.announced)
 
     @property
     def done(self) -> bool:
@@ -145,7 +160,15 @@ class Play:
                 while True:
                     if self._voided():
                         return
-                    scheduled = await self._schedule(skip_s, next_s)
+                    try:
+                        scheduled = await self._schedule(skip_s, next_s)
+                    except PhantomTouchError as exc:
+                        _log.warning(
+                            "refused",
+                            f"bhaptics-sdk2: {self.handle.owner}: request {self.request_id} "
+                            f"refused: {exc}",
+                        )
+                        return
                     self._scheduled = scheduled
                     self._changed()
                     if not await self._sleep_until(scheduled.ends_s):

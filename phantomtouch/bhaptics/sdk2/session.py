@@ -143,14 +143,21 @@ class Sdk2Session:
     # -- what the client is told -----------------------------------------------------------
 
     def active(self) -> tuple[list[str], list[int]]:
-        """The names of the events playing and the request ids playing, now."""
-        sounding = [play for play in self.plays.values() if play.sounding]
-        names = sorted({play.event for play in sounding if play.event is not None})
-        return names, sorted(play.request_id for play in sounding)
+        """The names of the events playing and the request ids playing, now (each play
+        that started is in them at least once: :attr:`Play.listed`)."""
+        listed = [play for play in self.plays.values() if play.listed]
+        names = sorted({play.event for play in listed if play.event is not None})
+        return names, sorted(play.request_id for play in listed)
 
     async def send_active(self) -> None:
-        """Push both active lists."""
+        """Push both active lists; a play shown that is already over is pushed off them
+        next."""
+        shown = [play for play in self.plays.values() if play.listed]
         names, ids = self._sent = self.active()
+        for play in shown:
+            play.announced = True
+            if play.done:
+                self._wake.set()
         await self._send(server_message("ServerActiveEventNameList", names))
         await self._send(server_message("ServerActiveRequestIdList", ids))
 
@@ -183,7 +190,7 @@ class Sdk2Session:
         while True:
             await self._wake.wait()
             self._wake.clear()
-            for request_id in [r for r, play in self.plays.items() if play.done]:
+            for request_id in [r for r, p in self.plays.items() if p.done and not p.listed]:
                 del self.plays[request_id]
             if self._events_changed:
                 self._events_changed = False

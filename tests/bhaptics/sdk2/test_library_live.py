@@ -202,8 +202,10 @@ def test_bhaptics_python_plays_every_call_as_the_study_says(tmp_path: Path) -> N
     on, off = band.sounding(at("mixed"), at("mixed") + 0.7)
     assert abs((off - on) - 0.3) < LENGTH_TOLERANCE_S, off - on
     both = (place(device, 0.0, 0.0) + place(device, 1.0, 1.0)) / 2
-    assert np.linalg.norm(band.centroid(on + 0.02, on + 0.18) - both) < 0.5
-    assert np.linalg.norm(band.centroid(on + 0.22, on + 0.28) - place(device, 0.0, 0.0)) < 0.5
+    # windows clear of each voice's start: on a loaded machine one voice of an event may
+    # reach the engine after its frame and start a few ms late (docs/bhaptics.md)
+    assert np.linalg.norm(band.centroid(on + 0.06, on + 0.18) - both) < 0.5
+    assert np.linalg.norm(band.centroid(on + 0.25, on + 0.29) - place(device, 0.0, 0.0)) < 0.5
 
     # dot and path mode
     t = at("dot")
