@@ -10,6 +10,7 @@
 ``phantomtouch bench accuracy``  phantom position and level error against CPU time
 ``phantomtouch calibrate``  measure each actuator, write a corrected device profile
 ``phantomtouch gateway``  a REST and WebSocket gateway of a fleet of armbands (NATS)
+``phantomtouch bhaptics register``  make bHaptics' Windows libraries see the Player (per user)
 
 Errors print one line: bad input (a field, its value and the allowed range; a wrong
 argument) exits 2, a failure while running (a file, the sound card, a missing extra)
@@ -31,6 +32,7 @@ from pydantic import ValidationError
 from tqdm import tqdm
 
 from phantomtouch import __version__
+from phantomtouch.bhaptics_command import add_bhaptics_command, player_argv
 from phantomtouch.calibrate_command import add_calibrate_command
 from phantomtouch.cli_parser import OneLineParser, check_output_file, make_output_folder
 from phantomtouch.device_arg import load_device
@@ -309,6 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_serve_commands(sub)
     add_import_command(sub)
+    add_bhaptics_command(sub)
     add_calibrate_command(sub)
 
     render = sub.add_parser("render", help="render one pattern to an 8-channel WAV")
@@ -365,7 +368,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit status."""
+    """Run the command line; returns the exit status. Started as the bHaptics Player's
+    program (``phantomtouch bhaptics register``), without arguments it serves as the
+    Player (:func:`~phantomtouch.bhaptics_command.player_argv`)."""
+    if argv is None:
+        argv = player_argv(sys.argv[0], sys.argv[1:])
     args = build_parser().parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     try:

@@ -26,9 +26,14 @@ import json
 import re
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from phantomtouch.errors import ParameterError
+
+if TYPE_CHECKING:
+    from phantomtouch.service.store import PatternStore
 
 _NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}")
 
@@ -46,6 +51,31 @@ def _library_name(args: argparse.Namespace, path: Path) -> str:
     if not _NAME.fullmatch(name) or name in (".", ".."):
         raise ParameterError(f"--name={name!r} must be 1-64 letters, digits, '.', '_' or '-'")
     return name
+
+
+def _read_capped(path: Path, max_bytes: int, what: str) -> bytes:
+    """The bytes of ``path`` (ParameterError: unreadable, or larger than ``max_bytes``)."""
+    try:
+        if path.stat().st_size > max_bytes:
+            raise ParameterError(f"{path.name}: {what} may have {max_bytes} bytes")
+        return path.read_bytes()
+    except OSError as exc:
+        raise ParameterError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from exc
+
+
+def _stored(args: argparse.Namespace, put: Callable[[PatternStore], bool]) -> tuple[str, Path]:
+    """Run ``put`` on the library (``--db``, default the service's); returns ``imported``
+    if ``put`` says the name was new (True), else ``replaced``, and the library's path."""
+    from phantomtouch.service.settings import default_db_path
+    from phantomtouch.service.store import PatternStore
+
+    db_path = Path(args.db) if args.db else default_db_path()
+    store = PatternStore.open(db_path)
+    try:
+        new = put(store)
+    finally:
+        store.close()
+    return ("imported" if new else "replaced"), db_path
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -72,17 +102,8 @@ def _run(args: argparse.Namespace) -> int:
         Path(args.output).write_text(clip.model_dump_json(indent=1) + "\n", encoding="utf-8")
         print(f"{path.name}: {summary}; written to {args.output}")
         return 0
-    from phantomtouch.service.settings import default_db_path
-    from phantomtouch.service.store import PatternStore
-
     name = _library_name(args, path)
-    db_path = Path(args.db) if args.db else default_db_path()
-    store = PatternStore.open(db_path)
-    try:
-        new = store.put_clip(name, clip)
-    finally:
-        store.close()
-    verb = "imported" if new else "replaced"
+    verb, db_path = _stored(args, lambda store: store.put_clip(name, clip))
     print(
         f"{verb} clip {name!r} from {path.name}: {summary}, in {db_path}; a pattern plays it "
         f'with "carrier": {{"kind": "clip", "clip": "{name}"}}'
@@ -92,16 +113,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def _import_tact(args: argparse.Namespace, path: Path) -> int:
     from phantomtouch.clips.tact import MAX_TACT_BYTES
-    from phantomtouch.service.settings import default_db_path
-    from phantomtouch.service.store import PatternStore
     from phantomtouch.service.tact_library import read_project, summary
 
-    try:
-        if path.stat().st_size > MAX_TACT_BYTES:
-            raise ParameterError(f"{path.name}: a .tact file may have {MAX_TACT_BYTES} bytes")
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ParameterError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from exc
+    data = _read_capped(path, MAX_TACT_BYTES, "a .tact file")
     text, project = read_project(data, source=path.name)
     about = summary(project)
     described = (
@@ -113,13 +127,7 @@ def _import_tact(args: argparse.Namespace, path: Path) -> int:
         print(f"{path.name}: {described}; written to {args.output}")
         return 0
     name = _library_name(args, path)
-    db_path = Path(args.db) if args.db else default_db_path()
-    store = PatternStore.open(db_path)
-    try:
-        new = store.put_tact(name, text, about)
-    finally:
-        store.close()
-    verb = "imported" if new else "replaced"
+    verb, db_path = _stored(args, lambda store: store.put_tact(name, text, about))
     print(
         f"{verb} .tact project {name!r} from {path.name}: {described}, in {db_path}; "
         f"POST /tact/{name}/play plays it"
@@ -148,16 +156,9 @@ def _holds_deployment(path: Path) -> bool:
 
 def _import_deployment(args: argparse.Namespace, path: Path) -> int:
     from phantomtouch.clips.deployment import MAX_DEPLOYMENT_BYTES
-    from phantomtouch.service.settings import default_db_path
-    from phantomtouch.service.store import PatternStore
     from phantomtouch.service.workspace_library import read_deployment, summary
 
-    try:
-        if path.stat().st_size > MAX_DEPLOYMENT_BYTES:
-            raise ParameterError(f"{path.name}: a deployment may have {MAX_DEPLOYMENT_BYTES} bytes")
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ParameterError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from exc
+    data = _read_capped(path, MAX_DEPLOYMENT_BYTES, "a deployment")
     try:
         text, deployment = read_deployment(data)
     except ParameterError as exc:
@@ -178,13 +179,7 @@ def _import_deployment(args: argparse.Namespace, path: Path) -> int:
         raise ParameterError(
             f"--workspace={workspace!r} must be 1-64 letters, digits, '.', '_' or '-'"
         )
-    db_path = Path(args.db) if args.db else default_db_path()
-    store = PatternStore.open(db_path)
-    try:
-        new = store.put_workspace(workspace, text, about)
-    finally:
-        store.close()
-    verb = "imported" if new else "replaced"
+    verb, db_path = _stored(args, lambda store: store.put_workspace(workspace, text, about))
     print(
         f"{verb} workspace {workspace!r} from {path.name} ({described}), in {db_path}; a game "
         "connecting with this workspace_id plays its events"

@@ -44,6 +44,7 @@ LAYER_OF = {
     "phantomtouch.cli": "composition",
     "phantomtouch.serve_command": "composition",
     "phantomtouch.import_command": "composition",
+    "phantomtouch.bhaptics_command": "composition",
     "phantomtouch.tact_command": "composition",
     "phantomtouch.calibrate_command": "composition",
     "phantomtouch.device_arg": "composition",

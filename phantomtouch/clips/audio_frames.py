@@ -17,8 +17,10 @@ not motors of an arm and are ignored) is a dot at its layout place with intensit
 :class:`~phantomtouch.clips.tact.DotFeedback` are each a motor's run of frames at one
 level, so that the score of a ``.tact`` project
 (:func:`phantomtouch.clips.tact_score.score`) plays them: each motor place one phantom at
-its level. Devices named by something that is no position are ignored; other
-devices (vest, head, hands) are kept, and play nothing on the band. Pure; any thread.
+its level. Devices named by something that is no position are ignored. The band plays no
+other device (vest, head, hands): each is kept as one feedback over its sounding frames,
+each motor at its largest level, which says where the event has content and for how long.
+Pure; any thread.
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ MAX_LEVEL = 100
 MAX_FRAMES = int(MAX_PROJECT_MS) // FRAME_MS
 """Most frames one device's list may hold (a ``.tact`` project's longest, 10 minutes)."""
 MAX_POINTS = 200_000
-"""Most motor levels above 0 one clip may hold by default, all devices together."""
+"""Most points (runs of an arm motor at one level) one clip may hold by default."""
 
 
 def audio_project(
@@ -71,21 +73,22 @@ def audio_project(
     name : str
         The project's name.
     max_points : int
-        Most motor levels above 0 it may hold, all devices together (a caller reading
+        Most points it may hold, all devices together (a caller reading
         several clips passes what is left of its budget).
 
     Returns
     -------
     TactProject
         One effect from 0 to the longest device list's ``frames * FRAME_MS`` ms; per device
-        one ``DOT_MODE`` content with a feedback per run of frames in which a motor keeps
-        one level above 0 (``NONE`` playback: the level holds, then steps).
+        one ``DOT_MODE`` content: for an arm a feedback per run of frames in which a motor
+        keeps one level above 0 (``NONE`` playback: the level holds, then steps); for
+        another device one feedback summing it up (see the module's docstring).
 
     Raises
     ------
     FieldError
         ``patterns`` not an object, a device's frames not a list of strings, more than
-        :data:`MAX_FRAMES` frames or ``max_points`` levels above 0, a frame that is not
+        :data:`MAX_FRAMES` frames or ``max_points`` points, a frame that is not
         base64 of :data:`FRAME_BYTES` bytes; the message names the field path, the value
         and what is allowed.
 
@@ -120,32 +123,33 @@ def audio_project(
                 f"({MAX_FRAMES * FRAME_MS} ms) are allowed",
                 field=at,
             )
-        motors = ARM_MOTORS if position in ARM_POSITIONS else FRAME_BYTES
-        rows = []
-        for k, frame in enumerate(frames):
-            levels = [min(level, MAX_LEVEL) for level in decode_frame(frame, f"{at}[{k}]")[:motors]]
-            points_left -= sum(1 for level in levels if level > 0)
-            if points_left < 0:
-                raise FieldError(
-                    f"{at}[{k}] brings the clip past {max_points} motor levels above 0; "
-                    f"at most {max_points} are allowed",
-                    field=f"{at}[{k}]",
-                )
-            rows.append(levels)
-        feedback = tuple(_runs(rows, motors))
+        rows = [decode_frame(frame, f"{at}[{k}]") for k, frame in enumerate(frames)]
+        if position in ARM_POSITIONS:
+            feedback = _runs([row[:ARM_MOTORS] for row in rows], ARM_MOTORS)
+        else:
+            feedback = _summary(rows)
+        points_left -= sum(len(fb.points) for fb in feedback)
+        if points_left < 0:
+            raise FieldError(
+                f"{at} brings the clip past {max_points} points (an arm's runs of a motor at "
+                "one level); no more are allowed",
+                field=at,
+            )
         longest = max(longest, len(frames))
-        contents.append(PositionContent(position, "DOT_MODE", feedback, ()))
+        contents.append(PositionContent(position, "DOT_MODE", tuple(feedback), ()))
     effects = (Effect(0.0, float(longest * FRAME_MS), tuple(contents)),) if longest else ()
     return TactProject(name=name, effects=effects, layouts={})
 
 
-def _runs(rows: list[list[int]], motors: int) -> list[DotFeedback]:
-    """Per motor, each run of frames at one level above 0 as one feedback, in time order."""
+def _runs(rows: list[bytes], motors: int) -> list[DotFeedback]:
+    """Per motor, each run of frames at one level above 0 (clamped to :data:`MAX_LEVEL`)
+    as one feedback, in time order."""
     found = []
+    ended = [*rows, bytes(motors)]  # a silent frame after the last ends every run
     for i in range(motors):
         start, level = 0, 0
-        for k, row in enumerate([*rows, [0] * motors]):
-            now = row[i] if i < len(row) else 0
+        for k, row in enumerate(ended):
+            now = min(row[i], MAX_LEVEL)
             if now == level:
                 continue
             if level > 0:
@@ -154,6 +158,19 @@ def _runs(rows: list[list[int]], motors: int) -> list[DotFeedback]:
             start, level = k, now
     found.sort(key=lambda fb: (fb.start_ms, fb.points[0].index))
     return found
+
+
+def _summary(rows: list[bytes]) -> list[DotFeedback]:
+    """A device the band does not play (vest, head, hands) as one feedback from its first
+    frame with a level above 0 to the end of its last, each motor at its largest level:
+    where it has content and for how long, in at most :data:`FRAME_BYTES` points."""
+    sounding = [k for k, row in enumerate(rows) if any(row)]
+    if not sounding:
+        return []
+    peaks = [min(max(row[i] for row in rows), MAX_LEVEL) for i in range(FRAME_BYTES)]
+    points = tuple(DotPoint(i, peak / MAX_LEVEL) for i, peak in enumerate(peaks) if peak > 0)
+    start_ms, end_ms = sounding[0] * FRAME_MS, (sounding[-1] + 1) * FRAME_MS
+    return [DotFeedback(start_ms, end_ms, "NONE", points)]
 
 
 def decode_frame(frame: object, where: str) -> bytes:

@@ -318,8 +318,27 @@ def test_nan_is_refused_wherever_it_is() -> None:
         parse_deployment(text)
 
 
-def test_a_huge_clip_is_refused_before_it_is_built() -> None:
-    full = frame(100, 100, 100, 100, 100, 100)
-    clip = {"patterns": {"ForearmL": [full] * 20_000, "ForearmR": [full] * 20_000}}
-    with pytest.raises(DeploymentError, match="past 200000"):
+def test_a_clip_of_too_many_points_is_refused_naming_the_device() -> None:
+    # every motor changes level every frame: each frame is 6 points per arm
+    flicker = [frame(*[100 - 50 * (k % 2)] * 6) for k in range(20_000)]
+    clip = {"patterns": {"ForearmL": flicker, "ForearmR": flicker}}
+    with pytest.raises(DeploymentError, match="past 200000 points") as caught:
         parse_deployment([mapping("huge", clips=[clip])])
+    assert caught.value.field == "[0].audioFilePatterns[0].clip.patterns.ForearmR"
+    # held levels are one point per run, however long: a 10-minute hold is 12 points
+    held = [frame(*[100] * 6)] * 30_000
+    event = parse_deployment([mapping("long", clips=[{"patterns": {"ForearmL": held}}])])
+    (content,) = event.events["long"].patterns[0].effects[0].contents
+    assert [(fb.start_ms, fb.end_ms, len(fb.points)) for fb in content.dots] == [
+        (0, 600_000, 1)
+    ] * 6
+
+
+def test_a_device_the_band_does_not_play_is_summed_up_not_kept_frame_by_frame() -> None:
+    vest = [frame(), frame(10, 0, 30), frame(40, 20), frame()]
+    event = parse_deployment([mapping("v", clips=[{"patterns": {"VestBack": vest}}])])
+    (content,) = event.events["v"].patterns[0].effects[0].contents
+    (summary,) = content.dots
+    assert (content.position, summary.start_ms, summary.end_ms) == ("VestBack", 20, 60)
+    assert [(p.index, p.intensity) for p in summary.points] == [(0, 0.4), (1, 0.2), (2, 0.3)]
+    assert event.events["v"].length_ms == 80

@@ -86,6 +86,32 @@ def delete_item(
     )
 
 
+def document_body(description: str, example: Any) -> dict[str, Any]:
+    """The OpenAPI of a ``PUT`` whose body is a free-form JSON document that the service's
+    own reader reads (a ``.tact`` project, a deployment): "an object", described."""
+    return {
+        "requestBody": {
+            "required": True,
+            "content": {
+                "application/json": {
+                    "schema": {"type": "object", "description": description},
+                    "example": example,
+                }
+            },
+        }
+    }
+
+
+def stored_document(what: str) -> dict[int | str, dict[str, Any]]:
+    """The OpenAPI of a ``GET`` answering such a document as stored (compact JSON)."""
+    return {
+        200: {
+            "description": f"The {what} as stored (compact JSON).",
+            "content": {"application/json": {"schema": {"type": "object"}}},
+        }
+    }
+
+
 def not_stored(name: str, where: str) -> NotFoundError:
     """The 404 of an item ``name`` that is not ``where`` (``in the clip library (GET
     /clips)``)."""

@@ -62,28 +62,13 @@ EXAMPLE: dict[str, Any] = {
         ],
     }
 }
-PROJECT_BODY_OPENAPI: dict[str, Any] = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "application/json": {
-                "schema": {
-                    "type": "object",
-                    "description": "A bHaptics Designer `.tact` file, or its `project` object "
-                    "(`layout`, `tracks`); keys in any case, numbers also as strings "
-                    "(docs/bhaptics.md). It must have content for `ForearmL` or `ForearmR`.",
-                },
-                "example": EXAMPLE,
-            }
-        },
-    }
-}
-PROJECT_ANSWER: dict[int | str, dict[str, Any]] = {
-    200: {
-        "description": "The project as stored (compact JSON).",
-        "content": {"application/json": {"schema": {"type": "object"}}},
-    }
-}
+PROJECT_BODY_OPENAPI = library.document_body(
+    "A bHaptics Designer `.tact` file, or its `project` object (`layout`, `tracks`); keys in "
+    "any case, numbers also as strings (docs/bhaptics.md). It must have content for "
+    "`ForearmL` or `ForearmR`.",
+    EXAMPLE,
+)
+PROJECT_ANSWER = library.stored_document("project")
 
 
 async def project_body(request: Request) -> tuple[str, Any]:

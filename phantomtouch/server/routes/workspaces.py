@@ -58,30 +58,14 @@ EXAMPLE: dict[str, Any] = {
         ],
     },
 }
-DEPLOYMENT_BODY_OPENAPI: dict[str, Any] = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "application/json": {
-                "schema": {
-                    "type": "object",
-                    "description": "A game's deployment: the bHaptics Developer Portal's "
-                    "answer (`{status, message: {hapticMappings: [...]}}`) or its `message`; "
-                    "each mapping an event (`key`) with `tactFilePatterns` (.tact projects) "
-                    "and `audioFilePatterns` (base64 frames of 20 motor levels every 20 ms); "
-                    "keys in any case (docs/bhaptics.md, SDK2).",
-                },
-                "example": EXAMPLE,
-            }
-        },
-    }
-}
-DEPLOYMENT_ANSWER: dict[int | str, dict[str, Any]] = {
-    200: {
-        "description": "The deployment as stored (compact JSON).",
-        "content": {"application/json": {"schema": {"type": "object"}}},
-    }
-}
+DEPLOYMENT_BODY_OPENAPI = library.document_body(
+    "A game's deployment: the bHaptics Developer Portal's answer (`{status, message: "
+    "{hapticMappings: [...]}}`) or its `message`; each mapping an event (`key`) with "
+    "`tactFilePatterns` (.tact projects) and `audioFilePatterns` (base64 frames of 20 motor "
+    "levels every 20 ms); keys in any case (docs/bhaptics.md, SDK2).",
+    EXAMPLE,
+)
+DEPLOYMENT_ANSWER = library.stored_document("deployment")
 
 
 async def deployment_body(request: Request) -> tuple[str, Deployment]:

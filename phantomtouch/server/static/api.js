@@ -72,6 +72,10 @@ export const api = {
   tactList: (limit) => json("GET", `/tact?limit=${limit}&offset=0`),
   putTact: (name, text) => json("PUT", `/tact/${encodeURIComponent(name)}`, { text }),
   playTact: (name) => json("POST", `/tact/${encodeURIComponent(name)}/play`, { json: {} }),
+  workspaces: (limit) => json("GET", `/bhaptics/workspaces?limit=${limit}&offset=0`),
+  putWorkspace: (id, text) =>
+    json("PUT", `/bhaptics/workspaces/${encodeURIComponent(id)}`, { text }),
+  deleteWorkspace: (id) => json("DELETE", `/bhaptics/workspaces/${encodeURIComponent(id)}`),
   health: () => json("GET", "/health"),
   putWearer: (name, profile) =>
     json("PUT", `/wearers/${encodeURIComponent(name)}`, { json: profile }),

@@ -1,5 +1,5 @@
 // The page: wires the armband, the live contacts, the designer, the status view, the
-// .tact panel and the stop button to the service.
+// .tact panel, the bHaptics games panel and the stop button to the service.
 
 import { api, token } from "./api.js";
 import { Armband } from "./armband.js";
@@ -11,6 +11,7 @@ import { StatusView } from "./status.js";
 import { TactPanel } from "./tact.js";
 import { formatNumber } from "./units.js";
 import { WearerPanel } from "./wearer.js";
+import { WorkspacesPanel } from "./workspaces.js";
 
 const $ = (id) => document.getElementById(id);
 const MAX_ALERTS = 3;
@@ -142,6 +143,7 @@ async function main() {
   designer = new Designer({ armband, chart: new GainChart($("chart")), session, showError, channelLabels });
   new WearerPanel({ device, showError });
   const tact = new TactPanel({ showError });
+  const games = new WorkspacesPanel({ showError });
   session.start();
   try {
     await designer.load();
@@ -149,6 +151,7 @@ async function main() {
     showError(`Cannot load the presets: ${exc.message}`);
   }
   await tact.loadList();
+  await games.loadList();
   document.body.dataset.ready = "true";
 }
 
