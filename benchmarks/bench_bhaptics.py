@@ -19,6 +19,14 @@ talks to it only as a bHaptics SDK1 client does (JSON over ``/v2/feedbacks``).
   run in the same process: a ``/ws`` connection sending 60 ``move`` messages a second
   for one contact (the project's own live-contact input at the same rate).
 
+- **SDK2**: the same service serves SDK2 v3 (``--bhaptics-sdk2``, TLS). The latency of an
+  ``SdkPlayDotMode`` (``ForearmL`` motor 2 at 100, 60 ms) from ``send`` to the port, p50 and
+  p99 beside SDK1's frame (an SDK2 play is a scheduled job: it starts
+  ``START_AHEAD_S`` after it is planned, where an SDK1 frame is a live contact); and
+  :data:`SDK2_CONNECTIONS` connections of one workspace each playing a 100 ms event
+  :data:`SDK2_EVENTS_HZ` times a second for ``--seconds``: CPU as above, the plays sent,
+  and how many the service answered as playing.
+
 Nothing is asserted: the figures depend on the machine and on what else runs on it.
 
 Run: ``python benchmarks/bench_bhaptics.py [--quick] [--frames 100] [--seconds 10] [--json]``.
@@ -31,6 +39,7 @@ import argparse
 import asyncio
 import json
 import os
+import ssl
 import sys
 import tempfile
 import threading
@@ -45,6 +54,8 @@ import websockets
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
 
+from tests.bhaptics.sdk2.deployments import auth_init_game, deployment, mapping
+from tests.bhaptics.test_standin_live import dot_project
 from tests.support.jack import JackServer
 from tests.support.live_server import HOST, LiveServer, free_port
 
@@ -53,6 +64,11 @@ PERIOD_FRAMES = 128
 PLAYER_TICK_MS = 20.0
 """The bHaptics Player's tick (SDK timer, ``.tact`` ``intervalMillis``)."""
 STREAM_HZ = 60.0
+SDK2_CONNECTIONS = 8
+"""SDK2 connections playing events at once (a game, SimHub, a few scripts)."""
+SDK2_EVENTS_HZ = 5.0
+"""Plays a second per SDK2 connection (a game's hits and shots)."""
+WORKSPACE = "bench"
 
 
 class Onsets:
@@ -140,6 +156,81 @@ async def _drain(ws: Any) -> None:
         pass
 
 
+def sdk2_url(port: int) -> str:
+    return f"wss://{HOST}:{port}/v3/feedback?workspace_id={WORKSPACE}&api_key=bench&version=1"
+
+
+def sdk2_context() -> ssl.SSLContext:
+    """A client context that accepts the service's self-signed certificate, as SDK2 clients
+    accept any."""
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    context.check_hostname = False
+    context.verify_mode = ssl.CERT_NONE
+    return context
+
+
+def sdk2(kind: str, message: dict[str, Any]) -> str:
+    return json.dumps({"Type": kind, "Message": json.dumps(message)})
+
+
+async def sdk2_latencies(port: int, onsets: Onsets, count: int) -> list[float]:
+    found = []
+    async with websockets.connect(
+        sdk2_url(port), ssl=sdk2_context(), ping_interval=None, compression=None
+    ) as ws:
+        reader = asyncio.create_task(_drain(ws))
+        for request_id in range(count):
+            await asyncio.sleep(0.2)
+            onsets.arm()
+            dots = {"requestId": request_id, "position": 1, "durationMillis": 60}
+            await ws.send(sdk2("SdkPlayDotMode", {**dots, "motorValues": [0, 0, 100, 0, 0, 0]}))
+            sent_s = time.monotonic()
+            if await asyncio.to_thread(onsets.seen.wait, 2.0):
+                found.append(onsets.onset_s - sent_s)
+        reader.cancel()
+    return found
+
+
+async def sdk2_events(port: int, seconds: float) -> dict[str, int]:
+    """:data:`SDK2_CONNECTIONS` connections playing the event ``hit`` (100 ms) at
+    :data:`SDK2_EVENTS_HZ` each; plays sent, and plays the service listed as playing."""
+    counts = {"sent": 0, "listed": 0}
+    context = sdk2_context()
+    async with websockets.connect(sdk2_url(port), ssl=context, ping_interval=None) as ws:
+        events = deployment(WORKSPACE, [mapping("hit", tact=[dot_project("ForearmR", 4, 100)])])
+        await ws.send(auth_init_game(WORKSPACE, events))
+        async for text in ws:
+            if json.loads(text)["Type"] == "ServerEventList":
+                break
+
+    async def one(k: int) -> None:
+        listed: set[int] = set()
+        async with websockets.connect(
+            sdk2_url(port), ssl=context, ping_interval=None, compression=None
+        ) as ws:
+
+            async def read() -> None:
+                async for text in ws:
+                    found = json.loads(text)
+                    if found["Type"] == "ServerActiveRequestIdList":
+                        listed.update(json.loads(found["Message"]))
+
+            reader = asyncio.create_task(read())
+            start, sent = time.monotonic(), 0
+            while time.monotonic() - start < seconds:
+                play = {"eventName": "hit", "requestId": k * 1_000_000 + sent, "intensity": 0.5}
+                await ws.send(sdk2("SdkPlay", play))
+                sent += 1
+                await asyncio.sleep(max(0.0, start + sent / SDK2_EVENTS_HZ - time.monotonic()))
+            await asyncio.sleep(0.5)
+            reader.cancel()
+        counts["sent"] += sent
+        counts["listed"] += len(listed)
+
+    await asyncio.gather(*(one(k) for k in range(SDK2_CONNECTIONS)))
+    return counts
+
+
 def cpu_s(pids: list[int]) -> float:
     tick_s = 1.0 / os.sysconf("SC_CLK_TCK")
     total = 0
@@ -199,7 +290,7 @@ async def stream_ws(url: str, seconds: float) -> int:
     return sent
 
 
-def measured(server: LiveServer, run: Any, seconds: float) -> dict[str, float]:
+def measured(server: LiveServer, run: Any, seconds: float) -> dict[str, Any]:
     pids = service_pids(server)
     before, started = cpu_s(pids), time.monotonic()
     sent = asyncio.run(run(seconds))
@@ -208,6 +299,16 @@ def measured(server: LiveServer, run: Any, seconds: float) -> dict[str, float]:
         "messages": sent,
         "seconds": elapsed,
         "cpu_percent": 100.0 * (cpu_s(pids) - before) / elapsed,
+    }
+
+
+def percentiles(found: list[float]) -> dict[str, float]:
+    ms = np.array(found) * 1e3
+    return {
+        "frames": len(found),
+        "p50": float(np.percentile(ms, 50)),
+        "p99": float(np.percentile(ms, 99)),
+        "max": float(ms.max()),
     }
 
 
@@ -235,33 +336,37 @@ def main() -> None:
         profile.write_text(
             f"sample_rate_hz = {SAMPLE_RATE_HZ}\nblock_frames = {PERIOD_FRAMES}\n", "utf-8"
         )
-        port = free_port()
-        env = {"JACK_DEFAULT_SERVER": jack.name}
+        port, sdk2_port = free_port(), free_port()
+        env = {"JACK_DEFAULT_SERVER": jack.name, "XDG_DATA_HOME": folder}
         server = LiveServer(
             Path(folder) / "library.db",
             output="system",
             env=env,
-            args=("--device", str(profile), "--bhaptics", f"{HOST}:{port}"),
+            args=(
+                "--device",
+                str(profile),
+                "--bhaptics",
+                f"{HOST}:{port}",
+                "--bhaptics-sdk2",
+                f"{HOST}:{sdk2_port}",
+            ),
         ).start()
         try:
             device = httpx.get(f"{server.url}/device", timeout=5.0).json()
             results["backend"] = device["backend"]
             onsets = Onsets(jack)
             onsets.connect()
-            found = asyncio.run(latencies(port, onsets, frames))
+            results["latency_ms"] = percentiles(asyncio.run(latencies(port, onsets, frames)))
+            results["sdk2_latency_ms"] = percentiles(
+                asyncio.run(sdk2_latencies(sdk2_port, onsets, frames))
+            )
             onsets.close()
-            ms = np.array(found) * 1e3
-            results["latency_ms"] = {
-                "frames": len(found),
-                "p50": float(np.percentile(ms, 50)),
-                "p99": float(np.percentile(ms, 99)),
-                "max": float(ms.max()),
-            }
             results["idle"] = idle(server, seconds)
             results["bhaptics_60hz"] = measured(server, lambda s: stream_bhaptics(port, s), seconds)
             results["ws_60hz"] = measured(
                 server, lambda s: stream_ws(f"ws://{HOST}:{server.port}/ws", s), seconds
             )
+            results["sdk2_events"] = measured(server, lambda s: sdk2_events(sdk2_port, s), seconds)
         finally:
             server.stop()
     idle_pct = results["idle"]["cpu_percent"]
@@ -287,6 +392,17 @@ def main() -> None:
     print(
         f"above idle, bHaptics frames cost {results['ratio_to_ws']:.2f} x the /ws moves "
         f"(load average {results['load_average'][0]:.2f})"
+    )
+    sdk2_lat, events = results["sdk2_latency_ms"], results["sdk2_events"]
+    print(
+        f"SDK2 dot-mode play to the port: p50 {sdk2_lat['p50']:.1f} ms, p99 "
+        f"{sdk2_lat['p99']:.1f} ms, max {sdk2_lat['max']:.1f} ms over {sdk2_lat['frames']} "
+        f"plays (SDK1 frame: p50 {lat['p50']:.1f} ms, p99 {lat['p99']:.1f} ms)"
+    )
+    print(
+        f"{SDK2_CONNECTIONS} SDK2 connections at {SDK2_EVENTS_HZ:g} events/s each: "
+        f"{events['cpu_percent']:.1f} % of one core (idle {idle_pct:.1f} %), "
+        f"{events['messages']['listed']} of {events['messages']['sent']} plays listed as playing"
     )
 
 

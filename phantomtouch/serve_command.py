@@ -67,6 +67,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         "wearer": args.wearer,
         "wearer_band": args.wearer_band,
         "bhaptics_listen": args.bhaptics,
+        "bhaptics_sdk2_listen": args.bhaptics_sdk2,
         "bhaptics_map": args.bhaptics_map,
     }
     if args.osc is not None:
@@ -100,6 +101,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         if settings.bhaptics_map is not None:
             ArmMap.load(settings.bhaptics_map)
         check_port_free(*settings.bhaptics_address)
+    if settings.bhaptics_sdk2_listen is not None and settings.bhaptics_sdk2_address:
+        check_port_free(*settings.bhaptics_sdk2_address)
     print(
         f"phantomtouch {args.command}: http://{settings.host}:{settings.port} (API docs at "
         f"/docs); library {settings.db_path} (--db FILE for another)"
@@ -107,6 +110,9 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     if settings.bhaptics_address is not None:
         host, port = settings.bhaptics_address
         print(f"phantomtouch {args.command}: bHaptics stand-in on ws://{host}:{port}/v2/feedbacks")
+    if settings.bhaptics_sdk2_address is not None:
+        host, port = settings.bhaptics_sdk2_address
+        print(f"phantomtouch {args.command}: bHaptics SDK2 on wss://{host}:{port}/v3/feedback")
     serve(settings, attach=_attachments(settings, fleet))
     return 0
 
@@ -124,6 +130,10 @@ def _attachments(settings: Settings, fleet: Attachment | None) -> list[Attachmen
         from phantomtouch.bhaptics.listener import attach as attach_bhaptics
 
         attachments.append(attach_bhaptics)
+    if settings.bhaptics_sdk2_address is not None:
+        from phantomtouch.bhaptics.sdk2.listener import attach as attach_sdk2
+
+        attachments.append(attach_sdk2)
     if fleet is not None:
         attachments.append(fleet)
     return attachments
@@ -172,6 +182,11 @@ def _serve_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="HOST:PORT",
         help="also stand in for the bHaptics Player: its WebSocket protocol on this loopback "
         "address (the Player's is 127.0.0.1:15881)",
+    )
+    parser.add_argument(
+        "--bhaptics-sdk2",
+        metavar="HOST:PORT",
+        help="where to serve bHaptics SDK2 (wss, v3) (default: --bhaptics's host, port 15882)",
     )
     parser.add_argument(
         "--bhaptics-map", help="bHaptics arm map file (TOML), with --bhaptics (docs/bhaptics.md)"

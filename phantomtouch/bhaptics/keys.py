@@ -78,6 +78,7 @@ def start_key(
         score(project, arm_map, engine.device, scale),
         owner=owner,
         quota=quota,
+        stop_count=engine.stop_count,
         skip_s=request.start_ms / 1000.0 * scale.duration,
         partial=True,
     )

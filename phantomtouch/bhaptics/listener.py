@@ -210,7 +210,7 @@ class BhapticsListener:
         if path not in PATHS:
             message = f"path={path!r}: the bHaptics stand-in serves SDK1 on /v2/feedbacks"
             if path in SDK2_PATHS:
-                message += "; SDK2 (port 15882, tact-js 2.x, bhaptics-python) is not supported"
+                message += "; SDK2 v3 is served over TLS on its own port (--bhaptics-sdk2)"
             return connection.respond(404, message + "\n")
         scope = {
             "type": "websocket",

@@ -249,6 +249,11 @@ class JobCalls:
             self._jobs.mark_stopped(record)
             return True
 
+    def live_jobs(self, owner: str) -> int:
+        """How many jobs of ``owner`` are scheduled or playing (host, any thread)."""
+        with self._lock:
+            return len(self._jobs.live_of(owner))
+
     def stop_owner(self, owner: str, reason: str = "closed") -> int:
         """Stop every job of ``owner`` scheduled or playing, each with its release ramp
         (its state says ``stopped`` with ``reason``: the owner went, ``docs/owners.md``);

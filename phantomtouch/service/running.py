@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.schema import DeviceProfile
+from phantomtouch.service.admission import Admission, policy_table
 from phantomtouch.service.connections import ConnectionCaps
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.metrics import Metrics
@@ -54,6 +55,9 @@ class Service:
     """The wearer the output stage is fitted to (``/wearer``, ``hello``)."""
     arm_map: ArmMap = field(init=False)
     """Where ``.tact`` projects and bHaptics frames land on the band (``bhaptics_map``)."""
+    admission: Admission = field(init=False)
+    """The one admission every input opens its sources at (:mod:`~phantomtouch.service.
+    admission`), with the service's policy table."""
     connections: ConnectionCaps = field(init=False)
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
@@ -65,6 +69,7 @@ class Service:
         self.wearer = ActiveWearer(self.engine, self.store)
         map_path = self.settings.bhaptics_map
         self.arm_map = ArmMap.load(map_path) if map_path is not None else ArmMap()
+        self.admission = Admission(self.engine, policy_table(self.settings), store=self.store)
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
         self.connections = ConnectionCaps(
             self.settings.max_ws_connections, self.settings.max_ws_connections_per_address

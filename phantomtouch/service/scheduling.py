@@ -180,6 +180,48 @@ def quota_error(
     )
 
 
+def schedule_touch(
+    engine: EngineFront,
+    store: PatternStore,
+    request: AnyTouch,
+    *,
+    owner: str,
+    quota: OwnerQuota,
+    stop_count: int,
+    names: tuple[str, str] = QUOTA_NAMES,
+) -> JobAccepted:
+    """The one path a touch request takes to the engine (host, a worker thread: reading the
+    store and planning take time): resolve it, check ``owner``'s ``quota`` before planning
+    (a refusal costs no planning), plan it through the engine's plan cache, schedule it.
+    ``stop_count`` is the engine's ``stop_count`` when the request arrived: a stop since
+    voids it. Inputs reach it through their handle
+    (:meth:`phantomtouch.service.admission.Handle.play`).
+
+    Raises
+    ------
+    QuotaError
+        The touch would take ``owner`` past ``quota`` (the message names the setting of
+        ``names``).
+    NotFoundError, MissingReferenceError, ParameterError
+        The request names what is not there, or cannot be planned.
+    """
+    pattern = resolve(request, store)
+    least_s = least_duration_s(pattern)
+    try:
+        engine.check_quota(owner, quota, least_s)
+    except QuotaRefused as refused:
+        raise quota_error(refused, least_s, names) from refused
+    planned = engine.plans.plan(pattern)
+    first = start_frame(engine, request.timing())
+    try:
+        job = engine.schedule(
+            planned, start_frame=first, owner=owner, stop_count=stop_count, quota=quota
+        )
+    except QuotaRefused as refused:
+        raise quota_error(refused, planned.duration_s, names) from refused
+    return accepted(engine, job, planned)
+
+
 async def schedule(
     service: Service,
     request: AnyTouch,
@@ -188,43 +230,17 @@ async def schedule(
     owner: str | None = None,
     detached: bool = False,
 ) -> JobAccepted:
-    """Resolve, plan and schedule a touch request; the answer of ``POST /touch``.
-
-    ``client`` is whose touch it is (``owner``, if given, names the same client as the
-    engine's owner): its quotas count the client's jobs not over in the engine's job
-    table (``docs/owners.md``), and it is the client's share of the
-    voices when voices are stolen (:meth:`~phantomtouch.engine.jobs.JobTable.admit`).
-    A ``detached`` touch (``client`` is then its detached owner) counts against the
-    detached quota instead. Reading the store, planning and scheduling (which may build a
-    noise loop) run in a worker thread: the event loop never waits for them.
-
-    Raises
-    ------
-    QuotaError
-        The touch would take the client past one of its quotas (the message names it).
-    """
-    engine = service.engine
-    owner = client if owner is None else owner
+    """:func:`schedule_touch` for ``client`` on the event loop, the work in a worker thread;
+    the stop count is read on arrival, before the thread starts."""
     settings = service.settings
-    quota = detached_quota(settings) if detached else client_quota(settings)
-    names = DETACHED_NAMES if detached else QUOTA_NAMES
-    stops = engine.stop_count  # a stop that comes while this one is planned voids it
-
-    def plan_and_schedule() -> JobAccepted:
-        pattern = resolve(request, service.store)
-        least_s = least_duration_s(pattern)
-        try:
-            engine.check_quota(owner, quota, least_s)  # before planning: a refusal costs none
-        except QuotaRefused as refused:
-            raise quota_error(refused, least_s, names) from refused
-        planned = service.plans.plan(pattern)
-        first = start_frame(engine, request.timing())
-        try:
-            job = engine.schedule(
-                planned, start_frame=first, owner=owner, stop_count=stops, quota=quota
-            )
-        except QuotaRefused as refused:
-            raise quota_error(refused, planned.duration_s, names) from refused
-        return accepted(engine, job, planned)
-
-    return await asyncio.to_thread(plan_and_schedule)
+    stops = service.engine.stop_count
+    return await asyncio.to_thread(
+        schedule_touch,
+        service.engine,
+        service.store,
+        request,
+        owner=client if owner is None else owner,
+        quota=detached_quota(settings) if detached else client_quota(settings),
+        stop_count=stops,
+        names=DETACHED_NAMES if detached else QUOTA_NAMES,
+    )

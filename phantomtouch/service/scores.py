@@ -80,9 +80,9 @@ def schedule_score(
     *,
     owner: str,
     quota: OwnerQuota,
+    stop_count: int,
     start_frame: int | None = None,
     skip_s: float = 0.0,
-    stop_count: int | None = None,
     partial: bool = False,
 ) -> ScoreJobs:
     """Schedule every voice of ``played`` as a job of ``owner`` (host, a worker thread:
@@ -103,9 +103,9 @@ def schedule_score(
     skip_s : float, >= 0
         Voices that begin before this time of the score (s) are left out; the others start
         that much sooner (the stand-in's ``startTimeMillis``).
-    stop_count : int or None
+    stop_count : int
         The engine's ``stop_count`` when the request arrived: a global stop since voids
-        every voice (as it voids a touch).
+        every voice (as it voids a touch), also one that comes while they are planned.
     partial : bool
         True: a voice the engine refuses is left out and logged, the others play (the
         stand-in: the Player plays what it can). False: the first refusal stops the voices
@@ -120,9 +120,18 @@ def schedule_score(
     ParameterError
         A voice would start more than ``MAX_SCHEDULE_AHEAD_S`` from now.
     QuotaRefused, EngineBusyError
-        ``partial`` is False and the engine refused a voice.
+        ``partial`` is False and the engine refused a voice; QuotaRefused also when
+        ``owner`` has no room for one voice more, before any is planned.
     """
     voices = [v for v in played.voices if v.start_s >= skip_s]
+    try:
+        engine.check_quota(owner, quota)  # before planning: a refusal costs none
+    except QuotaRefused as exc:
+        if not partial:
+            raise
+        logger.warning("a score of %s was refused whole (%s)", owner, exc)
+        now_frame = engine.frames_at(engine.server_time_s())
+        return ScoreJobs(now_frame, engine.time_at(now_frame), 0.0, refused=len(voices))
     plans = [engine.plans.plan(v.pattern) for v in voices]
     rate_hz = engine.sample_rate_hz
     now_s = engine.server_time_s()

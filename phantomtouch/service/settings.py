@@ -155,6 +155,9 @@ class Settings(ClientLimits):
     bhaptics_listen: str | None = None
     """Stand in for the bHaptics Player: accept its SDK1 WebSocket protocol at HOST:PORT, a
     loopback address (games connect to 127.0.0.1:15881); None: no bHaptics input."""
+    bhaptics_sdk2_listen: str | None = None
+    """Where to serve bHaptics SDK2 (v3, TLS), a loopback HOST:PORT; None: the host of
+    ``bhaptics_listen`` and port 15882 (the Player's) when that is set."""
     bhaptics_map: Path | None = None
     """bHaptics arm map file (TOML): which arm positions play on the band and where; None: both
     arms, along the band's actuator span."""
@@ -200,7 +203,7 @@ class Settings(ClientLimits):
             )
         return listen
 
-    @field_validator("bhaptics_listen")
+    @field_validator("bhaptics_listen", "bhaptics_sdk2_listen")
     @classmethod
     def _bhaptics_listen(cls, listen: str | None) -> str | None:
         if listen is None:
@@ -222,6 +225,17 @@ class Settings(ClientLimits):
             return None
         host, _, port = self.bhaptics_listen.rpartition(":")
         return host.strip("[]"), int(port)
+
+    @property
+    def bhaptics_sdk2_address(self) -> tuple[str, int] | None:
+        """Where SDK2 is served: ``bhaptics_sdk2_listen``, else port 15882 on the host of
+        ``bhaptics_listen``; None when neither is set."""
+        if self.bhaptics_sdk2_listen is not None:
+            host, _, port = self.bhaptics_sdk2_listen.rpartition(":")
+            return host.strip("[]"), int(port)
+        if self.bhaptics_address is None:
+            return None
+        return self.bhaptics_address[0], 15882
 
     @property
     def osc_address(self) -> tuple[str, int] | None:

@@ -29,6 +29,32 @@ def test_who_yields_a_slot(held: dict[str, int], owner: str, givers: list[str]) 
     assert yielding(held, owner) == givers
 
 
+@pytest.mark.parametrize(
+    ("held", "owner", "givers"),
+    [
+        # 200 sources of one program hold one voice each; a second program's one voice
+        # never yields to them: they share what their program holds
+        (
+            {**{f"osc:h/{k}": 1 for k in range(200)}, "ws:h/1": 1},
+            "osc:h/new",
+            [f"osc:h/{k}" for k in range(200)],
+        ),
+        ({**{f"osc:h/{k}": 1 for k in range(3)}, "ws:h/1": 1}, "osc:h/0", []),
+        # a program holding nothing takes from the program holding the most, and there
+        # from the source holding the most
+        ({"osc:h/1": 1, "osc:h/2": 3, "ws:h/1": 1}, "rest:h/1", ["osc:h/2"]),
+        # one apart between programs, the owners of the asker's program share among
+        # themselves
+        ({"osc:h/1": 2, "ws:h/1": 3}, "osc:h/2", ["osc:h/1"]),
+        ({"osc:h/1": 1, "ws:h/1": 2}, "osc:h/1", []),
+    ],
+)
+def test_shares_go_first_among_principals_then_among_their_owners(
+    held: dict[str, int], owner: str, givers: list[str]
+) -> None:
+    assert yielding(held, owner) == givers
+
+
 def test_every_owner_asking_once_ends_with_one_slot_whoever_asked_first() -> None:
     """However many owners ask, each in turn, the slots pass to whoever holds none: no
     owner ever holds two while another that asked holds none."""
