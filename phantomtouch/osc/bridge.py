@@ -48,6 +48,7 @@ from phantomtouch.osc.receivers import Change, ReceiverLayout
 from phantomtouch.osc.senders import OWNER_PREFIX, Sender, SenderTable
 from phantomtouch.service.flood import FloodGuard, LimitedLog
 from phantomtouch.service.running import InputHealth
+from phantomtouch.service.thread_priority import raise_thread_priority
 
 try:
     from phantomtouch.osc.packets import BadDatagram, messages_of
@@ -251,6 +252,7 @@ class OscBridge:
     # -- the receive loop ---------------------------------------------------------------
 
     def _run(self) -> None:
+        raise_thread_priority("the OSC bridge")  # a move is not late behind busy processes
         receive = self._socket.recvfrom
         while not self._closing.is_set():
             try:
