@@ -55,7 +55,7 @@ from realtime_load import start_hogs, stop
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
 
 from tests.support.jack import JackServer
-from tests.support.live_server import HOST, LiveServer
+from tests.support.live_server import HOST, LiveServer, free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_RATE_HZ = 48_000
@@ -63,7 +63,11 @@ PERIOD_FRAMES = 128
 GAP_S = 0.06
 """Between one measured move and the next (the contact goes back meanwhile)."""
 ONSET_TIMEOUT_S = 1.0
+SETTLE_S = 10.0
+"""Longest wait for the first move to the far actuator (a loaded event loop is slow)."""
 THRESHOLD = 0.2
+SILENCE = 1e-4
+"""A bHaptics frame's onset: the first sample past this, from silence."""
 """The onset: a sample past this share of the channel's level at rest on its actuator."""
 
 
@@ -81,7 +85,7 @@ class Onsets:
         self.seen = threading.Event()
         self.onset_s = 0.0
         self.peak = np.zeros(8)
-        self._channel = -1
+        self._channel: int | None = None
         self._level = math.inf
         self._armed = False
         self.client.set_process_callback(self._process)
@@ -100,7 +104,8 @@ class Onsets:
         for source, sink in zip(ports, self.inputs, strict=True):
             self.client.connect(source, sink)
 
-    def arm(self, channel: int, level: float) -> None:
+    def arm(self, channel: int | None, level: float) -> None:
+        """Find the next sample past ``level`` on ``channel`` (None: on any)."""
         self.seen.clear()
         self._channel, self._level = channel, level
         self._armed = True
@@ -111,7 +116,11 @@ class Onsets:
             self.peak[k] = max(self.peak[k], float(np.abs(port.get_array()).max()))
         if not self._armed:
             return
-        found = np.flatnonzero(np.abs(self.inputs[self._channel].get_array()) > self._level)
+        watched = self.inputs if self._channel is None else [self.inputs[self._channel]]
+        loud = np.zeros(frames, dtype=bool)
+        for port in watched:
+            loud |= np.abs(port.get_array()) > self._level
+        found = np.flatnonzero(loud)
         if found.size:
             self.onset_s = now_s + found[0] / self.rate_hz
             self._armed = False
@@ -132,7 +141,9 @@ class Install:
         if not self.python.exists():
             raise SystemExit(f"bench_lane: {self.python} is missing (scripts/install there)")
 
-    def server(self, folder: Path, jack: JackServer, device: Path | None) -> LiveServer:
+    def server(
+        self, folder: Path, jack: JackServer, device: Path | None, bhaptics_port: int
+    ) -> LiveServer:
         script = self.python.with_name("phantomtouch")
 
         class Served(LiveServer):
@@ -141,7 +152,8 @@ class Install:
             def command(self) -> list[str]:
                 return [str(script), *super().command()[3:]]
 
-        args = ("--device", str(device)) if device is not None else ()
+        args: tuple[str, ...] = ("--bhaptics", f"{HOST}:{bhaptics_port}")
+        args += ("--device", str(device)) if device is not None else ()
         return Served(
             folder / f"{self.name}-{uuid.uuid4().hex[:6]}.db",
             output="system",
@@ -184,6 +196,9 @@ async def moves(server: LiveServer, onsets: Onsets, count: int, path: str) -> di
             await asyncio.sleep(0.2)
             onsets.peak[:] = 0.0
             await _move(ws, udp, lane, server, far, path)
+            settled_s = time.monotonic() + SETTLE_S
+            while not onsets.peak[far_channel] and time.monotonic() < settled_s:
+                await asyncio.sleep(0.05)
             await asyncio.sleep(0.3)
             level = THRESHOLD * float(onsets.peak[far_channel])
             if level <= 0.0:
@@ -207,6 +222,35 @@ async def moves(server: LiveServer, onsets: Onsets, count: int, path: str) -> di
         finally:
             udp.close()
             reader.cancel()
+    return quantiles(found, missed)
+
+
+async def frames(port: int, onsets: Onsets, count: int) -> dict[str, Any]:
+    """``count`` bHaptics SDK1 frames (one dot, 60 ms) from silence: the first sample of
+    each on any channel."""
+    url = f"ws://{HOST}:{port}/v2/feedbacks?app_id=bench&app_name=bench_lane"
+    dot = {"position": "ForearmL", "dotPoints": [{"index": 2, "intensity": 100}]}
+    submit = {"Submit": [{"type": "frame", "key": "lane", "Frame": {**dot, "durationMillis": 60}}]}
+    found: list[float] = []
+    missed = 0
+    async with websockets.connect(url, ping_interval=None, compression=None) as ws:
+        reader = asyncio.create_task(_drain(ws, []))
+        try:
+            for _ in range(count):
+                await asyncio.sleep(0.2)  # silent again: released 80 ms after its 60 ms
+                onsets.arm(None, SILENCE)
+                await ws.send(json.dumps(submit))
+                sent_s = time.monotonic()
+                if await asyncio.to_thread(onsets.seen.wait, ONSET_TIMEOUT_S):
+                    found.append(onsets.onset_s - sent_s)
+                else:
+                    missed += 1
+        finally:
+            reader.cancel()
+    return quantiles(found, missed)
+
+
+def quantiles(found: list[float], missed: int) -> dict[str, Any]:
     ms = np.array(found) * 1e3
     return {
         "moves": len(found),
@@ -264,7 +308,8 @@ def measure_install(
     args: argparse.Namespace,
 ) -> dict[str, Any]:
     before = jack_clients(jack)
-    server = install.server(folder, jack, device).start()
+    bhaptics_port = free_port()
+    server = install.server(folder, jack, device, bhaptics_port).start()
     results: dict[str, Any] = {}
     try:
         deadline = time.monotonic() + 10.0
@@ -274,15 +319,19 @@ def measure_install(
             raise RuntimeError(f"{install.name}: the service made no JACK client")
         onsets.connect(sorted(new)[0])
         for scenario in ("quiet", "loaded"):
-            for path in ("ws", "lane"):
+            for path in ("ws", "lane", "bhaptics"):
                 load: list[subprocess.Popen[bytes]] = []
                 if scenario == "loaded":
-                    seconds = args.moves * (2 * GAP_S + 0.02) + 10.0
+                    seconds = args.moves * 0.25 + 10.0
                     load = [*start_hogs(args.hogs, seconds), start_wrk(server.port, seconds)]
                     time.sleep(1.0)
                 print(f"{install.name}: {scenario}/{path} ...", file=sys.stderr, flush=True)
                 try:
-                    found = asyncio.run(moves(server, onsets, args.moves, path))
+                    found = asyncio.run(
+                        frames(bhaptics_port, onsets, args.moves)
+                        if path == "bhaptics"
+                        else moves(server, onsets, args.moves, path)
+                    )
                 finally:
                     stop(load)
                 if found is not None:
