@@ -13,7 +13,9 @@ A recording JACK client of this process (:class:`Onsets`, its process callback n
 actuator's channel: the first sample whose magnitude passes a fifth of that channel's level
 while the contact rests on it (measured once per run). The latency is from the moment the
 client's send returns to that sample. Moves are sent over ``/ws`` (every client) and, where
-the service offers one in its ``welcome``, over the contact lane (``docs/lane.md``).
+the service offers one in its ``welcome``, over the contact lane (``docs/lane.md``). A third
+row sends bHaptics SDK1 frames (``--bhaptics``; one dot, 60 ms, from silence): from the
+send to the first sample on any channel.
 
 Scenarios:
 
