@@ -309,16 +309,19 @@ def measure_install(
     device: Path | None,
     args: argparse.Namespace,
 ) -> dict[str, Any]:
-    before = jack_clients(jack)
+    ours = {"system", onsets.client.name}
+    deadline = time.monotonic() + 10.0
+    while jack_clients(jack) - ours and time.monotonic() < deadline:
+        time.sleep(0.1)  # the service before this one leaves JACK
     bhaptics_port = free_port()
     server = install.server(folder, jack, device, bhaptics_port).start()
     results: dict[str, Any] = {}
     try:
         deadline = time.monotonic() + 10.0
-        while not (new := jack_clients(jack) - before) and time.monotonic() < deadline:
+        while not (new := jack_clients(jack) - ours) and time.monotonic() < deadline:
             time.sleep(0.1)
-        if not new:
-            raise RuntimeError(f"{install.name}: the service made no JACK client")
+        if len(new) != 1:
+            raise RuntimeError(f"{install.name}: expected the service's JACK client, got {new}")
         onsets.connect(sorted(new)[0])
         for scenario in ("quiet", "loaded"):
             for path in ("ws", "lane", "bhaptics"):
@@ -338,6 +341,7 @@ def measure_install(
                     stop(load)
                 if found is not None:
                     results[f"{scenario}/{path}"] = found
+                    print(f"  {json.dumps(found)}", file=sys.stderr, flush=True)
     finally:
         server.stop()
     return results

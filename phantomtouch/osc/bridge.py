@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from phantomtouch.engine.shares import yielding
+from phantomtouch.engine.thread_priority import raise_thread_priority
 from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError, install_hint
 from phantomtouch.osc import messages
 from phantomtouch.osc.counters import OscCounters
@@ -48,7 +49,6 @@ from phantomtouch.osc.receivers import Change, ReceiverLayout
 from phantomtouch.osc.senders import OWNER_PREFIX, Sender, SenderTable
 from phantomtouch.service.flood import FloodGuard, LimitedLog
 from phantomtouch.service.running import InputHealth
-from phantomtouch.service.thread_priority import raise_thread_priority
 
 try:
     from phantomtouch.osc.packets import BadDatagram, messages_of

@@ -4,7 +4,8 @@ On Linux an unprivileged user may run a thread ``SCHED_RR`` up to the priority i
 ``RLIMIT_RTPRIO`` allows (``ulimit -r``; PAM's ``limits.conf`` gives the ``audio`` group
 one, and rtkit grants the same to a desktop session's threads). Such a thread runs as soon
 as its datagram arrives, ahead of every ordinary process however busy the machine is.
-``SCHED_RESET_ON_FORK`` keeps it from passing to processes the thread starts. Elsewhere, or
+``SCHED_RESET_ON_FORK`` keeps it from passing to the threads and processes the thread starts
+(a worker it starts, the engine front's deadline thread, run at ordinary priority). Elsewhere, or
 without the permission, the thread keeps its ordinary priority and the reason is logged.
 """
 
@@ -14,7 +15,7 @@ import logging
 import os
 import sys
 
-logger = logging.getLogger("phantomtouch.service")
+logger = logging.getLogger("phantomtouch.engine")
 
 INPUT_PRIORITY = 1
 """``SCHED_RR`` priority of input threads: the lowest real-time one, at the engine's own
