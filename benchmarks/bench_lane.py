@@ -67,6 +67,8 @@ GAP_S = 0.06
 ONSET_TIMEOUT_S = 1.0
 SETTLE_S = 10.0
 """Longest wait for the first move to the far actuator (a loaded event loop is slow)."""
+QUIET_TIMEOUT_S = 5.0
+"""Longest wait for the contact to leave the far actuator before the next measured move."""
 THRESHOLD = 0.2
 SILENCE = 1e-4
 """A bHaptics frame's onset: the first sample past this, from silence."""
@@ -87,6 +89,8 @@ class Onsets:
         self.seen = threading.Event()
         self.onset_s = 0.0
         self.peak = np.zeros(8)
+        self.recent = np.zeros(8)
+        """Each channel's largest magnitude in the last period."""
         self._channel: int | None = None
         self._level = math.inf
         self._armed = False
@@ -115,7 +119,8 @@ class Onsets:
     def _process(self, frames: int) -> None:
         now_s = time.monotonic()
         for k, port in enumerate(self.inputs):
-            self.peak[k] = max(self.peak[k], float(np.abs(port.get_array()).max()))
+            self.recent[k] = float(np.abs(port.get_array()).max())
+        np.maximum(self.peak, self.recent, out=self.peak)
         if not self._armed:
             return
         watched = self.inputs if self._channel is None else [self.inputs[self._channel]]
@@ -127,6 +132,17 @@ class Onsets:
             self.onset_s = now_s + found[0] / self.rate_hz
             self._armed = False
             self.seen.set()
+
+    async def quiet(self, channel: int | None, level: float) -> bool:
+        """Wait until ``channel`` (None: every channel) stays below ``level`` for a period
+        (what was sent before has landed); False if it does not within a few seconds."""
+        deadline = time.monotonic() + QUIET_TIMEOUT_S
+        watched = slice(None) if channel is None else slice(channel, channel + 1)
+        while time.monotonic() < deadline:
+            if self.recent[watched].max() < level:
+                return True
+            await asyncio.sleep(0.005)
+        return False
 
     def close(self) -> None:
         self.client.deactivate()
@@ -212,6 +228,9 @@ async def moves(server: LiveServer, onsets: Onsets, count: int, path: str) -> di
             missed = 0
             for _ in range(count):
                 await _move(ws, udp, lane, server, near, path)
+                if not await onsets.quiet(far_channel, level):
+                    missed += 1
+                    continue
                 await asyncio.sleep(GAP_S)
                 onsets.arm(far_channel, level)
                 sent_s = await _move(ws, udp, lane, server, far, path)
@@ -240,6 +259,9 @@ async def frames(port: int, onsets: Onsets, count: int) -> dict[str, Any]:
         try:
             for _ in range(count):
                 await asyncio.sleep(0.2)  # silent again: released 80 ms after its 60 ms
+                if not await onsets.quiet(None, SILENCE):
+                    missed += 1
+                    continue
                 onsets.arm(None, SILENCE)
                 await ws.send(json.dumps(submit))
                 sent_s = time.monotonic()
@@ -327,7 +349,7 @@ def measure_install(
             for path in ("ws", "lane", "bhaptics"):
                 load: list[subprocess.Popen[bytes]] = []
                 if scenario == "loaded":
-                    seconds = args.moves * 0.25 + 10.0
+                    seconds = args.moves * 0.5 + 10.0
                     load = [*start_hogs(args.hogs, seconds), start_wrk(server.port, seconds)]
                     time.sleep(1.0)
                 print(f"{install.name}: {scenario}/{path} ...", file=sys.stderr, flush=True)

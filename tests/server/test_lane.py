@@ -200,7 +200,7 @@ def test_the_lane_counts_in_the_connections_message_rate(tmp_path: Path) -> None
         try:
             down = {"type": "down", "contact": "hand", "x_cm": NEAR.x_cm, "y_cm": NEAR.y_cm}
             assert client.say(down)["type"] == "ok"
-            for _ in range(60):
+            for _ in range(200):  # ten times the bucket: most are over the rate
                 client.send_lane(client.move(NEAR.x_cm, 1.0))
             answer = client.lane_answer()
             assert answer["type"] == "error" and answer["code"] == "rate_limited", answer
