@@ -119,15 +119,15 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 def _attachments(settings: Settings, fleet: Attachment | None) -> list[Attachment]:
     """What the running service is joined to, in the order it is entered: the OSC bridge
-    (``osc_listen`` set), the bHaptics stand-in (``bhaptics_listen`` set), then the armband
-    node (``--fleet``)."""
+    (``osc_listen`` set), the bHaptics stand-in in its own thread (``bhaptics_listen`` set),
+    then the armband node (``--fleet``)."""
     attachments: list[Attachment] = []
     if settings.osc_address is not None:
         from phantomtouch.osc.service_link import attach
 
         attachments.append(attach)
     if settings.bhaptics_address is not None:
-        from phantomtouch.bhaptics.listener import attach as attach_bhaptics
+        from phantomtouch.bhaptics.own_loop import attach as attach_bhaptics
 
         attachments.append(attach_bhaptics)
     if settings.bhaptics_sdk2_address is not None:

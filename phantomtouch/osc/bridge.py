@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from phantomtouch.engine.shares import yielding
+from phantomtouch.engine.thread_priority import raise_thread_priority
 from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError, install_hint
 from phantomtouch.osc import messages
 from phantomtouch.osc.counters import OscCounters
@@ -251,6 +252,7 @@ class OscBridge:
     # -- the receive loop ---------------------------------------------------------------
 
     def _run(self) -> None:
+        raise_thread_priority("the OSC bridge")  # a move is not late behind busy processes
         receive = self._socket.recvfrom
         while not self._closing.is_set():
             try:

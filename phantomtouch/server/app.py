@@ -37,6 +37,7 @@ from phantomtouch.server.routes import (
 from phantomtouch.service import errors
 from phantomtouch.service.bodies import merge_components
 from phantomtouch.service.engine_access import describe_output, open_engine
+from phantomtouch.service.lane import running_lane
 from phantomtouch.service.limits import BodyLimitMiddleware, TokenMiddleware
 from phantomtouch.service.metrics import Metrics, MetricsMiddleware
 from phantomtouch.service.origin import (
@@ -84,6 +85,7 @@ def _lifespan(settings: Settings, metrics: Metrics, attach: Sequence[Attachment]
         metrics.watch_engine(lambda: engine.status().to_dict())
         try:
             async with AsyncExitStack() as attached:
+                attached.enter_context(running_lane(service))
                 for attachment in attach:
                     await attached.enter_async_context(attachment(service))
                 yield

@@ -167,6 +167,8 @@ class Session:
             pass
         finally:
             self._expect(SessionState.OPEN, SessionState.CLOSED)
+            if self.service.lane is not None:  # no move over the lane after the release
+                self.service.lane.close(self.owner)
             unsubscribe()
             if self._state_task is not None:
                 self._state_task.cancel()
@@ -336,6 +338,10 @@ class Session:
                 "actuators": [a.model_dump() for a in device.actuators],
             },
         }
+        if self.service.lane is not None:
+            peer = self.websocket.client
+            host = None if peer is None else peer.host
+            welcome["lane"] = self.service.lane.open(self.owner, host, self.limiter)
         choice = self.service.wearer.choice
         if choice is not None:
             welcome["wearer"] = {"name": choice.name, "band": choice.band}

@@ -54,9 +54,15 @@ class FloodGuard:
         self._flood_since_s: float | None = None
         self._last_refusal_s = -float("inf")
         self._admitted_since_refusal = 0
+        self._lock = threading.Lock()
 
     def admit(self, now_s: float) -> bool:
-        """Whether a message received at ``now_s`` (``time.monotonic()``) may be handled."""
+        """Whether a message received at ``now_s`` (``time.monotonic()``) may be handled.
+        Any thread (a connection's lane counts in its rate, :mod:`~phantomtouch.service.lane`)."""
+        with self._lock:
+            return self._admit(now_s)
+
+    def _admit(self, now_s: float) -> bool:
         elapsed_s = max(0.0, now_s - self._stamp_s)
         self._tokens = min(self.rate_per_s, self._tokens + elapsed_s * self.rate_per_s)
         self._stamp_s = now_s

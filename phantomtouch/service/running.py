@@ -26,6 +26,7 @@ if TYPE_CHECKING:
 
     from phantomtouch.engine import EngineFront
     from phantomtouch.engine.plans import PlanCache
+    from phantomtouch.service.lane import ContactLane
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,8 @@ class Service:
     inputs: dict[str, Callable[[], InputHealth]] = field(default_factory=dict, init=False)
     """Supervised inputs by name (``osc``): how each fares, for ``/health``."""
     loop: asyncio.AbstractEventLoop | None = field(default=None, init=False)
+    lane: ContactLane | None = field(default=None, init=False)
+    """The contact lane, while it runs (``lane_port``)."""
 
     def __post_init__(self) -> None:
         self.wearer = ActiveWearer(self.engine, self.store)

@@ -70,6 +70,10 @@ class Settings(ClientLimits):
     host: str = Field(default="127.0.0.1", min_length=1)
     """Address to bind."""
     port: int = Field(default=8000, ge=1, le=65535)
+    contact_lane: bool = True
+    """Run the contact lane (``docs/lane.md``); false: moves come over ``/ws`` only."""
+    lane_port: int = Field(default=0, ge=0, le=65535)
+    """UDP port of the contact lane on ``host``; 0: any free port (``welcome`` says which)."""
     device_profile: Path | None = None
     """Device profile file (TOML or JSON); None: the paper's armband."""
     output_device: str | None = None

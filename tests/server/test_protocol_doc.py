@@ -28,6 +28,7 @@ from tests.support.live_server import LiveServer
 DOC = Path(__file__).parents[2] / "docs" / "protocol.md"
 ANY = "…"
 VOLATILE = {
+    "lane",
     "server_time_s",
     "start_at_s",
     "start_frame",
