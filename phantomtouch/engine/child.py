@@ -204,7 +204,7 @@ def serve(
             device.sample_rate_hz,
             publish=SharedClock(device.sample_rate_hz, shared["clock"]).publish,
         )
-        slots = MoveSlots(options["contact"].max_contacts, shared["slots"])
+        slots = MoveSlots(options["contact"].max_contacts, device.channels, shared["slots"])
         status = StatusBlock(device.channels, shared["status"])
         sink = spec.open(device)
         core = Core(
