@@ -102,17 +102,9 @@ class ContactVoice(Voice):
         self._applied = serial
         self._unit = down.unit_gains
         self._gains = self._target = down.unit_gains * np.float32(down.amplitude)
-        self._set_channels(np.flatnonzero(self._gains))
         self._carrier_frames = 0
         self._down_burst = down.burst
         self._bursts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
-
-    def _set_channels(self, channels: np.ndarray) -> None:
-        """The channels the gains drive; all of them are added when they span over half."""
-        self._channels = channels
-        self._channel_list: list[int] = channels.tolist()
-        span = int(channels[-1] - channels[0]) + 1 if channels.size else 0
-        self._wide = 2 * span > len(self._gains)
 
     def _level_before(self, frame: int) -> float:
         """Attack level of the frame before ``frame`` (1 without an attack)."""
@@ -156,11 +148,10 @@ class ContactVoice(Voice):
         self._applied = box.serial
         self._unit = box.unit_gains
         self._target = box.unit_gains * np.float32(box.amplitude)
-        self._set_channels(np.flatnonzero(self._gains + self._target))
 
     def sounds_through(self, block_start: int, block_end: int) -> bool:
         """It sounds from ``block_start`` to ``block_end`` (neither starts nor falls silent
-        within the block): :func:`render_contacts` takes it with the others."""
+        within the block): :meth:`ContactMix.render` takes it with the others."""
         silent_from = self.silent_from
         return self.start_frame <= block_start and (silent_from is None or silent_from >= block_end)
 
@@ -185,17 +176,14 @@ class ContactVoice(Voice):
         return self._target
 
     def end_block(self, mix: np.ndarray, block_start: int) -> bool:
-        """After :func:`render_contacts` took its carrier: its gains reach their target, its
+        """After :meth:`ContactMix.render` took its carrier: its gains reach their target, its
         bursts are added into ``mix`` (frames, channels); True once it is silent for good."""
         self._gains = self._target
         if self._bursts:
             self._add_bursts(mix, block_start)
         silent_from = self.silent_from
-        return (
-            silent_from is not None
-            and block_start + mix.shape[0] >= silent_from
-            and not (self._bursts)
-        )
+        ended = silent_from is not None and block_start + mix.shape[0] >= silent_from
+        return ended and not self._bursts
 
     def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
         frames = mix.shape[0]
@@ -206,7 +194,7 @@ class ContactVoice(Voice):
         silent_from = self.silent_from
         if silent_from is not None:
             count = min(count, silent_from - first)
-        if count > 0 and self._channels.size:
+        if count > 0:
             self._add_carrier(mix[offset : offset + count], first, work)
         self._gains = self._target
         if self._bursts:
@@ -239,23 +227,14 @@ class ContactVoice(Voice):
         env = self._envelope(first, count, work)
         if env is not None:
             signal *= env
-        # Over a wide span, all channels at once: a contiguous add beats one strided add per
-        # channel. The others have gains 0 before and after, so they add zeros.
-        channels = self._channels
-        start = self._gains if self._wide else self._gains[channels]
-        if self._target is self._gains:
+        start = self._gains
+        if self._target is start:
             block = signal[:, None] * start
         else:
-            ramp = work.ramp_of(count)
-            target = self._target if self._wide else self._target[channels]
-            block = ramp[:, None] * (target - start)
+            block = work.ramp_of(count)[:, None] * (self._target - start)
             block += start
             block *= signal[:, None]
-        if self._wide:
-            dest += block
-            return
-        for column, channel in enumerate(self._channel_list):  # cheaper than a fancy index
-            dest[:, channel] += block[:, column]
+        dest += block
 
     def _add_bursts(self, mix: np.ndarray, block_start: int) -> None:
         block_end = block_start + mix.shape[0]

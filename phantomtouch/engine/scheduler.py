@@ -73,6 +73,9 @@ class Scheduler:
     intake : callable or None
         Called at the start of every block, before its commands apply (the engine
         process's ``Intake.run``; set before the sink starts).
+    finished : callable or None
+        Called at the end of every call of :meth:`render`, once ``out`` is filled (the
+        engine process wakes its report thread there, never while a block renders).
     dac_delay : callable or None
         Returns the time from now until the block being rendered reaches the sound
         card's converter, s, when the sink knows it (None otherwise).
@@ -110,6 +113,7 @@ class Scheduler:
         self.last_error: BaseException | None = None
         self.events: deque[tuple[Any, ...]] = deque()
         self.intake: Callable[[], None] | None = None
+        self.finished: Callable[[], None] | None = None
         self.dac_delay: Callable[[], float | None] | None = None
         self._voices: list[Voice] = []
         self._waiting: list[tuple[int, int, Voice]] = []
@@ -149,6 +153,8 @@ class Scheduler:
         playing_s = out.shape[0] / self.clock.sample_rate_hz
         self.render_loads[self._timed % RENDER_TIMES] = (time.monotonic() - began_s) / playing_s
         self._timed += 1
+        if self.finished is not None:
+            self.finished()
 
     def _block(self, out: np.ndarray) -> None:
         start = self.frames
