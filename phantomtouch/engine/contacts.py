@@ -11,7 +11,7 @@ import numpy as np
 
 from phantomtouch.engine.checks import check_int, check_range
 from phantomtouch.engine.voices import RingPool, Voice, Workspace
-from phantomtouch.renderer.carriers import CarrierSource
+from phantomtouch.renderer.carriers import CarrierSource, SineSource, sine_blocks
 
 if TYPE_CHECKING:
     from phantomtouch.engine.messages import ContactDown
@@ -155,15 +155,22 @@ class ContactVoice(Voice):
         silent_from = self.silent_from
         return self.start_frame <= block_start and (silent_from is None or silent_from >= block_end)
 
-    def carrier(self, block_start: int, frames: int, work: Workspace) -> np.ndarray:
-        """Its carrier times its envelope for a block it sounds through, shape (frames,),
-        float32, a new array."""
-        signal = self._source.block(self._carrier_frames, frames)
-        self._carrier_frames += frames
-        env = self._envelope(block_start, frames, work)
-        if env is not None:
-            signal *= env
-        return signal
+    @property
+    def source(self) -> CarrierSource:
+        """Its carrier's samples."""
+        return self._source
+
+    def advance_carrier(self, frames: int) -> int:
+        """The carrier's first frame for a block of ``frames``; the carrier moves on by
+        the block."""
+        first = self._carrier_frames
+        self._carrier_frames = first + frames
+        return first
+
+    def envelope(self, block_start: int, frames: int, work: Workspace) -> np.ndarray | None:
+        """Its attack or release envelope over a block it sounds through, shape (frames,),
+        float32, a view of ``work`` (None: 1 throughout)."""
+        return self._envelope(block_start, frames, work)
 
     @property
     def gains(self) -> np.ndarray:
@@ -269,6 +276,7 @@ class ContactMix:
         self.block_frames = int(block_frames)
         self.channels = int(channels)
         self._ramp = self._ramp_for(self.block_frames)
+        self._index = np.arange(self.block_frames, dtype=np.float64)
         self._total = np.empty((self.block_frames, self.channels))
         self._ramped = np.empty((self.block_frames, self.channels))
         self._allocate(int(capacity))
@@ -287,16 +295,26 @@ class ContactMix:
         """The sum of ``contacts`` (each sounding through the block of ``frames`` from
         ``block_start``), shape (frames, channels), float64, valid until the next call;
         their carriers move on by the block (real time). :meth:`ContactVoice.end_block`
-        ends each one's block."""
+        ends each one's block. The sine carriers among them are computed together
+        (:func:`~phantomtouch.renderer.carriers.sine_blocks`), the others one by one."""
         count = len(contacts)
         if count > self.capacity:  # more contacts than ever before: room for twice as many
             self._allocate(2 * count)
         self.count = count
         carriers = self.carriers[:count, :frames]
         starts, deltas = self.starts[:count], self.deltas[:count]
+        sines: list[int] = []
+        sine_starts: list[int] = []
+        sine_cycles: list[float] = []
         moved = False
         for row, voice in enumerate(contacts):
-            carriers[row] = voice.carrier(block_start, frames, work)
+            source = voice.source
+            if isinstance(source, SineSource):
+                sines.append(row)
+                sine_starts.append(voice.advance_carrier(frames))
+                sine_cycles.append(source.cycles_per_frame)
+            else:
+                carriers[row] = source.block(voice.advance_carrier(frames), frames)
             gains, target = voice.gains, voice.target
             starts[row] = gains
             if target is gains:
@@ -304,6 +322,16 @@ class ContactMix:
             else:
                 np.subtract(target, gains, out=deltas[row], dtype=np.float64)
                 moved = True
+        if sines:
+            carriers[sines] = sine_blocks(
+                np.array(sine_starts, dtype=np.float64),
+                np.array(sine_cycles),
+                self._index[:frames],
+            )
+        for row, voice in enumerate(contacts):
+            env = voice.envelope(block_start, frames, work)
+            if env is not None:
+                carriers[row] *= env
         self.moved = moved
         return self._sum(carriers, starts, deltas, frames)
 

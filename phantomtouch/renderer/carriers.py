@@ -51,14 +51,40 @@ class SineSource:
     """``sin(2 pi f n / fs)`` from the absolute frame index ``n``."""
 
     def __init__(self, freq_hz: float, sample_rate_hz: int) -> None:
-        self._cycles_per_frame = float(freq_hz) / float(sample_rate_hz)
+        self.cycles_per_frame = float(freq_hz) / float(sample_rate_hz)
 
     def block(self, start_frame: int, frames: int) -> np.ndarray:
         cycles = np.arange(start_frame, start_frame + frames, dtype=np.float64)
-        cycles *= self._cycles_per_frame
+        cycles *= self.cycles_per_frame
         cycles -= np.floor(cycles)
         cycles *= 2.0 * np.pi
         return np.sin(cycles.astype(np.float32))
+
+
+def sine_blocks(
+    start_frames: np.ndarray, cycles_per_frame: np.ndarray, index: np.ndarray
+) -> np.ndarray:
+    """Many sines' blocks at once, each the samples :meth:`SineSource.block` gives, bit for
+    bit (the same float64 phase, wrapped, then the float32 sine).
+
+    Parameters
+    ----------
+    start_frames : ndarray, shape (n,), float64
+        Each sine's first frame (whole numbers).
+    cycles_per_frame : ndarray, shape (n,), float64
+        Each sine's ``freq_hz / sample_rate_hz``.
+    index : ndarray, shape (frames,), float64
+        ``0, 1, ..., frames - 1``.
+
+    Returns
+    -------
+    ndarray, shape (n, frames), float32
+    """
+    cycles = start_frames[:, None] + index
+    cycles *= cycles_per_frame[:, None]
+    cycles -= np.floor(cycles)
+    cycles *= 2.0 * np.pi
+    return np.sin(cycles.astype(np.float32))
 
 
 def band_pass_gain(

@@ -96,30 +96,32 @@ class DcBlocker:
             self._closed[frames] = closed
         return closed
 
-    def process(self, block: np.ndarray) -> None:
+    def process(self, block: np.ndarray, peak: float | None = None) -> bool:
         """Block DC in ``block`` (frames, channels), float32, in place (real time: the
-        callback; or the offline caller). A block that cannot reach the band's edge is
-        left as it is, the state advanced in closed form (module docstring); a NaN in the
-        block resets the state (the output stage mutes that block)."""
+        callback; or the offline caller); True when it changed a sample. A block that
+        cannot reach the band's edge is left as it is, the state advanced in closed form
+        (module docstring); a NaN in the block resets the state (the output stage mutes
+        that block). ``peak`` is the block's largest absolute sample (NaN when a sample
+        is NaN) when the caller has it already."""
         frames = block.shape[0]
         if frames == 0:
-            return
+            return False
         weights, decay, reach = self._closed_form(frames)
-        peak = float(np.abs(block).max())
+        if peak is None:
+            peak = float(np.abs(block).max())
         state = self._state
         if float(np.abs(state).max()) / self.pole + reach * peak <= self.dead_band:  # most
-            if peak == 0.0:
-                state *= decay
-            else:
-                state *= decay
+            state *= decay
+            if peak != 0.0:
                 state += weights @ block
-            return
+            return False
         slow, self._state = lfilter(self._b, self._a, block, axis=0, zi=state)
         if not math.isfinite(float(self._state.sum())):
             self._state.fill(0.0)
-            return
+            return False
         if slow.max() <= self.dead_band and slow.min() >= -self.dead_band:
-            return
+            return False
         excess = slow - np.clip(slow, -self.dead_band, self.dead_band)
         block -= excess.astype(np.float32)
         self.blocked_blocks += 1
+        return True
