@@ -288,6 +288,11 @@ class ContactMix:
         self.carriers = np.empty((capacity, self.block_frames))
         self.starts = np.empty((capacity, self.channels))
         self.deltas = np.empty((capacity, self.channels))
+        self._sine_rows = np.empty(capacity, dtype=np.intp)
+        self._sine_starts = np.empty(capacity)
+        self._sine_cycles = np.empty(capacity)
+        self._sines = np.empty((capacity, self.block_frames), dtype=np.float32)
+        self._phases = np.empty((2, capacity, self.block_frames))
 
     def render(
         self, contacts: list[ContactVoice], block_start: int, frames: int, work: Workspace
@@ -303,16 +308,16 @@ class ContactMix:
         self.count = count
         carriers = self.carriers[:count, :frames]
         starts, deltas = self.starts[:count], self.deltas[:count]
-        sines: list[int] = []
-        sine_starts: list[int] = []
-        sine_cycles: list[float] = []
+        sine_rows, sine_starts, sine_cycles = self._sine_rows, self._sine_starts, self._sine_cycles
+        sines = 0
         moved = False
         for row, voice in enumerate(contacts):
             source = voice.source
             if isinstance(source, SineSource):
-                sines.append(row)
-                sine_starts.append(voice.advance_carrier(frames))
-                sine_cycles.append(source.cycles_per_frame)
+                sine_rows[sines] = row
+                sine_starts[sines] = voice.advance_carrier(frames)
+                sine_cycles[sines] = source.cycles_per_frame
+                sines += 1
             else:
                 carriers[row] = source.block(voice.advance_carrier(frames), frames)
             gains, target = voice.gains, voice.target
@@ -323,11 +328,17 @@ class ContactMix:
                 np.subtract(target, gains, out=deltas[row], dtype=np.float64)
                 moved = True
         if sines:
-            carriers[sines] = sine_blocks(
-                np.array(sine_starts, dtype=np.float64),
-                np.array(sine_cycles),
+            blocks = sine_blocks(
+                sine_starts[:sines],
+                sine_cycles[:sines],
                 self._index[:frames],
+                out=self._sines[:sines, :frames],
+                scratch=(self._phases[0, :sines, :frames], self._phases[1, :sines, :frames]),
             )
+            if sines == count:  # every carrier a sine: most
+                carriers[...] = blocks
+            else:
+                carriers[sine_rows[:sines]] = blocks
         for row, voice in enumerate(contacts):
             env = voice.envelope(block_start, frames, work)
             if env is not None:
@@ -339,10 +350,10 @@ class ContactMix:
         self, carriers: np.ndarray, starts: np.ndarray, deltas: np.ndarray, frames: int
     ) -> np.ndarray:
         total = self._total[:frames]
-        np.matmul(carriers.T, starts, out=total)
+        np.dot(carriers.T, starts, out=total)
         if self.moved:
             ramped = self._ramped[:frames]
-            np.matmul(carriers.T, deltas, out=ramped)
+            np.dot(carriers.T, deltas, out=ramped)
             ramped *= self._ramp if frames == self.block_frames else self._ramp_for(frames)
             total += ramped
         return total

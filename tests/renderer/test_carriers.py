@@ -198,3 +198,17 @@ def test_many_sines_at_once_are_each_sines_own_block_bit_for_bit() -> None:
     )
     for row, freq_hz, start in zip(rows, freqs_hz, starts, strict=True):
         np.testing.assert_array_equal(row, SineSource(freq_hz, rate).block(start, frames))
+
+
+def test_many_sines_into_given_buffers_are_the_same_bits_and_fill_them() -> None:
+    """With ``out`` and ``scratch`` (the callback's buffers) the blocks are those of a new
+    array, bit for bit, written into ``out``."""
+    rate = 48_000
+    starts = np.array([0, 4_800_123, 172_800_000], dtype=np.float64)
+    cycles = np.array([f / rate for f in (20.0, 250.0, 1000.0)])
+    index = np.arange(64, dtype=np.float64)
+    out = np.full((3, 64), np.nan, dtype=np.float32)
+    scratch = (np.empty((3, 64)), np.empty((3, 64)))
+    given = sine_blocks(starts, cycles, index, out=out, scratch=scratch)
+    assert given is out
+    assert out.tobytes() == sine_blocks(starts, cycles, index).tobytes()
