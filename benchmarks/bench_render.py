@@ -3,7 +3,11 @@
 - real time: seconds of audio rendered per second of CPU, on one core;
 - a plain per-sample Python loop of the same algorithm (position -> barycentric gains
   with the power law -> carrier x envelope x gain), timed on a short stretch;
-- a numpy copy of an output array of the same size (a memcpy).
+- a numpy copy of an output array of the same size (a memcpy);
+- for ``exp2/central`` (a 100 Hz sine held between two actuators), the compute floor: one
+  carrier sine a frame (the renderer's own sine source) times eight gains, the faster of a
+  broadcast product and ``np.outer``, into an output array. ``x floor`` is the render's
+  time over it (issue 40: at most 1.3).
 
 Run: ``python benchmarks/bench_render.py [--json]``. Targets (issue): >= 1000x real time
 for one 8-channel 48 kHz pattern, and within 10x of the copy.
@@ -20,10 +24,18 @@ from collections.abc import Callable
 import numpy as np
 
 import phantomtouch as pt
+from phantomtouch.renderer.carriers import SineSource
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.renderer.trajectory import envelope_at, positions_at
 
-PATTERNS = ("exp2/curved", "exp1/sine100-low-v3", "exp1/sine100-high-v10-am", "exp1/noise-low-v18")
+PATTERNS = (
+    "exp2/central",
+    "exp2/curved",
+    "exp1/sine100-low-v3",
+    "exp1/sine100-high-v10-am",
+    "exp1/noise-low-v18",
+)
+FLOOR_PATTERN = "exp2/central"
 
 
 def best_of(fn: Callable[[], object], repeats: int) -> float:
@@ -72,6 +84,21 @@ def per_sample_loop(plan: pt.Plan, frames: int) -> np.ndarray:
     return out
 
 
+def floor_s(plan: pt.Plan, repeats: int) -> float:
+    """The compute floor of a sine pattern: one carrier sine a frame times eight gains."""
+    source = SineSource(getattr(plan.pattern.carrier, "freq_hz", 100.0), plan.sample_rate_hz)
+    gains = np.linspace(0.1, 0.8, plan.channels, dtype=np.float32)
+    out = np.empty((plan.frames, plan.channels), dtype=np.float32)
+
+    def broadcast() -> None:
+        np.multiply(source.block(0, plan.frames)[:, None], gains, out=out)
+
+    def outer() -> None:
+        np.outer(source.block(0, plan.frames), gains, out=out)
+
+    return min(best_of(broadcast, repeats), best_of(outer, repeats))
+
+
 def measure(name: str, repeats: int) -> dict[str, float]:
     pattern = pt.preset(name)
     plan = pt.plan(pattern)
@@ -80,13 +107,16 @@ def measure(name: str, repeats: int) -> dict[str, float]:
     copy_s = best_of(lambda: output.copy(), repeats * 3)
     loop_frames = 4800
     loop_s = best_of(lambda: per_sample_loop(plan, loop_frames), 1) * plan.frames / loop_frames
-    return {
+    result = {
         "duration_s": plan.duration_s,
         "render_ms": render_s * 1e3,
         "realtime_x": plan.duration_s / render_s,
         "vs_copy_x": render_s / copy_s,
         "vs_python_loop_speedup_x": loop_s / render_s,
     }
+    if name == FLOOR_PATTERN:
+        result["vs_floor_x"] = render_s / floor_s(plan, repeats)
+    return result
 
 
 def main() -> None:
@@ -99,11 +129,12 @@ def main() -> None:
         print(json.dumps(results, indent=2))
         return
     header = f"{'pattern':28} {'dur s':>6} {'ms':>7} {'x real time':>12} {'x copy':>7}"
-    print(f"{header} {'x faster than loop':>19}")
+    print(f"{header} {'x faster than loop':>19} {'x floor':>8}")
     for name, r in results.items():
+        floor = f"{r['vs_floor_x']:8.2f}" if "vs_floor_x" in r else ""
         print(
             f"{name:28} {r['duration_s']:6.2f} {r['render_ms']:7.2f} {r['realtime_x']:12.0f} "
-            f"{r['vs_copy_x']:7.1f} {r['vs_python_loop_speedup_x']:19.0f}"
+            f"{r['vs_copy_x']:7.1f} {r['vs_python_loop_speedup_x']:19.0f} {floor}"
         )
 
 

@@ -46,17 +46,18 @@ class ContactBoard:
         self._contacts[key] = voice
 
     def post_checked(
-        self, contact: int, x_cm: float, y_cm: float, intensity: float | None, frame: int | None
+        self, contact: int, unit_gains: np.ndarray, intensity: float | None, frame: int | None
     ) -> None:
-        """Post a position checked by the front into the voice's mailbox (None intensity:
-        the amplitude is unchanged); a contact not sounding is ignored."""
+        """Post a position checked by the front, as its phantom gains (``unit_gains``, shape
+        (channels,), float32, computed by the host), into the voice's mailbox (None
+        intensity: the amplitude is unchanged); a contact not sounding is ignored."""
         voice = self._contacts.get(contact)
         if voice is None:
             return
         amplitude = voice.mailbox.amplitude
         if intensity is not None:
             amplitude = contact_amplitude(self.device, intensity, None)
-        voice.mailbox = Position(next(self._serials), x_cm, y_cm, amplitude, frame)
+        voice.mailbox = Position(next(self._serials), unit_gains, amplitude, frame)
 
     def up(self, contact: int, burst: np.ndarray | None, frame: int | None) -> None:
         """Release a contact with an optional transient (ignored when it is not sounding)."""

@@ -35,6 +35,9 @@ INTAKE_SHARE = 0.15
 """Share of a block's playing time the callback spends on the host's messages."""
 MESSAGES_PER_BLOCK = 256
 """Most of the host's messages the callback performs per block."""
+FIGURES_EVERY_S = 0.01
+"""How often the callback writes its figures into the status block, s (rounded to whole
+blocks); the heartbeat is written every block."""
 
 
 @dataclasses.dataclass
@@ -57,6 +60,10 @@ class Intake:
         self.leave = threading.Event()
         device = self.core.device
         self.budget_s = INTAKE_SHARE * (device.block_frames / device.sample_rate_hz)
+        self.figures_every = max(
+            1, round(FIGURES_EVERY_S * device.sample_rate_hz / device.block_frames)
+        )
+        self._blocks = 0
 
     def run(self) -> None:
         """At the start of each block (real time): the host's messages come from the
@@ -78,7 +85,9 @@ class Intake:
         self.slots.drain(self.core.board.post_checked)
 
     def report(self) -> None:
-        """Send the last block's events, write figures and a heartbeat (real time)."""
+        """Queue the last block's events for the report box (:meth:`ReportBox.wake` sends
+        them once the block is rendered), write a heartbeat, and every
+        ``figures_every`` blocks the figures (real time)."""
         core = self.core
         state = self.state
         self.status.beat(time.monotonic(), core.scheduler.frames)
@@ -90,6 +99,9 @@ class Intake:
             del state.reports[:taken]
         if events:
             self.report_box.put(events)
+        self._blocks += 1
+        if self._blocks % self.figures_every:
+            return
         figures = core.figures(loads=False)  # the render loads: the host's to sum up
         figures.update(dropped_reports=self.report_box.dropped, refused_commands=state.refused)
         self.status.write(figures)
@@ -205,7 +217,7 @@ def serve(
             device.sample_rate_hz,
             publish=SharedClock(device.sample_rate_hz, shared["clock"]).publish,
         )
-        slots = MoveSlots(options["contact"].max_contacts, shared["slots"])
+        slots = MoveSlots(options["contact"].max_contacts, device.channels, shared["slots"])
         status = StatusBlock(device.channels, shared["status"])
         sink = spec.open(device)  # first: the sound card's period is the engine's block
         device = device.at_block(sink.block_frames)
@@ -239,6 +251,7 @@ def serve(
         status,
     )
     core.scheduler.intake = intake.run
+    core.scheduler.finished = intake.report_box.wake
     gc.freeze()  # what start-up made is never scanned again: collections stay short
     if not _wait_for_start(intake):
         core.close(fade=False)

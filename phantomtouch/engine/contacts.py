@@ -11,9 +11,7 @@ import numpy as np
 
 from phantomtouch.engine.checks import check_int, check_range
 from phantomtouch.engine.voices import RingPool, Voice, Workspace
-from phantomtouch.renderer.carriers import CarrierSource
-from phantomtouch.renderer.gains import gains_for_points
-from phantomtouch.renderer.geometry import Geometry
+from phantomtouch.renderer.carriers import CarrierSource, SineSource, sine_blocks
 
 if TYPE_CHECKING:
     from phantomtouch.engine.messages import ContactDown
@@ -54,13 +52,13 @@ class ContactSettings:
 
 @dataclass(frozen=True, slots=True)
 class Position:
-    """One posted position of a contact, before its gains are known."""
+    """One posted position of a contact, its gains computed by the host."""
 
     serial: int
     """Increases with every post; the callback applies a position once."""
-    x_cm: float
-    y_cm: float
-    """As given (before projection onto the layout)."""
+    unit_gains: np.ndarray
+    """Phantom gains of the position (projected onto the layout), shape (channels,),
+    float32, each in [0, 1]: the callback only ramps to them."""
     amplitude: float
     """The contact's amplitude from this position on."""
     frame: int | None
@@ -69,8 +67,8 @@ class Position:
 
 class ContactVoice(Voice):
     """One live contact: a carrier at a moving phantom position (real time, in the audio
-    callback; the side that posts moves only writes :attr:`mailbox`, a :class:`Position`,
-    which :func:`retarget_contacts` applies).
+    callback; the side that posts moves only writes :attr:`mailbox`, a :class:`Position`
+    with its gains, which :meth:`take_position` applies).
 
     Parameters
     ----------
@@ -98,23 +96,15 @@ class ContactVoice(Voice):
         self.key = down.contact
         self.place = (down.x_cm, down.y_cm, down.amplitude)
         self.law = down.law
-        self.mailbox = Position(serial, down.x_cm, down.y_cm, down.amplitude, down.frame)
+        self.mailbox = Position(serial, down.unit_gains, down.amplitude, down.frame)
         self._source = source
         self._attack_frames = int(attack_frames)
         self._applied = serial
         self._unit = down.unit_gains
         self._gains = self._target = down.unit_gains * np.float32(down.amplitude)
-        self._set_channels(np.flatnonzero(self._gains))
         self._carrier_frames = 0
         self._down_burst = down.burst
         self._bursts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
-
-    def _set_channels(self, channels: np.ndarray) -> None:
-        """The channels the gains drive; all of them are added when they span over half."""
-        self._channels = channels
-        self._channel_list: list[int] = channels.tolist()
-        span = int(channels[-1] - channels[0]) + 1 if channels.size else 0
-        self._wide = 2 * span > len(self._gains)
 
     def _level_before(self, frame: int) -> float:
         """Attack level of the frame before ``frame`` (1 without an attack)."""
@@ -147,25 +137,60 @@ class ContactVoice(Voice):
         channels = np.flatnonzero(self._unit)
         self._bursts.append((burst, self._unit[channels], channels, frame))
 
-    def pending(self, block_end: int) -> Position | None:
-        """The newest position, when it is not applied yet and due before ``block_end``."""
+    def take_position(self, block_start: int, block_end: int, work: Workspace) -> None:
+        """Ramp towards the newest position across the block ``block_start ..
+        block_end`` when it is not applied yet and is due before ``block_end``."""
         box = self.mailbox
-        if box.serial != self._applied and (box.frame is None or box.frame < block_end):
-            return box
-        return None
-
-    def retarget(
-        self, position: Position, unit_gains: np.ndarray, block_start: int, work: Workspace
-    ) -> None:
-        """Ramp towards ``position`` in the block from ``block_start``; ``unit_gains``,
-        shape (channels,), float32, are its phantom gains."""
-        late = position.frame is not None and position.frame < block_start
-        if late and self.start_frame <= block_start:
+        if box.serial == self._applied or (box.frame is not None and box.frame >= block_end):
+            return
+        if box.frame is not None and box.frame < block_start and self.start_frame <= block_start:
             work.late_commands += 1
-        self._applied = position.serial
-        self._unit = unit_gains
-        self._target = unit_gains * np.float32(position.amplitude)
-        self._set_channels(np.flatnonzero(self._gains + self._target))
+        self._applied = box.serial
+        self._unit = box.unit_gains
+        self._target = box.unit_gains * np.float32(box.amplitude)
+
+    def sounds_through(self, block_start: int, block_end: int) -> bool:
+        """It sounds from ``block_start`` to ``block_end`` (neither starts nor falls silent
+        within the block): :meth:`ContactMix.render` takes it with the others."""
+        silent_from = self.silent_from
+        return self.start_frame <= block_start and (silent_from is None or silent_from >= block_end)
+
+    @property
+    def source(self) -> CarrierSource:
+        """Its carrier's samples."""
+        return self._source
+
+    def advance_carrier(self, frames: int) -> int:
+        """The carrier's first frame for a block of ``frames``; the carrier moves on by
+        the block."""
+        first = self._carrier_frames
+        self._carrier_frames = first + frames
+        return first
+
+    def envelope(self, block_start: int, frames: int, work: Workspace) -> np.ndarray | None:
+        """Its attack or release envelope over a block it sounds through, shape (frames,),
+        float32, a view of ``work`` (None: 1 throughout)."""
+        return self._envelope(block_start, frames, work)
+
+    @property
+    def gains(self) -> np.ndarray:
+        """Its gains where the last block ended, shape (channels,), float32."""
+        return self._gains
+
+    @property
+    def target(self) -> np.ndarray:
+        """The gains it ramps to across this block (:attr:`gains` when it stays put)."""
+        return self._target
+
+    def end_block(self, mix: np.ndarray, block_start: int) -> bool:
+        """After :meth:`ContactMix.render` took its carrier: its gains reach their target, its
+        bursts are added into ``mix`` (frames, channels); True once it is silent for good."""
+        self._gains = self._target
+        if self._bursts:
+            self._add_bursts(mix, block_start)
+        silent_from = self.silent_from
+        ended = silent_from is not None and block_start + mix.shape[0] >= silent_from
+        return ended and not self._bursts
 
     def render(self, mix: np.ndarray, block_start: int, work: Workspace) -> bool:
         frames = mix.shape[0]
@@ -176,7 +201,7 @@ class ContactVoice(Voice):
         silent_from = self.silent_from
         if silent_from is not None:
             count = min(count, silent_from - first)
-        if count > 0 and self._channels.size:
+        if count > 0:
             self._add_carrier(mix[offset : offset + count], first, work)
         self._gains = self._target
         if self._bursts:
@@ -209,27 +234,14 @@ class ContactVoice(Voice):
         env = self._envelope(first, count, work)
         if env is not None:
             signal *= env
-        # Over a wide span, all channels at once: a contiguous add beats one strided add per
-        # channel. The others have gains 0 before and after, so they add zeros.
-        channels = self._channels
-        start = self._gains if self._wide else self._gains[channels]
-        if self._target is self._gains:
+        start = self._gains
+        if self._target is start:
             block = signal[:, None] * start
         else:
-            ramp = (
-                work.ramp
-                if count == work.block_frames
-                else (np.arange(1, count + 1, dtype=np.float64) / count).astype(np.float32)
-            )
-            target = self._target if self._wide else self._target[channels]
-            block = ramp[:, None] * (target - start)
+            block = work.ramp_of(count)[:, None] * (self._target - start)
             block += start
             block *= signal[:, None]
-        if self._wide:
-            dest += block
-            return
-        for column, channel in enumerate(self._channel_list):  # cheaper than a fancy index
-            dest[:, channel] += block[:, column]
+        dest += block
 
     def _add_bursts(self, mix: np.ndarray, block_start: int) -> None:
         block_end = block_start + mix.shape[0]
@@ -245,18 +257,128 @@ class ContactVoice(Voice):
         self._bursts = keep
 
 
-def retarget_contacts(
-    geometry: Geometry, voices: list[Voice], block_start: int, block_end: int, work: Workspace
-) -> None:
-    """Retarget every contact among ``voices`` with a position due before ``block_end``,
-    the gains of all of them computed in one vectorised call per law (real time)."""
-    due: dict[str, list[tuple[ContactVoice, Position]]] = {}
-    for voice in voices:
-        if isinstance(voice, ContactVoice) and (position := voice.pending(block_end)):
-            due.setdefault(voice.law, []).append((voice, position))
-    for law, moved in due.items():
-        points = np.array([(p.x_cm, p.y_cm) for _, p in moved], dtype=np.float64)
-        unit, _ = gains_for_points(geometry, points, law=law, mode="2d")
-        unit32 = unit.astype(np.float32)
-        for row, (voice, position) in enumerate(moved):
-            voice.retarget(position, unit32[row], block_start, work)
+class ContactMix:
+    """The sum of the contacts that sound through a block, as two matrix products.
+
+    With carriers ``c`` (contacts, frames), gains ``s`` where the last block ended and
+    ``d = target - s`` (contacts, channels), the contacts' sum at frame ``k`` is
+    ``(c.T @ s)[k] + ramp[k] * (c.T @ d)[k]``, ``ramp[k] = (k + 1) / frames``: each
+    contact's gains ramped linearly across the block, in float64. Buffers for up to
+    :attr:`capacity` contacts, grown when more sound (non real time on construction).
+
+    Parameters
+    ----------
+    block_frames, channels : int, >= 1
+    capacity : int, >= 1
+    """
+
+    def __init__(self, block_frames: int, channels: int, capacity: int = 8) -> None:
+        self.block_frames = int(block_frames)
+        self.channels = int(channels)
+        self._ramp = self._ramp_for(self.block_frames)
+        self._index = np.arange(self.block_frames, dtype=np.float64)
+        self._total = np.empty((self.block_frames, self.channels))
+        self._ramped = np.empty((self.block_frames, self.channels))
+        self._allocate(int(capacity))
+        self.count = 0
+        self.moved = False
+
+    def _allocate(self, capacity: int) -> None:
+        self.capacity = capacity
+        self.carriers = np.empty((capacity, self.block_frames))
+        self.starts = np.empty((capacity, self.channels))
+        self.deltas = np.empty((capacity, self.channels))
+        self._sine_rows = np.empty(capacity, dtype=np.intp)
+        self._sine_starts = np.empty(capacity)
+        self._sine_cycles = np.empty(capacity)
+        self._sines = np.empty((capacity, self.block_frames), dtype=np.float32)
+        self._phases = np.empty((2, capacity, self.block_frames))
+
+    def render(
+        self, contacts: list[ContactVoice], block_start: int, frames: int, work: Workspace
+    ) -> np.ndarray:
+        """The sum of ``contacts`` (each sounding through the block of ``frames`` from
+        ``block_start``), shape (frames, channels), float64, valid until the next call;
+        their carriers move on by the block (real time). :meth:`ContactVoice.end_block`
+        ends each one's block. The sine carriers among them are computed together
+        (:func:`~phantomtouch.renderer.carriers.sine_blocks`), the others one by one."""
+        count = len(contacts)
+        if count > self.capacity:  # more contacts than ever before: room for twice as many
+            self._allocate(2 * count)
+        self.count = count
+        carriers = self.carriers[:count, :frames]
+        starts, deltas = self.starts[:count], self.deltas[:count]
+        sine_rows, sine_starts, sine_cycles = self._sine_rows, self._sine_starts, self._sine_cycles
+        sines = 0
+        moved = False
+        for row, voice in enumerate(contacts):
+            source = voice.source
+            if isinstance(source, SineSource):
+                sine_rows[sines] = row
+                sine_starts[sines] = voice.advance_carrier(frames)
+                sine_cycles[sines] = source.cycles_per_frame
+                sines += 1
+            else:
+                carriers[row] = source.block(voice.advance_carrier(frames), frames)
+            gains, target = voice.gains, voice.target
+            starts[row] = gains
+            if target is gains:
+                deltas[row] = 0.0
+            else:
+                np.subtract(target, gains, out=deltas[row], dtype=np.float64)
+                moved = True
+        if sines:
+            blocks = sine_blocks(
+                sine_starts[:sines],
+                sine_cycles[:sines],
+                self._index[:frames],
+                out=self._sines[:sines, :frames],
+                scratch=(self._phases[0, :sines, :frames], self._phases[1, :sines, :frames]),
+            )
+            if sines == count:  # every carrier a sine: most
+                carriers[...] = blocks
+            else:
+                carriers[sine_rows[:sines]] = blocks
+        for row, voice in enumerate(contacts):
+            env = voice.envelope(block_start, frames, work)
+            if env is not None:
+                carriers[row] *= env
+        self.moved = moved
+        return self._sum(carriers, starts, deltas, frames)
+
+    def _sum(
+        self, carriers: np.ndarray, starts: np.ndarray, deltas: np.ndarray, frames: int
+    ) -> np.ndarray:
+        total = self._total[:frames]
+        np.dot(carriers.T, starts, out=total)
+        if self.moved:
+            ramped = self._ramped[:frames]
+            np.dot(carriers.T, deltas, out=ramped)
+            ramped *= self._ramp if frames == self.block_frames else self._ramp_for(frames)
+            total += ramped
+        return total
+
+    @staticmethod
+    def _ramp_for(frames: int) -> np.ndarray:
+        """``(k + 1) / frames``, shape (frames, 1), float64."""
+        return np.arange(1, frames + 1, dtype=np.float64)[:, None] / frames
+
+    def finite_rows(self) -> np.ndarray:
+        """Which contacts of the last :meth:`render` have finite carriers and gains, shape
+        (contacts,), bool."""
+        count = self.count
+        rows = np.isfinite(self.carriers[:count]).all(axis=1)
+        rows &= np.isfinite(self.starts[:count]).all(axis=1)
+        rows &= np.isfinite(self.deltas[:count]).all(axis=1)
+        return np.asarray(rows)
+
+    def sum_of(self, rows: np.ndarray, frames: int) -> np.ndarray:
+        """The sum of the last :meth:`render` over the contacts ``rows`` (a bool mask)
+        alone, as that call would have given it without the others (real time, rarely:
+        a block that came out not finite)."""
+        return self._sum(
+            self.carriers[: self.count, :frames][rows],
+            self.starts[: self.count][rows],
+            self.deltas[: self.count][rows],
+            frames,
+        )

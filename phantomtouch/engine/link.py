@@ -90,13 +90,18 @@ class ReportBox:
         threading.Thread(target=self._run, name="phantomtouch-report-box", daemon=True).start()
 
     def put(self, report: Any) -> None:
-        """Queue a report for the host and wake the thread (real time: no system call,
-        no pickle; only this method releases the wake lock, so it is held when released)."""
+        """Queue a report for the host (real time: no system call, no pickle); the thread
+        sends it once :meth:`wake` is called."""
         if len(self._waiting) >= REPORTS_WAITING:
             self.dropped += 1
             return
         self._waiting.append(report)
-        if self._wake.locked():
+
+    def wake(self) -> None:
+        """Wake the thread when reports wait (real time: at the end of the callback, so
+        that no thread is woken while it renders; only this method releases the wake
+        lock, so it is held when released)."""
+        if self._waiting and self._wake.locked():
             self._wake.release()
 
     def _run(self) -> None:

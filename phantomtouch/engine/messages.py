@@ -186,21 +186,20 @@ class StartContact:
 
 @dataclass(frozen=True, slots=True)
 class ContactMove:
-    """A contact's newest position, checked by the front (in-process engine only: the
-    engine process takes moves from shared memory)."""
+    """A contact's newest position, checked by the front, as its phantom gains
+    (``unit_gains``, shape (channels,), float32, projected onto the layout: computed by the
+    front, so the callback only ramps to them); in-process engine only: the engine process
+    takes moves from shared memory."""
 
     contact: int
-    x_cm: float
-    y_cm: float
+    unit_gains: np.ndarray
     intensity: float | None
     frame: int | None
 
     def apply(self, state: AudioState, void: bool) -> None:
         """Real time."""
         if not void:
-            state.core.board.post_checked(
-                self.contact, self.x_cm, self.y_cm, self.intensity, self.frame
-            )
+            state.core.board.post_checked(self.contact, self.unit_gains, self.intensity, self.frame)
 
 
 @dataclass(frozen=True, slots=True)

@@ -112,8 +112,9 @@ class WearerGains:
         from the next block on (real time, from an applier: any thread of the audio side)."""
         self._pending = gains
 
-    def apply(self, block: np.ndarray) -> None:
-        """Scale ``block`` (frames, channels), float32, in place."""
+    def apply(self, block: np.ndarray) -> bool:
+        """Scale ``block`` (frames, channels), float32, in place; False when every gain
+        is 1 (the block is left as it is)."""
         new, self._pending = self._pending, None
         if new is not None and not np.array_equal(new, self._to):
             self._from = self.gains.copy()
@@ -138,6 +139,9 @@ class WearerGains:
             block *= curve
         elif not self._unity:
             block *= self.gains
+        else:
+            return False
+        return True
 
 
 class Mixer:
@@ -184,10 +188,13 @@ class Mixer:
         device without FIR such a block is only calibrated, and its levels are its
         calibrated peaks, found once. Every other block takes the whole chain, whose
         limiter uses the largest of those peaks. Both ways give the same samples and levels.
+        The mix's peaks are found first: the DC blocker's bound takes them, and they stay
+        the levels unless the blocker or the wearer's gains changed the block.
         """
-        self.dc_blocker.process(block)
-        self.wearer.apply(block)
         levels = self._channel_peaks(block)
+        changed = self.dc_blocker.process(block, float(levels.max()))
+        if self.wearer.apply(block) or changed:
+            levels = self._channel_peaks(block)
         levels *= self.limiter.calibration  # calibrated peaks: rounding keeps the order of |x|
         loudest = float(levels.max())  # NaN when any sample is NaN: the whole chain
         if loudest <= self._untouched_peak and self.limiter.gain >= 1.0 and not self.stage.has_fir:

@@ -68,6 +68,7 @@ class ContactRecord:
     slot: tuple[int, int] | None = None
     term_s: float = math.inf
     deadline_s: float = math.inf
+    law: str = "power"
 
     def renew(self, now_s: float) -> None:
         """Push the deadline on to ``term_s`` after ``now_s`` (never earlier than it is)."""
@@ -303,7 +304,7 @@ class ContactCalls:
                 if held is None:
                     self._audio.free_slot(slot)
                 raise
-            record = ContactRecord(handle, x, y, slot, term_s, time.monotonic() + term_s)
+            record = ContactRecord(handle, x, y, slot, term_s, time.monotonic() + term_s, law)
             self._contacts.put(owner, contact, record)
         if term_s != math.inf:
             self._deadlines.wake()
@@ -341,7 +342,8 @@ class ContactCalls:
                 )
             record.x_cm, record.y_cm = x, y
             record.renew(time.monotonic())
-            self._audio.move(record.slot, ContactMove(record.handle, x, y, intensity, frame))
+            unit_gains = self._touchdowns.unit_gains(x, y, record.law)
+            self._audio.move(record.slot, ContactMove(record.handle, unit_gains, intensity, frame))
 
     def contact_up(
         self,

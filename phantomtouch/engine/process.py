@@ -190,9 +190,7 @@ class ChildAudio:
     def move(self, slot: tuple[int, int] | None, message: ContactMove) -> None:
         """Write a checked move into the contact's slot (host, under the front's lock)."""
         if slot is not None:
-            self._child.slots.write(
-                *slot, message.x_cm, message.y_cm, message.intensity, message.frame
-            )
+            self._child.slots.write(*slot, message.unit_gains, message.intensity, message.frame)
 
     def stop_all(self) -> None:
         """Raise the stop mark: everything posted so far is void (host)."""

@@ -14,7 +14,7 @@ import numpy as np
 
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue, StartCommand
-from phantomtouch.engine.contacts import retarget_contacts
+from phantomtouch.engine.contacts import ContactMix, ContactVoice
 from phantomtouch.engine.mixer import Mixer
 from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
 from phantomtouch.renderer.geometry import Geometry
@@ -76,6 +76,9 @@ class Scheduler:
     intake : callable or None
         Called at the start of every block, before its commands apply (the engine
         process's ``Intake.run``; set before the sink starts).
+    finished : callable or None
+        Called at the end of every call of :meth:`render`, once ``out`` is filled (the
+        engine process wakes its report thread there, never while a block renders).
     dac_delay : callable or None
         Returns the time from now until the block being rendered reaches the sound
         card's converter, s, when the sink knows it (None otherwise).
@@ -100,6 +103,7 @@ class Scheduler:
         self.mixer = Mixer(device)
         self.geometry = Geometry.for_device(device)
         self.work = Workspace(device.block_frames, device.channels)
+        self.contact_mix = ContactMix(device.block_frames, device.channels)
         chunk = max(chunk_frames, device.block_frames) if chunk_frames > 0 else 0
         self.pool = RingPool(rings, chunk, device.channels)
         self.frames = 0
@@ -109,10 +113,11 @@ class Scheduler:
         self.nonfinite_voices = 0
         self.overrun_voices = 0
         self._budget_s = VOICE_BUDGET_BLOCKS * device.block_frames / device.sample_rate_hz
-        self._before = np.empty((device.block_frames, device.channels), dtype=np.float32)
+        self._rows = np.empty((8, device.block_frames, device.channels), dtype=np.float32)
         self.last_error: BaseException | None = None
         self.events: deque[tuple[Any, ...]] = deque()
         self.intake: Callable[[], None] | None = None
+        self.finished: Callable[[], None] | None = None
         self.dac_delay: Callable[[], float | None] | None = None
         self._voices: list[Voice] = []
         self._waiting: list[tuple[int, int, Voice]] = []
@@ -158,6 +163,8 @@ class Scheduler:
         self.render_seconds[slot] = spent_s
         self.render_loads[slot] = spent_s * self.clock.sample_rate_hz / out.shape[0]
         self._timed += 1
+        if self.finished is not None:
+            self.finished()
 
     def _block(self, out: np.ndarray) -> None:
         start = self.frames
@@ -171,49 +178,113 @@ class Scheduler:
             frame, _, voice = heapq.heappop(waiting)
             if voice.state == WAITING:
                 self._begin(voice, frame, late=False)
-        out.fill(0.0)
         if self._voices:
-            retarget_contacts(self.geometry, self._voices, start, end, self.work)
-            keep: list[Voice] = []
-            for voice in self._voices:
-                if self._render_guarded(voice, out, start):  # silent for good
-                    voice.finish(self.pool)
-                    silent_from = voice.silent_from
-                    self.events.append(
-                        ("end", voice, start if silent_from is None else silent_from)
-                    )
-                else:
-                    keep.append(voice)
-            self._voices = keep
+            self._mix(out, start, end)
+        else:
+            out.fill(0.0)
         self.mixer.finish(out)
         self.active_voices = len(self._voices)
         self.frames = end
 
-    def _render_guarded(self, voice: Voice, out: np.ndarray, start: int) -> bool:
-        """Add ``voice`` into ``out``; True once it is silent for good, or silenced.
+    def _mix(self, out: np.ndarray, start: int, end: int) -> None:
+        """Mix the voices' block into ``out``.
 
-        The mix before the voice is kept (one copy of the block); when the voice leaves a
-        sample that is not finite (the block's sum is then NaN or Inf), the mix is put
-        back and the voice silenced, so the others sound as they would without it. Its
-        render time counts against its budget when blocks are due at a clock's pace.
+        Contacts that sound through the block are summed together in one array operation
+        (:class:`~phantomtouch.engine.contacts.ContactMix`); every other voice renders into
+        a zeroed row of its own, timed against its budget when blocks are due at a clock's
+        pace. The rows are summed in the voices' order (the samples of adding them one by
+        one), the contacts' sum added, and the mix checked once: only a block that came
+        out not finite is mixed again, leaving out each voice whose samples are not
+        finite, so the others sound as they would without it.
         """
-        before = self._before[: out.shape[0]]
-        np.copyto(before, out)
+        voices = self._voices
+        frames = out.shape[0]
+        work = self.work
+        done = [False] * len(voices)
+        through: list[int] = []
+        contacts: list[ContactVoice] = []
+        rendered: list[int] = []
+        for index, voice in enumerate(voices):
+            if isinstance(voice, ContactVoice):
+                voice.take_position(start, end, work)
+                if voice.sounds_through(start, end):
+                    through.append(index)
+                    contacts.append(voice)
+                    continue
+            rendered.append(index)
+        count = len(rendered)
+        if count > self._rows.shape[0]:  # more voices than ever before: room for twice as many
+            self._rows = np.empty((2 * count, *self._rows.shape[1:]), dtype=np.float32)
+        rows = self._rows[:count, :frames]
+        rows.fill(0.0)
+        clocked = self.clocked
         began_s = time.perf_counter()
-        done = voice.render(out, start, self.work)
-        spent_s = time.perf_counter() - began_s
+        for row, index in enumerate(rendered):
+            voice = voices[index]
+            done[index] = voice.render(rows[row], start, work)
+            if clocked:
+                now_s = time.perf_counter()
+                done[index] = self._over_budget(voice, now_s - began_s) or done[index]
+                began_s = now_s
+        if not contacts:
+            np.add.reduce(rows, axis=0, out=out)
+        elif count:
+            np.add.reduce(rows, axis=0, out=out)
+            out += self.contact_mix.render(contacts, start, frames, work)
+        else:
+            out[...] = self.contact_mix.render(contacts, start, frames, work)
         if not math.isfinite(float(np.add.reduce(out, axis=None))):
-            np.copyto(out, before)
-            self.nonfinite_voices += 1
-            return True
-        if spent_s <= self._budget_s or not self.clocked:  # pulled by hand: no deadline
+            self._remix(out, rows, rendered, through, done)
+        for index, contact in zip(through, contacts, strict=True):
+            if not done[index]:
+                done[index] = contact.end_block(out, start)
+        keep: list[Voice] = []
+        for voice, silent in zip(voices, done, strict=True):
+            if silent:
+                voice.finish(self.pool)
+                silent_from = voice.silent_from
+                self.events.append(("end", voice, start if silent_from is None else silent_from))
+            else:
+                keep.append(voice)
+        self._voices = keep
+
+    def _over_budget(self, voice: Voice, spent_s: float) -> bool:
+        """Count a render against the voice's budget; True once it is silenced for it."""
+        if spent_s <= self._budget_s:
             voice.overruns = 0
-            return done
+            return False
         voice.overruns += 1
         if voice.overruns >= OVERRUN_BLOCKS:
             self.overrun_voices += 1
             return True
-        return done
+        return False
+
+    def _remix(
+        self,
+        out: np.ndarray,
+        rows: np.ndarray,
+        rendered: list[int],
+        through: list[int],
+        done: list[bool],
+    ) -> None:
+        """Mix again what is finite: the voices' ``rows`` one by one, then the sum of the
+        contacts whose carriers and gains are finite; each voice left out is silenced
+        (``done``; rarely: a block that came out not finite)."""
+        out.fill(0.0)
+        for row, index in zip(rows, rendered, strict=True):
+            if np.isfinite(row).all():
+                out += row
+            else:
+                done[index] = True
+                self.nonfinite_voices += 1
+        if through:
+            finite = self.contact_mix.finite_rows()
+            if finite.any():
+                out += self.contact_mix.sum_of(finite, out.shape[0])
+            for index, kept in zip(through, finite.tolist(), strict=True):
+                if not kept:
+                    done[index] = True
+                    self.nonfinite_voices += 1
 
     def _apply_commands(self, start: int, end: int) -> None:
         queue = self.queue

@@ -25,7 +25,7 @@ from phantomtouch.engine.clock import FrameMapping
 K = TypeVar("K")
 
 _CLOCK_FIELDS = 4  # seq, anchor frame, anchor time s, output latency s
-_SLOT_FIELDS = 6  # seq, generation, x_cm, y_cm, intensity (NaN: unchanged), frame (NaN: next)
+_SLOT_FIELDS = 4  # seq, generation, intensity (NaN: unchanged), frame (NaN: next); then gains
 
 LOCKS_VARIABLE = "PHANTOMTOUCH_SHARED_LOCKS"
 """Set to ``1``, the shared clock and move slots use locks on x86 too."""
@@ -147,7 +147,8 @@ class SharedClock(_Rows, FrameMapping):
 
 
 class MoveSlots(_Rows):
-    """One slot per contact that is down: the newest position, written by the host.
+    """One slot per contact that is down: the newest position as its phantom gains,
+    computed and written by the host, so the callback only ramps to them.
 
     The host takes a slot for a contact at its touchdown, with a new generation (what
     the slot held for an earlier contact is never applied), and writes its moves; the
@@ -158,14 +159,21 @@ class MoveSlots(_Rows):
     ----------
     capacity : int, >= 1
         Slots (the engine's ``contact.max_contacts``).
+    channels : int, >= 1
+        Gains per position (the device's channels).
     raw, locked
         As for :class:`_Rows`.
     """
 
     def __init__(
-        self, capacity: int, raw: SharedBuffer | None = None, *, locked: bool | None = None
+        self,
+        capacity: int,
+        channels: int,
+        raw: SharedBuffer | None = None,
+        *,
+        locked: bool | None = None,
     ) -> None:
-        super().__init__(int(capacity), _SLOT_FIELDS, raw, locked)
+        super().__init__(int(capacity), _SLOT_FIELDS + int(channels), raw, locked)
         self.capacity = int(capacity)
         # the host's side
         self._free = list(range(self.capacity - 1, -1, -1))
@@ -193,14 +201,15 @@ class MoveSlots(_Rows):
         self,
         slot: int,
         generation: int,
-        x_cm: float,
-        y_cm: float,
+        unit_gains: np.ndarray,
         intensity: float | None,
         frame: int | None,
     ) -> None:
-        """Post a position (one writer thread at a time; with a lock, waits for it)."""
-        values = (generation, x_cm, y_cm, intensity, frame)
-        self._store(slot, tuple(math.nan if v is None else v for v in values), wait=True)
+        """Post a position as its gains, shape (channels,) (one writer thread at a time;
+        with a lock, waits for it)."""
+        values = (generation, intensity, frame)
+        head = tuple(math.nan if v is None else v for v in values)
+        self._store(slot, (*head, *unit_gains.tolist()), wait=True)
 
     # -- the engine process -----------------------------------------------------------
 
@@ -219,10 +228,10 @@ class MoveSlots(_Rows):
         """Stop applying every slot (the engine process)."""
         self._bound = [None] * self.capacity
 
-    def drain(self, post: Callable[[int, float, float, float | None, int | None], None]) -> None:
-        """Hand every new position to ``post(contact, x, y, intensity, frame)``
-        (real time, the audio callback). A row caught mid-write, or every row while the
-        host holds the lock, waits for the next block."""
+    def drain(self, post: Callable[[int, np.ndarray, float | None, int | None], None]) -> None:
+        """Hand every new position to ``post(contact, unit_gains, intensity, frame)``
+        (``unit_gains`` float32; real time, the audio callback). A row caught mid-write, or
+        every row while the host holds the lock, waits for the next block."""
         rows = self._read(wait=False)
         if rows is None:
             return
@@ -234,9 +243,9 @@ class MoveSlots(_Rows):
             bound = self._bound[slot]
             if bound is None or bound[1] != row[1]:
                 continue
-            intensity = None if math.isnan(row[4]) else float(row[4])
-            frame = None if math.isnan(row[5]) else int(row[5])
-            post(bound[0], float(row[2]), float(row[3]), intensity, frame)
+            intensity = None if math.isnan(row[2]) else float(row[2])
+            frame = None if math.isnan(row[3]) else int(row[3])
+            post(bound[0], row[_SLOT_FIELDS:].astype(np.float32), intensity, frame)
 
 
 STATUS_FIELDS = (

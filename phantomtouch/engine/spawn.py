@@ -60,7 +60,7 @@ class ChildProcess:
     ) -> None:
         context = multiprocessing.get_context("spawn")
         self.clock = SharedClock(device.sample_rate_hz)
-        self.slots = MoveSlots(options["contact"].max_contacts)
+        self.slots = MoveSlots(options["contact"].max_contacts, device.channels)
         self.status = StatusBlock(device.channels)
         self.mark = context.Value("q", 0, lock=False)
         loads = context.RawArray("d", RENDER_TIMES)

@@ -50,6 +50,13 @@ class Workspace:
         self.late_commands = 0
         self.inline_renders = 0
 
+    def ramp_of(self, frames: int) -> np.ndarray:
+        """``(i + 1) / frames`` for ``i < frames``, shape (frames,), float32 (:attr:`ramp`
+        when ``frames`` is ``block_frames``; a new array otherwise)."""
+        if frames == self.block_frames:
+            return self.ramp
+        return (np.arange(1, frames + 1, dtype=np.float64) / frames).astype(np.float32)
+
 
 class Voice:
     """What the scheduler needs of every voice.

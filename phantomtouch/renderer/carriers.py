@@ -51,14 +51,55 @@ class SineSource:
     """``sin(2 pi f n / fs)`` from the absolute frame index ``n``."""
 
     def __init__(self, freq_hz: float, sample_rate_hz: int) -> None:
-        self._cycles_per_frame = float(freq_hz) / float(sample_rate_hz)
+        self.cycles_per_frame = float(freq_hz) / float(sample_rate_hz)
 
     def block(self, start_frame: int, frames: int) -> np.ndarray:
         cycles = np.arange(start_frame, start_frame + frames, dtype=np.float64)
-        cycles *= self._cycles_per_frame
+        cycles *= self.cycles_per_frame
         cycles -= np.floor(cycles)
         cycles *= 2.0 * np.pi
         return np.sin(cycles.astype(np.float32))
+
+
+def sine_blocks(
+    start_frames: np.ndarray,
+    cycles_per_frame: np.ndarray,
+    index: np.ndarray,
+    *,
+    out: np.ndarray | None = None,
+    scratch: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """Many sines' blocks at once, each the samples :meth:`SineSource.block` gives, bit for
+    bit (the same float64 phase, wrapped, then the float32 sine).
+
+    Parameters
+    ----------
+    start_frames : ndarray, shape (n,), float64
+        Each sine's first frame (whole numbers).
+    cycles_per_frame : ndarray, shape (n,), float64
+        Each sine's ``freq_hz / sample_rate_hz``.
+    index : ndarray, shape (frames,), float64
+        ``0, 1, ..., frames - 1``.
+    out : ndarray, shape (n, frames), float32, optional
+        Where the blocks go (a new array when None).
+    scratch : two ndarrays, each shape (n, frames), float64, optional
+        Room for the phases and their whole cycles: with ``out`` too, nothing is
+        allocated (the audio callback's buffers).
+
+    Returns
+    -------
+    ndarray, shape (n, frames), float32
+        ``out`` when given.
+    """
+    phases, whole = (None, None) if scratch is None else scratch
+    cycles = np.add(start_frames[:, None], index, out=phases)
+    cycles *= cycles_per_frame[:, None]
+    cycles -= np.floor(cycles, out=whole)
+    cycles *= 2.0 * np.pi
+    if out is None:
+        return np.sin(cycles.astype(np.float32))
+    np.copyto(out, cycles, casting="same_kind")
+    return np.sin(out, out=out)
 
 
 def band_pass_gain(

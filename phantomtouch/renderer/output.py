@@ -34,6 +34,7 @@ class OutputStage:
         self.muted_blocks = 0
         gains = self.channel_gains(device)
         self._gains = gains.astype(np.float32) if np.any(gains != 1.0) else None
+        self._loudest_gain = float(gains.max()) * (1.0 + 1e-6)
         self._fir = None if cal.fir_taps is None else PartitionedFir(cal.fir_taps)
 
     @staticmethod
@@ -59,8 +60,22 @@ class OutputStage:
         if self._gains is not None:
             block *= self._gains
 
-    def process(self, block: np.ndarray) -> None:
-        """Calibrate and limit ``block`` in place, shape (frames, channels), float32."""
+    def process(self, block: np.ndarray, peak_bound: float | None = None) -> None:
+        """Calibrate and limit ``block`` in place, shape (frames, channels), float32.
+
+        ``peak_bound``, when given, is at least the block's largest absolute sample
+        (:attr:`PatternRenderer.peak_bound <phantomtouch.renderer.voice.PatternRenderer>`):
+        a finite bound that the calibration keeps within the ceiling, on a device without
+        FIR, proves the block finite and unclipped, and it is only calibrated (the same
+        samples, without a pass over them to look).
+        """
+        if (
+            peak_bound is not None
+            and self._fir is None
+            and peak_bound * self._loudest_gain <= self.ceiling
+        ):  # False for NaN
+            self.calibrate(block)
+            return
         self.calibrate(block)
         if block.size == 0:
             return

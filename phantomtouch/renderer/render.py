@@ -44,7 +44,7 @@ def render_plan_blocks(resolved: Plan, *, block_frames: int = 1024) -> Iterator[
     stage = OutputStage(resolved.device)
     while not voice.finished:
         block = voice.render(min(block_frames, voice.remaining_frames))
-        stage.process(block)
+        stage.process(block, voice.peak_bound)
         yield block
 
 
@@ -96,6 +96,6 @@ def render(
     while not voice.finished:
         block = out[start : start + _WHOLE_RENDER_BLOCK_FRAMES]
         voice.render_into(block)
-        stage.process(block)
+        stage.process(block, voice.peak_bound)
         start += len(block)
     return out

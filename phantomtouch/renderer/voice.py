@@ -84,6 +84,11 @@ def gain_block(
     return result.reshape(-1, channels)[offset : offset + frames]
 
 
+_ROUNDING_MARGIN = 1.0 + 1e-5
+"""How far float32 products and the two-term sums of a ramp may exceed the exact bound
+(a few units in the last place, 6e-8 each)."""
+
+
 class PatternRenderer:
     """Renders one plan in consecutive blocks.
 
@@ -98,6 +103,10 @@ class PatternRenderer:
     active_span : tuple of int
         Channels ``lo:hi`` outside which the last block rendered is 0 (its gains are 0
         there); ``(0, 0)`` when it is silent.
+    peak_bound : float
+        At least the largest absolute sample of the last block rendered: its carrier's
+        largest magnitude times its largest gain (a ramped gain lies between two grid
+        points), widened by float32 rounding; NaN when either is not finite.
 
     Notes
     -----
@@ -110,6 +119,7 @@ class PatternRenderer:
         self.plan = plan
         self.position_frames = 0
         self.active_span = (0, 0)
+        self.peak_bound = 0.0
         self._carrier: CarrierSource = make_source(
             plan.pattern.carrier, plan.sample_rate_hz, transients=plan.clip_transients
         )
@@ -151,6 +161,7 @@ class PatternRenderer:
         if overwrite:
             out[frames:] = 0.0
         self.active_span = (0, 0)
+        self.peak_bound = 0.0
         if frames <= 0:
             return
         first = self.position_frames
@@ -170,6 +181,9 @@ class PatternRenderer:
             return
         lo, hi = int(active[0]), int(active[-1]) + 1
         self.active_span = (lo, hi)
+        self.peak_bound = (
+            float(np.abs(carrier).max()) * float(np.abs(grid).max()) * _ROUNDING_MARGIN
+        )
         channels = out.shape[1]
         if overwrite or 2 * (hi - lo) > channels:
             lo, hi = 0, channels  # a contiguous add beats a strided one

@@ -294,3 +294,56 @@ def test_contact_gains_are_the_renderers_phantom_gains(
 def test_contact_settings_refuse_nonsense(field: str, value: float) -> None:
     with pytest.raises(ParameterError, match=f"^{field}="):
         ContactSettings(**{field: value})  # type: ignore[arg-type]
+
+
+def test_contacts_moved_in_one_block_each_ramp_to_their_gains_and_add_up(
+    captured: tuple[Engine, CaptureSink],
+) -> None:
+    """Contacts sound together as one array operation: their sum is each one's carrier
+    times its own gains ramped across the block."""
+    engine, sink = captured
+    moves = {
+        "a": ((0.0, 0.0), (3.8, 9.6)),
+        "b": ((1.0, 6.0), (0.5, 1.0)),
+        "c": ((3.8, 14.4), (2.0, 12.0)),
+    }
+    for name, (before, _) in moves.items():
+        engine.contact_down("c", name, *before, intensity=0.5, at_frame=0)
+    sink.pull(4)
+    for name, (_, after) in moves.items():
+        engine.contact_move("c", name, *after)
+    block = sink.pull(2).astype(np.float64)
+    ramp = np.arange(1, BLOCK + 1) / BLOCK
+    carrier = sine(2 * BLOCK, 4 * BLOCK)
+    expected = np.zeros((2 * BLOCK, DEVICE.channels))
+    for before, after in moves.values():
+        old, new = gains_at(DEVICE, *before), gains_at(DEVICE, *after)
+        expected[:BLOCK] += HALF * (old + ramp[:, None] * (new - old)) * carrier[:BLOCK, None]
+        expected[BLOCK:] += HALF * new * carrier[BLOCK:, None]
+    # three float32 gains and carriers, summed: a few ulps of the amplitude
+    np.testing.assert_allclose(block, expected, atol=3 * FLOAT32)
+
+
+def test_sine_and_noise_contacts_sounding_together_each_keep_their_carrier() -> None:
+    """The sine carriers among the contacts are computed together and put back in their
+    contacts' rows: a noise contact between two sines keeps its noise, each at its gains."""
+    sink = CaptureSink(DEVICE)
+    noise_carrier = NoiseCarrier(low_hz=60.0, high_hz=300.0, seed=11)
+    places = {"a": (0.0, 0.0), "b": (3.8, 9.6), "c": (2.0, 12.0)}
+    with Engine(DEVICE, sink, contact=ContactSettings(attack_s=0.0)) as engine:
+        engine.contact_down("c", "a", *places["a"], intensity=0.5, at_frame=0)
+        engine.contact_down(
+            "c", "b", *places["b"], intensity=0.5, carrier=noise_carrier, at_frame=0
+        )
+        engine.contact_down("c", "c", *places["c"], intensity=0.5, at_frame=0)
+        recording = sink.pull(6).astype(np.float64)
+    frames = len(recording)
+    carriers = {
+        "a": sine(frames),
+        "b": NoiseSource(60.0, 300.0, 11, RATE).block(0, frames).astype(np.float64),
+        "c": sine(frames),
+    }
+    expected = np.zeros((frames, DEVICE.channels))
+    for name, place in places.items():
+        expected += HALF * gains_at(DEVICE, *place) * carriers[name][:, None]
+    np.testing.assert_allclose(recording, expected, atol=3 * FLOAT32)

@@ -30,6 +30,12 @@ from phantomtouch.engine.shared import (
 )
 
 RATE = 48000
+CHANNELS = 2
+"""Gains per slot here: a position's two gains stand in for the device's eight."""
+
+
+def gains(a: float, b: float) -> np.ndarray:
+    return np.array([a, b], dtype=np.float32)
 
 
 @pytest.fixture(params=[False, True], ids=["sequence-lock", "lock"])
@@ -57,7 +63,7 @@ def test_readers_never_see_half_a_write(locked: bool) -> None:
     interval_s = sys.getswitchinterval()
     sys.setswitchinterval(1e-6)  # switch threads as often as possible
     shared = SharedClock(RATE, locked=locked)
-    slots = MoveSlots(1, locked=locked)
+    slots = MoveSlots(1, CHANNELS, locked=locked)
     slot, generation = slots.allocate() or (0, 0)
     slots.bind(slot, generation, 1)
     done = threading.Event()
@@ -65,7 +71,7 @@ def test_readers_never_see_half_a_write(locked: bool) -> None:
     def writer() -> None:
         for k in range(1, 30_000):
             shared.publish(k, k * 0.5, k * 0.25)
-            slots.write(slot, generation, float(k), 2.0 * k, None, None)
+            slots.write(slot, generation, gains(float(k), 2.0 * k), None, None)
         done.set()
 
     thread = threading.Thread(target=writer)
@@ -76,7 +82,7 @@ def test_readers_never_see_half_a_write(locked: bool) -> None:
             frame, anchor_s, latency_s = shared.anchor()
             assert (anchor_s, latency_s) == (frame * 0.5, frame * 0.25)
             clocks += 1
-            slots.drain(lambda contact, x, y, intensity, at: moves.append((x, y)))
+            slots.drain(lambda contact, g, intensity, at: moves.append((float(g[0]), float(g[1]))))
         thread.join()
     finally:
         sys.setswitchinterval(interval_s)
@@ -85,48 +91,48 @@ def test_readers_never_see_half_a_write(locked: bool) -> None:
 
 def posted(slots: MoveSlots) -> list[tuple[object, ...]]:
     got: list[tuple[object, ...]] = []
-    slots.drain(lambda *args: got.append(args))
+    slots.drain(lambda contact, g, intensity, at: got.append((contact, *g.tolist(), intensity, at)))
     return got
 
 
 def test_only_the_newest_position_of_a_bound_slot_is_posted_once(locked: bool) -> None:
-    slots = MoveSlots(4, locked=locked)
+    slots = MoveSlots(4, CHANNELS, locked=locked)
     taken = slots.allocate()
     assert taken is not None
     slot, generation = taken
-    slots.write(slot, generation, 1.0, 2.0, None, None)
+    slots.write(slot, generation, gains(1.0, 2.0), None, None)
     assert posted(slots) == []  # not bound yet: the touchdown is not through
     slots.bind(slot, generation, 7)
-    slots.write(slot, generation, 1.5, 2.5, 0.5, None)
-    slots.write(slot, generation, 1.7, 2.7, None, 4800)
-    assert posted(slots) == [(7, 1.7, 2.7, None, 4800)]
+    slots.write(slot, generation, gains(1.5, 2.5), 0.5, None)
+    slots.write(slot, generation, gains(1.75, 2.75), None, 4800)
+    assert posted(slots) == [(7, 1.75, 2.75, None, 4800)]
     assert posted(slots) == []  # applied once
 
 
 def test_a_slot_that_changes_hands_never_posts_what_it_held_before(locked: bool) -> None:
-    slots = MoveSlots(1, locked=locked)
+    slots = MoveSlots(1, CHANNELS, locked=locked)
     slot, old = slots.allocate() or (0, 0)
     slots.bind(slot, old, 1)
-    slots.write(slot, old, 1.0, 1.0, None, None)
+    slots.write(slot, old, gains(1.0, 1.0), None, None)
     slots.unbind((1,))
     slots.release(slot)
     assert posted(slots) == []
     again = slots.allocate()
     assert again is not None and again[0] == slot and again[1] != old
-    slots.write(slot, old, 3.0, 3.0, None, None)  # late from the earlier contact
+    slots.write(slot, old, gains(3.0, 3.0), None, None)  # late from the earlier contact
     slots.bind(slot, again[1], 2)
     assert posted(slots) == []
-    slots.write(slot, again[1], 2.0, 9.0, None, None)
+    slots.write(slot, again[1], gains(2.0, 9.0), None, None)
     assert posted(slots) == [(2, 2.0, 9.0, None, None)]
 
 
 def test_a_row_caught_mid_write_waits_for_the_next_block() -> None:
-    slots = MoveSlots(2, locked=False)
+    slots = MoveSlots(2, CHANNELS, locked=False)
     slot, generation = slots.allocate() or (0, 0)
     slots.bind(slot, generation, 1)
     row = slots._rows[slot]
     row[0] += 1.0  # the host has begun to write
-    row[2], row[3], row[4], row[5] = 1.0, 2.0, math.nan, math.nan
+    row[2], row[3], row[4], row[5] = math.nan, math.nan, 1.0, 2.0
     assert posted(slots) == []
     row[1] = generation
     row[0] += 1.0
@@ -134,10 +140,10 @@ def test_a_row_caught_mid_write_waits_for_the_next_block() -> None:
 
 
 def test_with_a_lock_the_callback_skips_a_block_while_the_host_writes() -> None:
-    slots = MoveSlots(2, locked=True)
+    slots = MoveSlots(2, CHANNELS, locked=True)
     slot, generation = slots.allocate() or (0, 0)
     slots.bind(slot, generation, 1)
-    slots.write(slot, generation, 1.0, 2.0, None, None)
+    slots.write(slot, generation, gains(1.0, 2.0), None, None)
     lock = slots.raw.lock
     assert lock.acquire(False)  # the host is in the middle of a write
     try:
@@ -184,12 +190,12 @@ def test_the_platform_and_the_environment_choose_the_guard(
 ) -> None:
     monkeypatch.delenv(LOCKS_VARIABLE, raising=False)
     monkeypatch.setattr(shared_module.platform, "machine", lambda: "x86_64")
-    assert not SharedClock(RATE).locked and not MoveSlots(1).locked
+    assert not SharedClock(RATE).locked and not MoveSlots(1, CHANNELS).locked
     monkeypatch.setattr(shared_module.platform, "machine", lambda: "aarch64")
-    assert SharedClock(RATE).locked and MoveSlots(1).locked
+    assert SharedClock(RATE).locked and MoveSlots(1, CHANNELS).locked
     monkeypatch.setattr(shared_module.platform, "machine", lambda: "x86_64")
     monkeypatch.setenv(LOCKS_VARIABLE, "1")
-    assert SharedClock(RATE).locked and MoveSlots(1).locked
+    assert SharedClock(RATE).locked and MoveSlots(1, CHANNELS).locked
     # the engine process takes the guard the host chose, whatever its own environment
     assert SharedClock(RATE, SharedBuffer.allocate(4, locked=False)).locked is False
 
@@ -198,16 +204,16 @@ def engine_side(clock_raw: SharedBuffer, slots_raw: SharedBuffer, count: int, re
     """Another process, as the engine: publish anchors and (standing in for the host)
     write moves, as fast as it can."""
     clock = SharedClock(RATE, clock_raw)
-    slots = MoveSlots(1, slots_raw)
+    slots = MoveSlots(1, CHANNELS, slots_raw)
     ready.set()
     for k in range(1, count + 1):
         clock.publish(k, k * 0.5, k * 0.25)
-        slots.write(0, 1, float(k), 2.0 * k, None, None)
+        slots.write(0, 1, gains(float(k), 2.0 * k), None, None)
 
 
 def test_another_process_is_never_seen_half_written(locked: bool) -> None:
     clock = SharedClock(RATE, locked=locked)
-    slots = MoveSlots(1, locked=locked)
+    slots = MoveSlots(1, CHANNELS, locked=locked)
     slots.bind(0, 1, 1)
     count = 100_000
     context = multiprocessing.get_context("spawn")
@@ -222,11 +228,11 @@ def test_another_process_is_never_seen_half_written(locked: bool) -> None:
             frame, anchor_s, latency_s = clock.anchor()
             assert (anchor_s, latency_s) == (frame * 0.5, frame * 0.25)
             anchors.add(frame)
-            slots.drain(lambda contact, x, y, intensity, at: moves.append((x, y)))
+            slots.drain(lambda contact, g, intensity, at: moves.append((float(g[0]), float(g[1]))))
     finally:
         process.join(timeout=60)
     assert process.exitcode == 0
-    slots.drain(lambda contact, x, y, intensity, at: moves.append((x, y)))
+    slots.drain(lambda contact, g, intensity, at: moves.append((float(g[0]), float(g[1]))))
     # read while the other process wrote, never a mix of two writes
     assert len(anchors) > 1 and len(moves) > 1
     assert all(y == 2.0 * x for x, y in moves)
@@ -236,7 +242,7 @@ def test_another_process_is_never_seen_half_written(locked: bool) -> None:
 
 
 def test_slots_run_out_and_come_back() -> None:
-    slots = MoveSlots(2)
+    slots = MoveSlots(2, CHANNELS)
     first, second = slots.allocate(), slots.allocate()
     assert first is not None and second is not None and slots.allocate() is None
     slots.release(first[0])

@@ -20,11 +20,14 @@ from phantomtouch import DeviceProfile, TouchPattern, render
 from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue
+from phantomtouch.engine.messages import ContactDown
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.engine.scheduler import OVERRUN_BLOCKS, Scheduler
 from phantomtouch.engine.voices import Voice, Workspace
 from phantomtouch.renderer import PatternRenderer, plan
+from phantomtouch.renderer.carriers import SineSource
 from phantomtouch.renderer.plan import Plan
+from phantomtouch.schema import SineCarrier
 from phantomtouch.schema.clip import Breakpoint, ClipCarrier, HapticClip
 from tests.support.waiting import wait_until
 
@@ -170,3 +173,39 @@ def test_blocks_pulled_by_hand_have_no_render_deadline() -> None:
     for _ in range(OVERRUN_BLOCKS + 2):
         scheduler.render(np.zeros((BLOCK, DEVICE.channels), dtype=np.float32))
     assert slow.blocks == OVERRUN_BLOCKS + 2 and scheduler.overrun_voices == 0
+
+
+def test_a_nan_contact_is_silenced_alone_and_the_others_play_their_samples() -> None:
+    """Contacts sound together in one array operation; one whose gains are NaN (posted past
+    the front, as no client can) is left out of it alone: a pattern and another contact
+    play, bit for bit, what they play without it."""
+
+    def play(with_nan: bool) -> tuple[np.ndarray, int]:
+        sink = CaptureSink(DEVICE)
+        with Engine(DEVICE, sink) as engine:
+            engine.schedule(GOOD, start_frame=3 * BLOCK + 5)
+            engine.contact_down("c", "good", 1.0, 4.0, intensity=0.4, at_frame=2 * BLOCK)
+            if with_nan:
+                down = ContactDown(
+                    contact=10_000,
+                    x_cm=1.0,
+                    y_cm=9.0,
+                    unit_gains=np.full(DEVICE.channels, np.nan, dtype=np.float32),
+                    amplitude=0.1,
+                    carrier=SineCarrier(),
+                    law="power",
+                    burst=None,
+                    frame=4 * BLOCK,
+                )
+                engine.core.board.down(down, SineSource(100.0, DEVICE.sample_rate_hz))
+            sink.pull(12)
+            engine.contact_move("c", "good", 2.0, 8.0)
+            sink.pull(12)
+            status = engine.status()
+        return sink.recording(), status.nonfinite_voices
+
+    alone, none = play(with_nan=False)
+    beside, silenced = play(with_nan=True)
+    assert (none, silenced) == (0, 1)
+    np.testing.assert_array_equal(beside, alone)
+    assert np.isfinite(beside).all() and np.any(beside)

@@ -13,6 +13,7 @@ from phantomtouch.renderer.carriers import (
     NoiseSource,
     SineSource,
     band_pass_gain,
+    sine_blocks,
 )
 
 FS = 48000
@@ -181,3 +182,33 @@ def test_combined_rms_equals_the_sines(freq_hz):
     # spreads by ~0.8 %; 4 % is about 5 sigma.
     assert rms(x) == pytest.approx(rms(sine), rel=0.04)
     assert rms(sine) == pytest.approx(UNIT_SINE_RMS, rel=1e-6)
+
+
+def test_many_sines_at_once_are_each_sines_own_block_bit_for_bit() -> None:
+    """The engine computes its contacts' sine carriers together; each row is what the
+    sine's own source gives, however far into the carrier (hours of frames) it is."""
+    rate = 48_000
+    freqs_hz = [20.0, 100.0, 150.0, 333.3, 1000.0]
+    starts = [0, 17, 4_800_123, 172_800_000, 999]
+    frames = 128
+    rows = sine_blocks(
+        np.array(starts, dtype=np.float64),
+        np.array([f / rate for f in freqs_hz]),
+        np.arange(frames, dtype=np.float64),
+    )
+    for row, freq_hz, start in zip(rows, freqs_hz, starts, strict=True):
+        np.testing.assert_array_equal(row, SineSource(freq_hz, rate).block(start, frames))
+
+
+def test_many_sines_into_given_buffers_are_the_same_bits_and_fill_them() -> None:
+    """With ``out`` and ``scratch`` (the callback's buffers) the blocks are those of a new
+    array, bit for bit, written into ``out``."""
+    rate = 48_000
+    starts = np.array([0, 4_800_123, 172_800_000], dtype=np.float64)
+    cycles = np.array([f / rate for f in (20.0, 250.0, 1000.0)])
+    index = np.arange(64, dtype=np.float64)
+    out = np.full((3, 64), np.nan, dtype=np.float32)
+    scratch = (np.empty((3, 64)), np.empty((3, 64)))
+    given = sine_blocks(starts, cycles, index, out=out, scratch=scratch)
+    assert given is out
+    assert out.tobytes() == sine_blocks(starts, cycles, index).tobytes()

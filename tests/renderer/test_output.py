@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
+from phantomtouch.renderer import PatternRenderer, plan
 from phantomtouch.renderer.fir import PartitionedFir
 from phantomtouch.renderer.output import OutputStage
+from phantomtouch.renderer.presets import preset as pt_preset
 from phantomtouch.schema import DeviceProfile
 
 
@@ -138,3 +140,36 @@ def test_non_finite_input_does_not_poison_the_fir(rng):
     good = rng.uniform(-0.1, 0.1, size=(256, 8)).astype(np.float32)
     stage.process(good)
     assert np.all(np.isfinite(good)) and np.any(good != 0.0)
+
+
+@pytest.mark.parametrize(
+    "preset", ["exp2/central", "exp1/sine100-high-v10-am", "exp1/noise-high-v3"]
+)
+def test_a_renderers_peak_bound_holds_and_its_blocks_come_out_as_a_full_look_gives(preset):
+    """The offline render skips the stage's look at a block its renderer's bound proves
+    finite and within the ceiling: every block is within the bound, and comes out as the
+    stage gives it without one."""
+    resolved = plan(pt_preset(preset), DeviceProfile.default())
+    renderer = PatternRenderer(resolved)
+    bounded, looked = OutputStage(resolved.device), OutputStage(resolved.device)
+    while not renderer.finished:
+        block = renderer.render(4096)
+        assert np.abs(block).max() <= renderer.peak_bound
+        reference = block.copy()
+        bounded.process(block, renderer.peak_bound)
+        looked.process(reference)
+        np.testing.assert_array_equal(block, reference)
+
+
+@pytest.mark.parametrize("bound", [np.nan, 2.0])
+def test_a_bound_that_proves_nothing_leaves_the_stage_its_look(rng, bound):
+    """A NaN bound (a carrier or gain not finite) or one past the ceiling: the stage still
+    mutes what is not finite and clips what is too loud."""
+    stage = OutputStage(device(safety={"ceiling": 0.5}))
+    loud = rng.uniform(-3, 3, size=(64, 8)).astype(np.float32)
+    stage.process(loud, bound)
+    assert np.max(np.abs(loud)) == np.float32(0.5)
+    bad = rng.uniform(-0.4, 0.4, size=(64, 8)).astype(np.float32)
+    bad[5, 2] = np.nan
+    stage.process(bad, bound)
+    np.testing.assert_array_equal(bad, 0.0)
