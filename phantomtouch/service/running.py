@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
-import secrets
 import threading
 from collections.abc import Callable
 from contextlib import AbstractAsyncContextManager, contextmanager
@@ -12,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.schema import DeviceProfile
+from phantomtouch.service.admission import Admission, policy_table
 from phantomtouch.service.connections import ConnectionCaps
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.metrics import Metrics
@@ -54,9 +53,13 @@ class Service:
     """The wearer the output stage is fitted to (``/wearer``, ``hello``)."""
     arm_map: ArmMap = field(init=False)
     """Where ``.tact`` projects and bHaptics frames land on the band (``bhaptics_map``)."""
+    admission: Admission = field(init=False)
+    """The one admission every input opens its sources at (:mod:`~phantomtouch.service.
+    admission`), with the service's policy table."""
     connections: ConnectionCaps = field(init=False)
+    """The bHaptics stand-in's connection caps, until it opens its sources at the
+    admission."""
     _renders: threading.BoundedSemaphore = field(init=False)
-    _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
     inputs: dict[str, Callable[[], InputHealth]] = field(default_factory=dict, init=False)
     """Supervised inputs by name (``osc``): how each fares, for ``/health``."""
     loop: asyncio.AbstractEventLoop | None = field(default=None, init=False)
@@ -65,6 +68,7 @@ class Service:
         self.wearer = ActiveWearer(self.engine, self.store)
         map_path = self.settings.bhaptics_map
         self.arm_map = ArmMap.load(map_path) if map_path is not None else ArmMap()
+        self.admission = Admission(self.engine, policy_table(self.settings), store=self.store)
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
         self.connections = ConnectionCaps(
             self.settings.max_ws_connections, self.settings.max_ws_connections_per_address
@@ -75,17 +79,14 @@ class Service:
         """The engine's plan cache, the one place plans are kept."""
         return self.engine.plans
 
-    def new_owner(self) -> str:
-        """A unique owner id for one WebSocket connection's contacts and jobs."""
-        return f"ws-{next(self._owners)}-{secrets.token_hex(3)}"
-
     def stop_everything(self) -> None:
         """Every job and every contact of every client off, at once (never queued).
 
         The engine's front tells each owner which of its contacts were let go
-        (``released``, reason ``stop``).
+        (``released``, reason ``stop``); whatever any source sent before it is void
+        (:meth:`~phantomtouch.service.admission.Admission.stop_all`).
         """
-        self.engine.stop_all()
+        self.admission.stop_all()
 
     @contextmanager
     def render_slot(self) -> Iterator[None]:
