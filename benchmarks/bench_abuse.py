@@ -101,7 +101,7 @@ from tests.support.owner_attacks import (
     http_crowd_voices,
     job_history_flood,
     osc_other_sender_renews,
-    osc_sender_pool,
+    osc_sender_contacts,
     ws_crowd_contacts,
     ws_crowd_voices,
     ws_touch_outlives_socket,
@@ -195,7 +195,7 @@ def owner_abuses(server: LiveServer, osc_port: int) -> dict[str, Callable[[], An
     url, ws_url = server.url, server.ws_url
     return {
         "osc other sender": lambda: in_process(osc_other_sender_renews, url, osc_port),
-        "osc 10 contacts": lambda: in_process(osc_sender_pool, url, osc_port),
+        "osc 10 contacts": lambda: in_process(osc_sender_contacts, url, osc_port),
         "ws closes": lambda: in_process(ws_touch_outlives_socket, url, ws_url),
         "crowd ws x70": lambda: in_process(ws_crowd_voices, url, ws_url),
         "crowd 64 addresses": lambda: in_process(http_crowd_voices, url),

@@ -45,6 +45,8 @@ from phantomtouch.engine import ProcessEngine, SinkSpec
 from phantomtouch.osc.bridge import OscBridge
 from phantomtouch.osc.mapping import default_map
 from phantomtouch.schema import DeviceProfile
+from phantomtouch.service.admission import Admission, policy_table
+from phantomtouch.service.settings import Settings
 
 TIME_BUDGET_S = 20.0
 """No single measurement runs longer than this."""
@@ -191,7 +193,10 @@ def main() -> None:
     results["bare_udp"] = bare_udp_yardstick(count)
     with ProcessEngine(device, SinkSpec("null")) as engine:
         engine.start()
-        bridge = OscBridge(engine, default_map(device), port=0, rate_per_s=1e6, record_latency=True)
+        table = policy_table(Settings(osc_messages_per_s=1e6))
+        bridge = OscBridge(
+            Admission(engine, table), default_map(device), port=0, record_latency=True
+        )
         with bridge:
             results["receivers"] = ingest(bridge, count, "receivers")
             results["contact_moves"] = ingest(bridge, count, "contact")

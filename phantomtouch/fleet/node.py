@@ -2,9 +2,10 @@
 
 The node answers the subjects of its armband (:mod:`phantomtouch.fleet.subjects`) by
 calling the same service code the REST routes and the WebSocket session call: a touch
-is :func:`phantomtouch.service.scheduling.schedule` and answers the status and body
-``POST /touch`` would; a stop is :meth:`Service.stop_everything`. Every heartbeat it
-rewrites its registry record. The local REST and WebSocket API keep working beside it.
+is played through the admission (:meth:`phantomtouch.service.admission.Handle.play`,
+the one touch path) and answers the status and body ``POST /touch`` would; a stop is
+:meth:`Service.stop_everything`. Every heartbeat it rewrites its registry record. The
+local REST and WebSocket API keep working beside it.
 
 A touch may carry ``start_at_unix_s`` (wall clock; hosts NTP-synced): the node maps it
 onto its engine's clock at the moment it schedules, so one request plays on several
@@ -45,7 +46,7 @@ from phantomtouch.fleet.records import (
     Load,
     StopRequest,
 )
-from phantomtouch.fleet.remote_contacts import RemoteContacts, drop_reason
+from phantomtouch.fleet.remote_contacts import KIND, PRINCIPAL, RemoteContacts, drop_reason
 from phantomtouch.fleet.settings import FleetSettings
 from phantomtouch.fleet.startup import Deadline, announce, exit_join_failed, open_registry
 from phantomtouch.fleet.tasks import cancel_until_done
@@ -81,13 +82,7 @@ class ArmbandNode:
             ["subject", "outcome"],
             registry=service.metrics.registry,
         )
-        self.contacts = RemoteContacts(
-            service.engine,
-            watchdog_s=service.settings.watchdog_s,
-            max_contacts=service.settings.max_contacts_per_connection,
-            max_bytes=service.settings.max_ws_message_bytes,
-            on_silent=self._count_silent,
-        )
+        self.contacts = RemoteContacts(service.admission, on_silent=self._count_silent)
         self.clock_offset_s: float | None = None
         self._in_flight = 0
         self._tasks: set[asyncio.Task[None]] = set()
@@ -124,7 +119,6 @@ class ArmbandNode:
         self._loops = [
             asyncio.create_task(self._heartbeats()),
             asyncio.create_task(self._stamps()),
-            asyncio.create_task(self._watchdog()),
         ]
         logger.info(
             "fleet: armband %r of site %r online (heartbeat %g s, TTL %g s)",
@@ -210,15 +204,10 @@ class ArmbandNode:
                 self.clock_offset_s = sent.unix_time_s - entry.created.timestamp()
 
     def _count_silent(self, owner_id: str) -> None:
-        """Count an owner released for silence, as the front releases it (any thread)."""
+        """Count and log an owner released for silence, as the front's deadline thread
+        releases it (that thread)."""
         self.messages.labels("contact", "watchdog_release").inc()
-
-    async def _watchdog(self) -> None:
-        period_s = self.service.settings.watchdog_s / 4
-        while True:
-            await asyncio.sleep(period_s)
-            for owner in self.contacts.release_silent():
-                logger.info("fleet: %r silent; its contacts on %r released", owner, self.armband)
+        logger.info("fleet: %r silent; its contacts on %r released", owner_id, self.armband)
 
     # -- touch --------------------------------------------------------------------------
 
@@ -248,7 +237,9 @@ class ArmbandNode:
         await self._respond(msg, answer)
 
     async def touch(self, data: bytes) -> FleetAnswer:
-        """Validate and schedule one fleet touch; the answer ``POST /touch`` would give."""
+        """Validate and schedule one fleet touch as a touch of its ``client`` (a source of
+        the admission, kind ``fleet``); the answer ``POST /touch`` would give."""
+        arrival = self.service.admission.arrival()
         try:
             limit = self.service.settings.max_body_bytes
             if len(data) > limit:
@@ -259,9 +250,8 @@ class ArmbandNode:
             request = parse_touch_request(json.dumps(envelope.touch))
             if envelope.start_at_unix_s is not None:
                 request = self._at_unix(request, envelope.start_at_unix_s)
-            accepted = await scheduling.schedule(
-                self.service, request, client=f"fleet:{envelope.client}"
-            )
+            source = self.service.admission.open(KIND, envelope.client, principal=PRINCIPAL)
+            accepted = await source.play(request, arrival=arrival)
         except (PhantomTouchError, ValidationError) as exc:
             problem = describe(exc)
             self.messages.labels("touch", problem.code).inc()

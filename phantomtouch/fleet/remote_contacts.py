@@ -7,86 +7,75 @@ models), a ``ping`` that keeps the owner alive, or a ``release`` of all its cont
 nothing queues. Nobody waits for an answer to a published message, so a message that
 is malformed, oversized or not allowed in its contact's state is counted and dropped.
 
-No contact state is kept here: the engine's front holds every contact of every owner
-(its owner table, :mod:`phantomtouch.engine.owners`), each with a deadline of
-``watchdog_s`` that the owner's messages (``ping`` included) push on. A gateway or a
-client that vanishes leaves nothing vibrating on any armband it touched, whatever
-happens to this node's NATS task.
+Each owner is a source of the admission (kind ``fleet``, :mod:`phantomtouch.service.
+admission`): its handle checks the message's rate, renews the owner on every message of
+it (``ping`` included) and holds its contacts in the engine's front with the fleet row's
+deadline (``watchdog_s``) and contacts per owner. Every fleet publisher authenticates to
+the same NATS and the node cannot tell them apart, so they are one principal
+(:data:`PRINCIPAL`): shares go first between the fleet and the node's local inputs, then
+among the fleet's owners. No contact state is kept here; a gateway or a client that
+vanishes leaves nothing vibrating on any armband it touched, whatever happens to this
+node's NATS task.
 """
 
 from __future__ import annotations
 
-import collections
 import json
-import time
 from collections.abc import Callable
 from dataclasses import KW_ONLY, dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from pydantic import ValidationError
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
-from phantomtouch.service.contact_down import contact_down, refuse_if_down
-from phantomtouch.service.errors import QuotaError, TooLargeError
+from phantomtouch.service.errors import QuotaError, RateLimitedError, TooLargeError
 from phantomtouch.service.ws_messages import Down, Move, Up
 
 if TYPE_CHECKING:
-    from phantomtouch.engine import EngineFront
+    from phantomtouch.service.admission import Admission, Handle
 
-OWNER_PREFIX = "fleet:"
-"""Engine owners of remote contacts start with this (local WebSocket owners with ``ws-``)."""
+KIND: Final = "fleet"
+"""The input's kind at the admission."""
+PRINCIPAL = "fleet:nats"
+"""The principal of every fleet owner (see the module docstring)."""
 MAX_OWNER_CHARS = 128
 
 
 @dataclass(eq=False)
 class RemoteContacts:
-    """The remote owners of one node: their messages, applied to the engine's front.
+    """The remote owners of one node: their messages, applied through the admission.
 
-    Call :meth:`close` when the node stops listening (it unsubscribes from the front).
+    Call :meth:`close` when the node stops listening.
 
     ``on_silent(owner_id)`` is called as the front lets go of an owner for silence, in
-    the thread that released it (the front's deadline thread, or :meth:`release_silent`'s
-    caller), before its contacts are seen gone: it must return at once.
+    the thread that released it (the front's deadline thread): it must return at once.
     """
 
-    engine: EngineFront
+    admission: Admission
     _: KW_ONLY
-    watchdog_s: float
-    """Seconds without a message of an owner before the front releases its contacts."""
-    max_contacts: int
-    """Contacts one owner may hold down at once."""
-    max_bytes: int
-    """Largest message read, bytes."""
     on_silent: Callable[[str], None] | None = None
-    _silent: collections.deque[str] = field(init=False, default_factory=collections.deque)
     _unsubscribe: Callable[[], None] = field(init=False)
 
     def __post_init__(self) -> None:
-        self._unsubscribe = self.engine.subscribe_released(self._released)
+        self._unsubscribe = self.admission.on_released(KIND, self._released)
 
-    def _released(self, owner: str, contacts: tuple[str, ...], reason: str) -> None:
+    def _released(self, handle: Handle, contacts: tuple[str, ...], reason: str) -> None:
         """The front's deadline thread let go of a silent owner (any thread)."""
-        if reason == "watchdog" and owner.startswith(OWNER_PREFIX):
-            owner_id = owner.removeprefix(OWNER_PREFIX)
-            self._silent.append(owner_id)
-            if self.on_silent is not None:
-                self.on_silent(owner_id)
+        if reason == "watchdog" and self.on_silent is not None:
+            self.on_silent(handle.source)
 
     def close(self) -> None:
         self._unsubscribe()
 
-    def handle(self, data: bytes, *, now_s: float | None = None) -> str:
-        """Apply one message; returns its type.
+    def handle(self, data: bytes) -> str:
+        """Apply one message (the node's NATS task); returns its type.
 
         Raises
         ------
         PhantomTouchError, ValidationError
             The message is dropped (the caller counts it).
         """
-        if len(data) > self.max_bytes:
-            raise TooLargeError(
-                f"message of {len(data)} bytes over the limit of {self.max_bytes}", field="body"
-            )
+        self.admission.check_size(KIND, len(data))
         try:
             message = json.loads(data)
         except (ValueError, RecursionError):
@@ -96,85 +85,43 @@ class RemoteContacts:
         owner_id = message.pop("owner", None)
         if not isinstance(owner_id, str) or not 0 < len(owner_id) <= MAX_OWNER_CHARS:
             raise ProtocolError(f"owner={owner_id!r}: must be a string of 1 to 128 characters")
-        now_s = time.monotonic() if now_s is None else now_s
         kind = message.get("type")
-        engine_owner = OWNER_PREFIX + owner_id
-        if kind == "release":
-            self.release(owner_id)
-            return kind
-        if kind == "ping":
-            self.engine.renew_owner(engine_owner, now_s)
-            return kind
-        held = self.engine.contacts_of(engine_owner)
-        if kind == "down":
-            down = Down.model_validate_json(json.dumps(message), strict=True)
-            self.engine.renew_owner(engine_owner, now_s)
-            self._down(engine_owner, held, down)
-        elif kind in ("move", "up"):
-            if not held:
-                raise ProtocolError(f"owner={owner_id!r} holds no contact: expected down")
-            self.engine.renew_owner(engine_owner, now_s)
-            if kind == "move":
-                move = Move.model_validate_json(json.dumps(message), strict=True)
-                self._held(held, move.contact, "move")
-                self.engine.contact_move(
-                    engine_owner, move.contact, move.x_cm, move.y_cm, intensity=move.intensity
-                )
-            else:
-                up = Up.model_validate_json(json.dumps(message), strict=True)
-                self._held(held, up.contact, "up")
-                self.engine.contact_up(
-                    engine_owner, up.contact, normal_velocity_m_s=up.normal_velocity_m_s
-                )
-        else:
+        if kind not in ("down", "move", "up", "ping", "release"):
             raise ProtocolError(
                 f"type={kind!r} is not a contact message; expected down, move, up, ping, release"
             )
-        return str(kind)
-
-    def _down(self, engine_owner: str, held: list[str], down: Down) -> None:
-        refuse_if_down(held, down.contact)
-        if len(held) >= self.max_contacts:
-            raise QuotaError(
-                f"contact={down.contact!r}: quota max_contacts_per_connection="
-                f"{self.max_contacts} is used up",
-                field="contact",
-                value=down.contact,
+        source = self.admission.open(KIND, owner_id, principal=PRINCIPAL)
+        if not source.receive(len(data)).admitted:
+            raise RateLimitedError(
+                f"owner={owner_id!r}: over the fleet message rate", field="owner"
             )
-        contact_down(self.engine, engine_owner, down, deadline_s=self.watchdog_s)
-
-    @staticmethod
-    def _held(held: list[str], contact: str, got: str) -> None:
-        if contact not in held:
-            raise ProtocolError(f"contact={contact!r} is not down: expected down, got {got}")
-
-    def release(self, owner_id: str) -> None:
-        """Let go of every contact of ``owner_id`` (with the release ramp)."""
-        self.engine.release_owner(OWNER_PREFIX + owner_id)
+        if kind == "release":
+            source.close("released")
+        elif kind == "down":
+            source.down_as(Down.model_validate_json(json.dumps(message), strict=True))
+        elif kind == "move":
+            move = Move.model_validate_json(json.dumps(message), strict=True)
+            source.move(move.contact, move.x_cm, move.y_cm, intensity=move.intensity)
+        elif kind == "up":
+            up = Up.model_validate_json(json.dumps(message), strict=True)
+            if not source.up(up.contact, normal_velocity_m_s=up.normal_velocity_m_s):
+                raise ProtocolError(f"contact={up.contact!r} is not down: expected down, got up")
+        return str(kind)
 
     def release_all(self) -> None:
         """Let go of every remote owner's contacts (the node is leaving)."""
-        for owner in self.engine.contact_owners(OWNER_PREFIX):
-            self.engine.release_owner(owner)
-
-    def release_silent(self, *, now_s: float | None = None) -> list[str]:
-        """The owners released for silence (``watchdog_s`` without a message) since the
-        last call, those due at ``now_s`` (None: now) included."""
-        self.engine.release_expired(now_s, OWNER_PREFIX)
-        silent: list[str] = []
-        while self._silent:
-            silent.append(self._silent.popleft())
-        return silent
+        self.admission.close_all(KIND, "released")
 
     def count(self) -> int:
         """Remote contacts down on this node."""
-        return sum(len(held) for held in self.engine.contact_owners(OWNER_PREFIX).values())
+        return sum(len(handle.contacts()) for handle in self.admission.handles(KIND))
 
 
 _DROP_REASONS: tuple[tuple[type[BaseException], str], ...] = (
     (ValidationError, "invalid"),
     (TooLargeError, "too_large"),
     (QuotaError, "quota"),
+    (RateLimitedError, "rate_limited"),
     (PhantomTouchError, "refused"),
 )
 """A dropped message's metric label by its exception, the first that matches."""

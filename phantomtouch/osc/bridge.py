@@ -4,27 +4,29 @@ One thread receives datagrams, takes them apart (:mod:`~phantomtouch.osc.packets
 reads each message with python-osc) and handles each message at once, in arrival order:
 receiver proximities become live contacts (:mod:`~phantomtouch.osc.receivers`),
 ``/phantomtouch/...`` messages touch, move, lift, play and stop
-(:mod:`~phantomtouch.osc.messages`). It calls the engine's control side
-(:class:`~phantomtouch.engine.EngineFront`), which never waits for the audio: a move
-reaches the audio at the next block. Bundles are taken apart and their messages applied
-on arrival; their time tags are ignored (python-osc's own dispatcher would sleep until a
-future time tag, which lets one datagram stall the bridge, and drops unparsable
-datagrams without counting them, hence the loop here).
+(:mod:`~phantomtouch.osc.messages`). The bridge is a protocol translation over the
+admission (:mod:`phantomtouch.service.admission`, its ``osc`` row): each sender
+(``HOST:PORT``) is a source with a handle (:mod:`~phantomtouch.osc.senders`), which checks
+its messages' rate (its own, and its host's together), renews its owner on each of its
+messages, holds its contacts in the engine's front with the map's ``watchdog_s`` as
+their deadline, and plays its touches through the one touch path (quota first, the plan
+cache, a stop voiding what came before it). Bundles are taken apart and their messages
+applied on arrival; their time tags are ignored (python-osc's own dispatcher would sleep
+until a future time tag, which lets one datagram stall the bridge, and drops unparsable
+datagrams without counting them, hence the loop here); a datagram carrying more messages
+than the row's ``max_work`` is dropped whole.
 
 Safety: every datagram and message is checked and a bad one dropped, counted
 (:class:`~phantomtouch.osc.counters.OscCounters`) and logged in one line, at most one per
-reason every :data:`LOG_INTERVAL_S`; a token bucket bounds the message rate. The bridge
-keeps no contact state: its contacts are held by the engine's front, by sender (owner
-``osc:HOST:PORT``, :mod:`~phantomtouch.osc.senders`, :mod:`phantomtouch.engine.owners`),
-each with the map's ``watchdog_s`` as its deadline, which every accepted message of the
-same sender pushes on (another sender's messages never do). A sender's silence for
-``watchdog_s`` releases its contacts -- by the front's deadline thread, so also when this
-thread is gone -- and closing the bridge releases them all. The generic contacts the bridge
-holds (at most :data:`MAX_CONTACTS`) are shared fairly between senders
-(:mod:`phantomtouch.engine.shares`). The receive thread is supervised: should it die
-anyway, the bridge's contacts are released at once and a new thread started
-(:meth:`OscBridge.health`). A contact that the engine let go of meanwhile (``POST /stop``,
-an engine restart, its deadline) touches down again on its sender's next message.
+reason every :data:`LOG_INTERVAL_S`. The bridge keeps no contact state: a sender's
+silence for ``watchdog_s`` releases its contacts -- by the front's deadline thread, so also
+when this thread is gone -- and closing the bridge closes every sender. Contacts are shared
+by the engine's fair-share rule, first among hosts, then among one host's ports
+(:mod:`phantomtouch.engine.shares`): opening more source ports buys a program nothing.
+The receive thread is supervised: should it die anyway, the bridge's contacts are released
+at once and a new thread started (:meth:`OscBridge.health`). A contact that the engine let
+go of meanwhile (``POST /stop``, an engine restart, its deadline) touches down again on its
+sender's next message.
 """
 
 from __future__ import annotations
@@ -34,20 +36,28 @@ import logging
 import socket
 import threading
 import time
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Final
 
 import numpy as np
+from pydantic import ValidationError
 
-from phantomtouch.engine.shares import yielding
 from phantomtouch.engine.thread_priority import raise_thread_priority
-from phantomtouch.errors import DeviceError, PhantomTouchError, ProtocolError, install_hint
+from phantomtouch.errors import (
+    DeviceError,
+    ParameterError,
+    PhantomTouchError,
+    ProtocolError,
+    install_hint,
+)
 from phantomtouch.osc import messages
 from phantomtouch.osc.counters import OscCounters
 from phantomtouch.osc.mapping import ReceiverMap
-from phantomtouch.osc.receivers import Change, ReceiverLayout
-from phantomtouch.osc.senders import OWNER_PREFIX, Sender, SenderTable
-from phantomtouch.service.flood import FloodGuard, LimitedLog
+from phantomtouch.osc.receivers import Change, ContactTracker, ReceiverLayout
+from phantomtouch.osc.senders import Receivers
+from phantomtouch.schema import describe_validation_error
+from phantomtouch.service.admission import Admission, Arrival, Handle, principal_for
+from phantomtouch.service.flood import LimitedLog
+from phantomtouch.service.models import AnyTouch, NamedTouch, PresetTouch
 from phantomtouch.service.running import InputHealth
 
 try:
@@ -55,21 +65,10 @@ try:
 except ImportError as exc:  # pragma: no cover - the osc extra is missing
     raise ImportError(f"OSC input needs python-osc, the osc extra: {install_hint('osc')}") from exc
 
-if TYPE_CHECKING:
-    from phantomtouch.engine import EngineFront
-
 logger = logging.getLogger("phantomtouch.osc")
 
-INPUT = "osc"
-"""The input's name in ``/health`` (its owners: ``osc:HOST:PORT``, one per sender)."""
-RATE_PER_S = 20_000.0
-"""Default of the message rate limit of one sender: 8 receivers at 90 Hz are 720 messages/s."""
-TOTAL_RATE_FACTOR = 2.0
-"""Every sender together may send this many times one sender's rate: one flooding sender
-takes at most half of what the bridge admits."""
-MAX_CONTACTS = 10
-"""Generic contacts (``/phantomtouch/contact/{id}``) the bridge holds at once, over every
-sender (shared by :func:`~phantomtouch.engine.shares.yielding`)."""
+INPUT: Final = "osc"
+"""The input's name in ``/health`` and its kind at the admission."""
 CONTACT_PREFIX = "contact-"
 """Engine contact ids of generic contacts start with this (receivers' with ``receivers-``)."""
 _POLL_S = 0.05
@@ -87,63 +86,45 @@ LOG_INTERVAL_S = 10.0
 
 
 class OscBridge:
-    """Receives OSC on ``host:port`` and drives ``engine``.
+    """Receives OSC on ``host:port`` and drives the engine through ``admission``.
 
     Parameters
     ----------
-    engine : EngineFront
+    admission : Admission
+        The service's admission; its ``osc`` row (rates, contacts per sender, senders
+        kept, the work of one datagram) applies, with the map's ``watchdog_s`` as the
+        deadline (the bridge sets it in the row).
     receiver_map : ReceiverMap
         The receivers and how they become contacts.
     host, port : str, int
         Where to listen (UDP); port 0 picks a free one (see :attr:`address`).
-    play : callable or None
-        ``play(name, owner)`` plays a preset or stored pattern for the sender ``owner``
-        (``osc:HOST:PORT``, its quota's client); it may raise
-        :class:`~phantomtouch.errors.PhantomTouchError`. None: presets only, planned and
-        scheduled here.
-    stop : callable or None
-        What ``/phantomtouch/stop`` does besides dropping the bridge's contacts; None:
-        ``engine.stop_all()``.
-    rate_per_s : float, > 0
-        Messages per second admitted from each sender (one second of burst), and
-        :data:`TOTAL_RATE_FACTOR` times that from every sender together; more are dropped
-        (``flood``), a sender's own excess before it counts against the others.
     record_latency : bool
         Keep each datagram's receipt-to-engine time in :attr:`latencies_s` (benchmarks).
     """
 
     def __init__(
         self,
-        engine: EngineFront,
+        admission: Admission,
         receiver_map: ReceiverMap,
         *,
         host: str = "127.0.0.1",
         port: int = 9001,
-        play: Callable[[str, str], None] | None = None,
-        stop: Callable[[], None] | None = None,
-        rate_per_s: float = RATE_PER_S,
         record_latency: bool = False,
     ) -> None:
-        self.engine = engine
+        self.admission = admission
         self.map = receiver_map
         self.counters = OscCounters()
         self.watchdog_releases = 0
         self.latencies_s: collections.deque[float] | None = (
             collections.deque(maxlen=_LATENCIES) if record_latency else None
         )
-        self._play = play or self._play_preset
-        self._stop = stop or engine.stop_all
-        self._flood = FloodGuard(rate_per_s * TOTAL_RATE_FACTOR)
+        admission.set_policy(admission.policy(INPUT).replace(deadline_s=receiver_map.watchdog_s))
         self._index = {r.address: i for i, r in enumerate(receiver_map.receiver)}
         self._layout = ReceiverLayout(
             np.array([(r.x_cm, r.y_cm) for r in receiver_map.receiver]),
             receiver_map.cluster_gap_cm,
         )
-        self._senders = SenderTable(
-            len(receiver_map.receiver), receiver_map.smoothing_s, rate_per_s
-        )
-        self._let_go: collections.deque[tuple[str, str]] = collections.deque()
-        self._unsubscribe = engine.subscribe_released(self._released)
+        self._senders: dict[str, Receivers] = {}
         self._log = LimitedLog(logger, LOG_INTERVAL_S)
         self.restarts = 0
         self.last_failure: str | None = None
@@ -162,22 +143,18 @@ class OscBridge:
     @property
     def contacts(self) -> list[str]:
         """Engine contact ids the bridge holds down now, over every sender (as the engine's
-        front says)."""
-        held = self.engine.contact_owners(OWNER_PREFIX).values()
-        return sorted(contact for contacts in held for contact in contacts)
+        front says); any thread."""
+        return sorted(c for h in self.admission.handles(INPUT) for c in h.contacts())
 
     def _released(self, owner: str, contacts: tuple[str, ...], reason: str) -> None:
-        """The front let go of contacts (any thread): of a sender of the bridge, count a
-        watchdog release; the receive thread forgets their smoothing state."""
-        if not owner.startswith(OWNER_PREFIX):
-            return
+        """The front let go of contacts of a sender (any thread): count a watchdog
+        release."""
         if reason == "watchdog":
             self.watchdog_releases += 1
-        self._let_go.extend((owner, contact) for contact in contacts)
 
     def start(self) -> None:
         """Start the receive thread (in the caller's thread)."""
-        self.engine.prepare_carrier(self.map.carrier)
+        self.admission.engine.prepare_carrier(self.map.carrier)
         self._spawn()
 
     def health(self) -> InputHealth:
@@ -239,8 +216,8 @@ class OscBridge:
             if thread is done:
                 break
         self._socket.close()
-        self._release_all("closed")
-        self._unsubscribe()
+        self._senders.clear()
+        self.admission.close_all(INPUT, "closed")
 
     def __enter__(self) -> OscBridge:
         self.start()
@@ -264,10 +241,6 @@ class OscBridge:
                     return
                 raise
             received_s = time.perf_counter()
-            while self._let_go:
-                owner, contact = self._let_go.popleft()
-                if (gone := self._senders.get(owner)) is not None:
-                    gone.tracker.live.pop(contact, None)
             self._datagram(data, peer, time.monotonic())
             if self.latencies_s is not None:
                 self.latencies_s.append(time.perf_counter() - received_s)
@@ -278,20 +251,19 @@ class OscBridge:
         except BadDatagram as exc:
             self._drop(exc.reason, f"a datagram of {len(data)} bytes: {exc}")
             return
-        sender, dropped = self._senders.heard(peer)
-        if dropped is not None:  # silent longest of MAX_SENDERS: its contacts go with it
-            self.engine.release_owner(dropped.owner, "quota")
-        for address, args in found:
-            if not sender.flood.admit(now_s):
-                self._drop(
-                    "flood", f"{sender.owner} over its rate of {sender.flood.rate_per_s:g}/s"
-                )
-                continue
-            if not self._flood.admit(now_s):
-                self._drop("flood", f"every sender together over {self._flood.rate_per_s:g}/s")
+        sender = self._sender(peer, now_s)
+        try:
+            sender.handle.check_work(len(found), field="messages")
+        except ParameterError as exc:
+            self._drop("refused", f"{sender.handle.source}: {exc}")
+            return
+        for k, (address, args) in enumerate(found):
+            verdict = sender.handle.receive(len(data) if k == 0 else 0, now_s=now_s)
+            if verdict.arrival is None:
+                self._drop("flood", verdict.reason)
                 continue
             try:
-                self._handle(sender, address, args, now_s)
+                self._handle(sender, address, args, verdict.arrival, now_s)
             except messages.BadMessage as exc:
                 self._drop(exc.reason, str(exc))
             except PhantomTouchError as exc:
@@ -300,34 +272,68 @@ class OscBridge:
                 self._drop("failed", f"{address[:64]}: {type(exc).__name__}: {exc}")
             else:
                 self.counters.count("accepted")
-                self.engine.renew_owner(sender.owner)
+
+    def _sender(self, peer: tuple[str, int], now_s: float) -> Receivers:
+        """The sender at ``peer`` (an IPv6 peer's flow and scope fields are ignored): its
+        handle, opened at the admission if new (a sender that yields its slot to a
+        newcomer is forgotten here, its contacts released by the admission)."""
+        source = f"{peer[0]}:{peer[1]}"
+        handle = self.admission.open(
+            INPUT,
+            source,
+            principal=principal_for(INPUT, host=peer[0]),
+            on_yield=lambda _reason: self._forget(source),
+            now_s=now_s,
+        )
+        sender = self._senders.get(source)
+        if sender is None or sender.handle is not handle:
+            handle.on_released(self._released)
+            sender = Receivers(
+                handle, [0.0] * len(self._index), ContactTracker(self.map.smoothing_s)
+            )
+            self._senders[source] = sender
+        return sender
 
     def _drop(self, reason: str, message: str) -> None:
         self.counters.count(reason)
         self._log.warning(reason, f"osc: dropped ({reason}): {message}")
 
+    def _forget(self, source: str) -> None:
+        """The sender at ``source`` yielded its slot (the receive thread)."""
+        self._senders.pop(source, None)
+
     def _release_all(self, reason: str) -> None:
-        """Forget the smoothing state and let the front release every contact of every
-        sender, published with ``reason`` (the receive thread, or the one closing it)."""
-        self._senders.forget_all()
-        for owner in self.engine.contact_owners(OWNER_PREFIX):
-            self.engine.release_owner(owner, reason)
+        """Forget the smoothing state and release every contact of every sender,
+        published with ``reason`` (the receive thread, or the one restarting it)."""
+        for sender in list(self._senders.values()):
+            sender.forget()
+        for handle in self.admission.handles(INPUT):
+            handle.release(reason)
 
     # -- messages -------------------------------------------------------------------------
 
-    def _handle(self, sender: Sender, address: str, args: tuple[Any, ...], now_s: float) -> None:
+    def _handle(
+        self,
+        sender: Receivers,
+        address: str,
+        args: tuple[Any, ...],
+        arrival: Arrival,
+        now_s: float,
+    ) -> None:
         index = self._index.get(address)
         if index is not None:
             sender.proximity[index] = messages.proximity(address, args)
             self._receivers(sender, now_s)
         elif address.startswith(messages.CONTACT_PREFIX):
-            self._contact(sender.owner, address, args)
+            self._contact(sender.handle, address, args)
         elif address == messages.TOUCH:
-            self._play(messages.touch_name(address, args), sender.owner)
+            request = touch_request(messages.touch_name(address, args))
+            sender.handle.play_now(request, arrival=arrival)
         elif address == messages.STOP:
             messages.no_arguments(address, args)
-            self._senders.forget_all()
-            self._stop()
+            for each in self._senders.values():
+                each.forget()
+            self.admission.stop_all()
         else:
             raise messages.BadMessage(
                 "unknown_address",
@@ -335,73 +341,65 @@ class OscBridge:
                 "/phantomtouch/touch, /phantomtouch/contact/{id} or /phantomtouch/stop",
             )
 
-    def _receivers(self, sender: Sender, now_s: float) -> None:
+    def _receivers(self, sender: Receivers, now_s: float) -> None:
         found = self._layout.touches(
             sender.proximity, threshold=self.map.threshold, max_intensity=self.map.max_intensity
         )
+        handle = sender.handle
+        sender.tracker.keep_only(handle.contacts())
         refused: PhantomTouchError | None = None
         for change in sender.tracker.update(found, now_s):
             try:
-                self._apply(sender.owner, change)
+                self._apply(handle, change)
             except PhantomTouchError as exc:
-                sender.tracker.live.pop(change.contact, None)  # tried again on the next value
+                sender.tracker.keep_only(handle.contacts())  # tried again on the next value
                 refused = exc
         if refused is not None:
             raise refused
 
-    def _apply(self, owner: str, change: Change) -> None:
+    def _apply(self, handle: Handle, change: Change) -> None:
         if change.kind == "up":
-            self.engine.contact_up(owner, change.contact)
+            handle.up(change.contact)
         elif change.kind == "down":
-            self._down(owner, change.contact, change.x_cm, change.y_cm, change.intensity)
+            self._down(handle, change.contact, change.x_cm, change.y_cm, change.intensity)
         else:
-            self._move(owner, change.contact, change.x_cm, change.y_cm, change.intensity)
+            self._move(handle, change.contact, change.x_cm, change.y_cm, change.intensity)
 
-    def _down(self, owner: str, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
-        self.engine.contact_down(
-            owner,
-            contact,
-            x_cm,
-            y_cm,
-            intensity=intensity,
-            carrier=self.map.carrier,
-            deadline_s=self.map.watchdog_s,
-        )
+    def _down(
+        self, handle: Handle, contact: str, x_cm: float, y_cm: float, intensity: float
+    ) -> None:
+        handle.down(contact, x_cm, y_cm, intensity=intensity, carrier=self.map.carrier)
 
-    def _move(self, owner: str, contact: str, x_cm: float, y_cm: float, intensity: float) -> None:
+    def _move(
+        self, handle: Handle, contact: str, x_cm: float, y_cm: float, intensity: float
+    ) -> None:
         try:
-            self.engine.contact_move(owner, contact, x_cm, y_cm, intensity=intensity)
+            handle.move(contact, x_cm, y_cm, intensity=intensity)
         except ProtocolError:  # the engine let go of it (a stop, a restart): down again
-            self._down(owner, contact, x_cm, y_cm, intensity)
+            self._down(handle, contact, x_cm, y_cm, intensity)
 
-    def _contact(self, owner: str, address: str, args: tuple[Any, ...]) -> None:
+    def _contact(self, handle: Handle, address: str, args: tuple[Any, ...]) -> None:
         contact = CONTACT_PREFIX + messages.contact_id(address)
         x_cm, y_cm, intensity = messages.contact(address, args)
         if intensity == 0.0:
-            self.engine.contact_up(owner, contact)
-            return
-        held = {
-            other: [c for c in contacts if c.startswith(CONTACT_PREFIX)]
-            for other, contacts in self.engine.contact_owners(OWNER_PREFIX).items()
-        }
-        if contact in held.get(owner, ()):
-            self._move(owner, contact, x_cm, y_cm, intensity)
-            return
-        if sum(map(len, held.values())) >= MAX_CONTACTS:
-            givers = yielding({other: len(mine) for other, mine in held.items()}, owner)
-            if not givers:
-                raise messages.BadMessage(
-                    "refused",
-                    f"{address}: {MAX_CONTACTS} contacts are down (the bridge's most) and no "
-                    "other sender holds two more than this one; lift one with intensity 0 first",
-                )
-            self.engine.contact_up(givers[0], held[givers[0]][0])  # its oldest, faded out
-        self._down(owner, contact, x_cm, y_cm, intensity)
+            handle.up(contact)
+        else:
+            self._move(handle, contact, x_cm, y_cm, intensity)
 
-    def _play_preset(self, name: str, owner: str) -> None:
-        from phantomtouch.renderer import plan, preset
 
-        self.engine.schedule(plan(preset(name), self.engine.device), owner=owner)
+def touch_request(name: str) -> AnyTouch:
+    """The touch request ``/phantomtouch/touch NAME`` makes: a name with a ``/`` is a preset
+    (``exp2/curved``), any other a stored pattern.
+
+    Raises
+    ------
+    ParameterError
+        The name is not one a touch request takes (the message names it).
+    """
+    try:
+        return PresetTouch(preset=name) if "/" in name else NamedTouch(stored=name)
+    except ValidationError as exc:
+        raise ParameterError(f"/phantomtouch/touch: {describe_validation_error(exc)}") from exc
 
 
 def open_socket(host: str, port: int) -> socket.socket:

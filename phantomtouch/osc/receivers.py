@@ -19,6 +19,7 @@ contact's first update is not smoothed (it starts where the touch is).
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,16 +132,18 @@ class ContactTracker:
     def __init__(self, smoothing_s: float, *, prefix: str = "receivers-") -> None:
         self.smoothing_s = smoothing_s
         self.ids = [f"{prefix}{k}" for k in range(MAX_CONTACTS)]
-        self.live: dict[str, Tracked] = {}
+        self.filters: dict[str, Tracked] = {}
+        """The smoothing state of each contact it put down; whether the contact is still
+        down is the engine's to say (:meth:`keep_only`)."""
 
     def update(self, found: list[Touch], now_s: float) -> list[Change]:
         """The changes that take the live contacts to ``found`` (from :func:`touches`)."""
         changes: list[Change] = []
         unmatched = list(found)
-        for contact in sorted(self.live, key=lambda c: self.ids.index(c)):
-            tracked = self.live[contact]
+        for contact in sorted(self.filters, key=lambda c: self.ids.index(c)):
+            tracked = self.filters[contact]
             if not unmatched:
-                del self.live[contact]
+                del self.filters[contact]
                 changes.append(Change("up", contact))
                 continue
             nearest = min(
@@ -150,8 +153,8 @@ class ContactTracker:
             self._smooth(tracked, nearest, now_s)
             changes.append(Change("move", contact, tracked.x_cm, tracked.y_cm, tracked.intensity))
         for touch in unmatched:
-            contact = next(c for c in self.ids if c not in self.live)
-            self.live[contact] = Tracked(contact, touch.x_cm, touch.y_cm, touch.intensity, now_s)
+            contact = next(c for c in self.ids if c not in self.filters)
+            self.filters[contact] = Tracked(contact, touch.x_cm, touch.y_cm, touch.intensity, now_s)
             changes.append(Change("down", contact, touch.x_cm, touch.y_cm, touch.intensity))
         return changes
 
@@ -163,8 +166,9 @@ class ContactTracker:
         tracked.y_cm += alpha * (target.y_cm - tracked.y_cm)
         tracked.intensity += alpha * (target.intensity - tracked.intensity)
 
-    def forget(self) -> list[str]:
-        """Drop every live contact (released elsewhere); returns their ids."""
-        gone = list(self.live)
-        self.live.clear()
-        return gone
+    def keep_only(self, down: Collection[str]) -> None:
+        """Forget the smoothing state of every contact not in ``down`` (what the engine's
+        front holds of the sender: a contact let go of by a stop, a deadline or a quota
+        touches down again on the next update)."""
+        for contact in [c for c in self.filters if c not in down]:
+            del self.filters[contact]

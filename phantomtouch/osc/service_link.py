@@ -1,12 +1,11 @@
 """The OSC bridge inside the service: the same engine, library and stop as the WebSocket.
 
-``/phantomtouch/touch NAME`` is a touch request as ``POST /touch`` makes it: a name with a
-``/`` is a preset (``exp2/curved``), any other a stored pattern, scheduled by
-:func:`phantomtouch.service.scheduling.schedule` on the event loop under the quotas of the
-client that sent it (``osc:HOST:PORT``; the touch is not tied to the sender's lifetime, as
-one of ``POST /touch`` is not); the bridge's thread waits for it (planning takes a
-millisecond or so, a new noise band about 60 ms the first time), at most ``PLAY_TIMEOUT_S``.
-``/phantomtouch/stop`` is :meth:`Service.stop_everything`. The bridge's
+The bridge opens its senders at the service's admission
+(:attr:`Service.admission`): ``/phantomtouch/touch NAME`` is a touch request as ``POST
+/touch`` makes it (a name with a ``/`` is a preset, ``exp2/curved``, any other a stored
+pattern), planned and scheduled in the bridge's thread through the sender's handle under
+its quota (planning takes a millisecond or so, a new noise band about 60 ms the first
+time); ``/phantomtouch/stop`` is the admission's stop, as ``POST /stop``. The bridge's
 counts appear in ``/metrics`` as ``phantomtouch_osc_messages_total{outcome}`` (with
 ``phantomtouch_osc_restarts_total`` and, on Linux, the datagrams the kernel dropped before
 the bridge read them, ``phantomtouch_osc_kernel_drops_total``), and its health in
@@ -22,21 +21,13 @@ from contextlib import asynccontextmanager
 
 from prometheus_client.core import CounterMetricFamily
 from prometheus_client.registry import Collector
-from pydantic import ValidationError
 
-from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.osc.bridge import INPUT, OscBridge
 from phantomtouch.osc.counters import kernel_drops
 from phantomtouch.osc.mapping import load_map
-from phantomtouch.schema import describe_validation_error
-from phantomtouch.service import scheduling
-from phantomtouch.service.models import NamedTouch, PresetTouch
 from phantomtouch.service.running import Service
 
 logger = logging.getLogger("phantomtouch.osc")
-
-PLAY_TIMEOUT_S = 5.0
-"""How long the bridge waits for a touch to be planned and scheduled."""
 
 
 class _Counts(Collector):
@@ -84,34 +75,12 @@ def start_osc(service: Service) -> OscBridge:
     """
     settings = service.settings
     address = settings.osc_address
-    assert address is not None and service.loop is not None
-    loop = service.loop
-    receiver_map = load_map(settings.osc_map, service.device)
-
-    def play(name: str, owner: str) -> None:
-        try:
-            request = PresetTouch(preset=name) if "/" in name else NamedTouch(stored=name)
-        except ValidationError as exc:
-            raise ParameterError(f"/phantomtouch/touch: {describe_validation_error(exc)}") from exc
-        scheduled = scheduling.schedule(service, request, client=owner)
-        try:
-            asyncio.run_coroutine_threadsafe(scheduled, loop).result(PLAY_TIMEOUT_S)
-        except TimeoutError as exc:
-            raise DeviceError(
-                f"/phantomtouch/touch {name!r}: not scheduled within {PLAY_TIMEOUT_S:g} s"
-            ) from exc
-
-    def stop() -> None:
-        loop.call_soon_threadsafe(service.stop_everything)
-
+    assert address is not None
     bridge = OscBridge(
-        service.engine,
-        receiver_map,
+        service.admission,
+        load_map(settings.osc_map, service.device),
         host=address[0],
         port=address[1],
-        play=play,
-        stop=stop,
-        rate_per_s=settings.osc_messages_per_s,
     )
     service.metrics.registry.register(_Counts(bridge))
     service.inputs[INPUT] = bridge.health

@@ -7,7 +7,9 @@ from typing import TYPE_CHECKING, Annotated, Any
 from fastapi import Depends, Path, Query
 from starlette.requests import HTTPConnection
 
+from phantomtouch.service.admission import Handle, principal_for
 from phantomtouch.service.app_state import app_state
+from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.models import PATTERN_NAME_REGEX, name_rules
 from phantomtouch.service.running import Service
 from phantomtouch.service.store import PatternStore
@@ -32,14 +34,22 @@ async def get_store(connection: HTTPConnection) -> PatternStore:
     return app_state(connection, "service", Service).store
 
 
-async def get_client(connection: HTTPConnection) -> str:
-    """Whose quotas an HTTP request counts against: its client's address."""
-    address = connection.client
-    return f"address:{address.host if address is not None else 'unknown'}"
+async def get_source(connection: HTTPConnection) -> Handle:
+    """The request's client as a source of the admission (kind ``rest``, one per host):
+    whose quotas its touches count against. A request over the host's message rate is
+    refused 429 here, before its body is read."""
+    peer = connection.client
+    host = None if peer is None else peer.host
+    admission = app_state(connection, "service", Service).admission
+    handle = admission.open("rest", host or "unknown", principal=principal_for("rest", host=host))
+    verdict = handle.receive(0)
+    if not verdict.admitted:
+        raise RateLimitedError(verdict.reason, field="request")
+    return handle
 
 
 ServiceDep = Annotated[Service, Depends(get_service)]
-ClientDep = Annotated[str, Depends(get_client)]
+SourceDep = Annotated[Handle, Depends(get_source)]
 if TYPE_CHECKING:
     EngineDep = EngineFront
 else:

@@ -4,8 +4,8 @@
 
     CONNECTING --accept--> OPEN --client closes / limit broken--> CLOSED
          \\--token missing: accept, close 1008--> CLOSED
-         \\--a connection cap reached: accept, close 1013--> CLOSED
-           (:mod:`phantomtouch.service.connections`)
+    OPEN --its slot yielded to a newcomer: close 1013--> CLOSED
+           (:mod:`phantomtouch.service.admission`)
 
 In ``OPEN`` each text frame is parsed and handled at once, in arrival order: ``move``
 goes straight to the engine's contact mailbox (latest wins, nothing queues here). Each
@@ -13,26 +13,28 @@ contact has its own two states, up and down; a step that its state does not allo
 answered with ``error`` ("expected X, got Y") and the session goes on. Malformed frames
 are answered with ``error`` too, frames nested too deeply to read included. Only a
 binary frame (1003), a frame over the size limit (1009), a missing token or a message
-rate exceeded for a second on end (1008, :mod:`phantomtouch.service.flood`) close it.
+rate exceeded for a second on end (1008), or the admission giving its slot to a newcomer
+(1013: the connection held nothing, or was silent longest) close it.
 Messages over the rate are dropped and counted; only the first of a flood is answered.
 The loop yields to the event loop after every frame, so that a connection whose frames
 are already buffered cannot keep HTTP requests and other connections waiting.
 
-The connection keeps no contact state: the engine's front holds its contacts (its owner
-table, :mod:`phantomtouch.engine.owners`) with a deadline of ``watchdog_s`` that every
-message of the connection pushes on; silence longer than that releases them, and the
-front's ``released`` events (``watchdog``, ``quota``, ``stop``, ``engine gone`` ...)
-become ``released`` messages. Closing, in any way, releases them all, and stops every
-touch the connection played (with its release ramp; its state says ``stopped``, reason
-``closed``) but those it asked to be ``detached``: they belong to the connection's
-address (owner ``detached:HOST``, with a quota of their own) and play on
-(``docs/owners.md``).
+The session is a protocol translation over its source's handle at the admission
+(:class:`~phantomtouch.service.admission.Handle`, kind ``ws``): the handle checks each
+frame's size and rate and renews the connection's owner; the engine's front holds its
+contacts (its owner table, :mod:`phantomtouch.engine.owners`) with a deadline of
+``watchdog_s`` that every message of the connection pushes on; silence longer than that
+releases them, and the front's ``released`` events (``watchdog``, ``quota``, ``stop``,
+``engine gone`` ...) become ``released`` messages. Closing, in any way, releases them all,
+and stops every touch the connection played (with its release ramp; its state says
+``stopped``, reason ``closed``) but those it asked to be ``detached``: they belong to the
+connection's principal (owner ``ws:HOST/detached``, with a quota of their own) and play
+on (``docs/owners.md``).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import enum
 import time
 from typing import TYPE_CHECKING, Any
@@ -41,8 +43,10 @@ from pydantic import ValidationError
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
-from phantomtouch.service import scheduling, tact_library
-from phantomtouch.service.contact_down import contact_down, refuse_if_down
+from phantomtouch.service import tact_library
+from phantomtouch.service.admission import Arrival, Handle, principal_for
+from phantomtouch.service.admission.handle import SCOPE_KEY
+from phantomtouch.service.connections import is_loopback_address
 from phantomtouch.service.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
@@ -50,10 +54,10 @@ from phantomtouch.service.errors import (
     WS_CLOSE_UNSUPPORTED_DATA,
     NotFoundError,
     Problem,
-    QuotaError,
+    SourcesFullError,
+    TooLargeError,
     describe,
 )
-from phantomtouch.service.flood import SCOPE_KEY, FloodGuard
 from phantomtouch.service.limits import token_matches
 from phantomtouch.service.running import Service
 from phantomtouch.service.ws_messages import (
@@ -99,22 +103,18 @@ class Session:
         self.websocket = websocket
         self.service = service
         self.engine: EngineFront = service.engine
-        settings = service.settings
-        self.watchdog_s = settings.watchdog_s
-        self.max_message_bytes = settings.max_ws_message_bytes
-        self.limiter = FloodGuard(settings.ws_messages_per_s)
-        websocket.scope[SCOPE_KEY] = self.limiter  # ping frames count too (server.wire)
-        self.owner = service.new_owner()
+        self.watchdog_s = service.admission.policy("ws").deadline_s
         self.state = SessionState.CONNECTING
         self.sender = JsonSender(
             websocket, sent=lambda kind: service.metrics.ws_messages.labels("out", kind).inc()
         )
         self._state_task: asyncio.Task[None] | None = None
+        self._serve_task: asyncio.Task[None] | None = None
+        self._yielded: str | None = None
         self._notices: set[asyncio.Task[None]] = set()
         self._count_in = service.metrics.ws_messages.labels("in", "move")
-        peer = websocket.client
-        self.detached_owner = f"detached:{peer.host if peer is not None else 'unknown'}"
-        """Whose detached touches this connection plays: its address's (they outlive it)."""
+        self.handle: Handle | None = None
+        """The connection's source at the admission, once its token is checked."""
 
     # -- the state machine -------------------------------------------------------------
 
@@ -124,24 +124,8 @@ class Session:
         self.state = new
 
     async def run(self) -> None:
-        """Accept, check the connection caps and the token, serve frames until the
-        connection ends, release."""
-        peer = self.websocket.client
-        host = None if peer is None else peer.host
-        refused = self.service.connections.enter(host)
-        if refused is not None:
-            self._expect(SessionState.CONNECTING, SessionState.CLOSED)
-            self.service.metrics.ws_refused.labels(refused[0]).inc()
-            with contextlib.suppress(*GONE):
-                await self.websocket.accept()
-                await self.websocket.close(WS_CLOSE_TRY_AGAIN_LATER, refused[1])
-            return
-        try:
-            await self._run()
-        finally:
-            self.service.connections.leave(host)
-
-    async def _run(self) -> None:
+        """Accept, check the token, serve frames until the connection ends, close the
+        handle (its contacts released, its touches stopped)."""
         await self.websocket.accept()
         self._expect(SessionState.CONNECTING, SessionState.OPEN)
         self.service.metrics.ws_connections.inc()
@@ -151,7 +135,6 @@ class Session:
         def released(owner: str, contacts: tuple[str, ...], reason: str) -> None:
             loop.call_soon_threadsafe(self.contacts_released, contacts, reason)
 
-        unsubscribe = self.engine.subscribe_released(released, self.owner)
         code: int | None = None
         reason = ""
         try:
@@ -160,20 +143,26 @@ class Session:
                 raise SessionClosed(
                     WS_CLOSE_POLICY_VIOLATION, "a token is required: ?token=... or Bearer"
                 )
-            await self._serve()
+            self._serve_task = asyncio.current_task()
+            handle = self.handle = self._open()
+            handle.on_released(released)
+            await self._serve(handle)
         except SessionClosed as closed:
             code, reason = closed.code, closed.reason
+        except asyncio.CancelledError:
+            if self._yielded is None:
+                raise
+            code, reason = WS_CLOSE_TRY_AGAIN_LATER, self._yielded
         except (WebSocketDisconnect, OSError):
             pass
         finally:
             self._expect(SessionState.OPEN, SessionState.CLOSED)
-            if self.service.lane is not None:  # no move over the lane after the release
-                self.service.lane.close(self.owner)
-            unsubscribe()
+            if self.service.lane is not None and self.handle is not None:
+                self.service.lane.close(self.handle.owner)  # no lane move after the release
             if self._state_task is not None:
                 self._state_task.cancel()
-            self.engine.release_owner(self.owner, "closed")
-            self.engine.stop_owner(self.owner, "closed")
+            if self.handle is not None:
+                self.handle.close("closed")
             self.service.metrics.ws_open.dec()
         if code is not None:
             try:
@@ -181,53 +170,89 @@ class Session:
             except GONE:
                 return
 
-    async def _serve(self) -> None:
+    def _open(self) -> Handle:
+        """The connection's handle at the admission, in a slot (one yields if they are
+        full); the protocol's ping frames count in its rate (:mod:`phantomtouch.server.wire`).
+
+        Raises
+        ------
+        SessionClosed
+            1013: every slot is held by connections that may not yield.
+        """
+        peer = self.websocket.client
+        host = None if peer is None else peer.host
+        try:
+            handle = self.service.admission.open(
+                "ws",
+                self.service.admission.new_source(),
+                principal=principal_for("ws", host=host),
+                on_yield=self._on_yield,
+                local=is_loopback_address(host),
+            )
+        except SourcesFullError as exc:
+            self.service.metrics.ws_refused.labels("full").inc()
+            raise SessionClosed(WS_CLOSE_TRY_AGAIN_LATER, str(exc)[:120]) from exc
+        self.websocket.scope[SCOPE_KEY] = handle
+        return handle
+
+    def _on_yield(self, reason: str) -> None:
+        """The admission gave this connection's slot to a newcomer (its handle is closed):
+        end the session with 1013 (any thread)."""
+        task = self._serve_task
+        if task is None:
+            return
+        self._yielded = reason[:120]
+        self.service.metrics.ws_refused.labels("yielded").inc()
+        task.get_loop().call_soon_threadsafe(task.cancel)
+
+    async def _serve(self, handle: Handle) -> None:
         receive = self.websocket.receive
+        limit = handle.policy.max_message_bytes
         while True:
             frame = await receive()
             if frame["type"] == "websocket.disconnect":
                 raise WebSocketDisconnect(frame.get("code", 1000))
             received_s = time.perf_counter()
-            now_s = time.monotonic()
-            self.engine.renew_owner(self.owner, now_s)
             text = frame.get("text")
             if text is None:
                 raise SessionClosed(
                     WS_CLOSE_UNSUPPORTED_DATA, "binary frames are not supported; send JSON text"
                 )
-            if len(text) > self.max_message_bytes or (
-                4 * len(text) > self.max_message_bytes
-                and len(text.encode()) > self.max_message_bytes
-            ):
+            size = len(text) if 4 * len(text) <= limit else len(text.encode())
+            try:
+                verdict = handle.receive(size)
+            except TooLargeError:
                 raise SessionClosed(
-                    WS_CLOSE_MESSAGE_TOO_BIG,
-                    f"message over the limit of {self.max_message_bytes} bytes",
-                )
-            if self.limiter.admit(now_s):
-                await self._handle_text(text, received_s)
+                    WS_CLOSE_MESSAGE_TOO_BIG, f"message over the limit of {limit} bytes"
+                ) from None
+            if verdict.arrival is not None:
+                await self._handle_text(handle, text, received_s, verdict.arrival)
             else:
-                await self._refuse_rate(now_s)
+                await self._refuse_rate(handle, verdict.sustained, verdict.flood_started)
             await asyncio.sleep(0)
 
-    async def _refuse_rate(self, now_s: float) -> None:
+    async def _refuse_rate(self, handle: Handle, sustained: bool, flood_started: bool) -> None:
         self.service.metrics.ws_dropped.inc()
-        limit = self.limiter.rate_per_s
-        if self.limiter.sustained(now_s):
+        limit = handle.policy.messages_per_s
+        guard = handle.meter.own
+        if sustained:
             self.service.metrics.ws_flood_closes.inc()
             raise SessionClosed(
                 WS_CLOSE_POLICY_VIOLATION,
                 f"over the message rate limit of {limit:g}/s for "
-                f"{self.limiter.close_after_s:g} s; {self.limiter.dropped} messages dropped",
+                f"{guard.close_after_s:g} s; {guard.dropped} messages dropped",
             )
-        if self.limiter.flood_started:
+        if flood_started:
             message = (
                 f"more than {limit:g} messages per second: messages are dropped, unanswered, "
-                f"until the rate falls; over it for {self.limiter.close_after_s:g} s closes "
+                f"until the rate falls; over it for {guard.close_after_s:g} s closes "
                 "the connection (1008)"
             )
             await self.sender.error(Problem(429, "rate_limited", message), None)
 
-    async def _handle_text(self, text: str, received_s: float) -> None:
+    async def _handle_text(
+        self, handle: Handle, text: str, received_s: float, arrival: Arrival
+    ) -> None:
         try:
             message = parse(text)
         except MessageError as exc:
@@ -239,27 +264,27 @@ class Session:
         else:
             self.service.metrics.ws_messages.labels("in", message.type).inc()
         try:
-            await self._dispatch(message, received_s)
+            await self._dispatch(handle, message, received_s, arrival)
         except (PhantomTouchError, ValidationError) as exc:
             await self.sender.error(describe(exc), message.id)
 
     # -- messages ---------------------------------------------------------------------
 
-    async def _dispatch(self, message: ClientMessage, received_s: float) -> None:
+    async def _dispatch(
+        self, handle: Handle, message: ClientMessage, received_s: float, arrival: Arrival
+    ) -> None:
         if isinstance(message, Move):
-            self._check_down(message.contact, "move")
-            self.engine.contact_move(
-                self.owner, message.contact, message.x_cm, message.y_cm, intensity=message.intensity
-            )
+            handle.move(message.contact, message.x_cm, message.y_cm, intensity=message.intensity)
             self.service.metrics.ws_ingest.observe(time.perf_counter() - received_s)
             await self.sender.ok(message.id)
         elif isinstance(message, Down):
-            await self._down(message)
+            await self._down(handle, message)
         elif isinstance(message, Up):
-            self._check_down(message.contact, "up")
-            self.engine.contact_up(
-                self.owner, message.contact, normal_velocity_m_s=message.normal_velocity_m_s
-            )
+            if not handle.up(message.contact, normal_velocity_m_s=message.normal_velocity_m_s):
+                raise ProtocolError(
+                    f"contact={message.contact!r} is not down: expected down, got up "
+                    "(a contact is released by up, the watchdog or stop)"
+                )
             await self.sender.ok(message.id)
         elif isinstance(message, Ping):
             await self.sender.send(
@@ -272,14 +297,16 @@ class Session:
                 )
             await self.sender.send(self._welcome(message))
         elif isinstance(message, Play):
-            owner = self.detached_owner if message.detached else self.owner
-            job = await scheduling.schedule(
-                self.service, message.request, client=owner, detached=message.detached
-            )
+            job = await handle.play(message.request, arrival=arrival, detached=message.detached)
             await self.sender.ok(message.id, job.model_dump())
         elif isinstance(message, PlayTact):
             played = await tact_library.play_tact(
-                self.service, message.tact, message, client=self.owner, field="tact"
+                self.service,
+                message.tact,
+                message,
+                handle=handle,
+                arrival=arrival,
+                field="tact",
             )
             await self.sender.ok(message.id, played.model_dump())
         elif isinstance(message, Stop):
@@ -288,27 +315,10 @@ class Session:
             self._subscribe(message.rate_hz)
             await self.sender.ok(message.id)
 
-    def _check_down(self, contact: str, got: str) -> None:
-        if not self.engine.holds(self.owner, contact):
-            raise ProtocolError(
-                f"contact={contact!r} is not down: expected down, got {got} "
-                "(a contact is released by up, the watchdog or stop)"
-            )
-
-    async def _down(self, message: Down) -> None:
-        held = self.engine.contacts_of(self.owner)
-        refuse_if_down(held, message.contact)
-        limit = self.service.settings.max_contacts_per_connection
-        if len(held) >= limit:
-            raise QuotaError(
-                f"contact={message.contact!r}: quota max_contacts_per_connection={limit} "
-                "(contacts one connection holds down at once) is used up; send up for one first",
-                field="contact",
-                value=message.contact,
-            )
+    async def _down(self, handle: Handle, message: Down) -> None:
         if message.carrier is not None and message.carrier.kind != "sine":
-            await asyncio.to_thread(self.engine.prepare_carrier, message.carrier)
-        contact_down(self.engine, self.owner, message, deadline_s=self.watchdog_s)
+            await asyncio.to_thread(handle.prepare_carrier, message.carrier)
+        handle.down_as(message)
         await self.sender.ok(message.id)
 
     async def _stop(self, message: Stop) -> None:
@@ -338,10 +348,10 @@ class Session:
                 "actuators": [a.model_dump() for a in device.actuators],
             },
         }
-        if self.service.lane is not None:
+        if self.service.lane is not None and self.handle is not None:
             peer = self.websocket.client
             host = None if peer is None else peer.host
-            welcome["lane"] = self.service.lane.open(self.owner, host, self.limiter)
+            welcome["lane"] = self.service.lane.open(self.handle, host)
         choice = self.service.wearer.choice
         if choice is not None:
             welcome["wearer"] = {"name": choice.name, "band": choice.band}
@@ -373,7 +383,7 @@ class Session:
                             "contact": c["contact"],
                             "x_cm": c["x_cm"],
                             "y_cm": c["y_cm"],
-                            "own": c["owner"] == self.owner,
+                            "own": self.handle is not None and c["owner"] == self.handle.owner,
                         }
                         for c in status["active_contacts"]
                     ],

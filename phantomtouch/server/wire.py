@@ -17,25 +17,27 @@ but logged in one line instead of a traceback, and counted
 (``phantomtouch_ws_refused_frames_total{reason="invalid_utf8"}``).
 
 Ping frames never reach the session, so uvicorn answered every one of them: millions a
-second of them held the event loop. Each ping now counts in the session's flood rule
-(the connection's :class:`~phantomtouch.service.flood.FloodGuard`, which the session
-puts in the scope under :data:`~phantomtouch.service.flood.SCOPE_KEY`) as a message
-does: over the rate it is dropped unanswered (``reason="ping_over_rate"``), and a
-connection that stays over its rate is closed with 1008, as a flood of messages is.
+second of them held the event loop. Each ping now counts in the connection's rate (its
+:class:`~phantomtouch.service.admission.Handle`, which the session puts in the scope
+under :data:`~phantomtouch.service.admission.handle.SCOPE_KEY`) as a message does, and
+renews the connection as a message does: over the rate it is dropped unanswered
+(``reason="ping_over_rate"``), and a connection that stays over its rate is closed with
+1008, as a flood of messages is.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import time
 from typing import TYPE_CHECKING, Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
+from phantomtouch.service.admission import Handle
+from phantomtouch.service.admission.handle import SCOPE_KEY
 from phantomtouch.service.errors import Problem
-from phantomtouch.service.flood import SCOPE_KEY, FloodGuard, LimitedLog
+from phantomtouch.service.flood import LimitedLog
 from phantomtouch.service.metrics import FRAME_REFUSALS
 
 if TYPE_CHECKING:
@@ -169,27 +171,29 @@ class FairWebSocketProtocol(WebSocketsSansIOProtocol):
         super().send_receive_event_to_app()
 
     def handle_ping(self) -> None:
-        """As uvicorn's (a pong), if the connection's flood rule admits the ping; over the
-        rate the pong is dropped, and a flood lasting ``close_after_s`` closes with 1008."""
-        guard = self.scope.get(SCOPE_KEY) if self.scope else None
-        if not isinstance(guard, FloodGuard) or self.close_sent:
+        """As uvicorn's (a pong), if the connection's rate admits the ping; over the rate
+        the pong is dropped, and a flood lasting ``close_after_s`` closes with 1008."""
+        handle = self.scope.get(SCOPE_KEY) if self.scope else None
+        if not isinstance(handle, Handle) or self.close_sent:
             super().handle_ping()
             return
-        now_s = time.monotonic()
-        if guard.admit(now_s):
+        verdict = handle.receive(0)
+        if verdict.admitted:
             super().handle_ping()
             return
         self.conn.data_to_send()  # the pong the parser queued: dropped
         FRAME_REFUSALS["ping_over_rate"] += 1
-        if guard.sustained(now_s):
+        if verdict.sustained:
+            rate = handle.policy.messages_per_s
+            close_after_s = handle.meter.own.close_after_s
             _REFUSALS_LOG.warning(
                 "ping_flood",
-                f"websocket: {self._peer()} sent pings over {guard.rate_per_s:g}/s for "
-                f"{guard.close_after_s:g} s; closed with 1008",
+                f"websocket: {self._peer()} sent pings over {rate:g}/s for "
+                f"{close_after_s:g} s; closed with 1008",
             )
             self.conn.send_close(
                 WS_CLOSE_POLICY_VIOLATION,
-                f"over the message rate limit of {guard.rate_per_s:g}/s (pings count)",
+                f"over the message rate limit of {rate:g}/s (pings count)",
             )
             self._unparsed.clear()
             self.handle_parser_exception()

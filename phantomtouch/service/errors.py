@@ -84,8 +84,9 @@ HTTP status, or the message rate limit exceeded for a second on end."""
 WS_CLOSE_MESSAGE_TOO_BIG = 1009
 """A message over ``max_ws_message_bytes``."""
 WS_CLOSE_TRY_AGAIN_LATER = 1013
-"""Too many WebSocket connections are open (``max_ws_connections`` in all, or
-``max_ws_connections_per_address`` from the address); never for a loopback address."""
+"""The connection's slot was given to a newcomer (``max_ws_connections`` in all, or
+``max_ws_connections_per_address`` from the address, were open: it held nothing, or was
+silent longest), or every slot is held by loopback connections, which never yield."""
 
 
 _RETRY_SOON: Mapping[str, str] = {"Retry-After": "1"}
@@ -140,6 +141,11 @@ class TooLargeError(ServiceError, status_code=413, code="too_large"):
 
 class RateLimitedError(ServiceError, status_code=429, code="rate_limited", headers=_RETRY_SOON):
     """Too many requests or messages; retry after a moment."""
+
+
+class SourcesFullError(ServiceError, status_code=503, code="busy", headers=_RETRY_SOON):
+    """An input's connection slots are full and no source may yield one to a newcomer
+    (:mod:`phantomtouch.service.admission`); a WebSocket is closed 1013."""
 
 
 class QuotaError(ServiceError, status_code=429, code="quota", headers=_RETRY_SOON):

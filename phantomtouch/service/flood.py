@@ -19,9 +19,6 @@ import logging
 import threading
 import time
 
-SCOPE_KEY = "phantomtouch.flood_guard"
-"""Where a WebSocket session leaves its :class:`FloodGuard` in the ASGI scope, so that the
-protocol counts the connection's ping frames in the same rule."""
 CLOSE_AFTER_S = 1.0
 """How long a connection may stay over its rate before it is closed (1008)."""
 CALM_S = 1.0

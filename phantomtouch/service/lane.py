@@ -5,8 +5,8 @@ HTTP request: under a stream of requests a move waits its turn behind them. The 
 UDP socket beside the service (on its host, a port of its own) read by a thread of its own
 that runs at real-time priority where the user may ask for it
 (:mod:`~phantomtouch.engine.thread_priority`) and decodes nothing but moves. It hands each
-to the engine's front at once (``contact_move``: the move slot the audio callback drains at
-its next block), so a move is late neither behind HTTP work nor behind busy processes.
+to the connection's admission handle at once (its ``move``: the move slot the audio callback
+drains at its next block), so a move is late neither behind HTTP work nor behind busy processes.
 
 The lane is the connection's, not a new client (``docs/lane.md``):
 
@@ -16,8 +16,8 @@ The lane is the connection's, not a new client (``docs/lane.md``):
 - a datagram is the connection's ``move`` message with ``"key"`` beside its fields (1 KiB at
   most, UTF-8 JSON); it goes through the same checks as over ``/ws``: the fields' ranges,
   the contact must be down (latest wins, nothing queues), and it counts in the connection's
-  message rate (its :class:`~phantomtouch.service.flood.FloodGuard`); a lane over the rate for
-  a second on end is closed (its key refused from then on);
+  message rate (its handle's :meth:`~phantomtouch.service.admission.Handle.receive`); a lane
+  over the rate for a second on end is closed (its key refused from then on);
 - a move renews its own owner's deadline, and no other;
 - nothing is answered but a refusal (the ``error`` message of ``/ws``, naming the field), and
   ``ok`` to a move that carries an ``id``; a datagram with no key of an open connection is
@@ -49,7 +49,8 @@ from phantomtouch.service.flood import FloodGuard
 from phantomtouch.service.ws_messages import Move
 
 if TYPE_CHECKING:
-    from phantomtouch.engine import EngineFront
+    from phantomtouch.service.admission import Handle
+    from phantomtouch.service.admission.rate import Verdict
     from phantomtouch.service.running import Service
 
 logger = logging.getLogger("phantomtouch.service")
@@ -74,11 +75,10 @@ class LaneMove(Move):
 
 @dataclass(frozen=True)
 class LaneEntry:
-    """One connection's use of the lane: its owner, its host and its message rate."""
+    """One connection's use of the lane: its admission handle and its host."""
 
-    owner: str
+    handle: Handle
     host: str | None
-    guard: FloodGuard
 
 
 class ContactLane:
@@ -86,8 +86,6 @@ class ContactLane:
 
     Parameters
     ----------
-    engine : EngineFront
-        Where moves go.
     host : str
         Address to bind (the service's).
     port : int, 0 <= port <= 65535
@@ -98,13 +96,11 @@ class ContactLane:
 
     def __init__(
         self,
-        engine: EngineFront,
         *,
         host: str,
         port: int = 0,
         counted: Callable[[str], None] | None = None,
     ) -> None:
-        self.engine = engine
         self._counted = counted or (lambda kind: None)
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._socket = socket.socket(family, socket.SOCK_DGRAM)
@@ -149,17 +145,18 @@ class ContactLane:
             sys.setswitchinterval(self._switch_interval_s)
             self._switch_interval_s = None
 
-    def open(self, owner: str, host: str | None, guard: FloodGuard) -> dict[str, Any]:
-        """The lane for ``owner`` (a ``/ws`` connection): ``{"port", "key"}`` for its
+    def open(self, handle: Handle, host: str | None) -> dict[str, Any]:
+        """The lane for a ``/ws`` connection's ``handle``: ``{"port", "key"}`` for its
         ``welcome``. ``host`` is the connection's peer address (None: unknown, any host is
-        taken); ``guard`` its message rate, which lane moves count in. Asked again, it
-        answers the same key. Any thread."""
+        taken); lane datagrams count in the handle's message rate and renew only its owner.
+        Asked again, it answers the same key. Any thread."""
+        owner = handle.owner
         with self._lock:
             key = self._keys.get(owner)
             if key is None:
                 key = secrets.token_urlsafe(KEY_BYTES)
                 self._keys[owner] = key
-                self._entries[key] = LaneEntry(owner, host, guard)
+                self._entries[key] = LaneEntry(handle, host)
         return {"port": self.port, "key": key}
 
     def close(self, owner: str) -> None:
@@ -213,14 +210,12 @@ class ContactLane:
             message = f"key={move.key!r} is not the lane key of an open /ws connection"
             problem = Problem(403, "forbidden", message, [_field("key", move.key, message)])
             return self._unkeyed_answer(problem, move.id, now_s)
-        if not entry.guard.admit(now_s):
-            return self._refuse_rate(entry, now_s)
+        verdict = entry.handle.receive(len(datagram), now_s=now_s)  # renews its owner
+        if not verdict.admitted:
+            return self._refuse_rate(entry, verdict)
         self._counted("lane_move")
         try:
-            self.engine.renew_owner(entry.owner, now_s)
-            self.engine.contact_move(
-                entry.owner, move.contact, move.x_cm, move.y_cm, intensity=move.intensity
-            )
+            entry.handle.move(move.contact, move.x_cm, move.y_cm, intensity=move.intensity)
         except PhantomTouchError as exc:
             return _error(describe(exc), move.id)
         return None if move.id is None else {"type": "ok", "id": move.id}
@@ -235,8 +230,9 @@ class ContactLane:
         self, entry: LaneEntry, problem: Problem, message_id: Any, now_s: float
     ) -> dict[str, Any] | None:
         """A refusal of a keyed datagram, within the connection's rate."""
-        if not entry.guard.admit(now_s):
-            return self._refuse_rate(entry, now_s)
+        verdict = entry.handle.receive(0, now_s=now_s)
+        if not verdict.admitted:
+            return self._refuse_rate(entry, verdict)
         self._counted("lane_refused")
         return _error(problem, message_id)
 
@@ -248,20 +244,16 @@ class ContactLane:
             return None
         return _error(problem, message_id)
 
-    def _refuse_rate(self, entry: LaneEntry, now_s: float) -> dict[str, Any] | None:
+    def _refuse_rate(self, entry: LaneEntry, verdict: Verdict) -> dict[str, Any] | None:
         self._counted("lane_refused")
-        guard = entry.guard
-        if guard.sustained(now_s):
-            self.close(entry.owner)
-            message = (
-                f"over the message rate limit of {guard.rate_per_s:g}/s for "
-                f"{guard.close_after_s:g} s: the lane is closed for this connection"
-            )
+        if verdict.sustained:
+            self.close(entry.handle.owner)
+            message = f"{verdict.reason} (/ws and lane together): the lane is closed"
             return _error(Problem(429, "rate_limited", message), None)
-        if guard.flood_started:
+        if verdict.flood_started:
             message = (
-                f"more than {guard.rate_per_s:g} messages per second (/ws and lane together): "
-                "messages are dropped, unanswered, until the rate falls"
+                f"{verdict.reason} (/ws and lane together): messages are dropped, "
+                "unanswered, until the rate falls"
             )
             return _error(Problem(429, "rate_limited", message), None)
         return None
@@ -276,7 +268,6 @@ def running_lane(service: Service) -> Iterator[ContactLane | None]:
         return
     messages = service.metrics.ws_messages
     lane = ContactLane(
-        service.engine,
         host=service.settings.host,
         port=service.settings.lane_port,
         counted=lambda kind: messages.labels("in", kind).inc(),

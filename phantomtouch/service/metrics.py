@@ -262,8 +262,8 @@ class Metrics:
         )
         self.ws_refused = counter(
             "phantomtouch_ws_refused_connections",
-            "WebSocket connections refused (close 1013) by a connection cap "
-            "(cap: total, per_address).",
+            "WebSocket connections closed 1013 by the connection slots (cap: yielded, a "
+            "connection that gave its slot to a newcomer; full, one refused a slot).",
             ["cap"],
         )
         self.refused_requests = counter(

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
-import secrets
 import threading
 from collections.abc import Callable
 from contextlib import AbstractAsyncContextManager, contextmanager
@@ -60,8 +58,9 @@ class Service:
     """The one admission every input opens its sources at (:mod:`~phantomtouch.service.
     admission`), with the service's policy table."""
     connections: ConnectionCaps = field(init=False)
+    """The bHaptics stand-in's connection caps, until it opens its sources at the
+    admission."""
     _renders: threading.BoundedSemaphore = field(init=False)
-    _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
     inputs: dict[str, Callable[[], InputHealth]] = field(default_factory=dict, init=False)
     """Supervised inputs by name (``osc``): how each fares, for ``/health``."""
     loop: asyncio.AbstractEventLoop | None = field(default=None, init=False)
@@ -83,17 +82,14 @@ class Service:
         """The engine's plan cache, the one place plans are kept."""
         return self.engine.plans
 
-    def new_owner(self) -> str:
-        """A unique owner id for one WebSocket connection's contacts and jobs."""
-        return f"ws-{next(self._owners)}-{secrets.token_hex(3)}"
-
     def stop_everything(self) -> None:
         """Every job and every contact of every client off, at once (never queued).
 
         The engine's front tells each owner which of its contacts were let go
-        (``released``, reason ``stop``).
+        (``released``, reason ``stop``); whatever any source sent before it is void
+        (:meth:`~phantomtouch.service.admission.Admission.stop_all`).
         """
-        self.engine.stop_all()
+        self.admission.stop_all()
 
     @contextmanager
     def render_slot(self) -> Iterator[None]:

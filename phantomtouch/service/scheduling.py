@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 from typing import TYPE_CHECKING, Any
 
 from phantomtouch.engine.jobs import OwnerQuota, QuotaRefused
@@ -24,7 +23,6 @@ from phantomtouch.service.store import PatternStore
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront, Job
-    from phantomtouch.service.running import Service
 
 LATE_START_TOLERANCE_S = 1.0
 """How far in the past a ``start_at_s`` may lie (it then starts at once)."""
@@ -38,13 +36,14 @@ def preset_pattern(name: str) -> TouchPattern:
         raise NotFoundError(str(exc), field="preset", value=name) from exc
 
 
-def stored_pattern(store: PatternStore, name: str, *, field: str = "stored") -> TouchPattern:
-    """The stored pattern ``name``; an unknown name is a :class:`NotFoundError`.
+def stored_pattern(store: PatternStore | None, name: str, *, field: str = "stored") -> TouchPattern:
+    """The stored pattern ``name``; an unknown name (or no library: None) is a
+    :class:`NotFoundError`.
 
     ``field`` is what the request called the name: ``name`` in the path of
     ``/patterns/{name}``, ``stored`` in a touch request.
     """
-    pattern = store.get(name)
+    pattern = None if store is None else store.get(name)
     if pattern is None:
         raise NotFoundError(
             f"{field}={name!r} is not in the pattern library (GET /patterns)",
@@ -54,7 +53,7 @@ def stored_pattern(store: PatternStore, name: str, *, field: str = "stored") -> 
     return pattern
 
 
-def resolve(request: AnyTouch, store: PatternStore) -> TouchPattern:
+def resolve(request: AnyTouch, store: PatternStore | None) -> TouchPattern:
     """The pattern a touch request asks for, its clip (if any) filled in."""
     if isinstance(request, PresetTouch):
         return with_clip(request.apply(preset_pattern(request.preset)), store)
@@ -63,7 +62,7 @@ def resolve(request: AnyTouch, store: PatternStore) -> TouchPattern:
     return with_clip(request.pattern(), store)
 
 
-def with_clip(pattern: TouchPattern, store: PatternStore) -> TouchPattern:
+def with_clip(pattern: TouchPattern, store: PatternStore | None) -> TouchPattern:
     """``pattern`` with its clip carrier's ``data`` read from the library.
 
     A pattern without a clip, or whose clip is given inline, is returned as it is; a clip
@@ -73,7 +72,7 @@ def with_clip(pattern: TouchPattern, store: PatternStore) -> TouchPattern:
     carrier = pattern.carrier
     if not isinstance(carrier, ClipCarrier) or carrier.data is not None or carrier.clip is None:
         return pattern
-    clip = store.get_clip(carrier.clip)
+    clip = None if store is None else store.get_clip(carrier.clip)
     if clip is None:
         raise MissingReferenceError(
             f"carrier.clip={carrier.clip!r} is not in the clip library (GET /clips; "
@@ -143,15 +142,9 @@ DETACHED_NAMES = ("max_detached_voices_per_client", "max_detached_seconds_per_cl
 
 
 def client_quota(settings: Settings) -> OwnerQuota:
-    """The quota of every client, from the settings."""
+    """The quota of every client, from the settings (the admission's rows carry it:
+    :func:`~phantomtouch.service.admission.policy_table`)."""
     return OwnerQuota(settings.voices_per_client, settings.max_voice_seconds_per_client)
-
-
-def detached_quota(settings: Settings) -> OwnerQuota:
-    """The quota of every client's detached touches, from the settings."""
-    return OwnerQuota(
-        settings.max_detached_voices_per_client, settings.max_detached_seconds_per_client
-    )
 
 
 def quota_error(
@@ -182,7 +175,7 @@ def quota_error(
 
 def schedule_touch(
     engine: EngineFront,
-    store: PatternStore,
+    store: PatternStore | None,
     request: AnyTouch,
     *,
     owner: str,
@@ -220,27 +213,3 @@ def schedule_touch(
     except QuotaRefused as refused:
         raise quota_error(refused, planned.duration_s, names) from refused
     return accepted(engine, job, planned)
-
-
-async def schedule(
-    service: Service,
-    request: AnyTouch,
-    *,
-    client: str,
-    owner: str | None = None,
-    detached: bool = False,
-) -> JobAccepted:
-    """:func:`schedule_touch` for ``client`` on the event loop, the work in a worker thread;
-    the stop count is read on arrival, before the thread starts."""
-    settings = service.settings
-    stops = service.engine.stop_count
-    return await asyncio.to_thread(
-        schedule_touch,
-        service.engine,
-        service.store,
-        request,
-        owner=client if owner is None else owner,
-        quota=detached_quota(settings) if detached else client_quota(settings),
-        stop_count=stops,
-        names=DETACHED_NAMES if detached else QUOTA_NAMES,
-    )

@@ -5,8 +5,8 @@ same parser as ``phantomtouch render FILE.tact`` and the stand-in's ``Register``
 (:func:`~phantomtouch.clips.tact.parse_tact`), as compact JSON with a summary; a project
 with nothing for an arm is refused in one line. ``POST /tact/{name}/play`` and the
 WebSocket's ``play`` naming a ``tact`` read it back, make its score with the service's arm
-map and schedule it (:func:`~phantomtouch.service.scores.schedule_score`) as jobs of the
-client, whole or not at all.
+map and schedule it through the client's handle at the admission
+(:meth:`~phantomtouch.service.admission.Handle.play_score`), whole or not at all.
 """
 
 from __future__ import annotations
@@ -23,11 +23,11 @@ from phantomtouch.clips.tact_score import ScaleOption, score
 from phantomtouch.engine.jobs import QuotaRefused
 from phantomtouch.errors import FieldError, ParameterError
 from phantomtouch.service.errors import NotFoundError, StoredPatternError
-from phantomtouch.service.scheduling import client_quota, quota_error, start_frame
-from phantomtouch.service.scores import schedule_score
+from phantomtouch.service.scheduling import quota_error, start_frame
 from phantomtouch.service.tact_models import ScoreAccepted, TactInfo, TactPlay
 
 if TYPE_CHECKING:
+    from phantomtouch.service.admission import Arrival, Handle
     from phantomtouch.service.running import Service
     from phantomtouch.service.store import PatternStore
 
@@ -126,25 +126,31 @@ def stored_project(store: PatternStore, name: str, *, field: str = "name") -> Ta
 
 
 async def play_tact(
-    service: Service, name: str, request: TactPlay, *, client: str, field: str = "name"
+    service: Service,
+    name: str,
+    request: TactPlay,
+    *,
+    handle: Handle,
+    arrival: Arrival,
+    field: str = "name",
 ) -> ScoreAccepted:
-    """Schedule the stored project ``name`` as ``request`` asks, as jobs of ``client`` (an
-    HTTP client's address or a WebSocket connection); host, the event loop: reading,
-    planning and scheduling run in a worker thread.
+    """Schedule the stored project ``name`` as ``request`` asks, as jobs of ``handle``'s
+    source (an HTTP client, a WebSocket connection), whole or not at all; a stop after
+    ``arrival`` voids it. Host, the event loop: reading, planning and scheduling run in a
+    worker thread.
 
     Raises
     ------
     NotFoundError
         No such project (``field`` names it).
     ParameterError
-        Nothing of it lands on this band (the arm map plays other arms), or its last voice
-        would start more than an hour from now.
+        Nothing of it lands on this band (the arm map plays other arms), it has more
+        voices than one message may ask for, or its last voice would start more than an
+        hour from now.
     QuotaError
         Its voices would take the client past one of its quotas; none of them plays.
     """
     engine = service.engine
-    quota = client_quota(service.settings)
-    stops = engine.stop_count  # a stop that comes while this one is planned voids it
 
     def plan_and_schedule() -> ScoreAccepted:
         project = stored_project(service.store, name, field=field)
@@ -157,13 +163,8 @@ async def play_tact(
             )
         played = score(project, arm_map, engine.device, scale)
         try:
-            scheduled = schedule_score(
-                engine,
-                played,
-                owner=client,
-                quota=quota,
-                start_frame=start_frame(engine, request.timing()),
-                stop_count=stops,
+            scheduled = handle.play_score(
+                played, arrival=arrival, start_frame=start_frame(engine, request.timing())
             )
         except QuotaRefused as refused:
             raise quota_error(refused, played.duration_s) from refused

@@ -8,8 +8,18 @@ from collections.abc import Callable
 import numpy as np
 from pythonosc.udp_client import SimpleUDPClient
 
+from phantomtouch.engine import EngineFront
 from phantomtouch.osc.mapping import ReceiverMap
 from phantomtouch.schema import DeviceProfile
+from phantomtouch.service.admission import Admission, policy_table
+from phantomtouch.service.settings import Settings
+
+
+def osc_admission(engine: EngineFront) -> Admission:
+    """The admission a bridge over ``engine`` alone opens its senders at: the service's
+    default policy table, no pattern library."""
+    return Admission(engine, policy_table(Settings()))
+
 
 FRAME_S = 1.0 / 90.0
 """VRChat's frame at 90 Hz."""

@@ -21,7 +21,7 @@ from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.osc.bridge import OscBridge
 from phantomtouch.osc.mapping import BHAPTICS_PREFIX, bhaptics_map, load_map
 from phantomtouch.schema import DeviceProfile
-from tests.osc.support import energy_track
+from tests.osc.support import energy_track, osc_admission
 
 DEVICE = DeviceProfile.default()
 
@@ -53,7 +53,7 @@ def test_a_parameter_is_a_phantom_at_its_motors_place(
 ) -> None:
     eng, sink = engine
     receivers = bhaptics_map(DEVICE)
-    with OscBridge(eng, receivers, port=0) as bridge:
+    with OscBridge(osc_admission(eng), receivers, port=0) as bridge:
         client = SimpleUDPClient(*bridge.address)
         client.send_message(f"{BHAPTICS_PREFIX}{parameter}", 1.0)
         deadline = time.monotonic() + 3.0
@@ -79,7 +79,7 @@ def test_two_neighbouring_parameters_are_one_phantom_between_their_motors(engine
     """A hand between motors 1 and 2 of the left sleeve (0 and 7.2 cm along the band),
     both receivers full, re-sent at 90 Hz for 0.3 s: one contact half way, at 3.6 cm."""
     eng, _ = engine
-    with OscBridge(eng, bhaptics_map(DEVICE), port=0) as bridge:
+    with OscBridge(osc_admission(eng), bhaptics_map(DEVICE), port=0) as bridge:
         client = SimpleUDPClient(*bridge.address)
         for _ in range(27):
             client.send_message(f"{BHAPTICS_PREFIX}Left_1", 1.0)

@@ -18,9 +18,8 @@ from pythonosc.udp_client import SimpleUDPClient
 from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.osc.bridge import OscBridge
 from phantomtouch.osc.mapping import ReceiverMap, default_map
-from phantomtouch.osc.senders import OWNER_PREFIX
 from phantomtouch.schema import DeviceProfile
-from tests.osc.support import FRAME_S, energy_track, proximity, send_stream
+from tests.osc.support import FRAME_S, energy_track, osc_admission, proximity, send_stream
 from tests.support.yardstick import WakeUpLag
 
 DEVICE = DeviceProfile.default()
@@ -55,7 +54,7 @@ def test_the_phantom_follows_a_hand_sliding_over_the_receivers(engine) -> None:
     eng, sink = engine
     receivers = _map()
     sent_frames: list[int] = []
-    with OscBridge(eng, receivers, port=0) as bridge, WakeUpLag() as lag:
+    with OscBridge(osc_admission(eng), receivers, port=0) as bridge, WakeUpLag() as lag:
         client = SimpleUDPClient(*bridge.address)
         send_stream(
             client,
@@ -145,12 +144,12 @@ def test_silence_releases_the_contact(engine) -> None:
     """A stream that stops with the hand still on the arm: the watchdog lets go."""
     eng, _ = engine
     receivers = _map(watchdog_s=0.4)
-    with OscBridge(eng, receivers, port=0) as bridge:
+    with OscBridge(osc_admission(eng), receivers, port=0) as bridge:
         client = SimpleUDPClient(*bridge.address)
         send_stream(client, receivers, lambda t: (X_CM, 7.2 - t, 1.0), 0.3)
         assert bridge.contacts == ["receivers-0"]
         owners = [c["owner"] for c in eng.status().to_dict()["active_contacts"]]
-        assert len(owners) == 1 and owners[0].startswith(OWNER_PREFIX), owners
+        assert len(owners) == 1 and owners[0].startswith("osc:127.0.0.1/"), owners
         deadline = time.monotonic() + 2.0
         while bridge.contacts and time.monotonic() < deadline:
             time.sleep(0.02)
@@ -166,7 +165,7 @@ def test_two_separate_touches_are_two_contacts(engine) -> None:
     eng, _ = engine
     receivers = _map()
     values = {0: 0.8, 4: 0.8, 3: 0.5, 7: 0.5}  # rows at y=0 and y=14.4, both columns
-    with OscBridge(eng, receivers, port=0) as bridge:
+    with OscBridge(osc_admission(eng), receivers, port=0) as bridge:
         client = SimpleUDPClient(*bridge.address)
         for i, value in values.items():
             client.send_message(receivers.receiver[i].address, value)

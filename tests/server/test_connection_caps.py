@@ -1,4 +1,6 @@
-"""Caps on WebSocket connections: remote addresses are refused (1013), loopback never.
+"""Connection slots of WebSocket connections: a remote newcomer past a cap takes the slot of
+the connection of its address silent longest (closed 1013), loopback is never made to yield
+nor refused, and a remote newcomer finding only loopback connections is refused 1013.
 
 The server listens on every interface (with a token, as it must off loopback); the test
 reaches it through this machine's own non-loopback address, which the server sees as a
@@ -66,13 +68,18 @@ async def welcomed(ws: ClientConnection) -> bool:
     return bool(json.loads(await asyncio.wait_for(ws.recv(), 5))["type"] == "welcome")
 
 
+async def closed_by_server(ws: ClientConnection) -> tuple[int | None, str]:
+    """Wait for the server to close ``ws``: its close code and reason."""
+    with pytest.raises(ConnectionClosed) as closed:
+        await asyncio.wait_for(ws.recv(), 5)
+    received = closed.value.rcvd
+    return (None, "") if received is None else (received.code, received.reason)
+
+
 async def refused(address: str) -> tuple[int | None, str]:
     """Connect and wait for the server to close: its close code and reason."""
     async with connect(address) as ws:
-        with pytest.raises(ConnectionClosed) as closed:
-            await asyncio.wait_for(ws.recv(), 5)
-    received = closed.value.rcvd
-    return (None, "") if received is None else (received.code, received.reason)
+        return await closed_by_server(ws)
 
 
 def refusals(live: LiveServer) -> dict[str, float]:
@@ -87,7 +94,7 @@ def refusals(live: LiveServer) -> dict[str, float]:
     return found
 
 
-def test_remote_connections_are_capped_and_loopback_never(
+def test_remote_newcomers_take_the_slot_silent_longest_and_loopback_never_yields(
     live: LiveServer, remote_host: str
 ) -> None:
     async def scenario() -> None:
@@ -96,23 +103,29 @@ def test_remote_connections_are_capped_and_loopback_never(
                 await stack.enter_async_context(connect(url(live, remote_host)))
                 for _ in range(PER_ADDRESS)
             ]
-            assert all([await welcomed(ws) for ws in remote])
-            code, reason = await refused(url(live, remote_host))
-            assert code == WS_CLOSE_TRY_AGAIN_LATER
-            assert f"max_ws_connections_per_address={PER_ADDRESS}" in reason
-            for ws in remote[4:]:
-                await ws.close()
+            assert all([await welcomed(ws) for ws in remote[1:]])  # remote[0] silent longest
+            newcomer = await stack.enter_async_context(connect(url(live, remote_host)))
+            assert await welcomed(newcomer)
+            code, reason = await closed_by_server(remote[0])
+            assert code == WS_CLOSE_TRY_AGAIN_LATER and "made room for a newcomer" in reason
             local = [
                 await stack.enter_async_context(connect(url(live, "127.0.0.1")))
-                for _ in range(TOTAL - 4)
+                for _ in range(TOTAL - PER_ADDRESS)
             ]
-            assert await welcomed(local[-1])
-            code, reason = await refused(url(live, remote_host))  # the 65th, from afar
+            assert await welcomed(local[-1])  # all 64 slots taken
+            late = await stack.enter_async_context(connect(url(live, remote_host)))
+            assert await welcomed(late)  # the 65th, from afar: a remote one yields
+            code, _ = await closed_by_server(remote[1])
             assert code == WS_CLOSE_TRY_AGAIN_LATER
-            assert f"max_ws_connections={TOTAL}" in reason
             for _ in range(4):  # loopback is never locked out
                 extra = await stack.enter_async_context(connect(url(live, "127.0.0.1")))
                 assert await welcomed(extra)
-            assert refusals(live) == {"total": 1.0, "per_address": 1.0, "open": TOTAL + 4.0}
+            for ws in [*remote[2:], newcomer, late]:
+                await ws.close()
+            for _ in range(TOTAL - len(local) - 4):  # every slot held from loopback
+                await stack.enter_async_context(connect(url(live, "127.0.0.1")))
+            code, reason = await refused(url(live, remote_host))
+            assert code == WS_CLOSE_TRY_AGAIN_LATER and "none may yield" in reason
+            assert refusals(live) == {"yielded": 2.0, "full": 1.0, "open": float(TOTAL)}
 
     asyncio.run(scenario())

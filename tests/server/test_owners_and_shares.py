@@ -23,7 +23,7 @@ from tests.support.owner_attacks import (
     job_history_flood,
     osc_flooder_and_another_sender,
     osc_other_sender_renews,
-    osc_sender_pool,
+    osc_sender_contacts,
     stop_all,
     ws_crowd_contacts,
     ws_crowd_voices,
@@ -57,14 +57,14 @@ def test_another_osc_senders_messages_do_not_keep_a_silent_senders_contact_on(
     assert seen == {"contacts": 0.0, "stayed_on": False}
 
 
-def test_one_osc_sender_cannot_hold_every_contact_of_the_bridge(
+def test_one_osc_sender_holds_its_quota_of_contacts_and_another_still_gets_one(
     live: tuple[LiveServer, int],
 ) -> None:
     server, osc_port = live
-    seen = osc_sender_pool(server.url, osc_port)
-    # B's contact went down (one of A's made room: still 10) and A could not take it back
-    # (refused: A holds 9, B 1); lifting B's leaves 9
-    assert seen == {"after_down": 10.0, "after_lift": 9.0, "refused": 1.0}
+    seen = osc_sender_contacts(server.url, osc_port)
+    # A's 11th is refused (its quota of max_contacts_per_connection=10); B's goes down
+    # beside A's 10, none of A's taken; lifting B's leaves A's 10
+    assert seen == {"after_down": 11.0, "after_lift": 10.0, "refused": 1.0}
 
 
 def test_one_osc_sender_flooding_does_not_drop_another_senders_messages(

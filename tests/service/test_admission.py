@@ -112,7 +112,7 @@ def test_size_contacts_and_protocol_are_refused_naming_the_limit(admission: Admi
     with pytest.raises(ProtocolError, match="expected move or up, got down"):
         ws.down("a", 1.9, 7.0)
     ws.down("b", 1.9, 2.0)
-    with pytest.raises(QuotaError, match="contacts_per_owner=2"):
+    with pytest.raises(QuotaError, match="max_contacts_per_connection=2"):
         ws.down("c", 1.9, 3.0)
     with pytest.raises(ProtocolError, match="expected down, got move"):
         ws.move("c", 1.0, 1.0)

@@ -13,7 +13,7 @@ returns what it saw; the tests assert on it and ``benchmarks/bench_abuse.py`` pr
 - :func:`ws_touch_outlives_socket`: a long touch played over a connection that closes;
 - :func:`osc_other_sender_renews`: OSC sender A puts a contact down and falls silent,
   sender B keeps sending (every proximity 0.0);
-- :func:`osc_sender_pool`: OSC sender A holds the bridge's 10 contacts, sender B asks for one;
+- :func:`osc_sender_contacts`: OSC sender A holds its 10 contacts and asks for an 11th, B for one;
 - :func:`osc_flooder_and_another_sender`: OSC sender A floods the port while sender B sends
   its contact at 90 Hz;
 - :func:`job_history_flood`: one client floods short touches while another's job is over.
@@ -238,12 +238,11 @@ def osc_other_sender_renews(url: str, osc_port: int, seconds: float = 3.0) -> di
     return {"contacts": contacts, "stayed_on": contacts > 0}
 
 
-def osc_sender_pool(url: str, osc_port: int) -> dict[str, Any]:
-    """OSC sender A puts down the bridge's 10 generic contacts and keeps sending them; sender
-    B puts one down and lifts it again. Returns the contacts down after B's ``down`` and
-    after its lift (9: B's was down, one of A's made room for it and A could not take it
-    back; 10: B was refused) and the refusals counted (A's try to take its contact back,
-    or B's refused ``down``)."""
+def osc_sender_contacts(url: str, osc_port: int) -> dict[str, Any]:
+    """OSC sender A puts down 10 generic contacts (its quota) and an 11th, and keeps sending
+    them; sender B (another port) puts one down and lifts it again. Returns the contacts
+    down after B's ``down`` and after its lift, and the refusals counted (A's 11th, each
+    time it is sent)."""
     a = SimpleUDPClient("127.0.0.1", osc_port)
     b = SimpleUDPClient("127.0.0.1", osc_port)
 
@@ -254,11 +253,13 @@ def osc_sender_pool(url: str, osc_port: int) -> dict[str, Any]:
     a_sends()
     assert wait_until(lambda: metric(url, "phantomtouch_active_contacts") == 10, 5)
     refused = osc_refusals(url)
+    a.send_message("/phantomtouch/contact/a10", [1.9, 7.2, 0.5])
     b.send_message("/phantomtouch/contact/b", [1.9, 2.4, 0.5])
     time.sleep(0.2)
     a_sends()
     time.sleep(0.2)
     after_down = metric(url, "phantomtouch_active_contacts")
+    a_sends()  # A renews within its 1 s deadline, however long the metrics took
     b.send_message("/phantomtouch/contact/b", [1.9, 2.4, 0.0])
     time.sleep(0.2)
     after_lift = metric(url, "phantomtouch_active_contacts")

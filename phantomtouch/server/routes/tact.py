@@ -14,7 +14,7 @@ from fastapi import APIRouter, Depends, Path, Request, Response
 from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
-from phantomtouch.server.deps import ClientDep, LimitParam, OffsetParam, ServiceDep, StoreDep
+from phantomtouch.server.deps import LimitParam, OffsetParam, ServiceDep, SourceDep, StoreDep
 from phantomtouch.server.routes import library
 from phantomtouch.service import tact_library
 from phantomtouch.service.bodies import strict_body
@@ -139,9 +139,11 @@ async def play_tact(
     name: TactNameParam,
     service: ServiceDep,
     request: Annotated[TactPlay, Depends(play_body)],
-    client: ClientDep,
+    source: SourceDep,
 ) -> ScoreAccepted:
     """Schedule every voice of the project as a job of this client, sample-exact to each
     other: whole, or not at all (429 `quota`). Optional `intensity_scale` and
     `duration_scale` (bHaptics' `scaleOption`), `start_in_ms` or `start_at_s`."""
-    return await tact_library.play_tact(service, name, request, client=client)
+    return await tact_library.play_tact(
+        service, name, request, handle=source, arrival=source.arrival()
+    )

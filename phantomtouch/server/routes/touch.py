@@ -7,8 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 from fastapi import APIRouter, Depends, Request
 from fastapi import Path as PathParam
 
-from phantomtouch.server.deps import ClientDep, EngineDep, ServiceDep
-from phantomtouch.service import scheduling
+from phantomtouch.server.deps import EngineDep, ServiceDep, SourceDep
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import NotFoundError, responses
 
@@ -50,14 +49,14 @@ SCHEDULES: dict[str, Any] = {
 
 
 @router.post("/touch", **SCHEDULES, summary="Play a touch", openapi_extra=TOUCH_BODY_OPENAPI)
-async def post_touch(request: TouchBody, service: ServiceDep, client: ClientDep) -> JobAccepted:
+async def post_touch(request: TouchBody, source: SourceDep) -> JobAccepted:
     """Schedule a touch: a whole pattern, a preset with overrides, or a stored pattern.
 
     Without `start_in_ms` or `start_at_s` it starts as soon as possible. 404 names an
     unknown preset or stored pattern; 503 `busy` means the engine's queue is full; 429
     `quota` that this client holds its share of the voices (the message names the quota).
     """
-    return await scheduling.schedule(service, request, client=client)
+    return await source.play(request, arrival=source.arrival())
 
 
 @router.post(

@@ -38,7 +38,12 @@ if TYPE_CHECKING:
     from phantomtouch.service.admission.policy import InputPolicy
     from phantomtouch.service.models import AnyTouch, JobAccepted
     from phantomtouch.service.store import PatternStore
+    from phantomtouch.service.ws_messages import Down
 
+SCOPE_KEY = "phantomtouch.handle"
+"""Where a WebSocket session leaves its connection's :class:`Handle` in the ASGI scope, so
+that the protocol counts the connection's ping frames in the same rate
+(:mod:`phantomtouch.server.wire`)."""
 YieldCallback = Callable[[str], None]
 """``on_yield(reason)``: the admission took the source's slot for a newcomer (or closed
 it); the adapter ends the source's transport (a WebSocket closes 1013 with ``reason``).
@@ -67,6 +72,8 @@ class Handle:
         The owner of the source's detached touches: its principal's (they outlive it).
     policy : InputPolicy
         The input's row.
+    local : bool
+        The source is on this machine (its row's ``local_never_yields`` applies).
     """
 
     def __init__(
@@ -80,6 +87,7 @@ class Handle:
         meter: Meter,
         on_yield: YieldCallback | None,
         on_close: Callable[[Handle], None],
+        local: bool = False,
     ) -> None:
         self.engine = engine
         self.store = store
@@ -90,6 +98,7 @@ class Handle:
         self.owner = owner_id(principal, source)
         self.detached_owner = owner_id(principal, DETACHED)
         self.meter = meter
+        self.local = local
         self.last_heard_s = monotonic(None)
         self.closed = False
         self._on_yield = on_yield
@@ -192,8 +201,9 @@ class Handle:
         limit = self.policy.contacts_per_owner
         if len(held) >= limit:
             raise QuotaError(
-                f"contact={contact!r}: quota contacts_per_owner={limit} of {self.kind} "
-                "(contacts one source holds down at once) is used up; send up for one first",
+                f"contact={contact!r}: quota {self.policy.contacts_setting}={limit} "
+                f"(contacts one {self.kind} source holds down at once) is used up; send up "
+                "for one first",
                 field="contact",
                 value=contact,
             )
@@ -208,6 +218,19 @@ class Handle:
             law=law,
             normal_velocity_m_s=normal_velocity_m_s,
             deadline_s=deadline_s if math.isfinite(deadline_s) else None,
+        )
+
+    def down_as(self, message: Down) -> None:
+        """:meth:`down` as a protocol's ``down`` message says (its contact, position in cm,
+        intensity, carrier, law and normal velocity); the WebSocket's and fleet's."""
+        self.down(
+            message.contact,
+            message.x_cm,
+            message.y_cm,
+            intensity=message.intensity,
+            carrier=message.carrier,
+            law=message.law,
+            normal_velocity_m_s=message.normal_velocity_m_s,
         )
 
     def prepare_carrier(self, carrier: Carrier | None) -> None:
@@ -299,8 +322,6 @@ class Handle:
     ) -> JobAccepted:
         """:meth:`play` in the caller's thread (host, a worker thread, never the event
         loop: it plans)."""
-        if self.store is None:
-            raise ParameterError("this input has no pattern store: it plays presets only")
         return schedule_touch(
             self.engine,
             self.store,

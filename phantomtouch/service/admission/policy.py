@@ -94,6 +94,14 @@ class InputPolicy:
         What one owner's touches may hold at once (voices, seconds still to play).
     detached_quota : OwnerQuota
         The same for the touches a source asked to outlive it (``detached``).
+    local_never_yields : bool
+        True: a source on this machine (a loopback peer) is never made to yield its slot
+        nor refused one (every program of the machine shares 127.0.0.1: a cap must never
+        lock the local scene out); it still counts towards ``max_sources``, so remote
+        sources yield first. False: every source alike (an input that only listens on
+        loopback, whose crowd must yield to a newcomer).
+    contacts_setting : str
+        The setting :attr:`contacts_per_owner` comes from, named when it is used up.
     """
 
     kind: Kind
@@ -107,6 +115,8 @@ class InputPolicy:
     max_sources_per_principal: int
     quota: OwnerQuota
     detached_quota: OwnerQuota
+    local_never_yields: bool = False
+    contacts_setting: str = "max_contacts_per_connection"
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -209,4 +219,6 @@ def policy_table(settings: Settings) -> dict[Kind, InputPolicy]:
             MAX_SOURCES,
         ),
     ]
+    rows[0] = rows[0].replace(local_never_yields=True)
+    rows[-1] = rows[-1].replace(contacts_setting="fleet contacts per owner")
     return {policy.kind: policy for policy in rows}

@@ -77,13 +77,7 @@ class Meter:
 
     def check_size(self, size_bytes: int) -> None:
         """Raise :class:`TooLargeError` when ``size_bytes`` is over the limit."""
-        if size_bytes > self.max_bytes:
-            raise TooLargeError(
-                f"{self.kind}: a message of {size_bytes} bytes is over the limit of "
-                f"{self.max_bytes} bytes",
-                field="message",
-                value=size_bytes,
-            )
+        check_size(self.kind, self.max_bytes, size_bytes)
 
     def admit(self, now_s: float, stop_count: int) -> Verdict:
         """Whether a message arriving at ``now_s`` is within the source's and the
@@ -108,6 +102,17 @@ class Meter:
                 ),
             )
         return Verdict(Arrival(stop_count, now_s))
+
+
+def check_size(kind: str, max_bytes: int, size_bytes: int) -> None:
+    """Raise :class:`TooLargeError` when a message of ``kind`` of ``size_bytes`` bytes is
+    over ``max_bytes`` (any thread; pure)."""
+    if size_bytes > max_bytes:
+        raise TooLargeError(
+            f"{kind}: a message of {size_bytes} bytes is over the limit of {max_bytes} bytes",
+            field="message",
+            value=size_bytes,
+        )
 
 
 def monotonic(now_s: float | None) -> float:
