@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.schema import DeviceProfile
+from phantomtouch.service.admission import Admission, policy_table
 from phantomtouch.service.connections import ConnectionCaps
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.metrics import Metrics
@@ -55,6 +56,8 @@ class Service:
     arm_map: ArmMap = field(init=False)
     """Where ``.tact`` projects and bHaptics frames land on the band (``bhaptics_map``)."""
     connections: ConnectionCaps = field(init=False)
+    admission: Admission = field(init=False)
+    """The one admission every input opens its sources at (the policy table of ``settings``)."""
     _renders: threading.BoundedSemaphore = field(init=False)
     _owners: Iterator[int] = field(default_factory=itertools.count, init=False)
     inputs: dict[str, Callable[[], InputHealth]] = field(default_factory=dict, init=False)
@@ -66,6 +69,7 @@ class Service:
         map_path = self.settings.bhaptics_map
         self.arm_map = ArmMap.load(map_path) if map_path is not None else ArmMap()
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
+        self.admission = Admission(self.engine, policy_table(self.settings), store=self.store)
         self.connections = ConnectionCaps(
             self.settings.max_ws_connections, self.settings.max_ws_connections_per_address
         )
