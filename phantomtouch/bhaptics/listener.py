@@ -44,6 +44,7 @@ import logging
 import re
 import secrets
 from collections.abc import AsyncIterator, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
@@ -149,9 +150,10 @@ class BhapticsListener:
         self.open = 0
         self.budget = PointBudget()
         """Registered points by principal, for every connection."""
-        self.reading = asyncio.Semaphore(1)
-        """Large messages are read in a worker thread one at a time (the memory reading
-        takes is one message's, whatever the number of connections)."""
+        self.reader = ThreadPoolExecutor(1, thread_name_prefix="bhaptics-read")
+        """Large messages are read in this one worker thread, one at a time: the memory
+        reading takes is one message's, reused by the next, whatever the number of
+        connections."""
         self._serials = itertools.count(1)
         settings = service.settings
         self._origin = HostOriginMiddleware(
@@ -216,6 +218,7 @@ class BhapticsListener:
         if self._server is not None:
             self._server.close()
             await self._server.wait_closed()
+        self.reader.shutdown(wait=False, cancel_futures=True)
 
     def _handshake(self, connection: ServerConnection, request: Request) -> Response | None:
         path = urlsplit(request.path).path
@@ -327,10 +330,11 @@ class _Connection:
         text = data if isinstance(data, str) else data.decode("utf-8", errors="replace")
         try:
             if len(text) <= INLINE_BYTES:
-                prepared: Prepared = prepare(text)
+                prepared: Prepared = prepare(text, self.session.room_points)
             else:
-                async with self.listener.reading:
-                    prepared = await asyncio.to_thread(prepare, text)
+                prepared = await asyncio.get_running_loop().run_in_executor(
+                    self.listener.reader, prepare, text, self.session.room_points
+                )
         except BadRequest as exc:
             self.listener.count(exc.reason)
             self.listener.log.warning(exc.reason, f"bhaptics: {owner}: {exc}")

@@ -91,9 +91,10 @@ class Prepared:
     projects: dict[int, TactProject | BadRequest]
 
 
-def prepare(text: str) -> Prepared:
-    """Read a message and parse the projects it registers (pure; any thread: a large
-    ``Register`` is read in a worker thread).
+def prepare(text: str, room_points: int = MAX_REGISTERED_POINTS) -> Prepared:
+    """Read a message and parse the projects it registers, as long as their points fit in
+    ``room_points`` (a project past it is not parsed: it could not be registered); pure,
+    any thread: a large ``Register`` is read in a worker thread.
 
     Raises
     ------
@@ -103,11 +104,20 @@ def prepare(text: str) -> Prepared:
     message = parse(text)
     projects: dict[int, TactProject | BadRequest] = {}
     for index, request in enumerate(message.requests):
-        if isinstance(request, Register):
-            try:
-                projects[index] = parse_tact(request.project, source=f"project of {request.key!r}")
-            except PhantomTouchError as exc:
-                projects[index] = BadRequest("bad_request", str(exc))
+        if not isinstance(request, Register):
+            continue
+        if room_points <= 0:
+            projects[index] = BadRequest(
+                "bad_request", "the registered projects of this client's host hold every point"
+            )
+            continue
+        try:
+            project = parse_tact(request.project, source=f"project of {request.key!r}")
+        except PhantomTouchError as exc:
+            projects[index] = BadRequest("bad_request", str(exc))
+        else:
+            projects[index] = project
+            room_points -= project_points(project)
     return Prepared(message, projects)
 
 
@@ -188,6 +198,13 @@ class PlayerSession:
     def owner(self) -> str:
         """The engine owner of what the connection plays."""
         return self.handle.owner
+
+    @property
+    def room_points(self) -> int:
+        """Points a message of the connection may still register (its own registrations
+        may be replaced)."""
+        own = sum(points for _, points in self.registered.values())
+        return self.budget.limit - self.budget.taken(self.handle.principal) + own
 
     # -- what the status shows -----------------------------------------------------------
 
