@@ -20,6 +20,7 @@ This module imports nothing of phantomtouch: it speaks each protocol from its do
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import socket
@@ -30,6 +31,7 @@ from typing import Any, ClassVar
 import httpx
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
 from tests.bhaptics.player_client import crowd_project, frame_submits
@@ -85,8 +87,11 @@ class WsSource:
             return
 
     def send(self, message: dict[str, Any]) -> None:
+        """Send ``message``; nothing once the server closed the connection (a source whose
+        slot went to a newcomer says nothing more)."""
         routed = {**message, "armband": self.armband} if self.armband else message
-        self.ws.send(json.dumps(routed))
+        with contextlib.suppress(ConnectionClosed):
+            self.ws.send(json.dumps(routed))
 
     def hold(self, x_cm: float = 1.9, y_cm: float = 7.2, intensity: float = 1.0) -> None:
         self.send(
@@ -266,6 +271,12 @@ class BhapticsSource:
         self.statuses: list[Any] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
+        self._wait(0, 60.0)  # the status every connection gets first
+
+    def _wait(self, before: int, timeout_s: float) -> None:
+        end = time.monotonic() + timeout_s
+        while len(self.statuses) <= before and time.monotonic() < end:
+            time.sleep(0.005)
 
     def _read(self) -> None:
         try:
@@ -275,22 +286,28 @@ class BhapticsSource:
             return
 
     def send(self, message: dict[str, Any] | str) -> None:
-        self.ws.send(message if isinstance(message, str) else json.dumps(message))
+        """Send ``message``; nothing once the server closed the connection."""
+        with contextlib.suppress(ConnectionClosed):
+            self.ws.send(message if isinstance(message, str) else json.dumps(message))
 
     def ask(self, message: dict[str, Any] | str, timeout_s: float = 60.0) -> None:
         """Send and wait for the status that answers it."""
         before = len(self.statuses)
         self.send(message)
-        end = time.monotonic() + timeout_s
-        while len(self.statuses) <= before and time.monotonic() < end:
-            time.sleep(0.005)
+        self._wait(before, timeout_s)
 
     def hold(self, x_cm: float = 1.9, y_cm: float = 7.2, intensity: float = 1.0) -> None:
-        del x_cm, y_cm  # a game names motors, not places: index 2 and the key's dot
+        """A key and a frame, a minute each. A game names motors, not places: the far half
+        of the band (``y_cm`` >= 7) gets the left arm's motor 2 and the right arm's 0, the
+        near half motor 3 only."""
+        del x_cm
         level = round(100 * intensity)
         length_ms = round(LONG_S * 1000)
+        if y_cm < 7.0:
+            self.ask({"Submit": [bhaptics_frame("held-frame", 3, length_ms, level)]})
+            return
         self.ask({"Register": [{"Key": "held", "Project": dot_project("ForearmR", 0, length_ms)}]})
-        self.send(
+        self.ask(
             {
                 "Submit": [
                     {"Type": "key", "Key": "held"},
@@ -314,7 +331,7 @@ class BhapticsSource:
     def long_score(self) -> None:
         length_ms = round(SCORE_S * 1000)
         self.ask({"Register": [{"Key": "score", "Project": dot_project("ForearmR", 1, length_ms)}]})
-        self.send({"Submit": [{"Type": "key", "Key": "score"}]})
+        self.ask({"Submit": [{"Type": "key", "Key": "score"}]})
 
     def bad_values(self) -> None:
         for bad in BAD_NUMBERS:

@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import json
 import socket
 import time
 from dataclasses import dataclass, field
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+from websockets.sync.client import connect
 
 from tests.attacks.inputs import BIG_POINTS, SCORE_S, OscSource, polyline
 from tests.bhaptics.test_standin_live import RELEASE_S, Capture
@@ -76,6 +78,18 @@ class Stand:
         return Capture(self.wav, self.clock, self.device)
 
 
+def wait_for_armband(ws_url: str, armband: str, timeout_s: float = 60.0) -> None:
+    """Until the gateway's ``welcome`` lists ``armband`` (its node's heartbeat reached it)."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        with connect(ws_url) as ws:
+            ws.send(json.dumps({"type": "hello", "id": 1}))
+            if armband in json.loads(ws.recv(timeout=10.0)).get("armbands", []):
+                return
+        time.sleep(0.25)
+    raise AssertionError(f"the gateway never saw armband {armband!r}")
+
+
 def start_stand(kind: str, folder: Path) -> Stand:
     """Start the processes of input ``kind`` in ``folder``."""
     wav = folder / "band.wav"
@@ -91,6 +105,7 @@ def start_stand(kind: str, folder: Path) -> Stand:
         node = ArmbandNode(folder, cluster, "a1", "lab", output=capture)
         node.start()
         gateway = Gateway(folder, cluster).start()
+        wait_for_armband(gateway.ws_url, "a1")
         return Stand(node, wav, f"{gateway.ws_url} a1", others=[gateway, cluster])
     osc_port = free_udp_port()
     server = LiveServer(
