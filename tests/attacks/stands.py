@@ -46,12 +46,18 @@ class Stand:
 
     def __post_init__(self) -> None:
         self.device = httpx.get(f"{self.url}/device", timeout=10.0).json()
+        self.clock = self.read_clock()
+
+    def read_clock(self) -> dict[str, Any]:
+        """``GET /clock``: the engine's frame count at a server time (this machine's
+        ``time.monotonic()``)."""
         asked_s = time.monotonic()
-        self.clock = httpx.get(f"{self.url}/clock", timeout=10.0).json()
+        clock: dict[str, Any] = httpx.get(f"{self.url}/clock", timeout=10.0).json()
         answered_s = time.monotonic()
-        if not asked_s - 1.0 < self.clock["server_time_s"] < answered_s + 1.0:
+        if not asked_s - 1.0 < clock["server_time_s"] < answered_s + 1.0:
             # a fleet node keeps the fleet's clock: place its frame count on this machine's
-            self.clock["server_time_s"] = (asked_s + answered_s) / 2
+            clock["server_time_s"] = (asked_s + answered_s) / 2
+        return clock
 
     @property
     def url(self) -> str:

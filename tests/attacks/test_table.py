@@ -61,6 +61,9 @@ class Played:
     windows: list[Window] = field(default_factory=list)
     error: BaseException | None = None
     span: tuple[float, float] = (0.0, 0.0)
+    clock: dict[str, Any] = field(default_factory=dict)
+    """``GET /clock`` as the row began: the engine's frames against server time, read
+    again for every row (a loaded machine's audio clock may fall behind the wall's)."""
 
 
 @dataclass
@@ -316,7 +319,7 @@ def table(
     try:
         for row in ROWS:
             settle(stand)
-            result = played[row.id] = Played()
+            result = played[row.id] = Played(clock=stand.read_clock())
             start = time.monotonic()
             try:
                 row.run(stand, inp, result)
@@ -335,6 +338,7 @@ def test_attack(table: Table, row: Row) -> None:
     if played.error is not None:
         raise AssertionError(f"{kind}: {row.id}: the attack could not be played") from played.error
     band = table.band
+    band.clock = played.clock
     start, end = played.span
     whole = band.window(start, end)
     assert np.all(np.isfinite(whole)), f"{kind}: the wearer's band was driven with NaN or Inf"
