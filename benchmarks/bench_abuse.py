@@ -40,6 +40,13 @@ abuse runs in a process of its own, bounded in count and time:
   second for 5 s, each reopened when closed: 408 after ``header_timeout_s``) and ``ping
   frames`` (WebSocket ping control frames at full speed: closed with 1008 like a flood
   of messages);
+- the bHaptics stand-in (:func:`bhaptics_abuses`, :mod:`tests.support.bhaptics_attacks`):
+  ``bh huge message`` (30,000 frame submits in one 10.7 MB message, twice, beside another
+  client's ``/ws`` contact moved at 30 Hz: was it let go of), ``bh idle crowd`` (8 idle
+  connections, then a game: was it served, how many yielded), ``bh stop planning`` (a
+  200-voice key, the stop 0.1 s after its submit: voices on after the stop) and ``bh hung
+  game`` (a game frozen after a 60 s frame and key: contacts and voices on one deadline
+  later);
 - the stop through a crowd (:func:`stop_rows`), against a server limited to 256 open
   files: a 40 s touch plays, 1,000 idle WebSockets and 300 slow-header connections hold
   the connections, and ``phantomtouch stop`` (``stop cli, crowd``) or the token holder's
@@ -88,6 +95,8 @@ from tests.support.abuse_output import (
     voices_on,
     wearer_switches,
 )
+from tests.support.bhaptics_attacks import huge_message as bhaptics_huge_message
+from tests.support.bhaptics_attacks import hung_game, idle_crowd, stop_while_planning
 from tests.support.exhaust import LimitedServer, crowd, endless_header, ping_frames
 from tests.support.fairness import (
     contact_hoard,
@@ -96,7 +105,7 @@ from tests.support.fairness import (
     victim_touch,
     ws_play_flood,
 )
-from tests.support.live_server import LiveServer
+from tests.support.live_server import LiveServer, free_port
 from tests.support.owner_attacks import (
     http_crowd_voices,
     job_history_flood,
@@ -226,6 +235,17 @@ def output_abuses(server: LiveServer) -> dict[str, Callable[[], Any]]:
     }
 
 
+def bhaptics_abuses(server: LiveServer, bh_url: str) -> dict[str, Callable[[], Any]]:
+    """The attacks on the bHaptics stand-in (docs/security.md, "bHaptics")."""
+    url, ws_url = server.url, server.ws_url
+    return {
+        "bh huge message": lambda: in_process(bhaptics_huge_message, url, ws_url, bh_url),
+        "bh idle crowd": lambda: in_process(idle_crowd, url, bh_url),
+        "bh stop planning": lambda: in_process(stop_while_planning, url, bh_url),
+        "bh hung game": lambda: in_process(hung_game, url, bh_url),
+    }
+
+
 STOP_TOKEN = "bench-stop-token-0123456789"
 LONG_TOUCH = {"path": {"kind": "polyline", "points_cm": [[1.9, 6.0]]}, "duration_s": 40.0}
 
@@ -295,11 +315,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=3.0, help="length of the baseline")
     args = parser.parse_args(argv)
     osc_port = free_udp_port()
+    bh_port = free_port()
+    bh_url = f"ws://127.0.0.1:{bh_port}/v2/feedbacks"
     with (
         tempfile.TemporaryDirectory() as folder,
         LiveServer(
             Path(folder) / "p.db",
-            args=("--osc", f"127.0.0.1:{osc_port}"),
+            args=("--osc", f"127.0.0.1:{osc_port}", "--bhaptics", f"127.0.0.1:{bh_port}"),
             env={"PHANTOMTOUCH_WATCHDOG_S": "30"},  # the contact crowd's silent contacts
         ) as server,
     ):
@@ -314,6 +336,7 @@ def main(argv: list[str] | None = None) -> int:
             **owner_abuses(server, osc_port),
             **output_abuses(server),
             **transport_abuses(server),
+            **bhaptics_abuses(server, bh_url),
         }
         inputs = set(input_abuses(server, osc_port)) | set(transport_abuses(server))
         print(

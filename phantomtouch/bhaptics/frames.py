@@ -8,11 +8,15 @@ first Tactosy's 20-motor layout for legacy ``Left``/``Right``), a path point at 
 a game moving a point by re-sending it glides: a new frame of the same key moves the
 contacts its previous frame put down (nothing restarts); contacts it no longer needs lift
 off, new ones touch down. Positions the band does not play (vest, head, hands, feet, an
-arm left out of the map) give no contact. Host, the event loop.
+arm left out of the map) give no contact. The contacts are the connection's, through its
+admission handle: the engine's owner table is the one record of which are down, and they
+end one deadline after the connection's last message, however long the frame. Host, the
+event loop.
 """
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -26,8 +30,8 @@ from phantomtouch.schema.pattern import KeyframePath
 
 if TYPE_CHECKING:
     from phantomtouch.clips.tact_map import ArmMap
-    from phantomtouch.engine import EngineFront
     from phantomtouch.schema import DeviceProfile
+    from phantomtouch.service.admission import Handle
 
 
 @dataclass(frozen=True)
@@ -75,80 +79,54 @@ def frame_levels(frame: Frame) -> list[float]:
     return levels.combined([*((p.x, p.y, p.intensity) for p in frame.paths), *dots])
 
 
-class FramePlayback:
-    """The contacts of one key's frames, held by ``owner`` in the engine's front.
+def frame_prefix(name: str) -> str:
+    """The contact ids of the frames of key ``name`` start with this (a digest of the name:
+    any key gives a short id of its own, and nothing is kept to remember it)."""
+    return "f" + hashlib.blake2b(name.encode("utf-8", "surrogatepass"), digest_size=6).hexdigest()
 
-    Parameters
-    ----------
-    engine : EngineFront
-    owner : str
-        The connection's owner id.
-    prefix : str
-        This key's contact ids start with it (unique within the owner).
-    arm_map : ArmMap
-    deadline_s : float
-        The contacts' deadline in the front (renewed by the connection while it lives).
+
+def frame_contacts(handle: Handle, name: str) -> list[str]:
+    """The contacts the frames of key ``name`` hold down now (the front's owner table)."""
+    prefix = frame_prefix(name) + "-"
+    return [c for c in handle.contacts() if c.startswith(prefix)]
+
+
+def show_frame(handle: Handle, name: str, spots: Sequence[Spot], arm_map: ArmMap) -> None:
+    """Show a frame of key ``name`` at ``spots`` (host, the event loop): the contacts its
+    previous frame holds move, new ones touch down (with the handle's deadline), those left
+    over lift.
+
+    Raises
+    ------
+    PhantomTouchError
+        The admission or the engine refused a contact (the owner's contacts, a busy
+        engine); those placed stay.
     """
+    prefix = frame_prefix(name)
+    held = frame_contacts(handle, name)
+    wanted = [f"{prefix}-{k}" for k in range(len(spots))]
+    for contact in held:
+        if contact not in wanted:
+            handle.up(contact)
+    for contact, spot in zip(wanted, spots, strict=True):
+        if contact in held:
+            try:
+                handle.move(contact, spot.x_cm, spot.y_cm, intensity=spot.intensity)
+                continue
+            except ProtocolError:  # let go of meanwhile (a stop, a deadline): down again
+                pass
+        handle.down(
+            contact,
+            spot.x_cm,
+            spot.y_cm,
+            intensity=spot.intensity,
+            carrier=arm_map.carrier,
+            law=arm_map.law,
+        )
 
-    def __init__(
-        self, engine: EngineFront, owner: str, prefix: str, arm_map: ArmMap, deadline_s: float
-    ) -> None:
-        self.engine = engine
-        self.owner = owner
-        self.prefix = prefix
-        self.arm_map = arm_map
-        self.deadline_s = deadline_s
-        self.frame: Frame | None = None
-        self._held: list[str] = []
 
-    @property
-    def held(self) -> list[str]:
-        """The contact ids this key holds down (as far as it knows)."""
-        return list(self._held)
-
-    def forget(self, contacts: Sequence[str]) -> None:
-        """The front let go of ``contacts``: they are no longer this key's to move or lift."""
-        self._held = [c for c in self._held if c not in contacts]
-
-    def play(self, frame: Frame, spots: Sequence[Spot]) -> None:
-        """Show ``frame`` at ``spots``: move the contacts down, put new ones down, lift
-        those left over (event loop).
-
-        Raises
-        ------
-        PhantomTouchError
-            The engine refused a contact (busy, closed); those placed stay.
-        """
-        self.frame = frame
-        held, self._held = self._held, []
-        for k, spot in enumerate(spots):
-            contact = f"{self.prefix}-{k}"
-            if contact in held:
-                try:
-                    self.engine.contact_move(
-                        self.owner, contact, spot.x_cm, spot.y_cm, intensity=spot.intensity
-                    )
-                    self._held.append(contact)
-                    continue
-                except ProtocolError:  # let go of meanwhile (a stop, a deadline): down again
-                    pass
-            self.engine.contact_down(
-                self.owner,
-                contact,
-                spot.x_cm,
-                spot.y_cm,
-                intensity=spot.intensity,
-                carrier=self.arm_map.carrier,
-                law=self.arm_map.law,
-                deadline_s=self.deadline_s,
-            )
-            self._held.append(contact)
-        for contact in held:
-            if contact not in self._held:
-                self.engine.contact_up(self.owner, contact)
-
-    def stop(self) -> None:
-        """Lift every contact of the key (event loop; never refused)."""
-        held, self._held = self._held, []
-        for contact in held:
-            self.engine.contact_up(self.owner, contact)
+def lift_frame(handle: Handle, name: str) -> None:
+    """Lift every contact of the frames of key ``name`` (host, the event loop; never
+    refused)."""
+    for contact in frame_contacts(handle, name):
+        handle.up(contact)

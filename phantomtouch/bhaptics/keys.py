@@ -1,14 +1,16 @@
 """A ``key`` submit: a registered ``.tact`` project played as engine jobs of the connection.
 
 The project's score (:func:`phantomtouch.clips.tact_score.score`: its voices, each a
-pattern starting at a time, stretched and scaled by ``scaleOption``) is scheduled by the
-service's :func:`~phantomtouch.service.scores.schedule_score`, as ``POST /tact/{name}/play``
-schedules a stored project: every voice a job of the connection's owner, sample-exact,
-under the connection's quota. A voice the engine refuses is left out (the Player plays what
-it can). ``startTimeMillis`` skips the voices that begin before it and starts the rest that
-much sooner. The playback is active (``ActiveKeys``) for the score's length; ``turnOff``
-stops its jobs (each fades out over the release). Host: a worker thread schedules
-(planning takes a millisecond or so per voice), the event loop stops.
+pattern starting at a time, stretched and scaled by ``scaleOption``) is scheduled through
+the connection's admission handle (:meth:`~phantomtouch.service.admission.Handle.play_score`),
+as ``POST /tact/{name}/play`` schedules a stored project: every voice a job of the
+connection's owner, sample-exact, under its quota, and void if a stop came after the message
+that asked for it (also while its voices were planned). A voice the engine refuses is left
+out (the Player plays what it can). ``startTimeMillis`` skips the voices that begin before it
+and starts the rest that much sooner. The playback is active (``ActiveKeys``) for the
+score's length, until a stop; ``turnOff`` stops its jobs (each fades out over the release).
+Host: a worker thread schedules (planning takes a millisecond or so per voice), the event
+loop stops.
 """
 
 from __future__ import annotations
@@ -17,14 +19,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from phantomtouch.clips.tact_score import ScaleOption, motor_levels, score
-from phantomtouch.service.scores import ScoreJobs, schedule_score
 
 if TYPE_CHECKING:
     from phantomtouch.bhaptics.requests import PlayKey
     from phantomtouch.clips.tact import TactProject
     from phantomtouch.clips.tact_map import ArmMap
-    from phantomtouch.engine import EngineFront
-    from phantomtouch.engine.jobs import OwnerQuota
+    from phantomtouch.service.admission import Arrival, Handle
+    from phantomtouch.service.scores import ScoreJobs
 
 
 @dataclass
@@ -36,6 +37,8 @@ class KeyPlayback:
     scale: ScaleOption
     start_ms: int
     scheduled: ScoreJobs
+    stop_count: int
+    """The engine's stop count when it was asked for: a stop since ended it."""
 
     @property
     def ends_s(self) -> float:
@@ -48,21 +51,21 @@ class KeyPlayback:
         stretched_start_ms = self.start_ms * self.scale.duration
         return motor_levels(self.project, elapsed_ms + stretched_start_ms, self.scale)
 
-    def stop(self, engine: EngineFront) -> None:
+    def over(self, now_s: float, stop_count: int) -> bool:
+        """Whether it no longer plays at server time ``now_s``, the engine's stop count
+        being ``stop_count`` (any thread)."""
+        return self.ends_s <= now_s or stop_count != self.stop_count
+
+    def stop(self, handle: Handle) -> None:
         """Stop every job of it (each fades out over the release; never refused)."""
-        self.scheduled.stop(engine)
+        self.scheduled.stop(handle.engine)
 
 
 def start_key(
-    engine: EngineFront,
-    request: PlayKey,
-    project: TactProject,
-    arm_map: ArmMap,
-    *,
-    owner: str,
-    quota: OwnerQuota,
+    handle: Handle, request: PlayKey, project: TactProject, arm_map: ArmMap, *, arrival: Arrival
 ) -> KeyPlayback:
-    """Schedule ``project`` as ``request`` asks (host, a worker thread).
+    """Schedule ``project`` as ``request`` asks, as jobs of ``handle``'s owner (host, a
+    worker thread); a stop after ``arrival`` voids every voice.
 
     Voices the engine refuses (the owner's quota, a full voice budget) are left out and
     logged; the others play.
@@ -70,15 +73,12 @@ def start_key(
     Raises
     ------
     ParameterError
-        The scale is out of range.
+        The scale is out of range, or the score has more voices than one message may start.
     """
     scale = ScaleOption.of(request.intensity_scale, request.duration_scale)
-    scheduled = schedule_score(
-        engine,
-        score(project, arm_map, engine.device, scale),
-        owner=owner,
-        quota=quota,
-        stop_count=engine.stop_count,
+    scheduled = handle.play_score(
+        score(project, arm_map, handle.engine.device, scale),
+        arrival=arrival,
         skip_s=request.start_ms / 1000.0 * scale.duration,
         partial=True,
     )
@@ -88,4 +88,5 @@ def start_key(
         scale=scale,
         start_ms=request.start_ms,
         scheduled=scheduled,
+        stop_count=arrival.stop_count,
     )

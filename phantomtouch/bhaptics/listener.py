@@ -3,27 +3,35 @@
 ``phantomtouch serve --bhaptics 127.0.0.1:15881`` opens a second listener in the service's
 process and event loop (a ``websockets`` server), where games and mods built on the
 bHaptics SDK1 connect to ``ws://127.0.0.1:15881/v2/feedbacks`` (a trailing slash and the
-query ``app_id``/``app_name`` optional; the name becomes part of the connection's owner
-id, ``bhaptics-N-NAME``). Each connection is one :class:`~phantomtouch.bhaptics.session.
-PlayerSession`; every message it sends is answered with a status, and a status is pushed
-whenever what it shows changes (every :data:`TICK_S` at most while something plays).
+query ``app_id``/``app_name`` optional; the name becomes part of the connection's source,
+``N-NAME``, and so of its owner ``bhaptics:HOST/N-NAME``). Each connection is one
+:class:`~phantomtouch.bhaptics.session.PlayerSession`; every message it sends is answered
+with a status, and a status is pushed whenever what it shows changes (every :data:`TICK_S`
+at most while something plays).
 
-What it allows, the same for every client (``docs/security.md``):
+What it allows, the same for every client (``docs/security.md``), all but the first two
+from the ``bhaptics`` row of the admission's policy table
+(:mod:`phantomtouch.service.admission`), through one handle per connection:
 
 - the Host and Origin rule of ``/ws`` (:mod:`phantomtouch.service.origin`): a client
   without ``Origin`` (every game) connects; a web page only from an origin allowed in
   ``cors_origins``; a refused handshake is answered 421 or 403 with the service's error
   body, and counted in ``/metrics``;
 - no RFC 6455 pings (games never answer them), no compression;
-- messages up to :data:`MAX_MESSAGE_BYTES` (a ``Register`` can be megabytes): a larger one
-  closes the connection with 1009 before it is read; the rate limit of ``/ws``
-  (``ws_messages_per_s``, close 1008 when exceeded for a second on end);
-- at most :data:`MAX_CONNECTIONS` connections (1013 beyond), each counted in the
-  service's connection caps, and what each may register is bounded
-  (:mod:`~phantomtouch.bhaptics.session`);
+- messages up to the row's ``max_message_bytes`` (a ``Register`` can be megabytes): a larger
+  one closes the connection with 1009 before it is read; its message rate (close 1008 when
+  exceeded for a second on end); at most ``max_work`` submits in one message (a message
+  asking for more is refused whole, answered with a status); large messages are read in a
+  worker thread one at a time, and a message's requests applied in slices, so that no
+  message holds the event loop;
+- the row's connection slots: when they are full a newcomer is served and the connection
+  silent longest yields (closed 1013), so that no idle crowd locks a game out;
+- what it plays ends one ``deadline_s`` after the client's last message (only a message of
+  the client renews it; the SDKs send one every few seconds), and what each may register
+  is bounded (:mod:`~phantomtouch.bhaptics.session`);
 - a message that cannot be read is answered with a status all the same, logged and counted
-  (``phantomtouch_bhaptics_messages_total{outcome}``); closing, however it happens, releases
-  everything the connection played.
+  (``phantomtouch_bhaptics_messages_total{outcome}``); closing, however it happens, closes
+  the handle, which releases everything the connection played.
 """
 
 from __future__ import annotations
@@ -35,8 +43,8 @@ import json
 import logging
 import re
 import secrets
-import time
 from collections.abc import AsyncIterator, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
@@ -48,19 +56,21 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from phantomtouch.bhaptics.requests import BadRequest
-from phantomtouch.bhaptics.session import PlayerSession, Prepared, prepare
+from phantomtouch.bhaptics.session import PlayerSession, PointBudget, Prepared, prepare
 from phantomtouch.clips.tact_map import ArmMap
-from phantomtouch.errors import DeviceError
+from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.service.admission import Handle, Kind, principal_for
 from phantomtouch.service.errors import (
+    WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
     WS_CLOSE_TRY_AGAIN_LATER,
     ServiceError,
+    TooLargeError,
     describe,
 )
-from phantomtouch.service.flood import FloodGuard, LimitedLog
+from phantomtouch.service.flood import LimitedLog
 from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
 from phantomtouch.service.running import InputHealth
-from phantomtouch.service.scheduling import client_quota
 
 if TYPE_CHECKING:
     from phantomtouch.service.running import Service
@@ -70,10 +80,8 @@ logger = logging.getLogger("phantomtouch.bhaptics")
 PATHS = ("/v2/feedbacks", "/v2/feedbacks/")
 """Where SDK1 clients connect."""
 SDK2_PATHS = ("/v3/feedback", "/v4/feedback", "/v3/feedback/", "/v4/feedback/")
-MAX_MESSAGE_BYTES = 16 << 20
-"""Largest message, bytes: a game registers hundreds of patterns in one."""
-MAX_CONNECTIONS = 8
-"""Connections open at once (a game, a page or two; each reconnect is a new one)."""
+KIND: Kind = "bhaptics"
+"""The stand-in's row of the admission's policy table."""
 TICK_S = 0.02
 """The Player's tick: the status is looked at this often while something plays."""
 SEND_TIMEOUT_S = 10.0
@@ -140,6 +148,12 @@ class BhapticsListener:
         self.log = LimitedLog(logger, LOG_INTERVAL_S)
         """Unreadable messages: one line per reason and interval."""
         self.open = 0
+        self.budget = PointBudget()
+        """Registered points by principal, for every connection."""
+        self.reader = ThreadPoolExecutor(1, thread_name_prefix="bhaptics-read")
+        """Large messages are read in this one worker thread, one at a time: the memory
+        reading takes is one message's, reused by the next, whatever the number of
+        connections."""
         self._serials = itertools.count(1)
         settings = service.settings
         self._origin = HostOriginMiddleware(
@@ -175,7 +189,7 @@ class BhapticsListener:
                 compression=None,
                 ping_interval=None,
                 ping_timeout=None,
-                max_size=MAX_MESSAGE_BYTES,
+                max_size=self.service.admission.policy(KIND).max_message_bytes,
                 max_queue=4,
                 server_header=None,
                 logger=logging.getLogger("phantomtouch.bhaptics.websockets"),
@@ -204,6 +218,7 @@ class BhapticsListener:
         if self._server is not None:
             self._server.close()
             await self._server.wait_closed()
+        self.reader.shutdown(wait=False, cancel_futures=True)
 
     def _handshake(self, connection: ServerConnection, request: Request) -> Response | None:
         path = urlsplit(request.path).path
@@ -231,49 +246,46 @@ class BhapticsListener:
     async def _connection(self, connection: ServerConnection) -> None:
         peer = connection.remote_address
         host = None if peer is None else str(peer[0])
-        if self.open >= MAX_CONNECTIONS:
-            await connection.close(
-                WS_CLOSE_TRY_AGAIN_LATER,
-                f"{self.open} bHaptics clients are connected, the most at once; retry later",
+        name = client_name(connection.request.path if connection.request else "")
+        source = self.source(name)
+        loop = asyncio.get_running_loop()
+
+        def yielded(reason: str) -> None:
+            loop.call_soon_threadsafe(
+                lambda: asyncio.ensure_future(
+                    connection.close(WS_CLOSE_TRY_AGAIN_LATER, reason[:120])
+                )
             )
-            return
-        refused = self.service.connections.enter(host)
-        if refused is not None:
-            await connection.close(WS_CLOSE_TRY_AGAIN_LATER, refused[1])
-            return
+
+        handle = self.service.admission.open(
+            KIND, source, principal=principal_for(KIND, host=host), on_yield=yielded
+        )
         self.open += 1
         try:
-            await _Connection(self, connection).run()
+            await _Connection(self, connection, handle, name).run()
         finally:
             self.open -= 1
-            self.service.connections.leave(host)
 
     def count(self, outcome: str) -> None:
         self.counts[outcome] += 1
 
-    def owner(self, name: str) -> str:
-        """A new connection's owner id: ``bhaptics-N-NAME`` (a random tag without name)."""
-        return f"bhaptics-{next(self._serials)}-{name or secrets.token_hex(3)}"
+    def source(self, name: str) -> str:
+        """A new connection's source name: ``N-NAME`` (a random tag without name)."""
+        return f"{next(self._serials)}-{name or secrets.token_hex(3)}"
 
 
 class _Connection:
     """One client: its messages, its status, its session (the event loop)."""
 
-    def __init__(self, listener: BhapticsListener, connection: ServerConnection) -> None:
+    def __init__(
+        self, listener: BhapticsListener, connection: ServerConnection, handle: Handle, name: str
+    ) -> None:
         self.listener = listener
         self.connection = connection
-        service = listener.service
-        self.engine = service.engine
-        self.limiter = FloodGuard(service.settings.ws_messages_per_s)
-        self.name = client_name(connection.request.path if connection.request else "")
-        self.owner = listener.owner(self.name)
+        self.handle = handle
+        self.name = name
         self.session = PlayerSession(
-            service.engine,
-            listener.arm_map,
-            owner=self.owner,
-            quota=client_quota(service.settings),
-            max_contacts=service.settings.max_contacts_per_connection,
-            changed=self._changed,
+            handle, listener.arm_map, budget=listener.budget, changed=self._changed
         )
         self._wake = asyncio.Event()
         self._sending = asyncio.Lock()
@@ -287,7 +299,7 @@ class _Connection:
             "bhaptics: client %r connected from %s as %s",
             self.name or "(no name)",
             self.connection.remote_address,
-            self.owner,
+            self.handle.owner,
         )
         ticker = asyncio.create_task(self._tick())
         try:
@@ -301,44 +313,51 @@ class _Connection:
             with contextlib.suppress(asyncio.CancelledError):
                 await ticker
             self.session.close()
-            logger.info("bhaptics: %s disconnected", self.owner)
+            logger.info("bhaptics: %s disconnected", self.handle.owner)
 
     async def _message(self, data: str | bytes) -> None:
-        now_s = time.monotonic()
-        self.session.renew()
-        if not self.limiter.admit(now_s):
+        owner = self.handle.owner
+        try:
+            verdict = self.handle.receive(len(data))
+        except TooLargeError as exc:
+            await self.connection.close(WS_CLOSE_MESSAGE_TOO_BIG, str(exc)[:120])
+            return
+        if verdict.arrival is None:
             self.listener.count("flood")
-            if self.limiter.sustained(now_s):
-                await self.connection.close(
-                    WS_CLOSE_POLICY_VIOLATION,
-                    f"over the message rate limit of {self.limiter.rate_per_s:g}/s for "
-                    f"{self.limiter.close_after_s:g} s",
-                )
+            if verdict.sustained:
+                await self.connection.close(WS_CLOSE_POLICY_VIOLATION, verdict.reason[:120])
             return
         text = data if isinstance(data, str) else data.decode("utf-8", errors="replace")
         try:
-            prepared: Prepared = (
-                prepare(text)
-                if len(text) <= INLINE_BYTES
-                else await asyncio.to_thread(prepare, text)
-            )
+            if len(text) <= INLINE_BYTES:
+                prepared: Prepared = prepare(text, self.session.room_points)
+            else:
+                prepared = await asyncio.get_running_loop().run_in_executor(
+                    self.listener.reader, prepare, text, self.session.room_points
+                )
         except BadRequest as exc:
             self.listener.count(exc.reason)
-            self.listener.log.warning(exc.reason, f"bhaptics: {self.owner}: {exc}")
+            self.listener.log.warning(exc.reason, f"bhaptics: {owner}: {exc}")
         else:
             for skipped in prepared.message.skipped:
                 self.listener.count(skipped.reason)
-            refused = await self.session.apply(prepared)
-            self.listener.count("accepted")
-            for _ in range(refused):
+            try:
+                refused = await self.session.apply(prepared, verdict.arrival)
+            except ParameterError as exc:
                 self.listener.count("refused")
+                self.listener.log.warning("refused", f"bhaptics: {owner}: refused {exc}")
+            else:
+                self.listener.count("accepted")
+                for _ in range(refused):
+                    self.listener.count("refused")
         self.session.expire()
         await self._send(self.session.status())
         self._wake.set()  # something may play now: the ticker looks again
 
     async def _tick(self) -> None:
         """Push the status when it changes: on a wake-up, and every :data:`TICK_S` while
-        something plays (renewing the connection's contacts)."""
+        something plays (ending what is over; it renews nothing: only the client's own
+        messages do)."""
         while True:
             if self.session.active:
                 with contextlib.suppress(TimeoutError):
@@ -346,7 +365,6 @@ class _Connection:
             else:
                 await self._wake.wait()
             self._wake.clear()
-            self.session.renew()
             self.session.expire()
             status = self.session.status()
             if status != self._last:

@@ -1,17 +1,22 @@
 """One client of the stand-in: its registrations, what it plays, and its status.
 
 A :class:`PlayerSession` is what the Player keeps for one connection. It holds the
-projects the client registered (bounded: :data:`MAX_KEYS` keys and
-:data:`MAX_REGISTERED_POINTS` points in all, beyond which a registration is refused and
-logged; the status, which lists only what is registered, says so to the client) and the
-playbacks active by name (a key, or its ``altKey``): frames as live contacts
+projects the client registered (bounded: :data:`MAX_KEYS` keys per connection, and
+:data:`MAX_REGISTERED_POINTS` points for every connection of one principal together,
+:class:`PointBudget`; beyond them a registration is refused and logged, and the status,
+which lists only what is registered, says so to the client) and the playbacks active by
+name (a key, or its ``altKey``): frames as live contacts
 (:mod:`~phantomtouch.bhaptics.frames`), keys as jobs (:mod:`~phantomtouch.bhaptics.keys`).
 A submit under a name that is active replaces it (a frame of the same key glides).
 
-It keeps no contact or job state of its own beyond their ids: the engine's front holds
-the contacts (owner :attr:`owner`, deadline :data:`CONTACT_DEADLINE_S`, renewed while the
-connection lives) and the jobs; :meth:`close` releases the owner, whatever happened.
-Every method runs on the event loop, except :func:`prepare` (any thread).
+Everything it plays goes through the connection's admission handle
+(:class:`~phantomtouch.service.admission.Handle`): the engine's owner table is the one
+record of its contacts, the handle's policy row gives their deadline (renewed only by a
+message of the client), the contacts one connection holds, the quota, and the stop voiding;
+:meth:`close` closes the handle, which releases the contacts and stops the jobs, whatever
+happened. What it keeps is what the status shows: the registrations, and each active
+playback's name with its frame or job ids. Every method runs on the event loop, except
+:func:`prepare` (any thread).
 """
 
 from __future__ import annotations
@@ -23,10 +28,17 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from phantomtouch.bhaptics import levels
-from phantomtouch.bhaptics.frames import FramePlayback, frame_levels, frame_spots
+from phantomtouch.bhaptics.frames import (
+    frame_levels,
+    frame_prefix,
+    frame_spots,
+    lift_frame,
+    show_frame,
+)
 from phantomtouch.bhaptics.keys import KeyPlayback, start_key
 from phantomtouch.bhaptics.requests import (
     BadRequest,
+    Frame,
     Message,
     PlayFrame,
     PlayKey,
@@ -43,20 +55,22 @@ from phantomtouch.service.flood import LimitedLog
 
 if TYPE_CHECKING:
     from phantomtouch.clips.tact_map import ArmMap
-    from phantomtouch.engine import EngineFront
-    from phantomtouch.engine.jobs import OwnerQuota
+    from phantomtouch.service.admission import Arrival, Handle
 
 logger = logging.getLogger("phantomtouch.bhaptics")
 
 MAX_KEYS = 2048
 """Projects one connection may hold registered (a game registers a few hundred)."""
 MAX_REGISTERED_POINTS = 250_000
-"""Dot points and path keyframes of one connection's projects, all together (a game's few
-hundred arm and vest patterns hold some tens of thousands)."""
-CONTACT_DEADLINE_S = 1.0
-"""A frame's contacts are released this long after the connection stops renewing them."""
+"""Dot points and path keyframes of the registered projects of one principal's connections,
+all together (a game's few hundred arm and vest patterns hold some tens of thousands; more
+connections buy no more)."""
 MAX_SPOTS_PER_FRAME = 4
 """Phantoms one frame may place (its strongest path points and its dots' centroid)."""
+MAX_ACTIVE_FRAMES = 64
+"""Frames one connection shows at once under distinct keys; a newer one ends the oldest."""
+SLICE_REQUESTS = 8
+"""Requests of one message applied before the event loop is let go of for a moment."""
 LOG_INTERVAL_S = 10.0
 
 
@@ -77,9 +91,10 @@ class Prepared:
     projects: dict[int, TactProject | BadRequest]
 
 
-def prepare(text: str) -> Prepared:
-    """Read a message and parse the projects it registers (pure; any thread: a large
-    ``Register`` is read in a worker thread).
+def prepare(text: str, room_points: int = MAX_REGISTERED_POINTS) -> Prepared:
+    """Read a message and parse the projects it registers, as long as their points fit in
+    ``room_points`` (a project past it is not parsed: it could not be registered); pure,
+    any thread: a large ``Register`` is read in a worker thread.
 
     Raises
     ------
@@ -89,12 +104,52 @@ def prepare(text: str) -> Prepared:
     message = parse(text)
     projects: dict[int, TactProject | BadRequest] = {}
     for index, request in enumerate(message.requests):
-        if isinstance(request, Register):
-            try:
-                projects[index] = parse_tact(request.project, source=f"project of {request.key!r}")
-            except PhantomTouchError as exc:
-                projects[index] = BadRequest("bad_request", str(exc))
+        if not isinstance(request, Register):
+            continue
+        if room_points <= 0:
+            projects[index] = BadRequest(
+                "bad_request", "the registered projects of this client's host hold every point"
+            )
+            continue
+        try:
+            project = parse_tact(request.project, source=f"project of {request.key!r}")
+        except PhantomTouchError as exc:
+            projects[index] = BadRequest("bad_request", str(exc))
+        else:
+            projects[index] = project
+            room_points -= project_points(project)
     return Prepared(message, projects)
+
+
+class PointBudget:
+    """The registered points of each principal, against :data:`MAX_REGISTERED_POINTS`
+    (the event loop)."""
+
+    def __init__(self, limit: int = MAX_REGISTERED_POINTS) -> None:
+        self.limit = limit
+        self._taken: dict[str, int] = {}
+
+    def taken(self, principal: str) -> int:
+        """Points ``principal``'s connections hold registered."""
+        return self._taken.get(principal, 0)
+
+    def change(self, principal: str, points: int) -> None:
+        """``principal`` holds ``points`` more (fewer, when negative)."""
+        total = self._taken.get(principal, 0) + points
+        if total > 0:
+            self._taken[principal] = total
+        else:
+            self._taken.pop(principal, None)
+
+
+@dataclass(frozen=True)
+class Shown:
+    """A frame on show: the frame, when it ends (server time, s), the stop count it came
+    under (a stop since ended it)."""
+
+    frame: Frame
+    ends_s: float
+    stop_count: int
 
 
 class PlayerSession:
@@ -102,16 +157,13 @@ class PlayerSession:
 
     Parameters
     ----------
-    engine : EngineFront
+    handle : Handle
+        The connection's admission handle (its owner, policy row and quota).
     arm_map : ArmMap
         Where arm positions land on the band (the positions it plays are the connected
         ones).
-    owner : str
-        The engine owner of the connection's contacts and jobs.
-    quota : OwnerQuota
-        The connection's share of voices and seconds.
-    max_contacts : int
-        Contacts the connection may hold down at once.
+    budget : PointBudget
+        The registered points of every principal, shared by the listener's connections.
     changed : callable
         Called (on the event loop) when what the status shows changed other than by a
         message: a playback ended, the engine let go of something.
@@ -119,42 +171,47 @@ class PlayerSession:
 
     def __init__(
         self,
-        engine: EngineFront,
+        handle: Handle,
         arm_map: ArmMap,
         *,
-        owner: str,
-        quota: OwnerQuota,
-        max_contacts: int,
+        budget: PointBudget,
         changed: Callable[[], None],
     ) -> None:
-        self.engine = engine
+        self.handle = handle
+        self.engine = handle.engine
         self.arm_map = arm_map
-        self.owner = owner
-        self.quota = quota
-        self.max_contacts = max_contacts
+        self.budget = budget
         self.positions = list(arm_map.arms)
         self.registered: dict[str, tuple[TactProject, int]] = {}
-        self.registered_points = 0
         self.keys: dict[str, KeyPlayback] = {}
-        self.frames: dict[str, FramePlayback] = {}
-        self._frame_ends: dict[str, asyncio.TimerHandle] = {}
-        self._prefixes: dict[str, str] = {}
+        self.frames: dict[str, Shown] = {}
         self._changed = changed
-        self._stops = engine.stop_count
         self._log = LimitedLog(logger, LOG_INTERVAL_S)
         loop = asyncio.get_running_loop()
 
         def released(owner: str, contacts: tuple[str, ...], reason: str) -> None:
-            loop.call_soon_threadsafe(self._released, contacts)
+            loop.call_soon_threadsafe(self._changed)
 
-        self._unsubscribe = engine.subscribe_released(released, owner)
+        handle.on_released(released)
+
+    @property
+    def owner(self) -> str:
+        """The engine owner of what the connection plays."""
+        return self.handle.owner
+
+    @property
+    def room_points(self) -> int:
+        """Points a message of the connection may still register (its own registrations
+        may be replaced)."""
+        own = sum(points for _, points in self.registered.values())
+        return self.budget.limit - self.budget.taken(self.handle.principal) + own
 
     # -- what the status shows -----------------------------------------------------------
 
     @property
     def active(self) -> list[str]:
-        """Names playing now (a key playback ends by time; see :meth:`expire`)."""
-        return [*self.keys, *(k for k, p in self.frames.items() if p.frame is not None)]
+        """Names playing now (a playback ends by time or a stop; see :meth:`expire`)."""
+        return [*self.keys, *self.frames]
 
     def status(self) -> dict[str, object]:
         """The status object now (:mod:`~phantomtouch.bhaptics.status`)."""
@@ -169,61 +226,80 @@ class PlayerSession:
         for playback in self.keys.values():
             for position, found in playback.levels(now_s).items():
                 add(position, found)
-        for frames in self.frames.values():
-            if frames.frame is not None:
-                add(frames.frame.position, frame_levels(frames.frame))
+        for shown in self.frames.values():
+            add(shown.frame.position, frame_levels(shown.frame))
         return status_message(
             registered=self.registered, active=self.active, positions=self.positions, levels=arms
         )
 
     def expire(self) -> bool:
-        """Forget key playbacks that are over, and everything if the engine was stopped
-        (``POST /stop``) since; whether anything changed."""
-        if self.engine.stop_count != self._stops:
-            self._stops = self.engine.stop_count
-            changed = bool(self.keys or self.frames)
+        """End what is over: key playbacks and frames past their end or a stop (``POST
+        /stop``), and, once the client was silent for its deadline, everything it plays
+        (its contacts the front releases by itself; its jobs are stopped here, reason
+        ``watchdog``). Whether anything changed."""
+        now_s = self.engine.server_time_s()
+        stops = self.handle.arrival().stop_count
+        if now_s - self.handle.last_heard_s > self.handle.policy.deadline_s and self.active:
+            self.handle.stop_touches("watchdog")
             self.keys.clear()
             for name in list(self.frames):
-                self._end_frame(name, lift=False)
-            return changed
-        now_s = self.engine.server_time_s()
-        over = [name for name, playback in self.keys.items() if playback.ends_s <= now_s]
+                self._end_frame(name)
+            return True
+        over = [name for name, playback in self.keys.items() if playback.over(now_s, stops)]
         for name in over:
             del self.keys[name]
-        return bool(over)
-
-    def renew(self) -> None:
-        """The connection is alive: push its contacts' deadlines on."""
-        self.engine.renew_owner(self.owner)
+        ended = [
+            name
+            for name, shown in self.frames.items()
+            if shown.ends_s <= now_s or shown.stop_count != stops
+        ]
+        for name in ended:
+            self._end_frame(name)
+        return bool(over or ended)
 
     # -- requests -------------------------------------------------------------------------
 
-    async def apply(self, prepared: Prepared) -> int:
-        """Apply a message's requests in order; one that is refused (not registered, over
-        a bound, refused by the engine) is logged and the rest still applied. Returns how
-        many were refused."""
+    async def apply(self, prepared: Prepared, arrival: Arrival) -> int:
+        """Apply a message's requests in order, letting the event loop go every
+        :data:`SLICE_REQUESTS`; one that is refused (not registered, over a bound, refused
+        by the admission or the engine) is logged and the rest still applied. Returns how
+        many were refused.
+
+        Raises
+        ------
+        ParameterError
+            The message asks for more submits than one message may (the handle's
+            ``max_work``); none of them is applied.
+        """
         for skipped in prepared.message.skipped:
             self._log.warning(skipped.reason, f"bhaptics: {self.owner}: skipped {skipped}")
+        requests = prepared.message.requests
+        submits = sum(not isinstance(request, Register) for request in requests)
+        self.handle.check_work(submits, field="Submit")
         refused = 0
-        for index, request in enumerate(prepared.message.requests):
+        for index, request in enumerate(requests):
+            if index and index % SLICE_REQUESTS == 0:
+                await asyncio.sleep(0)
             try:
-                await self._apply(request, prepared.projects.get(index))
+                await self._apply(request, prepared.projects.get(index), arrival)
             except PhantomTouchError as exc:
                 refused += 1
                 self._log.warning("refused", f"bhaptics: {self.owner}: refused {exc}")
         return refused
 
-    async def _apply(self, request: Request, project: TactProject | BadRequest | None) -> None:
+    async def _apply(
+        self, request: Request, project: TactProject | BadRequest | None, arrival: Arrival
+    ) -> None:
         if isinstance(request, Register):
             self._register(request.key, project)
         elif isinstance(request, PlayFrame):
-            self._play_frame(request)
+            self._play_frame(request, arrival)
         elif isinstance(request, PlayKey):
-            await self._play_key(request)
+            await self._play_key(request, arrival)
         elif isinstance(request, TurnOff):
             self._stop(request.key)
         elif isinstance(request, TurnOffAll):
-            for name in [*self.keys, *self.frames]:
+            for name in self.active:
                 self._stop(name)
 
     def _register(self, key: str, project: TactProject | BadRequest | None) -> None:
@@ -231,93 +307,75 @@ class PlayerSession:
             raise BadRequest("bad_request", f"Register {key!r}: {project}")
         points = project_points(project)
         _, old_points = self.registered.get(key, (None, 0))
-        total = self.registered_points - old_points + points
         if key not in self.registered and len(self.registered) >= MAX_KEYS:
             raise BadRequest(
                 "bad_request",
                 f"Register {key!r}: {MAX_KEYS} keys are registered, the most one connection "
                 "may hold; not registered",
             )
-        if total > MAX_REGISTERED_POINTS:
+        principal = self.handle.principal
+        if self.budget.taken(principal) - old_points + points > self.budget.limit:
             raise BadRequest(
                 "bad_request",
-                f"Register {key!r}: its {points} points would take the connection's "
-                f"registered projects past {MAX_REGISTERED_POINTS} points; not registered",
+                f"Register {key!r}: its {points} points would take the registered projects of "
+                f"this client's host past {self.budget.limit} points; not registered",
             )
         self.registered[key] = (project, points)
-        self.registered_points = total
+        self.budget.change(principal, points - old_points)
 
-    async def _play_key(self, request: PlayKey) -> None:
+    async def _play_key(self, request: PlayKey, arrival: Arrival) -> None:
         found = self.registered.get(request.key)
         if found is None:
             raise BadRequest("bad_request", f"key={request.key!r} is not registered")
         self._stop(request.name)
         playback = await asyncio.to_thread(
-            start_key,
-            self.engine,
-            request,
-            found[0],
-            self.arm_map,
-            owner=self.owner,
-            quota=self.quota,
+            start_key, self.handle, request, found[0], self.arm_map, arrival=arrival
         )
         self._stop(request.name)  # one submitted meanwhile under the same name
-        self.keys[request.name] = playback
+        if self.handle.closed:
+            playback.stop(self.handle)
+        elif not playback.over(self.engine.server_time_s(), self.handle.arrival().stop_count):
+            self.keys[request.name] = playback
 
-    def _play_frame(self, request: PlayFrame) -> None:
+    def _play_frame(self, request: PlayFrame, arrival: Arrival) -> None:
         name = request.key
         if name in self.keys:
-            self.keys.pop(name).stop(self.engine)
+            self.keys.pop(name).stop(self.handle)
         frame = request.frame
         if frame.empty:
             self._stop(name)
             return
-        playback = self.frames.get(name)
-        if playback is None:
-            prefix = self._prefixes.setdefault(name, f"f{len(self._prefixes)}")
-            playback = FramePlayback(
-                self.engine, self.owner, prefix, self.arm_map, CONTACT_DEADLINE_S
-            )
-            self.frames[name] = playback
-        held_elsewhere = len(self.engine.contacts_of(self.owner)) - len(playback.held)
-        room = min(MAX_SPOTS_PER_FRAME, self.max_contacts - held_elsewhere)
-        spots = frame_spots(frame, self.arm_map, self.engine.device, max_spots=max(0, room))
-        timer = self._frame_ends.pop(name, None)
-        if timer is not None:
-            timer.cancel()
-        self._frame_ends[name] = asyncio.get_running_loop().call_later(
-            frame.duration_ms / 1000.0, self._frame_over, name
+        if name not in self.frames and len(self.frames) >= MAX_ACTIVE_FRAMES:
+            self._end_frame(next(iter(self.frames)))
+        self.frames.pop(name, None)  # newest last: the oldest is the first to end
+        self.frames[name] = Shown(
+            frame, self.engine.server_time_s() + frame.duration_ms / 1000.0, arrival.stop_count
         )
-        playback.play(frame, spots)
+        held = self.handle.contacts()
+        mine = sum(contact.startswith(_prefix(name)) for contact in held)
+        room = min(MAX_SPOTS_PER_FRAME, self.handle.policy.contacts_per_owner - len(held) + mine)
+        spots = frame_spots(frame, self.arm_map, self.engine.device, max_spots=max(0, room))
+        show_frame(self.handle, name, spots, self.arm_map)
 
-    def _frame_over(self, name: str) -> None:
-        self._end_frame(name, lift=True)
-        self._changed()
-
-    def _end_frame(self, name: str, *, lift: bool) -> None:
-        playback = self.frames.pop(name, None)
-        timer = self._frame_ends.pop(name, None)
-        if timer is not None:
-            timer.cancel()
-        if playback is not None and lift:
-            playback.stop()
+    def _end_frame(self, name: str) -> None:
+        if self.frames.pop(name, None) is not None:
+            lift_frame(self.handle, name)
 
     def _stop(self, name: str) -> None:
         playback = self.keys.pop(name, None)
         if playback is not None:
-            playback.stop(self.engine)
-        self._end_frame(name, lift=True)
-
-    def _released(self, contacts: tuple[str, ...]) -> None:
-        """The front let go of contacts of the connection (a stop, a deadline, a quota):
-        forget them (event loop)."""
-        for playback in self.frames.values():
-            playback.forget(contacts)
-        self._changed()
+            playback.stop(self.handle)
+        self._end_frame(name)
 
     def close(self) -> None:
-        """Stop everything the connection plays and release its owner (never refused)."""
-        self._unsubscribe()
-        for name in [*self.keys, *self.frames]:
-            self._stop(name)
-        self.engine.release_owner(self.owner, "closed")
+        """Close the handle: every contact of the connection released, every job stopped,
+        also one planned meanwhile; its registrations' points given back (never refused)."""
+        self.handle.close()
+        self.keys.clear()
+        self.frames.clear()
+        self.budget.change(self.handle.principal, -sum(p for _, p in self.registered.values()))
+        self.registered.clear()
+
+
+def _prefix(name: str) -> str:
+    return frame_prefix(name) + "-"

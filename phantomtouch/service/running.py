@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING
 from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.service.admission import Admission, policy_table
-from phantomtouch.service.connections import ConnectionCaps
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.metrics import Metrics
 from phantomtouch.service.settings import Settings
@@ -57,9 +56,6 @@ class Service:
     admission: Admission = field(init=False)
     """The one admission every input opens its sources at (:mod:`~phantomtouch.service.
     admission`), with the service's policy table."""
-    connections: ConnectionCaps = field(init=False)
-    """The bHaptics stand-in's connection caps, until it opens its sources at the
-    admission."""
     _renders: threading.BoundedSemaphore = field(init=False)
     inputs: dict[str, Callable[[], InputHealth]] = field(default_factory=dict, init=False)
     """Supervised inputs by name (``osc``): how each fares, for ``/health``."""
@@ -73,9 +69,6 @@ class Service:
         self.arm_map = ArmMap.load(map_path) if map_path is not None else ArmMap()
         self.admission = Admission(self.engine, policy_table(self.settings), store=self.store)
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
-        self.connections = ConnectionCaps(
-            self.settings.max_ws_connections, self.settings.max_ws_connections_per_address
-        )
 
     @property
     def plans(self) -> PlanCache:

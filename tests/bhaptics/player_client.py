@@ -52,6 +52,52 @@ def check_status(status: Any) -> dict[str, Any]:
     return status
 
 
+def crowd_project(voices: int, length_ms: int, step_ms: int) -> dict[str, Any]:
+    """A Designer project of ``voices`` path feedbacks (one voice each, study §3.1) on the
+    left arm, each moving along the band for ``length_ms`` with a keyframe every ``step_ms``:
+    a key the stand-in takes a while to plan."""
+    times = range(0, length_ms + 1, step_ms)
+    feedback = [
+        {
+            "movingPattern": "CONST_SPEED",
+            "playbackType": "NONE",
+            "visible": True,
+            "pointList": [
+                {"time": t, "x": (k % 10) / 10, "y": t / length_ms, "intensity": 0.3} for t in times
+            ],
+        }
+        for k in range(voices)
+    ]
+    mode = {
+        "mode": "PATH_MODE",
+        "dotMode": {"dotConnected": False, "feedback": []},
+        "pathMode": {"feedback": feedback},
+    }
+    effect = {"startTime": 0, "offsetTime": length_ms, "modes": {"ForearmL": mode}}
+    return {
+        "layout": {"type": "Tactosy2", "layouts": {}},
+        "tracks": [{"enable": True, "effects": [effect]}],
+    }
+
+
+def frame_submits(count: int) -> str:
+    """One message asking for ``count`` frame submits, each under a key of its own."""
+    submit = [
+        {
+            "Type": "frame",
+            "Key": f"spam-{k}",
+            "Frame": {
+                "Position": "ForearmL",
+                "DotPoints": [{"Index": (k + i) % 20, "Intensity": 40} for i in range(8)],
+                "PathPoints": [],
+                "DurationMillis": 100,
+            },
+        }
+        for k in range(count)
+    ]
+    return json.dumps({"Register": [], "Submit": submit})
+
+
 class PlayerClient:
     """One connection; every status received is kept with its arrival time
     (``time.monotonic()``, the clock the server's ``/clock`` reports)."""
@@ -94,13 +140,13 @@ class PlayerClient:
             )
             return self.statuses[-1][1]
 
-    async def send(self, message: Any) -> tuple[float, dict[str, Any]]:
+    async def send(self, message: Any, timeout_s: float = 10.0) -> tuple[float, dict[str, Any]]:
         """Send one message (an object as JSON, a string as it is) and wait for the status
-        that answers it; (the send time, that status)."""
+        that answers it (at most ``timeout_s``); (the send time, that status)."""
         before = len(self.statuses)
         sent_s = time.monotonic()
         await self.ws.send(message if isinstance(message, str) else json.dumps(message))
-        status = await self.wait_statuses(before + 1)
+        status = await self.wait_statuses(before + 1, timeout_s)
         return sent_s, status
 
     def active_between(self, start_s: float, end_s: float) -> set[str]:
