@@ -14,17 +14,31 @@ from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.errors import ProtocolError
 from phantomtouch.fleet.remote_contacts import RemoteContacts
 from phantomtouch.schema import DeviceProfile
+from phantomtouch.service.admission import Admission, policy_table
 from phantomtouch.service.errors import QuotaError, TooLargeError
+from phantomtouch.service.settings import Settings
 
 DEVICE = DeviceProfile.default()
 WATCHDOG_S = 0.5
 
 
+SILENT: list[str] = []
+
+
 @pytest.fixture
 def captured() -> Iterator[tuple[RemoteContacts, CaptureSink]]:
+    """The node's remote contacts over an admission whose fleet row has a short deadline, two
+    contacts per owner and 1 KiB messages, on an engine pulled by hand."""
     sink = CaptureSink(DEVICE)
     with Engine(DEVICE, sink) as engine:
-        yield RemoteContacts(engine, watchdog_s=WATCHDOG_S, max_contacts=2, max_bytes=1024), sink
+        table = policy_table(Settings())
+        table["fleet"] = table["fleet"].replace(
+            deadline_s=WATCHDOG_S, contacts_per_owner=2, max_message_bytes=1024
+        )
+        SILENT.clear()
+        contacts = RemoteContacts(Admission(engine, table), on_silent=SILENT.append)
+        yield contacts, sink
+        contacts.close()
 
 
 def _message(**fields: object) -> bytes:
@@ -35,23 +49,25 @@ def test_a_remote_down_drives_the_actuator_under_it_only(
     captured: tuple[RemoteContacts, CaptureSink],
 ) -> None:
     contacts, sink = captured
-    assert (
-        contacts.handle(_message(type="down", contact="f", x_cm=0.0, y_cm=4.8), now_s=0.0) == "down"
-    )
+    assert contacts.handle(_message(type="down", contact="f", x_cm=0.0, y_cm=4.8)) == "down"
     recording = sink.pull(8)
     assert np.any(recording[:, 1])  # actuator 2 sits at (0, 4.8) cm on channel 2
     assert not np.any(np.delete(recording, 1, axis=1))
 
 
-def test_a_silent_owner_is_released_by_the_watchdog(
+def test_a_silent_owner_is_released_by_its_deadline(
     captured: tuple[RemoteContacts, CaptureSink],
 ) -> None:
     contacts, sink = captured
-    start_s = time.monotonic()  # the engine's deadlines run on this clock
-    contacts.handle(_message(type="down", contact="f", x_cm=1.9, y_cm=7.2), now_s=start_s)
-    contacts.handle(_message(type="ping"), now_s=start_s + 0.4)
-    assert contacts.release_silent(now_s=start_s + 0.4 + WATCHDOG_S / 2) == []
-    assert contacts.release_silent(now_s=start_s + 0.4 + WATCHDOG_S * 1.01) == ["gw-1"]
+    engine = contacts.admission.engine
+    contacts.handle(_message(type="down", contact="f", x_cm=1.9, y_cm=7.2))
+    contacts.handle(_message(type="ping"))  # a message of the owner's own renews it
+    heard_s = time.monotonic()
+    engine.release_expired(now_s=heard_s + WATCHDOG_S / 2)
+    assert contacts.count() == 1 and SILENT == []
+    engine.release_expired(now_s=time.monotonic() + WATCHDOG_S * 1.01)
+    assert contacts.count() == 0
+    assert SILENT == ["gw-1"]
     sink.pull(40)  # the release ramp
     assert not np.any(sink.pull(2))
 
@@ -77,16 +93,16 @@ def test_a_bad_message_is_refused_and_plays_nothing(
 ) -> None:
     contacts, sink = captured
     with pytest.raises(error):
-        contacts.handle(data, now_s=0.0)
+        contacts.handle(data)
     assert not np.any(sink.pull(4))
 
 
 def test_the_contact_quota_holds_per_owner(captured: tuple[RemoteContacts, CaptureSink]) -> None:
     contacts, _ = captured
     for contact in ("a", "b"):
-        contacts.handle(_message(type="down", contact=contact, x_cm=1.0, y_cm=1.0), now_s=0.0)
-    with pytest.raises(QuotaError, match="max_contacts_per_connection=2"):
-        contacts.handle(_message(type="down", contact="c", x_cm=1.0, y_cm=1.0), now_s=0.0)
+        contacts.handle(_message(type="down", contact=contact, x_cm=1.0, y_cm=1.0))
+    with pytest.raises(QuotaError, match="fleet contacts per owner=2"):
+        contacts.handle(_message(type="down", contact="c", x_cm=1.0, y_cm=1.0))
     other = json.dumps({"owner": "gw-2", "type": "down", "contact": "c", "x_cm": 1, "y_cm": 1})
-    assert contacts.handle(other.encode(), now_s=0.0) == "down"
+    assert contacts.handle(other.encode()) == "down"
     assert contacts.count() == 3
