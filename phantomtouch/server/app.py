@@ -35,6 +35,7 @@ from phantomtouch.server.routes import (
     ws,
 )
 from phantomtouch.service import errors
+from phantomtouch.service.arrivals import ArrivalMiddleware
 from phantomtouch.service.bodies import merge_components
 from phantomtouch.service.engine_access import describe_output, open_engine
 from phantomtouch.service.lane import running_lane
@@ -166,7 +167,7 @@ def create_app(settings: Settings | None = None, *, attach: Sequence[Attachment]
     if web.STATIC_DIR.is_dir():
         app.mount("/static", StaticFiles(directory=web.STATIC_DIR), name="static")
     refusals = Refusals(metrics)
-    # Outermost last: metrics, Host and Origin, CORS, token, content type, body size.
+    # Outermost last: arrival, metrics, Host and Origin, CORS, token, content type, body size.
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
     app.add_middleware(ContentTypeMiddleware, refusals=refusals)
     if settings.token is not None:
@@ -185,5 +186,6 @@ def create_app(settings: Settings | None = None, *, attach: Sequence[Attachment]
         refusals=refusals,
     )
     app.add_middleware(MetricsMiddleware, metrics=metrics)
+    app.add_middleware(ArrivalMiddleware)  # outermost: a request's arrival, before its body
     app.openapi = _openapi(app, settings)  # type: ignore[method-assign]
     return app

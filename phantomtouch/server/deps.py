@@ -7,8 +7,9 @@ from typing import TYPE_CHECKING, Annotated, Any
 from fastapi import Depends, Path, Query
 from starlette.requests import HTTPConnection
 
-from phantomtouch.service.admission import Handle, principal_for
+from phantomtouch.service.admission import Arrival, Handle, principal_for
 from phantomtouch.service.app_state import app_state
+from phantomtouch.service.arrivals import request_arrival
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.models import PATTERN_NAME_REGEX, name_rules
 from phantomtouch.service.running import Service
@@ -48,7 +49,14 @@ async def get_source(connection: HTTPConnection) -> Handle:
     return handle
 
 
+async def get_arrival(connection: HTTPConnection) -> Arrival:
+    """When the request arrived, with the engine's stop count as its headers came (a stop
+    sent after it voids what it asks for, however long its body takes to read)."""
+    return request_arrival(connection)
+
+
 ServiceDep = Annotated[Service, Depends(get_service)]
+ArrivalDep = Annotated[Arrival, Depends(get_arrival)]
 SourceDep = Annotated[Handle, Depends(get_source)]
 if TYPE_CHECKING:
     EngineDep = EngineFront

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, Response
 from pydantic import TypeAdapter
 
 from phantomtouch.schema import TouchPattern
-from phantomtouch.server.deps import PatternNameParam, ServiceDep, SourceDep, StoreDep
+from phantomtouch.server.deps import ArrivalDep, PatternNameParam, ServiceDep, SourceDep, StoreDep
 from phantomtouch.server.routes import library
 from phantomtouch.server.routes.touch import SCHEDULES
 from phantomtouch.service import scheduling
@@ -73,7 +73,8 @@ async def play_pattern(
     service: ServiceDep,
     timing: Annotated[PlayRequest, Depends(play_body)],
     source: SourceDep,
+    arrival: ArrivalDep,
 ) -> JobAccepted:
     """As `POST /touch` with `{"stored": name}`; optional `start_in_ms` or `start_at_s`."""
     request = NamedTouch(stored=name, start_in_ms=timing.start_in_ms, start_at_s=timing.start_at_s)
-    return await source.play(request, arrival=source.arrival())
+    return await source.play(request, arrival=arrival)

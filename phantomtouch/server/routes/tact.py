@@ -14,7 +14,14 @@ from fastapi import APIRouter, Depends, Path, Request, Response
 from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
-from phantomtouch.server.deps import LimitParam, OffsetParam, ServiceDep, SourceDep, StoreDep
+from phantomtouch.server.deps import (
+    ArrivalDep,
+    LimitParam,
+    OffsetParam,
+    ServiceDep,
+    SourceDep,
+    StoreDep,
+)
 from phantomtouch.server.routes import library
 from phantomtouch.service import tact_library
 from phantomtouch.service.bodies import strict_body
@@ -140,10 +147,9 @@ async def play_tact(
     service: ServiceDep,
     request: Annotated[TactPlay, Depends(play_body)],
     source: SourceDep,
+    arrival: ArrivalDep,
 ) -> ScoreAccepted:
     """Schedule every voice of the project as a job of this client, sample-exact to each
     other: whole, or not at all (429 `quota`). Optional `intensity_scale` and
     `duration_scale` (bHaptics' `scaleOption`), `start_in_ms` or `start_at_s`."""
-    return await tact_library.play_tact(
-        service, name, request, handle=source, arrival=source.arrival()
-    )
+    return await tact_library.play_tact(service, name, request, handle=source, arrival=arrival)

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 from fastapi import APIRouter, Depends, Request
 from fastapi import Path as PathParam
 
-from phantomtouch.server.deps import EngineDep, ServiceDep, SourceDep
+from phantomtouch.server.deps import ArrivalDep, EngineDep, ServiceDep, SourceDep
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import NotFoundError, responses
 
@@ -49,14 +49,14 @@ SCHEDULES: dict[str, Any] = {
 
 
 @router.post("/touch", **SCHEDULES, summary="Play a touch", openapi_extra=TOUCH_BODY_OPENAPI)
-async def post_touch(request: TouchBody, source: SourceDep) -> JobAccepted:
+async def post_touch(request: TouchBody, source: SourceDep, arrival: ArrivalDep) -> JobAccepted:
     """Schedule a touch: a whole pattern, a preset with overrides, or a stored pattern.
 
     Without `start_in_ms` or `start_at_s` it starts as soon as possible. 404 names an
     unknown preset or stored pattern; 503 `busy` means the engine's queue is full; 429
     `quota` that this client holds its share of the voices (the message names the quota).
     """
-    return await source.play(request, arrival=source.arrival())
+    return await source.play(request, arrival=arrival)
 
 
 @router.post(
