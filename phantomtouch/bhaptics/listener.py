@@ -6,10 +6,10 @@ bHaptics SDK1 connect to ``ws://127.0.0.1:15881/v2/feedbacks`` (a trailing slash
 query ``app_id``/``app_name`` optional; the name becomes part of the connection's source,
 ``N-NAME``, and so of its owner ``bhaptics:HOST/N-NAME``). Web games built on tact-js 2.x
 connect to ``/v4/feedback`` on the same port: each such connection is served as SDK2 inside
-its envelope (:mod:`~phantomtouch.bhaptics.v4_connection`); what follows is SDK1's. Each connection is one
-:class:`~phantomtouch.bhaptics.session.PlayerSession`; every message it sends is answered
-with a status, and a status is pushed whenever what it shows changes (every :data:`TICK_S`
-at most while something plays).
+its envelope (:mod:`~phantomtouch.bhaptics.v4_connection`); what follows is SDK1's. Each
+SDK1 connection is one :class:`~phantomtouch.bhaptics.session.PlayerSession`; every
+message it sends is answered with a status, and a status is pushed whenever what it shows
+changes (every :data:`TICK_S` at most while something plays).
 
 What it allows, the same for every client (``docs/security.md``), all but the first two
 from the ``bhaptics`` row of the admission's policy table
