@@ -4,10 +4,12 @@
 process and event loop (a ``websockets`` server), where games and mods built on the
 bHaptics SDK1 connect to ``ws://127.0.0.1:15881/v2/feedbacks`` (a trailing slash and the
 query ``app_id``/``app_name`` optional; the name becomes part of the connection's source,
-``N-NAME``, and so of its owner ``bhaptics:HOST/N-NAME``). Each connection is one
-:class:`~phantomtouch.bhaptics.session.PlayerSession`; every message it sends is answered
-with a status, and a status is pushed whenever what it shows changes (every :data:`TICK_S`
-at most while something plays).
+``N-NAME``, and so of its owner ``bhaptics:HOST/N-NAME``). Web games built on tact-js 2.x
+connect to ``/v4/feedback`` on the same port: each such connection is served as SDK2 inside
+its envelope (:mod:`~phantomtouch.bhaptics.v4_connection`); what follows is SDK1's. Each
+SDK1 connection is one :class:`~phantomtouch.bhaptics.session.PlayerSession`; every
+message it sends is answered with a status, and a status is pushed whenever what it shows
+changes (every :data:`TICK_S` at most while something plays).
 
 What it allows, the same for every client (``docs/security.md``), all but the first two
 from the ``bhaptics`` row of the admission's policy table
@@ -57,6 +59,8 @@ from websockets.http11 import Request, Response
 
 from phantomtouch.bhaptics.requests import BadRequest
 from phantomtouch.bhaptics.session import PlayerSession, PointBudget, Prepared, prepare
+from phantomtouch.bhaptics.v4_connection import PATHS as V4_PATHS
+from phantomtouch.bhaptics.v4_connection import V4Connections
 from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.errors import DeviceError, ParameterError
 from phantomtouch.service.admission import Handle, Kind, principal_for
@@ -79,7 +83,7 @@ logger = logging.getLogger("phantomtouch.bhaptics")
 
 PATHS = ("/v2/feedbacks", "/v2/feedbacks/")
 """Where SDK1 clients connect."""
-SDK2_PATHS = ("/v3/feedback", "/v4/feedback", "/v3/feedback/", "/v4/feedback/")
+V3_PATHS = ("/v3/feedback", "/v3/feedback/")
 KIND: Kind = "bhaptics"
 """The stand-in's row of the admission's policy table."""
 TICK_S = 0.02
@@ -163,6 +167,7 @@ class BhapticsListener:
             refusals=Refusals(service.metrics),
         )
         self._server: Server | None = None
+        self._v4: V4Connections | None = None
 
     @property
     def address(self) -> tuple[str, int]:
@@ -180,6 +185,7 @@ class BhapticsListener:
             The address cannot be listened on (the Player itself may hold it).
         """
         host, port = self.host, self.port
+        self._v4 = await asyncio.to_thread(V4Connections, self.service, self.counts)
         try:
             self._server = await serve(
                 self._connection,
@@ -222,9 +228,12 @@ class BhapticsListener:
 
     def _handshake(self, connection: ServerConnection, request: Request) -> Response | None:
         path = urlsplit(request.path).path
-        if path not in PATHS:
-            message = f"path={path!r}: the bHaptics stand-in serves SDK1 on /v2/feedbacks"
-            if path in SDK2_PATHS:
+        if path not in PATHS and path not in V4_PATHS:
+            message = (
+                f"path={path!r}: the bHaptics stand-in serves SDK1 on /v2/feedbacks and "
+                "SDK2 v4 on /v4/feedback"
+            )
+            if path in V3_PATHS:
                 message += "; SDK2 v3 is served over TLS on its own port (--bhaptics-sdk2)"
             return connection.respond(404, message + "\n")
         scope = {
@@ -246,7 +255,16 @@ class BhapticsListener:
     async def _connection(self, connection: ServerConnection) -> None:
         peer = connection.remote_address
         host = None if peer is None else str(peer[0])
-        name = client_name(connection.request.path if connection.request else "")
+        path = connection.request.path if connection.request else ""
+        if urlsplit(path).path in V4_PATHS:
+            assert self._v4 is not None
+            self.open += 1
+            try:
+                await self._v4.serve(connection, host)
+            finally:
+                self.open -= 1
+            return
+        name = client_name(path)
         source = self.source(name)
         loop = asyncio.get_running_loop()
 

@@ -13,9 +13,11 @@ from phantomtouch.schema import DeviceProfile
 from phantomtouch.service.admission import Admission, policy_table
 from phantomtouch.service.errors import RateLimitedError
 from phantomtouch.service.metrics import Metrics
+from phantomtouch.service.sdk2_workspaces import Workspaces
 from phantomtouch.service.settings import Settings
 from phantomtouch.service.store import PatternStore
 from phantomtouch.service.wearers import ActiveWearer
+from phantomtouch.service.workspace_library import stored_deployment
 
 if TYPE_CHECKING:
     import asyncio
@@ -56,6 +58,8 @@ class Service:
     admission: Admission = field(init=False)
     """The one admission every input opens its sources at (:mod:`~phantomtouch.service.
     admission`), with the service's policy table."""
+    workspaces: Workspaces = field(init=False)
+    """Every bHaptics SDK2 workspace's events, shared by the v3 and v4 connections."""
     _renders: threading.BoundedSemaphore = field(init=False)
     inputs: dict[str, Callable[[], InputHealth]] = field(default_factory=dict, init=False)
     """Supervised inputs by name (``osc``): how each fares, for ``/health``."""
@@ -68,6 +72,7 @@ class Service:
         map_path = self.settings.bhaptics_map
         self.arm_map = ArmMap.load(map_path) if map_path is not None else ArmMap()
         self.admission = Admission(self.engine, policy_table(self.settings), store=self.store)
+        self.workspaces = Workspaces(lambda workspace: stored_deployment(self.store, workspace))
         self._renders = threading.BoundedSemaphore(self.settings.max_concurrent_renders)
 
     @property

@@ -86,7 +86,12 @@ def test_who_may_connect(standin: tuple[LiveServer, int]) -> None:
     assert evil.http_status == 403
     assert "forbidden_origin" in evil.response_head + evil.buffer.decode(errors="replace")
     evil.close()
-    for path in ("/v4/feedback", "/feedbacks", "/"):
+    web_game = RawSocket(
+        HOST, port, "/v4/feedback?workspace_id=w", {"Origin": "https://evil.example"}
+    )
+    assert web_game.http_status == 403
+    web_game.close()
+    for path in ("/v3/feedback", "/feedbacks", "/"):
         other = RawSocket(HOST, port, path)
         assert other.http_status == 404, path
         other.close()

@@ -7,7 +7,13 @@
 //           "aesKeyHex": the AES key, "rsaBits": the server key's size}
 //   node v4_client.mjs open AES_KEY_HEX SDKDATA_JSON
 //       -> the plaintext
+//   node --experimental-websocket v4_client.mjs relay URL
+//       a game over a real connection: answers the server's ServerKey with its own key,
+//       then seals each stdin line {"send": PLAINTEXT} (or sends {"raw": TEXT} as it is,
+//       closes on {"close": true}), and writes one JSON line per event to stdout:
+//       {"keyed": RSA_BITS}, {"message": PLAINTEXT}, {"closed": CODE}
 
+import { createInterface } from "node:readline";
 import {
   constants,
   createCipheriv,
@@ -16,6 +22,53 @@ import {
   publicEncrypt,
   randomBytes,
 } from "node:crypto";
+
+function clientKey(serverKeyText) {
+  const serverKey = JSON.parse(serverKeyText);
+  if (serverKey.Type !== "ServerKey") throw new Error(`expected ServerKey, got ${serverKey.Type}`);
+  const publicKey = createPublicKey({
+    key: Buffer.from(serverKey.Key, "base64"),
+    format: "der",
+    type: "spki",
+  });
+  const aesKey = randomBytes(32);
+  const sealedKey = publicEncrypt(
+    { key: publicKey, padding: constants.RSA_PKCS1_PADDING },
+    aesKey,
+  );
+  return {
+    aesKey,
+    message: JSON.stringify({ Type: "SdkClientKey", Key: sealedKey.toString("base64") }),
+    rsaBits: publicKey.asymmetricKeyDetails.modulusLength,
+  };
+}
+
+function relay(url) {
+  const say = (event) => process.stdout.write(JSON.stringify(event) + "\n");
+  const socket = new WebSocket(url);
+  let aesKey = null;
+  socket.onmessage = (event) => {
+    const text = String(event.data);
+    if (aesKey === null) {
+      const key = clientKey(text);
+      aesKey = key.aesKey;
+      socket.send(key.message);
+      say({ keyed: key.rsaBits });
+      return;
+    }
+    say({ message: open(aesKey, text) });
+  };
+  socket.onclose = (event) => {
+    say({ closed: event.code });
+    process.exit(0);
+  };
+  createInterface({ input: process.stdin }).on("line", (line) => {
+    const order = JSON.parse(line);
+    if (order.close) socket.close(1000);
+    else if (order.raw !== undefined) socket.send(order.raw);
+    else socket.send(seal(aesKey, order.send));
+  });
+}
 
 function seal(aesKey, plaintext) {
   const nonce = randomBytes(12);
@@ -38,27 +91,18 @@ function open(aesKey, messageText) {
 const [mode, ...rest] = process.argv.slice(2);
 if (mode === "hello") {
   const [serverKeyText, plaintext] = rest;
-  const serverKey = JSON.parse(serverKeyText);
-  if (serverKey.Type !== "ServerKey") throw new Error(`expected ServerKey, got ${serverKey.Type}`);
-  const publicKey = createPublicKey({
-    key: Buffer.from(serverKey.Key, "base64"),
-    format: "der",
-    type: "spki",
-  });
-  const aesKey = randomBytes(32);
-  const sealedKey = publicEncrypt(
-    { key: publicKey, padding: constants.RSA_PKCS1_PADDING },
-    aesKey,
-  );
+  const key = clientKey(serverKeyText);
   process.stdout.write(JSON.stringify({
-    clientKey: JSON.stringify({ Type: "SdkClientKey", Key: sealedKey.toString("base64") }),
-    data: seal(aesKey, plaintext),
-    aesKeyHex: aesKey.toString("hex"),
-    rsaBits: publicKey.asymmetricKeyDetails.modulusLength,
+    clientKey: key.message,
+    data: seal(key.aesKey, plaintext),
+    aesKeyHex: key.aesKey.toString("hex"),
+    rsaBits: key.rsaBits,
   }));
 } else if (mode === "open") {
   const [aesKeyHex, messageText] = rest;
   process.stdout.write(open(Buffer.from(aesKeyHex, "hex"), messageText));
+} else if (mode === "relay") {
+  relay(rest[0]);
 } else {
   throw new Error(`unknown mode ${mode}`);
 }

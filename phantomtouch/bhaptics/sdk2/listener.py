@@ -40,7 +40,6 @@ from websockets.http11 import Request, Response
 
 from phantomtouch.bhaptics.sdk2.session import Sdk2Session
 from phantomtouch.bhaptics.sdk2.tls import server_context
-from phantomtouch.bhaptics.sdk2.workspaces import Workspaces
 from phantomtouch.errors import DeviceError
 from phantomtouch.service.admission import Kind, principal_for
 from phantomtouch.service.errors import (
@@ -53,7 +52,7 @@ from phantomtouch.service.errors import (
 )
 from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
 from phantomtouch.service.running import InputHealth
-from phantomtouch.service.workspace_library import stored_deployment
+from phantomtouch.service.sdk2_workspaces import Workspaces
 
 if TYPE_CHECKING:
     from phantomtouch.service.running import Service
@@ -267,9 +266,7 @@ async def attach(service: Service) -> AsyncIterator[None]:
     SDK2 left out; a busy address asked for with ``--bhaptics-sdk2`` stops the start."""
     address = service.settings.bhaptics_sdk2_address
     assert address is not None
-    listener = Sdk2Listener(
-        service, address, Workspaces(lambda workspace: stored_deployment(service.store, workspace))
-    )
+    listener = Sdk2Listener(service, address, service.workspaces)
     try:
         await listener.start()
     except DeviceError as exc:

@@ -39,11 +39,11 @@ from phantomtouch.bhaptics.sdk2.wire import (
     parse,
     server_message,
 )
-from phantomtouch.bhaptics.sdk2.workspaces import Workspaces
 from phantomtouch.clips.deployment import event_score, parse_deployment
 from phantomtouch.clips.tact_score import ScaleOption, frame_score
 from phantomtouch.errors import PhantomTouchError
 from phantomtouch.service.flood import LimitedLog
+from phantomtouch.service.sdk2_workspaces import Workspaces
 
 if TYPE_CHECKING:
     from phantomtouch.clips.tact_map import ArmMap
