@@ -73,6 +73,7 @@ from phantomtouch.service.errors import (
     describe,
 )
 from phantomtouch.service.flood import LimitedLog
+from phantomtouch.service.memory import give_back_memory
 from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
 from phantomtouch.service.running import InputHealth
 
@@ -330,8 +331,11 @@ class _Connection:
             ticker.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await ticker
+            registered = bool(self.session.registered)
             self.session.close()
             logger.info("bhaptics: %s disconnected", self.handle.owner)
+            if registered:  # its projects are freed: hand their memory back
+                await asyncio.to_thread(give_back_memory)
 
     async def _message(self, data: str | bytes) -> None:
         owner = self.handle.owner
