@@ -283,7 +283,9 @@ async def scenario(url: str, ws_base: str, marks: dict[str, Any]) -> None:
                 ]
             }
         )
-        await asyncio.sleep(0.7)
+        # past the vest's 0.7 s window with room to spare: a frame is shown at the next
+        # block, which the capture output holds ahead of the wall clock by its buffer
+        await asyncio.sleep(1.0)
 
         # the SDKs' 4 s ping: an empty frame on FootL, answered with a status
         _, status = await cpp.send(
