@@ -331,10 +331,30 @@ def table(
     yield Table(stand, inp, played, band)
 
 
+NOT_YET: dict[tuple[str, str], str] = {
+    (
+        "fleet",
+        "crowd of minted identities: another client is felt throughout",
+    ): "every fleet publisher is one principal (fleet:nats): the node cannot tell the "
+    "gateway's clients apart, so one host's 64 gateway connections share with the victim",
+    (
+        "fleet",
+        "message carrying huge work: another client is felt throughout",
+    ): "while the gateway relays a message asking for huge work, another client's stroke "
+    "drops out in 7 to 12 of about 105 blocks of 10 ms (the gateway's WebSocket is not over "
+    "the admission yet)",
+}
+"""Rows an input does not hold yet, and why: each is expected to fail (strictly: a row that
+starts to hold fails here until it is taken off this list)."""
+
+
 @pytest.mark.parametrize("row", ROWS, ids=[row.id for row in ROWS])
-def test_attack(table: Table, row: Row) -> None:
+def test_attack(table: Table, row: Row, request: pytest.FixtureRequest) -> None:
     played = table.played[row.id]
     kind = table.inp.kind
+    gap = NOT_YET.get((kind, row.id))
+    if gap is not None:
+        request.applymarker(pytest.mark.xfail(reason=f"{kind}: {gap}", strict=True))
     if played.error is not None:
         raise AssertionError(f"{kind}: {row.id}: the attack could not be played") from played.error
     band = table.band
