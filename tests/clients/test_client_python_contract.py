@@ -34,6 +34,7 @@ from phantomtouch_client import (
     Wearer,
     WearerRun,
     WearerSummary,
+    WorkspaceSummary,
     _calls,
 )
 from pydantic import BaseModel
@@ -61,6 +62,7 @@ ANSWERS: dict[str, type[BaseModel]] = {
     "WearerInfo": WearerSummary,
     "WearerRun": WearerRun,
     "TactInfo": TactSummary,
+    "WorkspaceInfo": WorkspaceSummary,
     "ScoreAccepted": ScoreStarted,
 }
 
@@ -86,6 +88,8 @@ def test_the_client_calls_every_route_of_the_openapi_document(server: LiveServer
         "reference_channel": 1,
         "trials": [],
         "project": {"project": {"tracks": []}},
+        "workspace_id": "W",
+        "deployment": {"hapticMappings": []},
     }
     calls = []
     for _, build in inspect.getmembers(_calls, inspect.isfunction):

@@ -64,6 +64,7 @@ from phantomtouch_client.models import (
     WearerRun,
     WearerSummary,
     Welcome,
+    WorkspaceSummary,
     touch_request,
 )
 from phantomtouch_client.pattern import HapticClip, TouchPattern
@@ -124,6 +125,7 @@ __all__ = [
     "WearerRun",
     "WearerSummary",
     "Welcome",
+    "WorkspaceSummary",
     "__version__",
     "touch_request",
     "ws_url",

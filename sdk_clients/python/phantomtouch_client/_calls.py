@@ -33,6 +33,7 @@ from phantomtouch_client.models import (
     Wearer,
     WearerRun,
     WearerSummary,
+    WorkspaceSummary,
     pattern_json,
     timing,
 )
@@ -226,6 +227,34 @@ def put_tact(name: str, project: Mapping[str, Any]) -> Call[TactSummary]:
 
 def delete_tact(name: str) -> Call[None]:
     return Call("DELETE", f"/tact/{_segment(name)}", _nothing)
+
+
+_WORKSPACE_SUMMARIES = TypeAdapter(list[WorkspaceSummary])
+
+
+def _workspace_summaries(response: httpx.Response) -> list[WorkspaceSummary]:
+    try:
+        return _WORKSPACE_SUMMARIES.validate_python(_decode(response))
+    except ValidationError as exc:
+        raise TransportError(f"{response.request.url.path}: unexpected answer: {exc}") from exc
+
+
+def workspaces(limit: int = 100, offset: int = 0) -> Call[list[WorkspaceSummary]]:
+    page = {"limit": int(limit), "offset": int(offset)}
+    return Call("GET", "/bhaptics/workspaces", _workspace_summaries, params=page)
+
+
+def get_workspace(workspace_id: str) -> Call[Any]:
+    return Call("GET", f"/bhaptics/workspaces/{_segment(workspace_id)}", _decode)
+
+
+def put_workspace(workspace_id: str, deployment: Mapping[str, Any]) -> Call[WorkspaceSummary]:
+    path = f"/bhaptics/workspaces/{_segment(workspace_id)}"
+    return Call("PUT", path, _model(WorkspaceSummary), dict(deployment))
+
+
+def delete_workspace(workspace_id: str) -> Call[None]:
+    return Call("DELETE", f"/bhaptics/workspaces/{_segment(workspace_id)}", _nothing)
 
 
 def play_tact(

@@ -33,6 +33,7 @@ from phantomtouch_client.models import (
     Wearer,
     WearerRun,
     WearerSummary,
+    WorkspaceSummary,
     touch_request,
 )
 from phantomtouch_client.pattern import HapticClip, TouchPattern
@@ -229,6 +230,26 @@ class AsyncClient(ClientBase):
     async def put_tact(self, name: str, project: Mapping[str, Any]) -> TactSummary:
         """``PUT /tact/{name}``: store (or replace) a ``.tact`` file's JSON."""
         return await self._run(_calls.put_tact(name, project))
+
+    async def workspaces(self, *, limit: int = 100, offset: int = 0) -> list[WorkspaceSummary]:
+        """``GET /bhaptics/workspaces``: one page of the stored SDK2 workspaces (games'
+        deployments), sorted by id."""
+        return await self._run(_calls.workspaces(limit, offset))
+
+    async def get_workspace(self, workspace_id: str) -> Any:
+        """``GET /bhaptics/workspaces/{workspace_id}``: the deployment's JSON as stored."""
+        return await self._run(_calls.get_workspace(workspace_id))
+
+    async def put_workspace(
+        self, workspace_id: str, deployment: Mapping[str, Any]
+    ) -> WorkspaceSummary:
+        """``PUT /bhaptics/workspaces/{workspace_id}``: store (or replace) a game's
+        deployment; a game connecting with this id plays its events by name."""
+        return await self._run(_calls.put_workspace(workspace_id, deployment))
+
+    async def delete_workspace(self, workspace_id: str) -> None:
+        """``DELETE /bhaptics/workspaces/{workspace_id}``."""
+        await self._run(_calls.delete_workspace(workspace_id))
 
     async def delete_tact(self, name: str) -> None:
         """``DELETE /tact/{name}``."""

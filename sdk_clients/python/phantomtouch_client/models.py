@@ -115,6 +115,18 @@ class TactSummary(_Answer):
     effects: int
 
 
+class WorkspaceSummary(_Answer):
+    """One stored bHaptics SDK2 workspace: a game's deployment, summarised."""
+
+    workspace_id: str
+    game: str
+    version: int | None
+    bytes: int
+    events: int
+    arm_events: int
+    longest_ms: int
+
+
 class ScoreStarted(_Answer):
     """A stored ``.tact`` project scheduled: one job per voice, from ``start_frame``."""
 
