@@ -28,7 +28,7 @@ def raise_thread_priority(name: str, priority: int = INPUT_PRIORITY) -> bool:
     Called by the thread itself, first thing (any input's thread). ``name`` says whose
     thread it is in the log line of a refusal.
     """
-    if sys.platform != "linux":
+    if sys.platform != "linux" or not hasattr(os, "sched_setscheduler"):
         return False
     try:
         policy = os.SCHED_RR | os.SCHED_RESET_ON_FORK
