@@ -337,12 +337,6 @@ NOT_YET: dict[tuple[str, str], str] = {
         "crowd of minted identities: another client is felt throughout",
     ): "every fleet publisher is one principal (fleet:nats): the node cannot tell the "
     "gateway's clients apart, so one host's 64 gateway connections share with the victim",
-    (
-        "fleet",
-        "message carrying huge work: another client is felt throughout",
-    ): "while the gateway relays a message asking for huge work, another client's stroke "
-    "drops out in 7 to 12 of about 105 blocks of 10 ms (the gateway's WebSocket is not over "
-    "the admission yet)",
 }
 """Rows an input does not hold yet, and why: each is expected to fail (strictly: a row that
 starts to hold fails here until it is taken off this list)."""
