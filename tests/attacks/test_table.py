@@ -52,6 +52,11 @@ class Window:
     channel: tuple[float, float] | None = None
     """Only the channel loudest in this span counts (where another client's touch was
     felt on its own), None: any."""
+    clocks: tuple[dict[str, Any], dict[str, Any]] | None = None
+    """``GET /clock`` read as the span began and as it ended, None: the row's. A loaded
+    machine may stall the engine for a moment, and its frames then fall behind the wall's
+    (by up to half a second in a row under two CPU hogs): a span read by one clock would
+    be placed on frames rendered before or after it. Each end is placed by its own."""
 
 
 @dataclass
@@ -174,10 +179,12 @@ def minted_identities(stand: Stand, inp: Input, played: Played) -> None:
     t = time.monotonic()
     lasts_s = min(2.3, inp.silence_ends_s - 0.2) if inp.kind == "rest" else 2.3
     end = t + lasts_s
+    began = stand.read_clock()
     while time.monotonic() < end:
         for source in (victim, *crowd):
             source.renew()
         time.sleep(0.1)
+    ended = stand.read_clock()
     victim.close()
     for attacker in crowd:
         attacker.close()
@@ -188,6 +195,7 @@ def minted_identities(stand: Stand, inp: Input, played: Played) -> None:
             True,
             f"another client's touch while one host held {len(crowd)} sources",
             own,
+            (began, ended),
         )
     )
 
@@ -220,12 +228,14 @@ def huge_work(stand: Stand, inp: Input, played: Played) -> None:
     own = alone(stand, WsInput(stand.ws_url))
     mover = Mover(stand)
     time.sleep(0.5)
+    began = stand.read_clock()
     t = time.monotonic()
     source = inp.source()
     for _ in range(2):
         source.huge()
     time.sleep(1.0)
     end = time.monotonic()
+    ended = stand.read_clock()
     source.close()
     released = mover.close()
     assert not released, f"the other client's hand was let go of: {released}"
@@ -236,6 +246,7 @@ def huge_work(stand: Stand, inp: Input, played: Played) -> None:
             True,
             "another client's hand, stroking while one message asked for huge work",
             own,
+            (began, ended),
         )
     )
 
@@ -361,11 +372,18 @@ def test_attack(table: Table, row: Row, request: pytest.FixtureRequest) -> None:
         f"{kind}: the band was driven past its ceiling {ceiling}"
     )
     for window in played.windows:
-        block = band.window(window.start_s, window.end_s)
+        loudest: int | None = None
         if window.channel is not None:
+            band.clock = played.clock
             alone_block = band.window(*window.channel)
             assert alone_block.size, f"{kind}: the capture holds nothing of the touch alone"
             loudest = int(np.argmax(np.sum(alone_block**2, axis=0)))
+        began, ended = (played.clock, played.clock) if window.clocks is None else window.clocks
+        band.clock = began
+        first = band.index(window.start_s)
+        band.clock = ended
+        block = band.samples[first : band.index(window.end_s)]
+        if loudest is not None:
             block = block[:, [loudest]]
         if window.felt:
             frames = max(1, round(BLOCK_S * band.rate_hz))
