@@ -71,6 +71,9 @@ class Scheduler:
         not finite (NaN, Inf; its block is left out of the mix), and one over its render
         budget (``VOICE_BUDGET_BLOCKS``) in ``OVERRUN_BLOCKS`` blocks in a row (``clocked``
         only: blocks pulled by hand have no deadline).
+    future : FutureMix
+        The prerendered voices that sound, summed ahead of the blocks that play them
+        (:mod:`phantomtouch.engine.future_mix`); the other voices are rendered each block.
     events : deque of tuple
         Reports the control side drains: ``("start", voice, frame, late)``,
         ``("release", voice, frame)``, ``("end", voice, frame)`` (silent from ``frame``),
