@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from phantomtouch.engine.checks import check_int, check_range
+from phantomtouch.engine.future_mix import AHEAD_FRAMES
 from phantomtouch.engine.voices import RingPool, Voice, Workspace
 from phantomtouch.renderer.carriers import CarrierSource, SineSource, sine_blocks
 
@@ -103,6 +104,13 @@ class ContactVoice(Voice):
         self._unit = down.unit_gains
         self._gains = self._target = down.unit_gains * np.float32(down.amplitude)
         self._carrier_frames = 0
+        self.carrier_ahead = (
+            np.empty(AHEAD_FRAMES, dtype=np.float32) if isinstance(source, SineSource) else None
+        )
+        """A sine carrier's next samples, computed ahead by :class:`ContactMix` (None for
+        any other carrier): frames ``ahead_first .. ahead_first + ahead_frames``."""
+        self.ahead_first = 0
+        self.ahead_frames = 0
         self._down_burst = down.burst
         self._bursts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
 
@@ -276,7 +284,7 @@ class ContactMix:
         self.block_frames = int(block_frames)
         self.channels = int(channels)
         self._ramp = self._ramp_for(self.block_frames)
-        self._index = np.arange(self.block_frames, dtype=np.float64)
+        self._index = np.arange(max(AHEAD_FRAMES, self.block_frames), dtype=np.float64)
         self._total = np.empty((self.block_frames, self.channels))
         self._ramped = np.empty((self.block_frames, self.channels))
         self._allocate(int(capacity))
@@ -291,8 +299,9 @@ class ContactMix:
         self._sine_rows = np.empty(capacity, dtype=np.intp)
         self._sine_starts = np.empty(capacity)
         self._sine_cycles = np.empty(capacity)
-        self._sines = np.empty((capacity, self.block_frames), dtype=np.float32)
-        self._phases = np.empty((2, capacity, self.block_frames))
+        ahead = self._index.shape[0]
+        self._sines = np.empty((capacity, ahead), dtype=np.float32)
+        self._phases = np.empty((2, capacity, ahead))
 
     def render(
         self, contacts: list[ContactVoice], block_start: int, frames: int, work: Workspace
@@ -301,25 +310,32 @@ class ContactMix:
         ``block_start``), shape (frames, channels), float64, valid until the next call;
         their carriers move on by the block (real time). :meth:`ContactVoice.end_block`
         ends each one's block. The sine carriers among them are computed together
-        (:func:`~phantomtouch.renderer.carriers.sine_blocks`), the others one by one."""
+        (:func:`~phantomtouch.renderer.carriers.sine_blocks`) ``AHEAD_FRAMES`` at a time
+        into each contact's :attr:`~ContactVoice.carrier_ahead`, the same samples as block
+        by block (the phase of frame ``n`` is ``n`` times the cycles per frame whatever the
+        block), whenever one of them runs out; the others one by one."""
         count = len(contacts)
         if count > self.capacity:  # more contacts than ever before: room for twice as many
             self._allocate(2 * count)
         self.count = count
         carriers = self.carriers[:count, :frames]
         starts, deltas = self.starts[:count], self.deltas[:count]
-        sine_rows, sine_starts, sine_cycles = self._sine_rows, self._sine_starts, self._sine_cycles
+        sine_rows, sine_starts = self._sine_rows, self._sine_starts
         sines = 0
         moved = False
         for row, voice in enumerate(contacts):
-            source = voice.source
-            if isinstance(source, SineSource):
-                sine_rows[sines] = row
-                sine_starts[sines] = voice.advance_carrier(frames)
-                sine_cycles[sines] = source.cycles_per_frame
-                sines += 1
+            ahead = voice.carrier_ahead
+            if ahead is not None:
+                first = voice.advance_carrier(frames)
+                at = first - voice.ahead_first
+                if at + frames <= voice.ahead_frames:
+                    carriers[row] = ahead[at : at + frames]
+                else:
+                    sine_rows[sines] = row
+                    sine_starts[sines] = first
+                    sines += 1
             else:
-                carriers[row] = source.block(voice.advance_carrier(frames), frames)
+                carriers[row] = voice.source.block(voice.advance_carrier(frames), frames)
             gains, target = voice.gains, voice.target
             starts[row] = gains
             if target is gains:
@@ -328,23 +344,40 @@ class ContactMix:
                 np.subtract(target, gains, out=deltas[row], dtype=np.float64)
                 moved = True
         if sines:
-            blocks = sine_blocks(
-                sine_starts[:sines],
-                sine_cycles[:sines],
-                self._index[:frames],
-                out=self._sines[:sines, :frames],
-                scratch=(self._phases[0, :sines, :frames], self._phases[1, :sines, :frames]),
-            )
-            if sines == count:  # every carrier a sine: most
-                carriers[...] = blocks
-            else:
-                carriers[sine_rows[:sines]] = blocks
+            self._sines_ahead(contacts, sines, frames)
         for row, voice in enumerate(contacts):
             env = voice.envelope(block_start, frames, work)
             if env is not None:
                 carriers[row] *= env
         self.moved = moved
         return self._sum(carriers, starts, deltas, frames)
+
+    def _sines_ahead(self, contacts: list[ContactVoice], sines: int, frames: int) -> None:
+        """Compute the next ``AHEAD_FRAMES`` of the ``sines`` sine carriers that ran out
+        (rows :attr:`_sine_rows`, first frames :attr:`_sine_starts`) together, and take
+        this block's from them."""
+        rows = self._sine_rows[:sines].tolist()
+        voices = [contacts[row] for row in rows]
+        cycles = self._sine_cycles[:sines]
+        for k, voice in enumerate(voices):
+            source = voice.source
+            assert isinstance(source, SineSource)
+            cycles[k] = source.cycles_per_frame
+        blocks = sine_blocks(
+            self._sine_starts[:sines],
+            cycles,
+            self._index,
+            out=self._sines[:sines],
+            scratch=(self._phases[0, :sines], self._phases[1, :sines]),
+        )
+        for k, (row, voice) in enumerate(zip(rows, voices, strict=True)):
+            ahead = voice.carrier_ahead
+            assert ahead is not None
+            kept = min(ahead.shape[0], blocks.shape[1])  # a block longer than it: none
+            ahead[:kept] = blocks[k, :kept]
+            voice.ahead_first = int(self._sine_starts[k])
+            voice.ahead_frames = kept
+            self.carriers[row, :frames] = blocks[k, :frames]
 
     def _sum(
         self, carriers: np.ndarray, starts: np.ndarray, deltas: np.ndarray, frames: int

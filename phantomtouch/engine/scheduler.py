@@ -15,8 +15,17 @@ import numpy as np
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.commands import CommandQueue, StartCommand
 from phantomtouch.engine.contacts import ContactMix, ContactVoice
+from phantomtouch.engine.future_mix import FutureMix
 from phantomtouch.engine.mixer import Mixer
-from phantomtouch.engine.voices import DONE, PLAYING, WAITING, RingPool, Voice, Workspace
+from phantomtouch.engine.voices import (
+    DONE,
+    PLAYING,
+    WAITING,
+    PatternVoice,
+    RingPool,
+    Voice,
+    Workspace,
+)
 from phantomtouch.renderer.geometry import Geometry
 from phantomtouch.schema.device import DeviceProfile
 
@@ -62,6 +71,9 @@ class Scheduler:
         not finite (NaN, Inf; its block is left out of the mix), and one over its render
         budget (``VOICE_BUDGET_BLOCKS``) in ``OVERRUN_BLOCKS`` blocks in a row (``clocked``
         only: blocks pulled by hand have no deadline).
+    future : FutureMix
+        The prerendered voices that sound, summed ahead of the blocks that play them
+        (:mod:`phantomtouch.engine.future_mix`); the other voices are rendered each block.
     events : deque of tuple
         Reports the control side drains: ``("start", voice, frame, late)``,
         ``("release", voice, frame)``, ``("end", voice, frame)`` (silent from ``frame``),
@@ -104,6 +116,7 @@ class Scheduler:
         self.geometry = Geometry.for_device(device)
         self.work = Workspace(device.block_frames, device.channels)
         self.contact_mix = ContactMix(device.block_frames, device.channels)
+        self.future = FutureMix(device.block_frames, device.channels)
         chunk = max(chunk_frames, device.block_frames) if chunk_frames > 0 else 0
         self.pool = RingPool(rings, chunk, device.channels)
         self.frames = 0
@@ -152,10 +165,11 @@ class Scheduler:
                 block.fill(0.0)
                 self.callback_errors += 1
                 self.last_error = exc
-                for voice in self._voices:
+                for voice in [*self.future.voices, *self._voices]:
                     voice.finish(self.pool)
                     self.events.append(("end", voice, self.frames))
                 self._voices = []
+                self.future.clear()
                 self.active_voices = 0
                 self.frames += block.shape[0]
         spent_s = time.monotonic() - began_s
@@ -178,12 +192,21 @@ class Scheduler:
             frame, _, voice = heapq.heappop(waiting)
             if voice.state == WAITING:
                 self._begin(voice, frame, late=False)
+        future = self.future
         if self._voices:
             self._mix(out, start, end)
+        elif future.voices:
+            future.take(out, start)
+            if not math.isfinite(float(np.add.reduce(out, axis=None))):
+                self._remix(out, self._rows[:0, : out.shape[0]], [], [], [])
         else:
             out.fill(0.0)
+        if future.next_end is not None and future.next_end <= end:
+            for voice in future.ended(end):
+                voice.finish(self.pool)
+                self.events.append(("end", voice, voice.silent_from))
         self.mixer.finish(out)
-        self.active_voices = len(self._voices)
+        self.active_voices = len(self._voices) + len(future.voices)
         self.frames = end
 
     def _mix(self, out: np.ndarray, start: int, end: int) -> None:
@@ -193,9 +216,10 @@ class Scheduler:
         (:class:`~phantomtouch.engine.contacts.ContactMix`); every other voice renders into
         a zeroed row of its own, timed against its budget when blocks are due at a clock's
         pace. The rows are summed in the voices' order (the samples of adding them one by
-        one), the contacts' sum added, and the mix checked once: only a block that came
-        out not finite is mixed again, leaving out each voice whose samples are not
-        finite, so the others sound as they would without it.
+        one) after the future-mix ring's slice (the prerendered voices, summed ahead in
+        the order they began), the contacts' sum added, and the mix checked once: only a
+        block that came out not finite is mixed again, leaving out each voice whose samples
+        are not finite, so the others sound as they would without it.
         """
         voices = self._voices
         frames = out.shape[0]
@@ -213,10 +237,14 @@ class Scheduler:
                     continue
             rendered.append(index)
         count = len(rendered)
-        if count > self._rows.shape[0]:  # more voices than ever before: room for twice as many
-            self._rows = np.empty((2 * count, *self._rows.shape[1:]), dtype=np.float32)
-        rows = self._rows[:count, :frames]
+        ahead = 1 if self.future.voices else 0  # the ring's slice is the first row
+        if count + ahead > self._rows.shape[0]:  # more voices than ever: room for twice as many
+            self._rows = np.empty((2 * (count + ahead), *self._rows.shape[1:]), dtype=np.float32)
+        rows = self._rows[ahead : ahead + count, :frames]
         rows.fill(0.0)
+        if ahead:
+            self.future.take(self._rows[0, :frames], start)
+        summed = self._rows[: ahead + count, :frames]
         clocked = self.clocked
         began_s = time.perf_counter()
         for row, index in enumerate(rendered):
@@ -227,9 +255,9 @@ class Scheduler:
                 done[index] = self._over_budget(voice, now_s - began_s) or done[index]
                 began_s = now_s
         if not contacts:
-            np.add.reduce(rows, axis=0, out=out)
-        elif count:
-            np.add.reduce(rows, axis=0, out=out)
+            np.add.reduce(summed, axis=0, out=out)
+        elif count + ahead:
+            np.add.reduce(summed, axis=0, out=out)
             out += self.contact_mix.render(contacts, start, frames, work)
         else:
             out[...] = self.contact_mix.render(contacts, start, frames, work)
@@ -267,10 +295,22 @@ class Scheduler:
         through: list[int],
         done: list[bool],
     ) -> None:
-        """Mix again what is finite: the voices' ``rows`` one by one, then the sum of the
-        contacts whose carriers and gains are finite; each voice left out is silenced
-        (``done``; rarely: a block that came out not finite)."""
-        out.fill(0.0)
+        """Mix again what is finite: the future-mix ring's slice summed again without its
+        voices whose samples are not finite, the voices' ``rows`` one by one, then the sum
+        of the contacts whose carriers and gains are finite; each voice left out is
+        silenced (``done``, or at once for the ring's; rarely: a block that came out not
+        finite)."""
+        future = self.future
+        start = self.frames
+        if future.voices:
+            for voice in future.nonfinite(start, out.shape[0], self.work.scratch):
+                voice.finish(self.pool)
+                self.nonfinite_voices += 1
+                self.events.append(("end", voice, start))
+        if future.voices:
+            future.take(out, start)
+        else:
+            out.fill(0.0)
         for row, index in zip(rows, rendered, strict=True):
             if np.isfinite(row).all():
                 out += row
@@ -323,10 +363,16 @@ class Scheduler:
                 voice.release(frame, command.transient, command.fade_frames)
                 if voice.state == PLAYING:
                     self.events.append(("release", voice, frame))
+                    if voice.ahead:
+                        self.future.resum(frame, start)
 
     def _begin(self, voice: Voice, frame: int, *, late: bool) -> None:
         voice.begin(frame, self.pool)
-        self._voices.append(voice)
+        if isinstance(voice, PatternVoice) and voice.prerendered:
+            voice.ahead = True
+            self.future.add(voice, self.frames)
+        else:
+            self._voices.append(voice)
         self.queue.retire()
         self.events.append(("start", voice, frame, late))
 
@@ -337,10 +383,11 @@ class Scheduler:
         self.events.append(("cancel", voice, frame))
 
     def _stop_all(self, stop_seq: int, frame: int) -> None:
-        for voice in self._voices:
+        for voice in [*self.future.voices, *self._voices]:
             if voice.seq < stop_seq:
                 voice.release(frame)
                 self.events.append(("release", voice, frame))
+        self.future.resum(frame, frame)
         for _, _, voice in self._waiting:
             if voice.seq < stop_seq and voice.state == WAITING:  # not cancelled already
                 self._cancel(voice, frame)

@@ -78,6 +78,9 @@ class Voice:
     release_frames : int, >= 1
     overruns : int
         Blocks in a row in which it took longer than its render budget (the scheduler's).
+    ahead : bool
+        It plays from the future-mix ring (:mod:`phantomtouch.engine.future_mix`): a
+        release must have the ring summed again.
     """
 
     kind: ClassVar[str]
@@ -91,6 +94,7 @@ class Voice:
         self.release_frame: int | None = None
         self.release_frames = max(1, int(release_frames))
         self.overruns = 0
+        self.ahead = False
 
     @property
     def silent_from(self) -> int | None:
@@ -202,6 +206,11 @@ class PatternVoice(Voice):
             end = min(end, self.release_frame + self.release_frames - 1)
         return end
 
+    @property
+    def prerendered(self) -> bool:
+        """Its samples were rendered whole beforehand (it renders nothing in the callback)."""
+        return self._renderer is None
+
     def begin(self, frame: int, pool: RingPool) -> None:
         super().begin(frame, pool)
         self.take_ring(pool)
@@ -310,3 +319,23 @@ class PatternVoice(Voice):
             if head < count:
                 dest[head:] += ring[: count - head] * gains[head:, None]
         self._read = read + count
+
+    def mix_ahead(self, dest: np.ndarray, first: int, index: np.ndarray, gain: np.ndarray) -> None:
+        """Add its samples for frames ``first ..`` into ``dest`` (frames, channels), float32,
+        faded as :meth:`render` fades them (a prerendered voice; the frames lie within
+        ``start_frame .. silent_from``). ``index`` (``0, 1, ..``, float32) and ``gain``
+        (scratch, float32) hold at least as many frames; the future-mix ring calls it
+        (real time, the callback)."""
+        count = dest.shape[0]
+        assert self._ring is not None
+        at = first - self.start_frame
+        samples = self._ring[at : at + count]
+        release = self.release_frame
+        if release is None or release >= first + count:
+            dest += samples
+            return
+        gains = gain[:count]
+        np.subtract(np.float32(release + self.release_frames - 1 - first), index[:count], gains)
+        gains *= np.float32(1.0 / self.release_frames)
+        np.clip(gains, 0.0, 1.0, out=gains)
+        dest += samples * gains[:, None]

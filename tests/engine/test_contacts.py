@@ -15,6 +15,7 @@ import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, ProtocolError, gains_at
 from phantomtouch.engine import CaptureSink, ContactSettings, Engine
+from phantomtouch.engine.future_mix import AHEAD_FRAMES
 from phantomtouch.renderer.carriers import NoiseSource, SineSource
 from phantomtouch.renderer.levels import amplitude_for_level
 from phantomtouch.schema import NoiseCarrier, SineCarrier
@@ -347,3 +348,20 @@ def test_sine_and_noise_contacts_sounding_together_each_keep_their_carrier() -> 
     for name, place in places.items():
         expected += HALF * gains_at(DEVICE, *place) * carriers[name][:, None]
     np.testing.assert_allclose(recording, expected, atol=3 * FLOAT32)
+
+
+def test_sine_carriers_computed_ahead_are_each_contacts_sine_bit_for_bit() -> None:
+    """Sine carriers are computed ``AHEAD_FRAMES`` at a time into each contact: across
+    several such stretches, begun at frames of their own, each contact's channel is its
+    sine times its float32 gain, bit for bit (one contact a channel: the float64 product
+    rounded once is the float32 product)."""
+    sink = CaptureSink(DEVICE)
+    downs = {"a": ((0.0, 0.0), 0, 300), "b": ((3.8, 14.4), 7, 300 + AHEAD_FRAMES // 3)}
+    with Engine(DEVICE, sink, contact=ContactSettings(attack_s=0.0)) as engine:
+        for name, ((x_cm, y_cm), _, frame) in downs.items():
+            engine.contact_down("c", name, x_cm, y_cm, intensity=0.5, at_frame=frame)
+        recording = sink.pull(-(-4 * AHEAD_FRAMES // BLOCK))
+    for _, channel, frame in downs.values():
+        carrier = SineSource(100.0, RATE).block(0, len(recording) - frame)
+        np.testing.assert_array_equal(recording[frame:, channel], carrier * np.float32(HALF))
+        assert not np.any(recording[:frame, channel])

@@ -44,9 +44,9 @@ GOOD = TouchPattern.model_validate(
 )
 
 
-def nan_plan(seconds: float = 2.0) -> Plan:
+def nan_plan(seconds: float = 2.0, fade_s: float = 0.6) -> Plan:
     """A still touch whose looped clip lasts 5e-324 s: every sample NaN (built past the
-    schema, as no request can any more)."""
+    schema, as no request can any more); ``fade_s`` its fade-in and fade-out, s."""
     clip = HapticClip.model_construct(
         duration_s=5e-324,
         amplitude=[Breakpoint(t_s=0.0, value=1.0)],
@@ -55,7 +55,12 @@ def nan_plan(seconds: float = 2.0) -> Plan:
     )
     carrier = ClipCarrier.model_construct(kind="clip", clip=None, loop=True, data=clip)
     pattern = TouchPattern.model_validate(
-        {"path": {"kind": "polyline", "points_cm": [[1.9, 7.0]]}, "duration_s": seconds}
+        {
+            "path": {"kind": "polyline", "points_cm": [[1.9, 7.0]]},
+            "duration_s": seconds,
+            "fade_in_s": fade_s,
+            "fade_out_s": fade_s,
+        }
     ).model_copy(update={"carrier": carrier})
     resolved = plan(pattern, DEVICE)
     assert np.isnan(render_first(resolved)[1:]).all()  # the attack is real (frame 0: gain 0)
