@@ -96,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
         f"{len(clip.frequency)} frequency points, {len(clip.transients)} transients"
     )
     if args.output is not None:
-        from phantomtouch.cli_parser import check_output_file
+        from phantomtouch.commands.parser import check_output_file
 
         check_output_file(args.output, "--output")
         Path(args.output).write_text(clip.model_dump_json(indent=1) + "\n", encoding="utf-8")
