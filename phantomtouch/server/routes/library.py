@@ -18,6 +18,21 @@ from phantomtouch.service.errors import NotFoundError, responses
 Item = TypeVar("Item")
 
 
+def list_items(
+    router: APIRouter, model: Any, summary: str
+) -> Callable[[DecoratedCallable], DecoratedCallable]:
+    """``GET ""``: one page of the library's items (``limit``, ``offset``), sorted by name.
+
+    Parameters
+    ----------
+    router, model, summary
+        As :func:`get_item`; ``model`` is one item's (the answer is a list of them).
+    """
+    return router.get(
+        "", response_model=list[model], responses=responses(401, 422, 503), summary=summary
+    )
+
+
 def get_item(
     router: APIRouter, model: Any, summary: str, path: str = "/{name}", **options: Any
 ) -> Callable[[DecoratedCallable], DecoratedCallable]:

@@ -85,20 +85,11 @@ async def project_body(request: Request) -> tuple[str, Any]:
     return await run_in_threadpool(tact_library.read_project, raw, source="body")
 
 
-@router.get(
-    "",
-    response_model=list[TactInfo],
-    responses=responses(401, 422, 503),
-    summary="The .tact library",
-)
-def list_tact(
-    store: StoreDep,
-    limit: LimitParam = 100,
-    offset: OffsetParam = 0,
-) -> list[TactInfo]:
+@library.list_items(router, TactInfo, "The .tact library")
+def list_tact(store: StoreDep, limit: LimitParam = 100, offset: OffsetParam = 0) -> list[TactInfo]:
     """One page of the stored projects, sorted by name, with their size and length; fewer
     than `limit` means the last page. The projects themselves are not read."""
-    return tact_library.listed(store, limit=limit, offset=offset)
+    return tact_library.LIBRARY.listed(store, limit=limit, offset=offset)
 
 
 @router.get(
@@ -109,8 +100,7 @@ def list_tact(
 )
 def get_tact(name: TactNameParam, store: StoreDep) -> Response:
     """The project as stored: the `.tact` JSON, compact, spelled as it was given."""
-    text = library.found(store.get_tact(name), name, tact_library.NOT_STORED)
-    return Response(content=text, media_type="application/json")
+    return Response(content=tact_library.LIBRARY.text(store, name), media_type="application/json")
 
 
 @library.put_item(router, TactInfo, "Store a .tact project", PROJECT_BODY_OPENAPI)
@@ -121,16 +111,13 @@ def put_tact(
 ) -> TactInfo:
     """Store (or replace) a project; one with nothing for an arm is refused (422)."""
     text, project = body
-    summary = tact_library.summary(project)
-    store.put_tact(name, text, summary)
-    return TactInfo(name=name, bytes=len(text.encode("utf-8")), **summary)
+    return tact_library.LIBRARY.put(store, name, text, tact_library.summary(project))
 
 
 @library.delete_item(router, "Remove a .tact project")
 def delete_tact(name: TactNameParam, store: StoreDep) -> Response:
     """Remove a stored project."""
-    if not store.delete_tact(name):
-        raise library.not_stored(name, tact_library.NOT_STORED)
+    tact_library.LIBRARY.delete(store, name)
     return Response(status_code=204)
 
 
