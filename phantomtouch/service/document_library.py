@@ -4,8 +4,8 @@ Each document is stored as compact JSON with its size and a summary beside it
 (:mod:`phantomtouch.service.store_tables`), so that a listing never reads a document. A
 :class:`DocumentLibrary` is one such table seen from a route or a command: list a page of
 summaries, read a document back (404 naming the key when there is none), store one,
-remove one. :mod:`~phantomtouch.service.tact_library` and
-:mod:`~phantomtouch.service.workspace_library` each hold one, with their own parser.
+remove one. There are two: :data:`TACT` and :data:`WORKSPACES`; their parsers are
+:mod:`~phantomtouch.service.tact_library` and :mod:`~phantomtouch.service.workspace_library`.
 """
 
 from __future__ import annotations
@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from phantomtouch.service.errors import NotFoundError
+from phantomtouch.service.tact_models import TactInfo
+from phantomtouch.service.workspace_models import WorkspaceInfo
 
 if TYPE_CHECKING:
     from phantomtouch.service.store import PatternStore
@@ -128,3 +130,16 @@ class DocumentLibrary(Generic[Info]):
 
     def _id(self, key: str, size_bytes: int) -> dict[str, Any]:
         return {self.key: key, "bytes": size_bytes}
+
+
+TACT = DocumentLibrary("tact", "name", TactInfo, "in the .tact library (GET /tact)", "tact")
+"""The stored ``.tact`` projects (``/tact/{name}``, ``phantomtouch import``)."""
+WORKSPACES = DocumentLibrary(
+    "workspaces",
+    "workspace_id",
+    WorkspaceInfo,
+    "in the workspace library (GET /bhaptics/workspaces)",
+    "workspace",
+)
+"""The stored deployments by workspace id (``/bhaptics/workspaces/{id}``, ``phantomtouch
+import``)."""

@@ -18,24 +18,15 @@ from phantomtouch.clips.tact import ARM_POSITIONS, TactProject, parse_tact
 from phantomtouch.clips.tact_score import ScaleOption, score
 from phantomtouch.engine.jobs import QuotaRefused
 from phantomtouch.errors import FieldError, ParameterError
-from phantomtouch.service.document_library import DocumentLibrary, compact, document_value
+from phantomtouch.service.document_library import TACT, compact, document_value
 from phantomtouch.service.errors import StoredPatternError
 from phantomtouch.service.scheduling import quota_error, start_frame
-from phantomtouch.service.tact_models import ScoreAccepted, TactInfo, TactPlay
+from phantomtouch.service.tact_models import ScoreAccepted, TactPlay
 
 if TYPE_CHECKING:
     from phantomtouch.service.admission import Arrival, Handle
     from phantomtouch.service.running import Service
     from phantomtouch.service.store import PatternStore
-
-LIBRARY = DocumentLibrary(
-    table="tact",
-    key="name",
-    info=TactInfo,
-    where="in the .tact library (GET /tact)",
-    log_name="tact",
-)
-"""The stored projects (``GET|PUT|DELETE /tact/{name}``, ``phantomtouch import``)."""
 
 
 def read_project(document: bytes | str, *, source: str) -> tuple[str, TactProject]:
@@ -96,7 +87,7 @@ def stored_project(store: PatternStore, name: str, *, field: str = "name") -> Ta
     StoredPatternError
         The row is there but no longer reads as a project.
     """
-    text = LIBRARY.text(store, name, field=field)
+    text = TACT.text(store, name, field=field)
     try:
         return parse_tact(text, source=f"tact={name!r}")
     except ParameterError as exc:

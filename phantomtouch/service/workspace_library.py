@@ -16,22 +16,11 @@ import json
 from typing import TYPE_CHECKING, Any
 
 from phantomtouch.clips.deployment import Deployment, DeploymentError, parse_deployment
-from phantomtouch.service.document_library import DocumentLibrary, compact, document_value
+from phantomtouch.service.document_library import WORKSPACES, compact, document_value
 from phantomtouch.service.errors import StoredPatternError
-from phantomtouch.service.workspace_models import WorkspaceInfo
 
 if TYPE_CHECKING:
     from phantomtouch.service.store import PatternStore
-
-LIBRARY = DocumentLibrary(
-    table="workspaces",
-    key="workspace_id",
-    info=WorkspaceInfo,
-    where="in the workspace library (GET /bhaptics/workspaces)",
-    log_name="workspace",
-)
-"""The stored deployments by workspace id (``GET|PUT|DELETE /bhaptics/workspaces/{id}``,
-``phantomtouch import``)."""
 
 
 def read_deployment(document: bytes | str) -> tuple[str, Deployment]:
@@ -82,7 +71,7 @@ def stored_deployment(
     StorageError
         The store failed.
     """
-    text = store.get_document(LIBRARY.table, workspace_id)
+    text = store.get_document(WORKSPACES.table, workspace_id)
     if text is None:
         return None
     try:
