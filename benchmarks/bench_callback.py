@@ -1,6 +1,6 @@
 """The audio callback alone, in this process: p50 and p99 of one call, in µs and yardsticks.
 
-The real :class:`~phantomtouch.engine.engine.Engine` (front, admission, scheduler, voices,
+The real :class:`~phantomtouch.engine.local_audio.Engine` (front, admission, scheduler, voices,
 mixer, render-ahead thread) plays into a sink pulled by hand, so nothing but the
 callback's own work is timed: ``Scheduler.render`` on one block, wall time
 (``perf_counter``). Scenes, each at 128 and at 64 frames a block:

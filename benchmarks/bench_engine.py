@@ -42,8 +42,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support.ja
 
 import phantomtouch as pt
 from phantomtouch.engine import Engine
-from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.front import MAX_VOICES
+from phantomtouch.engine.local_audio import RENDER_AHEAD_FRAMES
 from phantomtouch.engine.sinks import RenderFn, Sink
 
 PATTERN_PRESETS = [n for n in pt.preset_names() if n.startswith("exp1/") and "-v3" in n][::2]

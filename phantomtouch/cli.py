@@ -32,18 +32,18 @@ from pydantic import ValidationError
 from tqdm import tqdm
 
 from phantomtouch import __version__
-from phantomtouch.bhaptics_command import add_bhaptics_command, player_argv
-from phantomtouch.calibrate_command import add_calibrate_command
-from phantomtouch.cli_parser import OneLineParser, check_output_file, make_output_folder
-from phantomtouch.device_arg import load_device
+from phantomtouch.commands.bhaptics import add_bhaptics_command, player_argv
+from phantomtouch.commands.calibrate import add_calibrate_command
+from phantomtouch.commands.device_arg import load_device
+from phantomtouch.commands.import_file import add_import_command
+from phantomtouch.commands.parser import OneLineParser, check_output_file, make_output_folder
+from phantomtouch.commands.serve import EXIT_FAILURE, add_serve_commands
+from phantomtouch.commands.tact import add_tact_render_arguments, is_tact, render_tact
 from phantomtouch.errors import ParameterError, PhantomTouchError, install_hint
-from phantomtouch.import_command import add_import_command
 from phantomtouch.renderer import plan_at, preset, preset_names, render_plan_blocks
 from phantomtouch.renderer.output import frames_at_ceiling
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import TouchPattern, describe_validation_error, limits
-from phantomtouch.serve_command import EXIT_FAILURE, add_serve_commands
-from phantomtouch.tact_command import add_tact_render_arguments, is_tact, render_tact
 
 """The command could not do its work (``serve``: the pattern library cannot be opened)."""
 EXIT_USAGE = 2
@@ -370,7 +370,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status. Started as the bHaptics Player's
     program (``phantomtouch bhaptics register``), without arguments it serves as the
-    Player (:func:`~phantomtouch.bhaptics_command.player_argv`)."""
+    Player (:func:`~phantomtouch.commands.bhaptics.player_argv`)."""
     if argv is None:
         argv = player_argv(sys.argv[0], sys.argv[1:])
     args = build_parser().parse_args(argv)

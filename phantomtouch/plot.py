@@ -142,11 +142,14 @@ def save_plot(plan: Plan, traces: TraceEnvelope, path: str | Path) -> None:
     plt.close(fig)
 
 
-def build_figure(plan: Plan, traces: TraceEnvelope) -> Any:
-    """The Fig. 3 view as a matplotlib ``Figure`` with three axes: map, envelope, lanes.
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` on its file-only backend (Agg), for every figure of the
+    project (the caller's thread).
 
-    Lane ``k`` (from the top, channel ``k + 1``) is centred at ``channels - 1 - k``; its
-    gain curves are ``centre ± LANE_HALF_HEIGHT * gain / amplitude``.
+    Raises
+    ------
+    ParameterError
+        matplotlib is missing: the message names the ``plot`` extra that brings it.
     """
     try:
         import matplotlib
@@ -157,6 +160,16 @@ def build_figure(plan: Plan, traces: TraceEnvelope) -> Any:
         raise ParameterError(
             f"plot needs matplotlib, the plot extra: {install_hint('plot')}"
         ) from exc
+    return plt
+
+
+def build_figure(plan: Plan, traces: TraceEnvelope) -> Any:
+    """The Fig. 3 view as a matplotlib ``Figure`` with three axes: map, envelope, lanes.
+
+    Lane ``k`` (from the top, channel ``k + 1``) is centred at ``channels - 1 - k``; its
+    gain curves are ``centre ± LANE_HALF_HEIGHT * gain / amplitude``.
+    """
+    plt = pyplot()
     times = np.linspace(0.0, plan.duration_s, 2000, endpoint=False)
     envelope = envelope_at(plan, times)
     amplitude = max(plan.amplitude, 1e-12)

@@ -10,7 +10,7 @@ The layers, lowest first (docs/architecture.md)::
     service      phantomtouch.service                         -> engine, clips, package, ...
     server, fleet, osc, bhaptics                             -> service and below; never
                                                                 each other
-    composition  the command line (cli, its *_command modules, device_arg, __main__), and the
+    composition  the command line (cli, the commands package, __main__), and the
                  offline tools it runs (analysis, plot, manifest): may import anything.
 
 The rule: a module may import its own layer and the layers listed below it in ``ALLOWED``,
@@ -42,13 +42,7 @@ LAYER_OF = {
     "phantomtouch.bhaptics": "bhaptics",
     "phantomtouch.__main__": "composition",
     "phantomtouch.cli": "composition",
-    "phantomtouch.serve_command": "composition",
-    "phantomtouch.import_command": "composition",
-    "phantomtouch.bhaptics_command": "composition",
-    "phantomtouch.tact_command": "composition",
-    "phantomtouch.calibrate_command": "composition",
-    "phantomtouch.device_arg": "composition",
-    "phantomtouch.cli_parser": "composition",
+    "phantomtouch.commands": "composition",
     "phantomtouch.analysis": "composition",
     "phantomtouch.plot": "composition",
     "phantomtouch.manifest": "composition",

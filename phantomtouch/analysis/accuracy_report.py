@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from phantomtouch.analysis.accuracy import TWO_POINT_THRESHOLD_CM, AccuracyReport, Row
-from phantomtouch.errors import ParameterError, install_hint
+from phantomtouch.plot import pyplot
 
 _HEADER = (
     ("setting", "{:<13}"),
@@ -70,15 +70,7 @@ def format_table(report: AccuracyReport) -> str:
 
 def save_plot(report: AccuracyReport, path: str | Path) -> None:
     """Work-precision plot: worst position and level error against CPU time per setting."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as exc:
-        raise ParameterError(
-            f"plot needs matplotlib, the plot extra: {install_hint('plot')}"
-        ) from exc
+    plt = pyplot()
     floor_cm, floor_db = 1e-4, 1e-4
     fig, (ax_pos, ax_level) = plt.subplots(1, 2, figsize=(12, 5))
     for row in report.rows:

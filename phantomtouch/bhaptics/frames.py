@@ -50,8 +50,8 @@ def frame_spots(
     position the band does not play or a frame without a point above 0."""
     placed = frame_score(
         frame.position,
-        [(d.index, d.intensity / MAX_INTENSITY) for d in frame.dots],
-        [(p.x, p.y, p.intensity / MAX_INTENSITY) for p in frame.paths],
+        [(d.index, d.intensity) for d in frame.dots],
+        [(p.x, p.y, p.intensity) for p in frame.paths],
         frame.duration_ms,
         arm_map,
         device,
@@ -70,13 +70,13 @@ def frame_spots(
 def frame_levels(frame: Frame) -> list[float]:
     """The six equivalent motor levels 0-100 of ``frame`` on its own position."""
     layout = LEGACY_TACTOSY_LAYOUT if frame.legacy else None
+    paths = [(p.x, p.y, p.intensity * MAX_INTENSITY) for p in frame.paths]
     if layout is None:
-        return levels.combined(
-            ((p.x, p.y, p.intensity) for p in frame.paths),
-            ((d.index, d.intensity) for d in frame.dots),
-        )
-    dots = [(*layout[d.index], d.intensity) for d in frame.dots if d.index in layout]
-    return levels.combined([*((p.x, p.y, p.intensity) for p in frame.paths), *dots])
+        return levels.combined(paths, ((d.index, d.intensity * MAX_INTENSITY) for d in frame.dots))
+    dots = [
+        (*layout[d.index], d.intensity * MAX_INTENSITY) for d in frame.dots if d.index in layout
+    ]
+    return levels.combined([*paths, *dots])
 
 
 def frame_prefix(name: str) -> str:

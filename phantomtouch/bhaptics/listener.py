@@ -43,39 +43,28 @@ import contextlib
 import itertools
 import json
 import logging
-import re
 import secrets
 from collections.abc import AsyncIterator, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 from urllib.parse import parse_qs, urlsplit
 
-from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
-from prometheus_client.registry import Collector
-from websockets.asyncio.server import Server, ServerConnection, serve
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
+from websockets.asyncio.server import ServerConnection
 from websockets.exceptions import ConnectionClosed
-from websockets.http11 import Request, Response
 
 from phantomtouch.bhaptics.requests import BadRequest
 from phantomtouch.bhaptics.session import PlayerSession, PointBudget, Prepared, prepare
 from phantomtouch.bhaptics.v4_connection import PATHS as V4_PATHS
 from phantomtouch.bhaptics.v4_connection import V4Connections
+from phantomtouch.bhaptics.websocket import Listener, admit, name_tag, open_handle, send_text
 from phantomtouch.clips.tact_map import ArmMap
-from phantomtouch.errors import DeviceError, ParameterError
-from phantomtouch.service.admission import Handle, Kind, principal_for
-from phantomtouch.service.errors import (
-    WS_CLOSE_MESSAGE_TOO_BIG,
-    WS_CLOSE_POLICY_VIOLATION,
-    WS_CLOSE_TRY_AGAIN_LATER,
-    ServiceError,
-    TooLargeError,
-    describe,
-)
+from phantomtouch.errors import ParameterError
+from phantomtouch.service.admission import Handle, Kind
 from phantomtouch.service.flood import LimitedLog
 from phantomtouch.service.memory import give_back_memory
-from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
-from phantomtouch.service.running import InputHealth
+from phantomtouch.service.metrics import labelled
 
 if TYPE_CHECKING:
     from phantomtouch.service.running import Service
@@ -89,37 +78,9 @@ KIND: Kind = "bhaptics"
 """The stand-in's row of the admission's policy table."""
 TICK_S = 0.02
 """The Player's tick: the status is looked at this often while something plays."""
-SEND_TIMEOUT_S = 10.0
-"""A client that reads nothing for this long while a status waits to be sent is closed."""
 INLINE_BYTES = 32 << 10
 """Messages up to this size are read on the event loop; larger ones in a worker thread."""
 LOG_INTERVAL_S = 10.0
-OUTCOMES = ("accepted", "not_json", "bad_request", "refused", "flood")
-_NAME = re.compile(r"[^A-Za-z0-9_.-]+")
-
-
-class _Counts(Collector):
-    def __init__(self, listener: BhapticsListener) -> None:
-        self.listener = listener
-
-    def collect(self) -> Iterator[CounterMetricFamily | GaugeMetricFamily]:
-        family = CounterMetricFamily(
-            "phantomtouch_bhaptics_messages",
-            "bHaptics stand-in messages (or requests in them) by outcome.",
-            labels=["outcome"],
-        )
-        for outcome, count in self.listener.counts.items():
-            family.add_metric([outcome], count)
-        yield family
-        yield GaugeMetricFamily(
-            "phantomtouch_bhaptics_open_connections",
-            "Clients connected to the bHaptics stand-in.",
-            value=self.listener.open,
-        )
-
-
-async def _no_app(scope: Any, receive: Any, send: Any) -> None:
-    """The Host/Origin check is used for its verdict alone."""
 
 
 def client_name(path: str) -> str:
@@ -129,11 +90,11 @@ def client_name(path: str) -> str:
     for field in ("app_name", "app_id", "appName", "appKey"):
         values = query.get(field)
         if values and values[0].strip():
-            return _NAME.sub("_", values[0].strip())[:32]
+            return name_tag(values[0].strip(), max_chars=32)
     return ""
 
 
-class BhapticsListener:
+class BhapticsListener(Listener):
     """The stand-in's listener for one running service; :meth:`start`, then :meth:`close`.
 
     Parameters
@@ -142,14 +103,14 @@ class BhapticsListener:
     arm_map : ArmMap
     """
 
+    paths = (*PATHS, *V4_PATHS)
+
     def __init__(self, service: Service, arm_map: ArmMap) -> None:
         address = service.settings.bhaptics_address
         if address is None:
             raise ValueError("the service's settings name no bhaptics_listen address")
-        self.service = service
-        self.host, self.port = address
+        super().__init__(service, address, KIND)
         self.arm_map = arm_map
-        self.counts = dict.fromkeys(OUTCOMES, 0)
         self.log = LimitedLog(logger, LOG_INTERVAL_S)
         """Unreadable messages: one line per reason and interval."""
         self.open = 0
@@ -160,22 +121,7 @@ class BhapticsListener:
         reading takes is one message's, reused by the next, whatever the number of
         connections."""
         self._serials = itertools.count(1)
-        settings = service.settings
-        self._origin = HostOriginMiddleware(
-            _no_app,
-            hosts=HostPolicy.build(self.host, settings.allowed_hosts),
-            origins=OriginPolicy.build(settings.cors_origins),
-            refusals=Refusals(service.metrics),
-        )
-        self._server: Server | None = None
         self._v4: V4Connections | None = None
-
-    @property
-    def address(self) -> tuple[str, int]:
-        """Where it listens (host, port)."""
-        assert self._server is not None
-        host, port = next(iter(self._server.sockets)).getsockname()[:2]
-        return str(host), int(port)
 
     async def start(self) -> None:
         """Listen on ``settings.bhaptics_listen`` (the event loop).
@@ -185,73 +131,39 @@ class BhapticsListener:
         DeviceError
             The address cannot be listened on (the Player itself may hold it).
         """
-        host, port = self.host, self.port
         self._v4 = await asyncio.to_thread(V4Connections, self.service, self.counts)
-        try:
-            self._server = await serve(
-                self._connection,
-                host,
-                port,
-                process_request=self._handshake,
-                compression=None,
-                ping_interval=None,
-                ping_timeout=None,
-                max_size=self.service.admission.policy(KIND).max_message_bytes,
-                max_queue=4,
-                server_header=None,
-                logger=logging.getLogger("phantomtouch.bhaptics.websockets"),
-            )
-        except OSError as exc:
-            raise DeviceError(
-                f"bhaptics listen={host}:{port}: cannot listen ({exc.strerror}); is the "
-                "bHaptics Player (or another stand-in) running? Quit it or choose another "
-                "address with --bhaptics"
-            ) from exc
-        self.service.metrics.registry.register(_Counts(self))
-        self.service.inputs["bhaptics"] = self.health
+        await self.listen(self._connection, input_name="bhaptics", flag="--bhaptics")
 
-    def health(self) -> InputHealth:
-        """Whether it listens (any thread)."""
-        serving = self._server is not None and self._server.is_serving()
-        return InputHealth(
-            state="running" if serving else "stopped",
-            degraded=not serving,
-            restarts=0,
-            last_failure=None,
+    def metrics(self) -> Iterator[Metric]:
+        """Messages by outcome and open connections (the scraping thread)."""
+        yield labelled(
+            CounterMetricFamily,
+            "phantomtouch_bhaptics_messages",
+            "bHaptics stand-in messages (or requests in them) by outcome.",
+            "outcome",
+            self.counts,
+        )
+        yield GaugeMetricFamily(
+            "phantomtouch_bhaptics_open_connections",
+            "Clients connected to the bHaptics stand-in.",
+            value=self.open,
         )
 
-    async def close(self) -> None:
-        """Stop listening and close every connection (each releases what it played)."""
-        if self._server is not None:
-            self._server.close()
-            await self._server.wait_closed()
-        self.reader.shutdown(wait=False, cancel_futures=True)
+    def not_found(self, path: str) -> str:
+        """The 404 answer to a handshake on ``path`` (pure)."""
+        message = (
+            f"path={path!r}: the bHaptics stand-in serves SDK1 on /v2/feedbacks and "
+            "SDK2 v4 on /v4/feedback"
+        )
+        if path in V3_PATHS:
+            message += "; SDK2 v3 is served over TLS on its own port (--bhaptics-sdk2)"
+        return message
 
-    def _handshake(self, connection: ServerConnection, request: Request) -> Response | None:
-        path = urlsplit(request.path).path
-        if path not in PATHS and path not in V4_PATHS:
-            message = (
-                f"path={path!r}: the bHaptics stand-in serves SDK1 on /v2/feedbacks and "
-                "SDK2 v4 on /v4/feedback"
-            )
-            if path in V3_PATHS:
-                message += "; SDK2 v3 is served over TLS on its own port (--bhaptics-sdk2)"
-            return connection.respond(404, message + "\n")
-        scope = {
-            "type": "websocket",
-            "path": path,
-            "headers": [
-                (name.lower().encode("latin-1"), value.encode("latin-1"))
-                for name, value in request.headers.raw_items()
-            ],
-        }
-        error: ServiceError | None = self._origin.check(scope)
-        if error is None:
-            return None
-        problem = describe(error)
-        response = connection.respond(problem.status_code, json.dumps(problem.body()))
-        response.headers["Content-Type"] = "application/json"
-        return response
+    async def close(self) -> None:
+        """Stop listening and close every connection (each releases what it played; the
+        event loop)."""
+        await super().close()
+        self.reader.shutdown(wait=False, cancel_futures=True)
 
     async def _connection(self, connection: ServerConnection) -> None:
         peer = connection.remote_address
@@ -266,19 +178,7 @@ class BhapticsListener:
                 self.open -= 1
             return
         name = client_name(path)
-        source = self.source(name)
-        loop = asyncio.get_running_loop()
-
-        def yielded(reason: str) -> None:
-            loop.call_soon_threadsafe(
-                lambda: asyncio.ensure_future(
-                    connection.close(WS_CLOSE_TRY_AGAIN_LATER, reason[:120])
-                )
-            )
-
-        handle = self.service.admission.open(
-            KIND, source, principal=principal_for(KIND, host=host), on_yield=yielded
-        )
+        handle = open_handle(self.service, KIND, self.source(name), host, connection)
         self.open += 1
         try:
             await _Connection(self, connection, handle, name).run()
@@ -339,15 +239,8 @@ class _Connection:
 
     async def _message(self, data: str | bytes) -> None:
         owner = self.handle.owner
-        try:
-            verdict = self.handle.receive(len(data))
-        except TooLargeError as exc:
-            await self.connection.close(WS_CLOSE_MESSAGE_TOO_BIG, str(exc)[:120])
-            return
-        if verdict.arrival is None:
-            self.listener.count("flood")
-            if verdict.sustained:
-                await self.connection.close(WS_CLOSE_POLICY_VIOLATION, verdict.reason[:120])
+        arrival = await admit(self.connection, self.handle, data, self.listener.counts)
+        if arrival is None:
             return
         text = data if isinstance(data, str) else data.decode("utf-8", errors="replace")
         try:
@@ -364,7 +257,7 @@ class _Connection:
             for skipped in prepared.message.skipped:
                 self.listener.count(skipped.reason)
             try:
-                refused = await self.session.apply(prepared, verdict.arrival)
+                refused = await self.session.apply(prepared, arrival)
             except ParameterError as exc:
                 self.listener.count("refused")
                 self.listener.log.warning("refused", f"bhaptics: {owner}: refused {exc}")
@@ -395,14 +288,7 @@ class _Connection:
     async def _send(self, status: dict[str, object]) -> None:
         async with self._sending:
             self._last = status
-            try:
-                await asyncio.wait_for(self.connection.send(json.dumps(status)), SEND_TIMEOUT_S)
-            except ConnectionClosed:
-                return
-            except TimeoutError:
-                await self.connection.close(
-                    WS_CLOSE_POLICY_VIOLATION, f"the client read nothing for {SEND_TIMEOUT_S:g} s"
-                )
+            await send_text(self.connection, json.dumps(status))
 
 
 @asynccontextmanager

@@ -28,7 +28,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from phantomtouch.clips.tact import position_name
+from phantomtouch.clips.tact import DotPoint, position_name
 from phantomtouch.errors import ParameterError
 
 MAX_KEY_CHARS = 256
@@ -62,16 +62,8 @@ class BadRequest(ParameterError):
 
 
 @dataclass(frozen=True)
-class DotPoint:
-    """A motor of a position's layout (``index`` 0-based) at ``intensity`` 0-100."""
-
-    index: int
-    intensity: float
-
-
-@dataclass(frozen=True)
 class PathPoint:
-    """A point of a position's unit square (``x``, ``y`` 0-1) at ``intensity`` 0-100;
+    """A point of a position's unit square (``x``, ``y`` 0-1) at ``intensity`` 0-1;
     ``motor_count`` (1-3) is how many motors the Player spread it over."""
 
     x: float
@@ -166,15 +158,7 @@ def parse(text: str) -> Message:
         The text is not a JSON object (reason ``not_json``) or its ``Register`` or
         ``Submit`` is not an array (``bad_request``).
     """
-    try:
-        document = json.loads(text.removeprefix("\ufeff"))
-    except (ValueError, RecursionError) as exc:
-        raise BadRequest("not_json", f"the message is not JSON ({exc})"[:200]) from None
-    if not isinstance(document, dict):
-        raise BadRequest(
-            "not_json", f"the message must be a JSON object, got {type(document).__name__}"
-        )
-    fields = _folded(document)
+    fields = folded(json_object(text))
     requests: list[Request] = []
     skipped: list[BadRequest] = []
     for name, read in (("register", _register), ("submit", _submit)):
@@ -187,10 +171,29 @@ def parse(text: str) -> Message:
     return Message(tuple(requests), tuple(skipped))
 
 
-def _folded(value: object, where: str = "the message") -> dict[str, Any]:
+def json_object(text: str) -> dict[str, Any]:
+    """The JSON object of one text message (a byte-order mark dropped; pure).
+
+    Raises
+    ------
+    BadRequest
+        Not JSON, or not an object (reason ``not_json``).
+    """
+    try:
+        document = json.loads(text.removeprefix("\ufeff"))
+    except (ValueError, RecursionError) as exc:
+        raise BadRequest("not_json", f"the message is not JSON ({exc})"[:200]) from None
+    if not isinstance(document, dict):
+        raise BadRequest(
+            "not_json", f"the message must be a JSON object, got {type(document).__name__}"
+        )
+    return document
+
+
+def folded(value: object, where: str = "the message") -> dict[str, Any]:
     """A JSON object's members by lower-case name (``Key``, ``key`` and ``KEY`` alike)."""
     if not isinstance(value, dict):
-        raise BadRequest("bad_request", f"{where} must be an object, got {_shown(value)}")
+        raise BadRequest("bad_request", f"{where} must be an object, got {shown(value)}")
     return {str(name).lower(): member for name, member in value.items()}
 
 
@@ -199,28 +202,31 @@ def _array(fields: Mapping[str, Any], name: str) -> list[Any]:
     if value is None:
         return []
     if not isinstance(value, list):
-        raise BadRequest("bad_request", f"{name}={_shown(value)} must be an array")
+        raise BadRequest("bad_request", f"{name}={shown(value)} must be an array")
     return value
 
 
-def _shown(value: object) -> str:
+def shown(value: object) -> str:
+    """A value as an error message shows it: its ``repr``, at most 80 characters."""
     return repr(value)[:80]
 
 
 def number(value: object, name: str) -> float:
     """A finite number, given as a JSON number or a string (``"0.250"`` in old files)."""
     if isinstance(value, bool) or not isinstance(value, int | float | str):
-        raise BadRequest("bad_request", f"{name}={_shown(value)} must be a number")
+        raise BadRequest("bad_request", f"{name}={shown(value)} must be a number")
     try:
         result = float(value)
     except (ValueError, OverflowError):
-        raise BadRequest("bad_request", f"{name}={_shown(value)} must be a number") from None
+        raise BadRequest("bad_request", f"{name}={shown(value)} must be a number") from None
     if not math.isfinite(result):
-        raise BadRequest("bad_request", f"{name}={_shown(value)} must be finite")
+        raise BadRequest("bad_request", f"{name}={shown(value)} must be finite")
     return result
 
 
-def _clamped(value: object, name: str, low: float, high: float) -> float:
+def clamped(value: object, name: str, low: float, high: float) -> float:
+    """``value`` read as a number (:func:`number`, naming ``name``), clamped to
+    ``[low, high]``."""
     return min(high, max(low, number(value, name)))
 
 
@@ -230,7 +236,7 @@ def _key(value: object, name: str) -> str:
     if not isinstance(value, str) or not 1 <= len(value) <= MAX_KEY_CHARS:
         raise BadRequest(
             "bad_request",
-            f"{name}={_shown(value)} must be a string of 1-{MAX_KEY_CHARS} characters",
+            f"{name}={shown(value)} must be a string of 1-{MAX_KEY_CHARS} characters",
         )
     return value
 
@@ -243,14 +249,14 @@ def position(value: object) -> tuple[str, bool]:
     if found is None:
         raise BadRequest(
             "bad_request",
-            f"position={_shown(value)} must be a position name (ForearmL, ForearmR, VestFront, "
+            f"position={shown(value)} must be a position name (ForearmL, ForearmR, VestFront, "
             "...) or the C++ SDK's number (10 ForearmL, 11 ForearmR, ...)",
         )
     return found, str(value).strip().lower() in _LEGACY_ARMS
 
 
 def _register(item: object) -> Register:
-    fields = _folded(item, "a registration")
+    fields = folded(item, "a registration")
     key = _key(fields.get("key"), "key")
     project = fields.get("project")
     if isinstance(project, str):
@@ -262,13 +268,13 @@ def _register(item: object) -> Register:
             ) from None
     if not isinstance(project, dict):
         raise BadRequest(
-            "bad_request", f"project of key={key!r} must be an object, got {_shown(project)}"
+            "bad_request", f"project of key={key!r} must be an object, got {shown(project)}"
         )
     return Register(key, project)
 
 
 def _submit(item: object) -> Request:
-    fields = _folded(item, "a submit")
+    fields = folded(item, "a submit")
     kind = fields.get("type")
     kind_name = kind.lower() if isinstance(kind, str) else None
     if kind_name == "turnoffall":
@@ -281,15 +287,15 @@ def _submit(item: object) -> Request:
         key = fields.get("key")
         return PlayFrame("" if key is None else _key(key, "key"), _frame(fields.get("frame")))
     raise BadRequest(
-        "bad_request", f"type={_shown(kind)} must be one of key, frame, turnOff, turnOffAll"
+        "bad_request", f"type={shown(kind)} must be one of key, frame, turnOff, turnOffAll"
     )
 
 
 def _play_key(key: str, parameters: object) -> PlayKey:
-    fields = {} if parameters is None else _folded(parameters, "Parameters")
+    fields = {} if parameters is None else folded(parameters, "Parameters")
     alt = fields.get("altkey")
     scale = fields.get("scaleoption")
-    scale_fields = {} if scale is None else _folded(scale, "scaleOption")
+    scale_fields = {} if scale is None else folded(scale, "scaleOption")
     intensity = scale_fields.get(
         "intensity", fields.get("intensityratio", fields.get("ratio", 1.0))
     )
@@ -298,33 +304,35 @@ def _play_key(key: str, parameters: object) -> PlayKey:
     return PlayKey(
         key=key,
         alt_key=None if alt in (None, "") else _key(alt, "altKey"),
-        intensity_scale=_clamped(intensity, "scaleOption.intensity", *SCALE_RANGE),
-        duration_scale=_clamped(duration, "scaleOption.duration", *DURATION_SCALE_RANGE),
-        start_ms=round(_clamped(start, "startTimeMillis", 0, MAX_START_MS)),
+        intensity_scale=clamped(intensity, "scaleOption.intensity", *SCALE_RANGE),
+        duration_scale=clamped(duration, "scaleOption.duration", *DURATION_SCALE_RANGE),
+        start_ms=round(clamped(start, "startTimeMillis", 0, MAX_START_MS)),
     )
 
 
 def _frame(value: object) -> Frame:
-    fields = _folded(value, "Frame")
+    fields = folded(value, "Frame")
     duration = fields.get("durationmillis")
     duration_ms = (
         MIN_DURATION_MS
         if duration is None
-        else round(_clamped(duration, "durationMillis", MIN_DURATION_MS, MAX_DURATION_MS))
+        else round(clamped(duration, "durationMillis", MIN_DURATION_MS, MAX_DURATION_MS))
     )
     dots = tuple(
         DotPoint(
             index=round(number(point.get("index"), "dotPoints.index")),
-            intensity=_clamped(point.get("intensity"), "dotPoints.intensity", 0.0, MAX_INTENSITY),
+            intensity=clamped(point.get("intensity"), "dotPoints.intensity", 0.0, MAX_INTENSITY)
+            / MAX_INTENSITY,
         )
         for point in _points(fields, "dotpoints")
     )
     paths = tuple(
         PathPoint(
-            x=_clamped(point.get("x"), "pathPoints.x", 0.0, 1.0),
-            y=_clamped(point.get("y"), "pathPoints.y", 0.0, 1.0),
-            intensity=_clamped(point.get("intensity"), "pathPoints.intensity", 0.0, MAX_INTENSITY),
-            motor_count=round(_clamped(point.get("motorcount", 0), "pathPoints.motorCount", 0, 3))
+            x=clamped(point.get("x"), "pathPoints.x", 0.0, 1.0),
+            y=clamped(point.get("y"), "pathPoints.y", 0.0, 1.0),
+            intensity=clamped(point.get("intensity"), "pathPoints.intensity", 0.0, MAX_INTENSITY)
+            / MAX_INTENSITY,
+            motor_count=round(clamped(point.get("motorcount", 0), "pathPoints.motorCount", 0, 3))
             or 3,
         )
         for point in _points(fields, "pathpoints")
@@ -334,4 +342,4 @@ def _frame(value: object) -> Frame:
 
 
 def _points(fields: Mapping[str, Any], name: str) -> list[dict[str, Any]]:
-    return [_folded(point, name) for point in _array(fields, name)[:MAX_POINTS]]
+    return [folded(point, name) for point in _array(fields, name)[:MAX_POINTS]]

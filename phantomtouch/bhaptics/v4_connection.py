@@ -16,38 +16,19 @@ ends with it.
 
 from __future__ import annotations
 
-import asyncio
 import itertools
-import logging
-import re
 from typing import TYPE_CHECKING
-from urllib.parse import parse_qs, urlsplit
 
 from websockets.asyncio.server import ServerConnection
-from websockets.exceptions import ConnectionClosed
 
-from phantomtouch.bhaptics.sdk2.session import Sdk2Session
-from phantomtouch.bhaptics.v4_envelope import EnvelopeError, ServerKey, V4Envelope
-from phantomtouch.service.admission import Kind, principal_for
-from phantomtouch.service.errors import (
-    WS_CLOSE_MESSAGE_TOO_BIG,
-    WS_CLOSE_POLICY_VIOLATION,
-    WS_CLOSE_TRY_AGAIN_LATER,
-    TooLargeError,
-)
+from phantomtouch.bhaptics.v4_envelope import ServerKey, V4Envelope
+from phantomtouch.bhaptics.websocket import serve_sdk2
 
 if TYPE_CHECKING:
     from phantomtouch.service.running import Service
 
-logger = logging.getLogger("phantomtouch.bhaptics")
-
 PATHS = ("/v4/feedback", "/v4/feedback/")
 """Where v4 clients connect."""
-KIND: Kind = "bhaptics-sdk2"
-"""The admission's row for SDK2 connections, v3 and v4 alike."""
-SEND_TIMEOUT_S = 10.0
-"""A client that reads nothing for this long while a message waits to be sent is closed."""
-_NAME = re.compile(r"[^A-Za-z0-9_.-]+")
 
 
 class V4Connections:
@@ -69,71 +50,12 @@ class V4Connections:
 
     async def serve(self, connection: ServerConnection, host: str | None) -> None:
         """Serve one connection until it closes (the listener's event loop)."""
-        path = connection.request.path if connection.request else ""
-        values = parse_qs(urlsplit(path).query).get("workspace_id")
-        workspace = values[0].strip()[:256] if values else ""
-        source = f"v4-{next(self._serials)}-{_NAME.sub('_', workspace)[:24] or 'none'}"
-        loop = asyncio.get_running_loop()
-
-        def yielded(reason: str) -> None:
-            loop.call_soon_threadsafe(
-                lambda: loop.create_task(connection.close(WS_CLOSE_TRY_AGAIN_LATER, reason[:120]))
-            )
-
-        handle = self.service.admission.open(
-            KIND, source, principal=principal_for(KIND, host=host), on_yield=yielded
-        )
-        envelope = V4Envelope(self.key)
-
-        async def send(text: str) -> None:
-            try:
-                await asyncio.wait_for(connection.send(envelope.seal(text)), SEND_TIMEOUT_S)
-            except ConnectionClosed:
-                return
-            except TimeoutError:
-                await connection.close(
-                    WS_CLOSE_POLICY_VIOLATION, f"the client read nothing for {SEND_TIMEOUT_S:g} s"
-                )
-
-        session = Sdk2Session(
-            handle,
-            self.service.arm_map,
-            workspace=workspace,
+        await serve_sdk2(
+            self.service,
+            connection,
+            self.counts,
+            source=f"v4-{next(self._serials)}",
+            host=host,
             workspaces=self.service.workspaces,
-            send=send,
+            envelope=V4Envelope(self.key),
         )
-        logger.info("bhaptics-v4: workspace %r connected as %s", workspace, handle.owner)
-        try:
-            await connection.send(envelope.hello())
-            envelope.accept(await connection.recv())
-            await session.open()
-            async for data in connection:
-                await self._message(connection, session, envelope, data)
-        except EnvelopeError as exc:
-            self.counts["bad_request"] += 1
-            logger.warning("bhaptics-v4: %s: %s", handle.owner, exc)
-            await connection.close(exc.close_code, str(exc)[:120])
-        except ConnectionClosed:
-            pass
-        finally:
-            session.close()
-            logger.info("bhaptics-v4: %s disconnected", handle.owner)
-
-    async def _message(
-        self,
-        connection: ServerConnection,
-        session: Sdk2Session,
-        envelope: V4Envelope,
-        data: str | bytes,
-    ) -> None:
-        try:
-            verdict = session.handle.receive(len(data))
-        except TooLargeError as exc:
-            await connection.close(WS_CLOSE_MESSAGE_TOO_BIG, str(exc)[:120])
-            return
-        if verdict.arrival is None:
-            self.counts["flood"] += 1
-            if verdict.sustained:
-                await connection.close(WS_CLOSE_POLICY_VIOLATION, verdict.reason[:120])
-            return
-        self.counts[await session.receive(envelope.open(data), verdict.arrival)] += 1

@@ -28,6 +28,7 @@ time linear in the file (:mod:`~phantomtouch.clips.ahap_envelope`; benchmarks/be
 from __future__ import annotations
 
 import warnings
+from typing import Any
 
 import numpy as np
 
@@ -104,25 +105,24 @@ def clip_of_ahap(document: AhapFile, *, source: str = "clip") -> HapticClip:
                     )
                 )
             continue
-        parameter = entry.get("Parameter")
-        if parameter is not None:
-            control = _control(parameter["ParameterID"], intensity, sharpness)
-            if control is None:
-                unplayed.append(f"Pattern[{index}].Parameter ({parameter['ParameterID']})")
-            else:
-                control.add(np.array([parameter["Time"]]), np.array([parameter["ParameterValue"]]))
+        # a Parameter is a curve of one point, at its own time
+        name = "Parameter" if "Parameter" in entry else "ParameterCurve"
+        curve: Any = entry.get(name)
+        if curve is None:
             continue
-        curve = entry.get("ParameterCurve")
-        if curve is not None:
-            control = _control(curve["ParameterID"], intensity, sharpness)
-            if control is None:
-                unplayed.append(f"Pattern[{index}].ParameterCurve ({curve['ParameterID']})")
-            else:
-                points = curve["ParameterCurveControlPoints"]
-                control.add(
-                    curve["Time"] + np.array([p["Time"] for p in points]),
-                    np.array([p["ParameterValue"] for p in points]),
-                )
+        control = _control(curve["ParameterID"], intensity, sharpness)
+        if control is None:
+            unplayed.append(f"Pattern[{index}].{name} ({curve['ParameterID']})")
+            continue
+        points = (
+            curve["ParameterCurveControlPoints"]
+            if name == "ParameterCurve"
+            else [{"Time": 0.0, "ParameterValue": curve["ParameterValue"]}]
+        )
+        control.add(
+            curve["Time"] + np.array([p["Time"] for p in points]),
+            np.array([p["ParameterValue"] for p in points]),
+        )
     _warn_unplayed(unplayed, source)
 
     events = np.array(continuous, dtype=np.float64).reshape(-1, 6)

@@ -55,6 +55,7 @@ from pathlib import Path
 from typing import Any
 
 from phantomtouch.clips.audio_frames import audio_project
+from phantomtouch.clips.files import read_limited
 from phantomtouch.clips.tact import MAX_PROJECT_MS, TactProject, parse_tact
 from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.clips.tact_score import ScaleOption, Score, score
@@ -285,18 +286,12 @@ def is_deployment(document: Any) -> bool:
 def load_deployment(path: str | Path) -> Deployment:
     """Read a deployment file (see :func:`parse_deployment`); an unreadable file is a
     :class:`DeploymentError` naming it. Runs in the caller's thread (file I/O)."""
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-        if size > MAX_DEPLOYMENT_BYTES:
-            raise DeploymentError(
-                f"{path}: {size} bytes; a deployment may have {MAX_DEPLOYMENT_BYTES}", field=""
-            )
-        data = path.read_bytes()
-    except OSError as exc:
-        raise DeploymentError(
-            f"cannot read {str(path)!r}: {exc.strerror or exc}", field=""
-        ) from exc
+    data = read_limited(
+        Path(path),
+        max_bytes=MAX_DEPLOYMENT_BYTES,
+        what="a deployment",
+        error=lambda message: DeploymentError(message, field=""),
+    )
     return parse_deployment(data)
 
 

@@ -23,7 +23,7 @@ whole file and the rules.
 
 from __future__ import annotations
 
-from typing import Any, Literal, Self
+from typing import Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -35,6 +35,7 @@ from phantomtouch.schema.clip import (
     Transient,
     Unit,
 )
+from phantomtouch.schema.validation import check_never_decreasing
 
 
 class _Lenient(BaseModel):
@@ -67,13 +68,8 @@ class FrequencyPoint(_Lenient):
     frequency: Unit
 
 
-def _never_decreasing(points: list[Any], field: str) -> None:
-    for i in range(1, len(points)):
-        if points[i].time < points[i - 1].time:
-            raise ValueError(
-                f"{field}[{i}].time={points[i].time!r} must not be before {field}[{i - 1}]"
-                f".time={points[i - 1].time!r} (times never decrease; equal times are a step)"
-            )
+_STEP = "; equal times are a step"
+"""What an equal time means in a ``.haptic`` envelope, said beside the rule."""
 
 
 class Version(_Lenient):
@@ -88,8 +84,12 @@ class Envelopes(_Lenient):
 
     @model_validator(mode="after")
     def _times(self) -> Self:
-        _never_decreasing(self.amplitude, "amplitude")
-        _never_decreasing(self.frequency or [], "frequency")
+        check_never_decreasing(
+            [p.time for p in self.amplitude], "amplitude", time_name="time", note=_STEP
+        )
+        check_never_decreasing(
+            [p.time for p in self.frequency or []], "frequency", time_name="time", note=_STEP
+        )
         return self
 
 

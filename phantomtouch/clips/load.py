@@ -9,6 +9,7 @@ from typing import Any, Literal
 
 from pydantic import ValidationError
 
+from phantomtouch.clips.files import read_limited
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema.clip import HapticClip
 from phantomtouch.schema.validation import describe_validation_error
@@ -117,11 +118,5 @@ def _loaded(text: str | bytes, source: str) -> Any:
 def load_clip(path: str | Path) -> HapticClip:
     """Read a clip file (see :func:`parse_clip`); unreadable files are ParameterError too."""
     path = Path(path)
-    try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise ParameterError(f"{path}: {size} bytes; a clip file may have {MAX_FILE_BYTES}")
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ParameterError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from exc
+    data = read_limited(path, max_bytes=MAX_FILE_BYTES, what="a clip file")
     return parse_clip(data, suffix=path.suffix, source=path.name)

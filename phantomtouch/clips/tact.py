@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from phantomtouch.clips.files import read_limited
 from phantomtouch.errors import FieldError, ParameterError
 
 Playback = Literal["NONE", "FADE_IN", "FADE_OUT", "FADE_IN_OUT"]
@@ -295,14 +296,9 @@ def parse_tact(document: str | bytes | Mapping[str, Any], *, source: str = "tact
 def load_tact(path: str | Path) -> TactProject:
     """Read a ``.tact`` file (see :func:`parse_tact`); unreadable files are ParameterError."""
     path = Path(path)
-    try:
-        size = path.stat().st_size
-        if size > MAX_TACT_BYTES:
-            raise ParameterError(f"{path}: {size} bytes; a .tact file may have {MAX_TACT_BYTES}")
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ParameterError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from exc
-    return parse_tact(data, source=path.name)
+    return parse_tact(
+        read_limited(path, max_bytes=MAX_TACT_BYTES, what="a .tact file"), source=path.name
+    )
 
 
 def _lowered(obj: Mapping[str, Any]) -> dict[str, Any]:

@@ -5,9 +5,9 @@ imports the renderer and the schema, never the server.
 """
 
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.engine import Engine
 from phantomtouch.engine.front import EngineFront
 from phantomtouch.engine.jobs import Job
+from phantomtouch.engine.local_audio import Engine
 from phantomtouch.engine.process import ProcessEngine
 from phantomtouch.engine.sinks import CaptureSink, NullSink, Sink
 from phantomtouch.engine.soundcard import (

@@ -7,9 +7,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.contacts import ContactSettings, ContactVoice, Position
 from phantomtouch.engine.touchdown import contact_amplitude
+from phantomtouch.engine.voice_queue import CommandQueue
 from phantomtouch.schema.device import DeviceProfile
 
 if TYPE_CHECKING:

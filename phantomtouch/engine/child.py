@@ -18,8 +18,8 @@ import numpy as np
 
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core
-from phantomtouch.engine.engine import RENDER_AHEAD_FRAMES, RENDER_AHEAD_RINGS, voice_costs
 from phantomtouch.engine.link import Inbox, ReportBox
+from phantomtouch.engine.local_audio import RENDER_AHEAD_FRAMES, RENDER_AHEAD_RINGS, voice_costs
 from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
 from phantomtouch.engine.messages import prepare as prepare_message
 from phantomtouch.engine.noise import HeldLoops

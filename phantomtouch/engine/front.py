@@ -11,7 +11,6 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Self
 
-from phantomtouch.engine.admission import RENDER_BUDGET, Admission
 from phantomtouch.engine.checks import check_channel_gains, check_int, check_range, check_seconds
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.events import apply_events
@@ -21,13 +20,14 @@ from phantomtouch.engine.messages import Event, PlanReleased, SetWearerGains
 from phantomtouch.engine.owners import ContactCalls, DeadlineThread, OwnerTable
 from phantomtouch.engine.plans import PlanCache
 from phantomtouch.engine.prerender import PRERENDER_MAX_S
+from phantomtouch.engine.render_budget import RENDER_BUDGET, Admission
 from phantomtouch.engine.status import EngineStatus
 from phantomtouch.engine.touchdown import Touchdowns
 from phantomtouch.errors import ParameterError
 from phantomtouch.schema.device import DeviceProfile
 
 if TYPE_CHECKING:
-    from phantomtouch.engine.engine import LocalAudio
+    from phantomtouch.engine.local_audio import LocalAudio
     from phantomtouch.engine.process import ChildAudio
 
 MAX_QUEUE_CAPACITY = 1_000_000

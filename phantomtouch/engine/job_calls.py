@@ -8,7 +8,6 @@ import threading
 import uuid
 from typing import TYPE_CHECKING, Any, cast
 
-from phantomtouch.engine.admission import Admission
 from phantomtouch.engine.checks import check_ahead, check_frame, check_id
 from phantomtouch.engine.jobs import (
     POLICIES,
@@ -21,13 +20,14 @@ from phantomtouch.engine.jobs import (
 )
 from phantomtouch.engine.messages import DropPlan, HoldPlan, ReleaseJob, StartJob
 from phantomtouch.engine.owners import post_release
+from phantomtouch.engine.render_budget import Admission
 from phantomtouch.errors import ParameterError
 from phantomtouch.renderer.plan import Plan, plan
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
 
 if TYPE_CHECKING:
-    from phantomtouch.engine.engine import LocalAudio
+    from phantomtouch.engine.local_audio import LocalAudio
     from phantomtouch.engine.plans import HeldPlan, PlanCache
     from phantomtouch.engine.process import ChildAudio
 

@@ -23,7 +23,7 @@ from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import Carrier
 
 if TYPE_CHECKING:
-    from phantomtouch.engine.engine import LocalAudio
+    from phantomtouch.engine.local_audio import LocalAudio
     from phantomtouch.engine.process import ChildAudio
 
 logger = logging.getLogger("phantomtouch.engine")

@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 
 from phantomtouch.engine.clock import SampleClock
-from phantomtouch.engine.commands import CommandQueue, StartCommand
 from phantomtouch.engine.contacts import ContactMix, ContactVoice
 from phantomtouch.engine.future_mix import FutureMix
 from phantomtouch.engine.mixer import Mixer
+from phantomtouch.engine.voice_queue import CommandQueue, StartCommand
 from phantomtouch.engine.voices import (
     DONE,
     PLAYING,

@@ -28,6 +28,11 @@ ROUTES_HELP = (
     "the cluster's NATS route ports, comma-separated (HOST:6222): checked to admit no server "
     "without credentials"
 )
+OPEN_NATS_HELP = (
+    "a NATS server that lets anonymous clients publish on the armbands' subjects (anyone "
+    "reaching it can play on every armband)"
+)
+"""What ``--fleet-insecure`` and ``--insecure-nats`` let the command run on."""
 
 
 def _routes(given: str | None) -> list[str]:
@@ -57,8 +62,7 @@ def add_serve_options(serve: argparse.ArgumentParser) -> None:
     serve.add_argument(
         "--fleet-insecure",
         action="store_true",
-        help="join even a NATS server that lets anonymous clients publish on the armbands' "
-        "subjects (anyone reaching it can play on every armband)",
+        help=f"join even {OPEN_NATS_HELP}",
     )
 
 
@@ -155,8 +159,7 @@ def register(sub: Any) -> None:
     gateway.add_argument(
         "--insecure-nats",
         action="store_true",
-        help="run even on a NATS server that lets anonymous clients publish on the armbands' "
-        "subjects (anyone reaching it can play on every armband)",
+        help=f"run even on {OPEN_NATS_HELP}",
     )
     gateway.set_defaults(func=_cmd_gateway)
     config = sub.add_parser(

@@ -19,48 +19,44 @@ import logging
 from collections.abc import AsyncIterator, Iterator
 from contextlib import asynccontextmanager
 
-from prometheus_client.core import CounterMetricFamily
-from prometheus_client.registry import Collector
+from prometheus_client.core import CounterMetricFamily, Metric
 
 from phantomtouch.osc.bridge import INPUT, OscBridge
 from phantomtouch.osc.counters import kernel_drops
 from phantomtouch.osc.mapping import load_map
+from phantomtouch.service.metrics import FunctionCollector, labelled
 from phantomtouch.service.running import Service
 
 logger = logging.getLogger("phantomtouch.osc")
 
 
-class _Counts(Collector):
-    def __init__(self, bridge: OscBridge) -> None:
-        self.bridge = bridge
-
-    def collect(self) -> Iterator[CounterMetricFamily]:
-        family = CounterMetricFamily(
-            "phantomtouch_osc_messages",
-            "OSC messages received, by outcome: accepted or why they were dropped.",
-            labels=["outcome"],
-        )
-        for outcome, count in self.bridge.counters.snapshot().items():
-            family.add_metric([outcome], count)
-        yield family
+def _families(bridge: OscBridge) -> Iterator[Metric]:
+    """The bridge's families for ``/metrics`` (the scraping thread)."""
+    yield labelled(
+        CounterMetricFamily,
+        "phantomtouch_osc_messages",
+        "OSC messages received, by outcome: accepted or why they were dropped.",
+        "outcome",
+        bridge.counters.snapshot(),
+    )
+    yield CounterMetricFamily(
+        "phantomtouch_osc_watchdog_releases",
+        "Times silence on OSC released the bridge's contacts.",
+        value=bridge.watchdog_releases,
+    )
+    drops = kernel_drops(bridge.address)
+    if drops is not None:
         yield CounterMetricFamily(
-            "phantomtouch_osc_watchdog_releases",
-            "Times silence on OSC released the bridge's contacts.",
-            value=self.bridge.watchdog_releases,
+            "phantomtouch_osc_kernel_drops",
+            "OSC datagrams the kernel dropped before the bridge read them (its receive "
+            "buffer was full; Linux only).",
+            value=drops,
         )
-        drops = kernel_drops(self.bridge.address)
-        if drops is not None:
-            yield CounterMetricFamily(
-                "phantomtouch_osc_kernel_drops",
-                "OSC datagrams the kernel dropped before the bridge read them (its receive "
-                "buffer was full; Linux only).",
-                value=drops,
-            )
-        yield CounterMetricFamily(
-            "phantomtouch_osc_restarts",
-            "Times the OSC receive thread died and was started again (its contacts released).",
-            value=self.bridge.restarts,
-        )
+    yield CounterMetricFamily(
+        "phantomtouch_osc_restarts",
+        "Times the OSC receive thread died and was started again (its contacts released).",
+        value=bridge.restarts,
+    )
 
 
 def start_osc(service: Service) -> OscBridge:
@@ -82,7 +78,7 @@ def start_osc(service: Service) -> OscBridge:
         host=address[0],
         port=address[1],
     )
-    service.metrics.registry.register(_Counts(bridge))
+    service.metrics.registry.register(FunctionCollector(lambda: _families(bridge)))
     service.inputs[INPUT] = bridge.health
     bridge.start()
     return bridge

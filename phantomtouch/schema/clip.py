@@ -15,6 +15,8 @@ from typing import Annotated, Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from phantomtouch.schema.validation import check_never_decreasing
+
 MAX_CLIP_S = 600.0
 """Longest clip, s."""
 MIN_CLIP_S = 0.001
@@ -66,15 +68,6 @@ class Transient(_Model):
     frequency: Unit = Field(description="0-1, mapped onto the actuator's band like the envelope.")
 
 
-def _ordered(points: list[Breakpoint] | list[Transient], field: str) -> None:
-    for i in range(1, len(points)):
-        if points[i].t_s < points[i - 1].t_s:
-            raise ValueError(
-                f"{field}[{i}].t_s={points[i].t_s!r} must not be before "
-                f"{field}[{i - 1}].t_s={points[i - 1].t_s!r} (times never decrease)"
-            )
-
-
 class HapticClip(_Model):
     """An amplitude envelope, a frequency envelope and transients, all 0-1.
 
@@ -93,9 +86,9 @@ class HapticClip(_Model):
 
     @model_validator(mode="after")
     def _times(self) -> Self:
-        _ordered(self.amplitude, "amplitude")
-        _ordered(self.frequency, "frequency")
-        _ordered(self.transients, "transients")
+        check_never_decreasing([p.t_s for p in self.amplitude], "amplitude", time_name="t_s")
+        check_never_decreasing([p.t_s for p in self.frequency], "frequency", time_name="t_s")
+        check_never_decreasing([p.t_s for p in self.transients], "transients", time_name="t_s")
         return self
 
 

@@ -30,6 +30,35 @@ _MESSAGE_FIELD = re.compile(r"([a-z_][a-z0-9_]*(?:\[\d+\])*(?:\.[a-z_][a-z0-9_]*
 _STEP = re.compile(r"\.?([a-z_][a-z0-9_]*)|\[(\d+)\]")
 
 
+def check_never_decreasing(
+    times: Sequence[float], field: str, *, time_name: str, note: str = ""
+) -> None:
+    """Refuse a list of points whose times decrease (pure; a model validator's check).
+
+    Parameters
+    ----------
+    times : sequence of float
+        The points' times, in the list's order.
+    field : str
+        The list's name in the message (``amplitude``).
+    time_name : str
+        The time's name in a point (``t_s``, ``time``).
+    note : str
+        Added to the rule in the message (``; equal times are a step``).
+
+    Raises
+    ------
+    ValueError
+        A time before the one ahead of it; the message names both points and their times.
+    """
+    for i in range(1, len(times)):
+        if times[i] < times[i - 1]:
+            raise ValueError(
+                f"{field}[{i}].{time_name}={times[i]!r} must not be before "
+                f"{field}[{i - 1}].{time_name}={times[i - 1]!r} (times never decrease{note})"
+            )
+
+
 def field_location(loc: Sequence[int | str], *, tags: Iterable[str] = ()) -> list[int | str]:
     """``loc`` without union branch names; ``tags`` are more union tags to leave out.
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import collections
 import functools
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
@@ -55,37 +55,97 @@ CONNECTION_BUDGET: dict[str, int] = {}
 ``connections``, ``stop_lane``), set once at start (:mod:`phantomtouch.server.serve`)."""
 
 
-class _ConnectionCollector(Collector):
-    def collect(self) -> Iterator[Metric]:
-        family = CounterMetricFamily(
-            "phantomtouch_connections_refused",
-            "Connections refused before a request reached the app, by reason (header_timeout: "
-            "408, header_too_large: 431, budget: over the connection budget).",
-            labels=["reason"],
-        )
-        for reason in ("budget", "header_timeout", "header_too_large"):
-            family.add_metric([reason], CONNECTION_REFUSALS[reason])
-        yield family
-        for name, value in sorted(CONNECTION_BUDGET.items()):
-            yield GaugeMetricFamily(
-                f"phantomtouch_connection_budget_{name}",
-                "The connection budget the server started with (open_files: the open-file "
-                "limit; connections: served at once; stop_lane: more for POST /stop only).",
-                value=value,
-            )
+def labelled(
+    family: type[CounterMetricFamily | GaugeMetricFamily],
+    name: str,
+    documentation: str,
+    label: str,
+    values: Mapping[str, float],
+) -> Metric:
+    """One family with a sample per value of one label (pure).
+
+    Parameters
+    ----------
+    family : CounterMetricFamily or GaugeMetricFamily
+    name, documentation : str
+    label : str
+        The label's name (``outcome``, ``reason``, ``quantile``).
+    values : mapping of str to float
+        The samples, by the label's value, in the order given.
+    """
+    metric = family(name, documentation, labels=[label])
+    for key, value in values.items():
+        metric.add_metric([key], value)
+    return metric
 
 
-class _FrameCollector(Collector):
+class FunctionCollector(Collector):
+    """A collector whose families come from one function, called at each scrape (the
+    scraping thread): how the service and every input (OSC, the bHaptics listeners) show
+    their counts.
+
+    Parameters
+    ----------
+    families : callable () -> iterable of Metric
+    """
+
+    def __init__(self, families: Callable[[], Iterable[Metric]]) -> None:
+        self.families = families
+
     def collect(self) -> Iterator[Metric]:
-        family = CounterMetricFamily(
-            "phantomtouch_ws_refused_frames",
-            "WebSocket frames refused by the protocol before a session read them, by reason "
-            "(invalid_utf8: a text frame that is not UTF-8, closed with 1007).",
-            labels=["reason"],
+        yield from self.families()
+
+
+def _connection_families() -> Iterator[Metric]:
+    yield labelled(
+        CounterMetricFamily,
+        "phantomtouch_connections_refused",
+        "Connections refused before a request reached the app, by reason (header_timeout: "
+        "408, header_too_large: 431, budget: over the connection budget).",
+        "reason",
+        {
+            reason: CONNECTION_REFUSALS[reason]
+            for reason in ("budget", "header_timeout", "header_too_large")
+        },
+    )
+    for name, value in sorted(CONNECTION_BUDGET.items()):
+        yield GaugeMetricFamily(
+            f"phantomtouch_connection_budget_{name}",
+            "The connection budget the server started with (open_files: the open-file "
+            "limit; connections: served at once; stop_lane: more for POST /stop only).",
+            value=value,
         )
-        for reason in ("invalid_utf8", *sorted(set(FRAME_REFUSALS) - {"invalid_utf8"})):
-            family.add_metric([reason], FRAME_REFUSALS[reason])
-        yield family
+
+
+def _frame_families() -> Iterator[Metric]:
+    yield labelled(
+        CounterMetricFamily,
+        "phantomtouch_ws_refused_frames",
+        "WebSocket frames refused by the protocol before a session read them, by reason "
+        "(invalid_utf8: a text frame that is not UTF-8, closed with 1007).",
+        "reason",
+        {
+            reason: FRAME_REFUSALS[reason]
+            for reason in ("invalid_utf8", *sorted(set(FRAME_REFUSALS) - {"invalid_utf8"}))
+        },
+    )
+
+
+_CALLBACK_QUANTILES = (
+    (
+        "phantomtouch_render_load",
+        "Audio callback time over the last 4096 blocks, as a fraction of the time each "
+        "callback had (the sound card's period).",
+        {"0.99": "render_load_p99", "1": "render_load_max"},
+    ),
+    (
+        "phantomtouch_callback_seconds",
+        "Audio callback time over the last 4096 blocks, s.",
+        {"0.5": "callback_p50_s", "0.99": "callback_p99_s", "1": "callback_max_s"},
+    ),
+)
+"""The audio callback's time by quantile: each family's name, help and the status key of
+each quantile."""
 
 
 class _EngineCollector(Collector):
@@ -118,15 +178,14 @@ class _EngineCollector(Collector):
             "render-ahead thread had not kept its ring filled.",
             status["inline_renders"],
         )
-        silenced = CounterMetricFamily(
+        yield labelled(
+            CounterMetricFamily,
             "phantomtouch_silenced_voices",
             "Voices silenced alone while the others played on, by reason (non_finite: a "
             "sample NaN or Inf; over_budget: past the render budget block after block).",
-            labels=["reason"],
+            "reason",
+            {"non_finite": status["nonfinite_voices"], "over_budget": status["overrun_voices"]},
         )
-        silenced.add_metric(["non_finite"], status["nonfinite_voices"])
-        silenced.add_metric(["over_budget"], status["overrun_voices"])
-        yield silenced
         yield CounterMetricFamily(
             "phantomtouch_muted_blocks",
             "Output blocks the output stage replaced by silence for a NaN or Inf in the mix "
@@ -153,24 +212,9 @@ class _EngineCollector(Collector):
             "Commands waiting for the audio thread.",
             status["queue_depth"],
         )
-        load = GaugeMetricFamily(
-            "phantomtouch_render_load",
-            "Audio callback time over the last 4096 blocks, as a fraction of the time each "
-            "callback had (the sound card's period).",
-            labels=["quantile"],
-        )
-        load.add_metric(["0.99"], status["render_load_p99"])
-        load.add_metric(["1"], status["render_load_max"])
-        yield load
-        callback = GaugeMetricFamily(
-            "phantomtouch_callback_seconds",
-            "Audio callback time over the last 4096 blocks, s.",
-            labels=["quantile"],
-        )
-        callback.add_metric(["0.5"], status["callback_p50_s"])
-        callback.add_metric(["0.99"], status["callback_p99_s"])
-        callback.add_metric(["1"], status["callback_max_s"])
-        yield callback
+        for name, documentation, keys in _CALLBACK_QUANTILES:
+            quantiles = {quantile: status[key] for quantile, key in keys.items()}
+            yield labelled(GaugeMetricFamily, name, documentation, "quantile", quantiles)
         yield GaugeMetricFamily(
             "phantomtouch_period_frames",
             "Frames of each audio callback: the sound card's period.",
@@ -201,14 +245,13 @@ class _EngineCollector(Collector):
             "Times the engine process was restarted after it died or stalled.",
             status["restarts"],
         )
-        channel = GaugeMetricFamily(
+        yield labelled(
+            GaugeMetricFamily,
             "phantomtouch_channel_peak_level",
             "Largest absolute sample per output channel in the last block (full scale 1).",
-            labels=["channel"],
+            "channel",
+            {str(k): level for k, level in enumerate(status["levels"], start=1)},
         )
-        for k, level in enumerate(status["levels"], start=1):
-            channel.add_metric([str(k)], level)
-        yield channel
 
 
 class Metrics:
@@ -274,8 +317,8 @@ class Metrics:
         )
         self._engine = _EngineCollector()
         self.registry.register(self._engine)
-        self.registry.register(_FrameCollector())
-        self.registry.register(_ConnectionCollector())
+        self.registry.register(FunctionCollector(_frame_families))
+        self.registry.register(FunctionCollector(_connection_families))
 
     def watch_engine(self, read: StatusReader | None) -> None:
         """Read the engine's figures with ``read`` at scrape time (None: stop)."""

@@ -62,6 +62,28 @@ class ClientLimits(BaseSettings):
     """Silence after which a connection's contacts are released, in seconds."""
 
 
+def _loopback_listen(listen: str | None, example_port: int, why: str) -> str | None:
+    """``listen`` if it is ``HOST:PORT`` on a loopback host (None stays None; pure).
+
+    Raises
+    ------
+    ValueError
+        Not ``HOST:PORT`` with a port of 1-65535 (the message shows ``example_port``), or
+        a host that is not loopback (the message says ``why`` the input listens on one).
+    """
+    if listen is None:
+        return None
+    host, _, port = listen.rpartition(":")
+    if not host or not port.isdecimal() or not 1 <= int(port) <= 65535:
+        raise ValueError(f"must be HOST:PORT, e.g. 127.0.0.1:{example_port}")
+    if not is_loopback(host):
+        raise ValueError(
+            f"{why} on a loopback address only (127.0.0.1), where only programs of this "
+            "machine reach it"
+        )
+    return listen
+
+
 class Settings(ClientLimits):
     """Everything the service needs to start; each field has a sane default."""
 
@@ -195,32 +217,14 @@ class Settings(ClientLimits):
     @field_validator("osc_listen")
     @classmethod
     def _osc_listen(cls, listen: str | None) -> str | None:
-        if listen is None:
-            return None
-        host, _, port = listen.rpartition(":")
-        if not host or not port.isdecimal() or not 1 <= int(port) <= 65535:
-            raise ValueError("must be HOST:PORT, e.g. 127.0.0.1:9001")
-        if not is_loopback(host):
-            raise ValueError(
-                "OSC carries no token, so it listens on a loopback address only "
-                "(127.0.0.1), where only programs of this machine reach it"
-            )
-        return listen
+        return _loopback_listen(listen, 9001, "OSC carries no token, so it listens")
 
     @field_validator("bhaptics_listen", "bhaptics_sdk2_listen")
     @classmethod
     def _bhaptics_listen(cls, listen: str | None) -> str | None:
-        if listen is None:
-            return None
-        host, _, port = listen.rpartition(":")
-        if not host or not port.isdecimal() or not 1 <= int(port) <= 65535:
-            raise ValueError("must be HOST:PORT, e.g. 127.0.0.1:15881")
-        if not is_loopback(host):
-            raise ValueError(
-                "bHaptics clients carry no token, so the stand-in listens on a loopback "
-                "address only (127.0.0.1), where only programs of this machine reach it"
-            )
-        return listen
+        return _loopback_listen(
+            listen, 15881, "bHaptics clients carry no token, so the stand-in listens"
+        )
 
     @property
     def bhaptics_address(self) -> tuple[str, int] | None:

@@ -343,51 +343,13 @@ class PatternStore:
         """Remove the matching run of wearer ``name``; False if there was none."""
         return self._delete("wearer_runs", name)
 
-    # -- .tact projects (bHaptics Designer; played by POST /tact/{name}/play) -------------
-
-    def list_tact(self, limit: int, offset: int) -> builtins.list[tuple[str, int, str]]:
-        """One page of stored projects by name: ``(name, bytes, summary JSON)``, at most
-        ``limit`` from the ``offset``-th on (the projects themselves are not read)."""
-        return self._list_sized("tact", limit, offset)
-
-    def get_tact(self, name: str) -> str | None:
-        """The project JSON stored as ``name``, or None."""
-        return self._text("tact", name)
-
-    def put_tact(self, name: str, project: str, summary: dict[str, Any]) -> bool:
-        """Store the project JSON ``project`` under ``name`` with its ``summary``; True if
-        the name was new."""
-        return self._put_sized("tact", name, project, summary)
-
-    def delete_tact(self, name: str) -> bool:
-        """Remove the project ``name``; False if it was not stored."""
-        return self._delete("tact", name)
-
-    # -- bHaptics SDK2 workspaces (a game's deployment: its events by name) ---------------
-
-    def list_workspaces(self, limit: int, offset: int) -> builtins.list[tuple[str, int, str]]:
-        """One page of stored workspaces by id: ``(id, bytes, summary JSON)``, at most
-        ``limit`` from the ``offset``-th on (the deployments themselves are not read)."""
-        return self._list_sized("workspaces", limit, offset)
-
-    def get_workspace(self, workspace_id: str) -> str | None:
-        """The deployment JSON stored for ``workspace_id``, or None."""
-        return self._text("workspaces", workspace_id)
-
-    def put_workspace(self, workspace_id: str, deployment: str, summary: dict[str, Any]) -> bool:
-        """Store the deployment JSON ``deployment`` for ``workspace_id`` with its
-        ``summary``; True if the workspace was new."""
-        return self._put_sized("workspaces", workspace_id, deployment, summary)
-
-    def delete_workspace(self, workspace_id: str) -> bool:
-        """Remove the workspace ``workspace_id``; False if it was not stored."""
-        return self._delete("workspaces", workspace_id)
-
     # -- documents kept as text with their size and a summary (tact, workspaces) ---------
 
-    def _list_sized(
+    def list_documents(
         self, table: SizedTable, limit: int, offset: int
     ) -> builtins.list[tuple[str, int, str]]:
+        """One page of ``table``'s documents by name: ``(name, bytes, summary JSON)``, at
+        most ``limit`` from the ``offset``-th on (the documents themselves are not read)."""
         with self._using(writes=False) as db:
             rows = db.execute(
                 f"SELECT name, bytes, summary FROM {table} ORDER BY name LIMIT ? OFFSET ?",
@@ -395,16 +357,25 @@ class PatternStore:
             ).fetchall()
         return [(str(name), int(size), str(summary)) for name, size, summary in rows]
 
-    def _text(self, table: SizedTable, name: str) -> str | None:
+    def get_document(self, table: SizedTable, name: str) -> str | None:
+        """The document JSON stored in ``table`` as ``name``, or None."""
         with self._using(writes=False) as db:
             row = db.execute(
                 f"SELECT {DOCUMENT[table]} FROM {table} WHERE name = ?", (name,)
             ).fetchone()
         return None if row is None else str(row[0])
 
-    def _put_sized(self, table: SizedTable, name: str, text: str, summary: dict[str, Any]) -> bool:
+    def put_document(
+        self, table: SizedTable, name: str, text: str, summary: dict[str, Any]
+    ) -> bool:
+        """Store the document JSON ``text`` in ``table`` as ``name`` with its ``summary``;
+        True if the name was new."""
         size = len(text.encode("utf-8"))
         return self._replace(table, name, (text, size, json.dumps(summary), time.time()))
+
+    def delete_document(self, table: SizedTable, name: str) -> bool:
+        """Remove the document ``name`` from ``table``; False if it was not stored."""
+        return self._delete(table, name)
 
 
 FULL_DISK_BYTES = 1 << 20

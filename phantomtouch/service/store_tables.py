@@ -31,13 +31,23 @@ CREATE TABLE IF NOT EXISTS patterns (
     updated_unix_s REAL NOT NULL
 )
 """
-_CLIP_SCHEMA = """
-CREATE TABLE IF NOT EXISTS clips (
-    name TEXT PRIMARY KEY,
-    clip TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
+
+
+def _documents(table: Table, *, sized: bool = False) -> str:
+    """The schema of a table of documents by name (its :data:`DOCUMENT` column and when it
+    was stored); ``sized``: with the document's size and summary beside it, so that a
+    listing never reads a document."""
+    beside = "    bytes INTEGER NOT NULL,\n    summary TEXT NOT NULL,\n" if sized else ""
+    return (
+        f"CREATE TABLE IF NOT EXISTS {table} (\n"
+        "    name TEXT PRIMARY KEY,\n"
+        f"    {DOCUMENT[table]} TEXT NOT NULL,\n"
+        f"{beside}"
+        "    updated_unix_s REAL NOT NULL\n"
+        ")\n"
+    )
+
+
 _CLIP_SIZES_SCHEMA = """
 CREATE TABLE IF NOT EXISTS clip_sizes (
     name TEXT PRIMARY KEY,
@@ -50,52 +60,14 @@ CREATE TABLE IF NOT EXISTS clip_sizes (
 """
 """What ``GET /clips`` lists of each clip, kept when it is stored; a row counts only while
 its ``updated_unix_s`` is the clip's (:meth:`PatternStore.clip_sizes`)."""
-_WEARER_SCHEMA = """
-CREATE TABLE IF NOT EXISTS wearers (
-    name TEXT PRIMARY KEY,
-    profile TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-_WEARER_RUN_SCHEMA = """
-CREATE TABLE IF NOT EXISTS wearer_runs (
-    name TEXT PRIMARY KEY,
-    run TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-
-
-_TACT_SCHEMA = """
-CREATE TABLE IF NOT EXISTS tact (
-    name TEXT PRIMARY KEY,
-    project TEXT NOT NULL,
-    bytes INTEGER NOT NULL,
-    summary TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-"""``.tact`` projects: the project's JSON as stored, its size and a summary, so that a
-listing never reads a project."""
-_WORKSPACE_SCHEMA = """
-CREATE TABLE IF NOT EXISTS workspaces (
-    name TEXT PRIMARY KEY,
-    deployment TEXT NOT NULL,
-    bytes INTEGER NOT NULL,
-    summary TEXT NOT NULL,
-    updated_unix_s REAL NOT NULL
-)
-"""
-"""bHaptics SDK2 workspaces by id: the game's deployment JSON as stored, its size and a
-summary, as ``.tact`` projects are kept."""
 
 TABLES = (
     _SCHEMA,
-    _CLIP_SCHEMA,
+    _documents("clips"),
     _CLIP_SIZES_SCHEMA,
-    _WEARER_SCHEMA,
-    _WEARER_RUN_SCHEMA,
-    _TACT_SCHEMA,
-    _WORKSPACE_SCHEMA,
+    _documents("wearers"),
+    _documents("wearer_runs"),
+    _documents("tact", sized=True),
+    _documents("workspaces", sized=True),
 )
 """Every table's ``CREATE TABLE IF NOT EXISTS``, run in this order when the store opens."""

@@ -12,27 +12,21 @@ map and schedule it through the client's handle at the admission
 from __future__ import annotations
 
 import asyncio
-import json
-import logging
 from typing import TYPE_CHECKING, Any
-
-from pydantic import ValidationError
 
 from phantomtouch.clips.tact import ARM_POSITIONS, TactProject, parse_tact
 from phantomtouch.clips.tact_score import ScaleOption, score
 from phantomtouch.engine.jobs import QuotaRefused
 from phantomtouch.errors import FieldError, ParameterError
-from phantomtouch.service.errors import NotFoundError, StoredPatternError
+from phantomtouch.service.document_library import TACT, compact, document_value
+from phantomtouch.service.errors import StoredPatternError
 from phantomtouch.service.scheduling import quota_error, start_frame
-from phantomtouch.service.tact_models import ScoreAccepted, TactInfo, TactPlay
+from phantomtouch.service.tact_models import ScoreAccepted, TactPlay
 
 if TYPE_CHECKING:
     from phantomtouch.service.admission import Arrival, Handle
     from phantomtouch.service.running import Service
     from phantomtouch.service.store import PatternStore
-
-logger = logging.getLogger("phantomtouch.server.store")
-NOT_STORED = "in the .tact library (GET /tact)"
 
 
 def read_project(document: bytes | str, *, source: str) -> tuple[str, TactProject]:
@@ -47,12 +41,7 @@ def read_project(document: bytes | str, *, source: str) -> tuple[str, TactProjec
         line, naming ``source`` and the positions it does play on.
     """
     project = parse_tact(document, source=source)
-    text = (
-        bytes(document).decode("utf-8-sig", errors="replace")
-        if isinstance(document, bytes | bytearray)
-        else document.removeprefix("\ufeff")
-    )
-    value = json.loads(text)
+    value = document_value(document)
     if not project.has_arm_content:
         found = sorted(project.positions()) or ["none"]
         field = _tracks_path(value)
@@ -61,7 +50,7 @@ def read_project(document: bytes | str, *, source: str) -> tuple[str, TactProjec
             f"plays {', '.join(ARM_POSITIONS)}",
             field=field,
         )
-    return json.dumps(value, separators=(",", ":"), ensure_ascii=False), project
+    return compact(value), project
 
 
 def _tracks_path(document: Any) -> str:
@@ -88,20 +77,6 @@ def summary(project: TactProject) -> dict[str, Any]:
     }
 
 
-def listed(store: PatternStore, *, limit: int, offset: int) -> list[TactInfo]:
-    """One page of the stored projects, sorted by name (any thread); a row whose summary
-    no longer reads is logged and left out."""
-    page = []
-    for name, size, stored in store.list_tact(limit, offset):
-        try:
-            page.append(
-                TactInfo.model_validate({**json.loads(stored), "name": name, "bytes": size})
-            )
-        except (ValueError, ValidationError) as exc:
-            logger.warning("tact=%r: its stored summary no longer reads (%s); left out", name, exc)
-    return page
-
-
 def stored_project(store: PatternStore, name: str, *, field: str = "name") -> TactProject:
     """The project stored as ``name`` (any thread).
 
@@ -112,9 +87,7 @@ def stored_project(store: PatternStore, name: str, *, field: str = "name") -> Ta
     StoredPatternError
         The row is there but no longer reads as a project.
     """
-    text = store.get_tact(name)
-    if text is None:
-        raise NotFoundError(f"{field}={name!r} is not {NOT_STORED}", field=field, value=name)
+    text = TACT.text(store, name, field=field)
     try:
         return parse_tact(text, source=f"tact={name!r}")
     except ParameterError as exc:

@@ -13,20 +13,14 @@ are answered and play nothing on the band).
 from __future__ import annotations
 
 import json
-import logging
 from typing import TYPE_CHECKING, Any
 
-from pydantic import ValidationError
-
 from phantomtouch.clips.deployment import Deployment, DeploymentError, parse_deployment
+from phantomtouch.service.document_library import WORKSPACES, compact, document_value
 from phantomtouch.service.errors import StoredPatternError
-from phantomtouch.service.workspace_models import WorkspaceInfo
 
 if TYPE_CHECKING:
     from phantomtouch.service.store import PatternStore
-
-logger = logging.getLogger("phantomtouch.server.store")
-NOT_STORED = "in the workspace library (GET /bhaptics/workspaces)"
 
 
 def read_deployment(document: bytes | str) -> tuple[str, Deployment]:
@@ -45,15 +39,10 @@ def read_deployment(document: bytes | str) -> tuple[str, Deployment]:
         It does not read as a deployment; ``field`` is the path of the field at fault.
     """
     deployment = parse_deployment(document)
-    text = (
-        bytes(document).decode("utf-8-sig", errors="replace")
-        if isinstance(document, bytes | bytearray)
-        else document.removeprefix("\ufeff")
-    )
-    value = json.loads(text)
+    value = document_value(document)
     if isinstance(value, str):  # the text sent once more as a JSON string: keep the text
         value = json.loads(value)
-    return json.dumps(value, separators=(",", ":"), ensure_ascii=False), deployment
+    return compact(value), deployment
 
 
 def summary(deployment: Deployment) -> dict[str, Any]:
@@ -66,26 +55,6 @@ def summary(deployment: Deployment) -> dict[str, Any]:
         "arm_events": sum(1 for e in events if e.has_arm_content),
         "longest_ms": max((e.length_ms for e in events), default=0),
     }
-
-
-def listed(store: PatternStore, *, limit: int, offset: int) -> list[WorkspaceInfo]:
-    """One page of the stored workspaces, sorted by id (any thread); a row whose summary
-    no longer reads is logged and left out."""
-    page = []
-    for workspace_id, size, stored in store.list_workspaces(limit, offset):
-        try:
-            page.append(
-                WorkspaceInfo.model_validate(
-                    {**json.loads(stored), "workspace_id": workspace_id, "bytes": size}
-                )
-            )
-        except (ValueError, ValidationError) as exc:
-            logger.warning(
-                "workspace=%r: its stored summary no longer reads (%s); left out",
-                workspace_id,
-                exc,
-            )
-    return page
 
 
 def stored_deployment(
@@ -102,7 +71,7 @@ def stored_deployment(
     StorageError
         The store failed.
     """
-    text = store.get_workspace(workspace_id)
+    text = store.get_document(WORKSPACES.table, workspace_id)
     if text is None:
         return None
     try:

@@ -20,8 +20,8 @@ import pytest
 
 from phantomtouch import __version__
 from phantomtouch.bhaptics.user_registry import FileUserRegistry, user_registry
-from phantomtouch.bhaptics_command import PLAYER_ARGV, player_argv
 from phantomtouch.cli import main
+from phantomtouch.commands.bhaptics import PLAYER_ARGV, player_argv
 from phantomtouch.errors import DeviceError
 
 LAUNCHER = Path(sys.executable).with_name("phantomtouch")

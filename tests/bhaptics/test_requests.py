@@ -44,7 +44,7 @@ def test_the_cpp_spelling_integer_position_and_both_arrays() -> None:
     assert register == Register("k", {"Tracks": []})
     assert isinstance(play, PlayFrame)
     assert play.frame.position == "ForearmR" and not play.frame.legacy
-    assert play.frame.dots[0].index == 2 and play.frame.dots[0].intensity == 100.0
+    assert play.frame.dots[0].index == 2 and play.frame.dots[0].intensity == 1.0
     assert play.frame.duration_ms == 200
 
 
@@ -67,7 +67,7 @@ def test_lowercase_strings_for_numbers_a_bom_and_missing_arrays() -> None:
     (play,) = parse(text).requests
     assert isinstance(play, PlayFrame)
     point = play.frame.paths[0]
-    assert (point.x, point.y, point.intensity, point.motor_count) == (1.0, 0.0, 100.0, 3)
+    assert (point.x, point.y, point.intensity, point.motor_count) == (1.0, 0.0, 1.0, 3)
     assert play.frame.dots == () and play.frame.duration_ms == 20
 
 

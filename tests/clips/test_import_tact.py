@@ -64,7 +64,7 @@ def test_every_real_file_is_imported_or_refused_in_one_line(
     assert len(expected) == 44
     store = PatternStore.open(db)
     try:
-        listed = store.list_tact(1000, 0)
+        listed = store.list_documents("tact", 1000, 0)
     finally:
         store.close()
     assert [name for name, _, _ in listed] == sorted(expected)
@@ -83,8 +83,8 @@ def test_the_stored_project_reads_back_as_the_file_and_o_writes_the_put_body(
     assert "replaced" in capsys.readouterr().out
     store = PatternStore.open(db)
     try:
-        stored = store.get_tact("rubbing")
-        assert [name for name, _, _ in store.list_tact(10, 0)] == ["rubbing"]
+        stored = store.get_document("tact", "rubbing")
+        assert [name for name, _, _ in store.list_documents("tact", 10, 0)] == ["rubbing"]
     finally:
         store.close()
     assert stored is not None

@@ -97,7 +97,7 @@ def test_the_cache_renders_a_plan_once_keeps_its_bound_and_skips_long_plans() ->
 
 def test_prerendered_touches_are_not_charged_for_first_frames() -> None:
     # a first chunk in the callback costs 0.1 of a block here: rendered there, 14 taps in
-    # 0.1 s fill the churn account (tests/engine/test_admission.py); prerendered, 40 begin
+    # 0.1 s fill the churn account (tests/engine/test_render_budget.py); prerendered, 40 begin
     with Engine(DEVICE, CaptureSink(DEVICE), voice_cost=1e-4, start_cost=0.1) as engine:
         for k in range(40):
             engine.schedule(tap(), start_frame=(100 + k) * BLOCK)

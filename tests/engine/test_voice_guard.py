@@ -19,10 +19,10 @@ import soundfile
 from phantomtouch import DeviceProfile, TouchPattern, render
 from phantomtouch.engine import CaptureSink, Engine
 from phantomtouch.engine.clock import SampleClock
-from phantomtouch.engine.commands import CommandQueue
 from phantomtouch.engine.messages import ContactDown
 from phantomtouch.engine.process import ProcessEngine, SinkSpec
 from phantomtouch.engine.scheduler import OVERRUN_BLOCKS, Scheduler
+from phantomtouch.engine.voice_queue import CommandQueue
 from phantomtouch.engine.voices import Voice, Workspace
 from phantomtouch.renderer import PatternRenderer, plan
 from phantomtouch.renderer.carriers import SineSource

@@ -7,7 +7,7 @@ import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
 from phantomtouch.engine import CaptureSink, Engine
-from phantomtouch.engine.engine import RENDER_AHEAD_RINGS
+from phantomtouch.engine.local_audio import RENDER_AHEAD_RINGS
 from phantomtouch.engine.voices import PatternVoice, RingPool, Workspace
 from phantomtouch.renderer import plan
 

@@ -131,7 +131,7 @@ def test_the_workspace_outlives_the_service_and_reads_back_as_its_events(
             "hit": 100,
         }
         assert stored_deployment(store, "nobody") is None
-        store.put_workspace("damaged", '{"hapticMappings": 3}', {})
+        store.put_document("workspaces", "damaged", '{"hapticMappings": 3}', {})
         with pytest.raises(StoredPatternError, match="PUT it again or DELETE it"):
             stored_deployment(store, "damaged")
     finally:

@@ -21,37 +21,21 @@ that cannot be read is answered with the active lists, logged and counted
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import itertools
-import json
 import logging
-import re
 from collections.abc import AsyncIterator, Iterator
 from contextlib import asynccontextmanager
-from typing import TYPE_CHECKING, Any
-from urllib.parse import parse_qs, urlsplit
+from typing import TYPE_CHECKING
 
-from prometheus_client.core import CounterMetricFamily
-from prometheus_client.registry import Collector
-from websockets.asyncio.server import Server, ServerConnection, serve
+from prometheus_client.core import CounterMetricFamily, Metric
+from websockets.asyncio.server import ServerConnection
 from websockets.exceptions import ConnectionClosed
-from websockets.http11 import Request, Response
 
-from phantomtouch.bhaptics.sdk2.session import Sdk2Session
 from phantomtouch.bhaptics.sdk2.tls import server_context
+from phantomtouch.bhaptics.websocket import SDK2_KIND, Listener, serve_sdk2
 from phantomtouch.errors import DeviceError
-from phantomtouch.service.admission import Kind, principal_for
-from phantomtouch.service.errors import (
-    WS_CLOSE_MESSAGE_TOO_BIG,
-    WS_CLOSE_POLICY_VIOLATION,
-    WS_CLOSE_TRY_AGAIN_LATER,
-    ServiceError,
-    TooLargeError,
-    describe,
-)
-from phantomtouch.service.origin import HostOriginMiddleware, HostPolicy, OriginPolicy, Refusals
-from phantomtouch.service.running import InputHealth
+from phantomtouch.service.metrics import labelled
 from phantomtouch.service.sdk2_workspaces import Workspaces
 
 if TYPE_CHECKING:
@@ -59,42 +43,11 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger("phantomtouch.bhaptics")
 
-KIND: Kind = "bhaptics-sdk2"
-"""The input's row of the admission's policy table."""
 PATHS = ("/v3/feedback", "/v3/feedback/")
 """Where SDK2 clients connect."""
-SEND_TIMEOUT_S = 10.0
-"""A client that reads nothing for this long while a message waits to be sent is closed."""
-OUTCOMES = ("accepted", "not_json", "bad_request", "refused", "flood")
-_NAME = re.compile(r"[^A-Za-z0-9_.-]+")
 
 
-class _Counts(Collector):
-    def __init__(self, listener: Sdk2Listener) -> None:
-        self.listener = listener
-
-    def collect(self) -> Iterator[CounterMetricFamily]:
-        family = CounterMetricFamily(
-            "phantomtouch_bhaptics_sdk2_messages",
-            "bHaptics SDK2 messages by outcome.",
-            labels=["outcome"],
-        )
-        for outcome, count in self.listener.counts.items():
-            family.add_metric([outcome], count)
-        yield family
-
-
-async def _no_app(scope: Any, receive: Any, send: Any) -> None:
-    """The Host/Origin check is used for its verdict alone."""
-
-
-def workspace_of(path: str) -> str:
-    """The ``workspace_id`` of a connection's query ('' without one)."""
-    values = parse_qs(urlsplit(path).query).get("workspace_id")
-    return values[0].strip()[:256] if values else ""
-
-
-class Sdk2Listener:
+class Sdk2Listener(Listener):
     """The SDK2 listener of one running service; :meth:`start`, then :meth:`close`.
 
     Parameters
@@ -106,27 +59,12 @@ class Sdk2Listener:
         Every workspace's events, shared by its connections.
     """
 
-    def __init__(self, service: Service, address: tuple[str, int], workspaces: Workspaces) -> None:
-        self.service = service
-        self.host, self.port = address
-        self.workspaces = workspaces
-        self.counts = dict.fromkeys(OUTCOMES, 0)
-        self._serials = itertools.count(1)
-        settings = service.settings
-        self._origin = HostOriginMiddleware(
-            _no_app,
-            hosts=HostPolicy.build(self.host, settings.allowed_hosts),
-            origins=OriginPolicy.build(settings.cors_origins),
-            refusals=Refusals(service.metrics),
-        )
-        self._server: Server | None = None
+    paths = PATHS
 
-    @property
-    def address(self) -> tuple[str, int]:
-        """Where it listens (host, port)."""
-        assert self._server is not None
-        host, port = next(iter(self._server.sockets)).getsockname()[:2]
-        return str(host), int(port)
+    def __init__(self, service: Service, address: tuple[str, int], workspaces: Workspaces) -> None:
+        super().__init__(service, address, SDK2_KIND)
+        self.workspaces = workspaces
+        self._serials = itertools.count(1)
 
     async def start(self) -> None:
         """Listen (the event loop); the TLS pair is made first if the user has none.
@@ -136,127 +74,38 @@ class Sdk2Listener:
         DeviceError
             The address cannot be listened on, or no TLS pair can be had.
         """
-        context = server_context()
-        try:
-            self._server = await serve(
-                self._connection,
-                self.host,
-                self.port,
-                ssl=context,
-                process_request=self._handshake,
-                compression=None,
-                ping_interval=None,
-                ping_timeout=None,
-                max_size=self.service.admission.policy(KIND).max_message_bytes + 1,
-                max_queue=4,
-                server_header=None,
-                logger=logging.getLogger("phantomtouch.bhaptics.websockets"),
-            )
-        except OSError as exc:
-            raise DeviceError(
-                f"bhaptics-sdk2 listen={self.host}:{self.port}: cannot listen "
-                f"({exc.strerror}); is the bHaptics Player running? Quit it or choose another "
-                "address with --bhaptics-sdk2"
-            ) from exc
-        self.service.metrics.registry.register(_Counts(self))
-        self.service.inputs["bhaptics-sdk2"] = self.health
-
-    def health(self) -> InputHealth:
-        """Whether it listens (any thread)."""
-        serving = self._server is not None and self._server.is_serving()
-        return InputHealth(
-            state="running" if serving else "stopped",
-            degraded=not serving,
-            restarts=0,
-            last_failure=None,
+        await self.listen(
+            self._connection,
+            input_name="bhaptics-sdk2",
+            flag="--bhaptics-sdk2",
+            extra_bytes=1,
+            tls=server_context(),
         )
 
-    async def close(self) -> None:
-        """Stop listening and close every connection (each releases what it played)."""
-        if self._server is not None:
-            self._server.close()
-            await self._server.wait_closed()
+    def metrics(self) -> Iterator[Metric]:
+        """Messages by outcome (the scraping thread)."""
+        yield labelled(
+            CounterMetricFamily,
+            "phantomtouch_bhaptics_sdk2_messages",
+            "bHaptics SDK2 messages by outcome.",
+            "outcome",
+            self.counts,
+        )
 
-    def _handshake(self, connection: ServerConnection, request: Request) -> Response | None:
-        path = urlsplit(request.path).path
-        if path not in PATHS:
-            return connection.respond(
-                404, f"path={path!r}: the bHaptics SDK2 stand-in serves /v3/feedback\n"
-            )
-        scope = {
-            "type": "websocket",
-            "path": path,
-            "headers": [
-                (name.lower().encode("latin-1"), value.encode("latin-1"))
-                for name, value in request.headers.raw_items()
-            ],
-        }
-        error: ServiceError | None = self._origin.check(scope)
-        if error is None:
-            return None
-        problem = describe(error)
-        response = connection.respond(problem.status_code, json.dumps(problem.body()))
-        response.headers["Content-Type"] = "application/json"
-        return response
+    def not_found(self, path: str) -> str:
+        """The 404 answer to a handshake on ``path`` (pure)."""
+        return f"path={path!r}: the bHaptics SDK2 stand-in serves /v3/feedback"
 
     async def _connection(self, connection: ServerConnection) -> None:
-        service = self.service
         peer = connection.remote_address
-        workspace = workspace_of(connection.request.path if connection.request else "")
-        source = f"{next(self._serials)}-{_NAME.sub('_', workspace)[:24] or 'none'}"
-        loop = asyncio.get_running_loop()
-
-        def yielded(reason: str) -> None:
-            loop.call_soon_threadsafe(
-                lambda: loop.create_task(connection.close(WS_CLOSE_TRY_AGAIN_LATER, reason))
-            )
-
-        handle = service.admission.open(
-            KIND,
-            source,
-            principal=principal_for(KIND, host=None if peer is None else str(peer[0])),
-            on_yield=yielded,
+        await serve_sdk2(
+            self.service,
+            connection,
+            self.counts,
+            source=str(next(self._serials)),
+            host=None if peer is None else str(peer[0]),
+            workspaces=self.workspaces,
         )
-
-        async def send(text: str) -> None:
-            try:
-                await asyncio.wait_for(connection.send(text), SEND_TIMEOUT_S)
-            except ConnectionClosed:
-                return
-            except TimeoutError:
-                await connection.close(
-                    WS_CLOSE_POLICY_VIOLATION, f"the client read nothing for {SEND_TIMEOUT_S:g} s"
-                )
-
-        session = Sdk2Session(
-            handle, service.arm_map, workspace=workspace, workspaces=self.workspaces, send=send
-        )
-        logger.info("bhaptics-sdk2: workspace %r connected as %s", workspace, handle.owner)
-        try:
-            await session.open()
-            async for data in connection:
-                await self._message(connection, session, data)
-        except ConnectionClosed:
-            pass
-        finally:
-            session.close()
-            logger.info("bhaptics-sdk2: %s disconnected", handle.owner)
-
-    async def _message(
-        self, connection: ServerConnection, session: Sdk2Session, data: str | bytes
-    ) -> None:
-        try:
-            verdict = session.handle.receive(len(data))
-        except TooLargeError as exc:
-            await connection.close(WS_CLOSE_MESSAGE_TOO_BIG, str(exc)[:120])
-            return
-        if verdict.arrival is None:
-            self.counts["flood"] += 1
-            if verdict.sustained:
-                await connection.close(WS_CLOSE_POLICY_VIOLATION, verdict.reason[:120])
-            return
-        text = data if isinstance(data, str) else data.decode("utf-8", errors="replace")
-        self.counts[await session.receive(text, verdict.arrival)] += 1
 
 
 @asynccontextmanager

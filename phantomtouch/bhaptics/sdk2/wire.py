@@ -34,7 +34,11 @@ from phantomtouch.bhaptics.requests import (
     MIN_DURATION_MS,
     SCALE_RANGE,
     BadRequest,
+    clamped,
+    folded,
+    json_object,
     number,
+    shown,
 )
 
 ARM_MOTORS = 6
@@ -164,20 +168,12 @@ def envelope(text: str) -> Envelope:
         Not JSON (reason ``not_json``), not an object, no ``Type``, or a type the server
         does not know (``bad_request``).
     """
-    try:
-        document = json.loads(text.removeprefix("\ufeff"))
-    except (ValueError, RecursionError) as exc:
-        raise BadRequest("not_json", f"the message is not JSON ({exc})"[:200]) from None
-    if not isinstance(document, dict):
-        raise BadRequest(
-            "not_json", f"the message must be a JSON object, got {type(document).__name__}"
-        )
-    fields = _folded(document, "the message")
+    fields = folded(json_object(text), "the message")
     kind = fields.get("type")
     if not isinstance(kind, str) or kind.lower() not in _TYPES:
         raise BadRequest(
             "bad_request",
-            f"Type={_shown(kind)} must be one of {', '.join(CLIENT_TYPES)}",
+            f"Type={shown(kind)} must be one of {', '.join(CLIENT_TYPES)}",
         )
     body = fields.get("message")
     if body is None:
@@ -189,10 +185,10 @@ def envelope(text: str) -> Envelope:
                 body = json.loads(stripped)
             except (ValueError, RecursionError):
                 raise BadRequest(
-                    "bad_request", f"Message={_shown(body)} starts as JSON but does not read"
+                    "bad_request", f"Message={shown(body)} starts as JSON but does not read"
                 ) from None
     if not isinstance(body, dict | str):
-        raise BadRequest("bad_request", f"Message={_shown(body)} must be a string or an object")
+        raise BadRequest("bad_request", f"Message={shown(body)} must be a string or an object")
     return Envelope(_TYPES[kind.lower()], body)
 
 
@@ -207,9 +203,9 @@ def parse(text: str) -> Request:
     found = envelope(text)
     kind, body = found.type, found.body
     if kind in ("SdkRequestAuth", "SdkRequestAuthInit", "SdkRequestReInit"):
-        haptic = _folded(body, "Message").get("haptic") if isinstance(body, dict) else None
+        haptic = folded(body, "Message").get("haptic") if isinstance(body, dict) else None
         if haptic is not None and not isinstance(haptic, str | dict | list):
-            raise BadRequest("bad_request", f"haptic={_shown(haptic)} must be a string or object")
+            raise BadRequest("bad_request", f"haptic={shown(haptic)} must be a string or object")
         return Auth(kind, haptic)
     if kind in ("SdkPlay", "SdkPlayWithStartTime", "SdkPlayLoop"):
         return _play(kind, _object(body, kind))
@@ -218,22 +214,22 @@ def parse(text: str) -> Request:
     if kind == "SdkPlayPathMode":
         return _path(_object(body, kind))
     if kind == "SdkStopByRequestId":
-        value = _folded(body, "Message").get("requestid") if isinstance(body, dict) else body
+        value = folded(body, "Message").get("requestid") if isinstance(body, dict) else body
         return StopRequest(request_id=_request_id(value))
     if kind == "SdkStopByEventId":
-        value = _folded(body, "Message").get("eventname") if isinstance(body, dict) else body
+        value = folded(body, "Message").get("eventname") if isinstance(body, dict) else body
         return StopRequest(event=_name(value, "eventName"))
     if kind == "SdkStopAll":
         return StopRequest()
     if kind in ("SdkPause", "SdkResume"):
-        value = _folded(body, "Message").get("eventname") if isinstance(body, dict) else body
+        value = folded(body, "Message").get("eventname") if isinstance(body, dict) else body
         event = None if value in (None, "") else _name(value, "eventName")
         return PauseRequest(resume=kind == "SdkResume", event=event)
-    value = _folded(body, "Message").get("macaddress", "") if isinstance(body, dict) else body
+    value = folded(body, "Message").get("macaddress", "") if isinstance(body, dict) else body
     if not isinstance(value, str) or len(value) > MAX_ADDRESS_CHARS:
         raise BadRequest(
             "bad_request",
-            f"address={_shown(value)} must be a string of at most {MAX_ADDRESS_CHARS} characters",
+            f"address={shown(value)} must be a string of at most {MAX_ADDRESS_CHARS} characters",
         )
     return DeviceRequest(kind, value)
 
@@ -248,19 +244,17 @@ def server_message(kind: str, payload: object) -> str:
 def _play(kind: str, fields: Mapping[str, Any]) -> PlayEvent:
     count, interval_ms = 1, 0
     if kind == "SdkPlayLoop":
-        count = round(_clamped(fields.get("maxcount", 1), "maxCount", 1, MAX_LOOP_COUNT))
-        interval_ms = round(
-            _clamped(fields.get("interval", 0), "interval", 0, MAX_LOOP_INTERVAL_MS)
-        )
+        count = round(clamped(fields.get("maxcount", 1), "maxCount", 1, MAX_LOOP_COUNT))
+        interval_ms = round(clamped(fields.get("interval", 0), "interval", 0, MAX_LOOP_INTERVAL_MS))
     start = fields.get("startmillis", fields.get("starttime", 0))
     return PlayEvent(
         event=_name(fields.get("eventname"), "eventName"),
         request_id=_request_id(fields.get("requestid")),
-        intensity=_clamped(_or_one(fields.get("intensity")), "intensity", *SCALE_RANGE),
-        duration=_clamped(_or_one(fields.get("duration")), "duration", *DURATION_SCALE_RANGE),
-        offset_angle_x=_clamped(fields.get("offsetanglex", 0), "offsetAngleX", -360.0, 360.0),
-        offset_y=_clamped(fields.get("offsety", 0), "offsetY", -1.0, 1.0),
-        start_ms=round(_clamped(start, "startMillis", 0, MAX_START_MS)),
+        intensity=clamped(_or_one(fields.get("intensity")), "intensity", *SCALE_RANGE),
+        duration=clamped(_or_one(fields.get("duration")), "duration", *DURATION_SCALE_RANGE),
+        offset_angle_x=clamped(fields.get("offsetanglex", 0), "offsetAngleX", -360.0, 360.0),
+        offset_y=clamped(fields.get("offsety", 0), "offsetY", -1.0, 1.0),
+        start_ms=round(clamped(start, "startMillis", 0, MAX_START_MS)),
         count=count,
         interval_ms=interval_ms,
     )
@@ -269,9 +263,9 @@ def _play(kind: str, fields: Mapping[str, Any]) -> PlayEvent:
 def _dots(fields: Mapping[str, Any]) -> PlayPoints:
     values = fields.get("motorvalues")
     if not isinstance(values, list):
-        raise BadRequest("bad_request", f"motorValues={_shown(values)} must be an array")
+        raise BadRequest("bad_request", f"motorValues={shown(values)} must be an array")
     dots = tuple(
-        (index, _clamped(value, f"motorValues[{index}]", 0.0, MAX_INTENSITY))
+        (index, clamped(value, f"motorValues[{index}]", 0.0, MAX_INTENSITY))
         for index, value in enumerate(values[:ARM_MOTORS])
     )
     return PlayPoints(
@@ -285,15 +279,15 @@ def _dots(fields: Mapping[str, Any]) -> PlayPoints:
 def _path(fields: Mapping[str, Any]) -> PlayPoints:
     points = fields.get("pathpoints")
     if not isinstance(points, list):
-        raise BadRequest("bad_request", f"pathPoints={_shown(points)} must be an array")
+        raise BadRequest("bad_request", f"pathPoints={shown(points)} must be an array")
     paths = []
     for k, point in enumerate(points[:MAX_POINTS]):
-        item = _folded(point, f"pathPoints[{k}]")
+        item = folded(point, f"pathPoints[{k}]")
         paths.append(
             (
-                _clamped(item.get("x"), f"pathPoints[{k}].x", 0.0, 1.0),
-                _clamped(item.get("y"), f"pathPoints[{k}].y", 0.0, 1.0),
-                _clamped(item.get("intensity"), f"pathPoints[{k}].intensity", 0.0, MAX_INTENSITY),
+                clamped(item.get("x"), f"pathPoints[{k}].x", 0.0, 1.0),
+                clamped(item.get("y"), f"pathPoints[{k}].y", 0.0, 1.0),
+                clamped(item.get("intensity"), f"pathPoints[{k}].intensity", 0.0, MAX_INTENSITY),
             )
         )
     return PlayPoints(
@@ -307,34 +301,20 @@ def _path(fields: Mapping[str, Any]) -> PlayPoints:
 def _object(body: Mapping[str, Any] | str, kind: str) -> dict[str, Any]:
     if not isinstance(body, dict):
         raise BadRequest(
-            "bad_request", f"{kind}: Message={_shown(body)} must be a JSON object (or its text)"
+            "bad_request", f"{kind}: Message={shown(body)} must be a JSON object (or its text)"
         )
-    return _folded(body, "Message")
-
-
-def _folded(value: object, where: str) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise BadRequest("bad_request", f"{where} must be an object, got {_shown(value)}")
-    return {str(name).lower(): member for name, member in value.items()}
-
-
-def _shown(value: object) -> str:
-    return repr(value)[:80]
+    return folded(body, "Message")
 
 
 def _or_one(value: object) -> object:
     return 1.0 if value is None or value == "" else value
 
 
-def _clamped(value: object, name: str, low: float, high: float) -> float:
-    return min(high, max(low, number(value, name)))
-
-
 def _name(value: object, name: str) -> str:
     if not isinstance(value, str) or not 1 <= len(value) <= MAX_KEY_CHARS:
         raise BadRequest(
             "bad_request",
-            f"{name}={_shown(value)} must be a string of 1-{MAX_KEY_CHARS} characters",
+            f"{name}={shown(value)} must be a string of 1-{MAX_KEY_CHARS} characters",
         )
     return value
 
@@ -349,7 +329,7 @@ def _request_id(value: object) -> int:
     if isinstance(text, bool) or not isinstance(text, int) or not 0 <= text <= MAX_REQUEST_ID:
         raise BadRequest(
             "bad_request",
-            f"requestId={_shown(value)} must be an integer 0-{MAX_REQUEST_ID} (or its digits)",
+            f"requestId={shown(value)} must be an integer 0-{MAX_REQUEST_ID} (or its digits)",
         )
     return text
 
@@ -357,9 +337,9 @@ def _request_id(value: object) -> int:
 def _position(value: object) -> str | None:
     found = number(value, "position")
     if not found.is_integer():
-        raise BadRequest("bad_request", f"position={_shown(value)} must be an integer")
+        raise BadRequest("bad_request", f"position={shown(value)} must be an integer")
     return POSITIONS.get(int(found))
 
 
 def _duration(value: object) -> int:
-    return round(_clamped(value, "durationMillis", MIN_DURATION_MS, MAX_DURATION_MS))
+    return round(clamped(value, "durationMillis", MIN_DURATION_MS, MAX_DURATION_MS))

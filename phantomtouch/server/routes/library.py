@@ -10,12 +10,27 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Response
 from fastapi.types import DecoratedCallable
 
 from phantomtouch.service.errors import NotFoundError, responses
 
 Item = TypeVar("Item")
+
+
+def list_items(
+    router: APIRouter, model: Any, summary: str
+) -> Callable[[DecoratedCallable], DecoratedCallable]:
+    """``GET ""``: one page of the library's items (``limit``, ``offset``), sorted by name.
+
+    Parameters
+    ----------
+    router, model, summary
+        As :func:`get_item`; ``model`` is one item's (the answer is a list of them).
+    """
+    return router.get(
+        "", response_model=list[model], responses=responses(401, 422, 503), summary=summary
+    )
 
 
 def get_item(
@@ -102,14 +117,36 @@ def document_body(description: str, example: Any) -> dict[str, Any]:
     }
 
 
-def stored_document(what: str) -> dict[int | str, dict[str, Any]]:
-    """The OpenAPI of a ``GET`` answering such a document as stored (compact JSON)."""
-    return {
-        200: {
-            "description": f"The {what} as stored (compact JSON).",
-            "content": {"application/json": {"schema": {"type": "object"}}},
-        }
-    }
+def get_document(
+    router: APIRouter, what: str, summary: str, path: str = "/{name}"
+) -> Callable[[DecoratedCallable], DecoratedCallable]:
+    """``GET path``: such a document as stored, compact JSON (404: no such item); the
+    route answers :func:`document`.
+
+    Parameters
+    ----------
+    router, summary, path
+        As :func:`get_item`.
+    what : str
+        What the document is, for the OpenAPI (``project``, ``deployment``).
+    """
+    return router.get(
+        path,
+        response_class=Response,
+        responses={
+            200: {
+                "description": f"The {what} as stored (compact JSON).",
+                "content": {"application/json": {"schema": {"type": "object"}}},
+            },
+            **responses(401, 404, 422, 500, 503),
+        },
+        summary=summary,
+    )
+
+
+def document(text: str) -> Response:
+    """The answer of a :func:`get_document` route: the stored JSON text."""
+    return Response(content=text, media_type="application/json")
 
 
 def not_stored(name: str, where: str) -> NotFoundError:

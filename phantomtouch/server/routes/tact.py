@@ -25,6 +25,7 @@ from phantomtouch.server.deps import (
 from phantomtouch.server.routes import library
 from phantomtouch.service import tact_library
 from phantomtouch.service.bodies import strict_body
+from phantomtouch.service.document_library import TACT
 from phantomtouch.service.errors import responses
 from phantomtouch.service.models import PATTERN_NAME_REGEX, name_rules
 from phantomtouch.service.tact_models import ScoreAccepted, TactInfo, TactPlay
@@ -75,7 +76,6 @@ PROJECT_BODY_OPENAPI = library.document_body(
     "`ForearmL` or `ForearmR`.",
     EXAMPLE,
 )
-PROJECT_ANSWER = library.stored_document("project")
 
 
 async def project_body(request: Request) -> tuple[str, Any]:
@@ -85,32 +85,17 @@ async def project_body(request: Request) -> tuple[str, Any]:
     return await run_in_threadpool(tact_library.read_project, raw, source="body")
 
 
-@router.get(
-    "",
-    response_model=list[TactInfo],
-    responses=responses(401, 422, 503),
-    summary="The .tact library",
-)
-def list_tact(
-    store: StoreDep,
-    limit: LimitParam = 100,
-    offset: OffsetParam = 0,
-) -> list[TactInfo]:
+@library.list_items(router, TactInfo, "The .tact library")
+def list_tact(store: StoreDep, limit: LimitParam = 100, offset: OffsetParam = 0) -> list[TactInfo]:
     """One page of the stored projects, sorted by name, with their size and length; fewer
     than `limit` means the last page. The projects themselves are not read."""
-    return tact_library.listed(store, limit=limit, offset=offset)
+    return TACT.listed(store, limit=limit, offset=offset)
 
 
-@router.get(
-    "/{name}",
-    response_class=Response,
-    responses={**PROJECT_ANSWER, **responses(401, 404, 422, 500, 503)},
-    summary="One stored .tact project",
-)
+@library.get_document(router, "project", "One stored .tact project")
 def get_tact(name: TactNameParam, store: StoreDep) -> Response:
     """The project as stored: the `.tact` JSON, compact, spelled as it was given."""
-    text = library.found(store.get_tact(name), name, tact_library.NOT_STORED)
-    return Response(content=text, media_type="application/json")
+    return library.document(TACT.text(store, name))
 
 
 @library.put_item(router, TactInfo, "Store a .tact project", PROJECT_BODY_OPENAPI)
@@ -121,16 +106,13 @@ def put_tact(
 ) -> TactInfo:
     """Store (or replace) a project; one with nothing for an arm is refused (422)."""
     text, project = body
-    summary = tact_library.summary(project)
-    store.put_tact(name, text, summary)
-    return TactInfo(name=name, bytes=len(text.encode("utf-8")), **summary)
+    return TACT.put(store, name, text, tact_library.summary(project))
 
 
 @library.delete_item(router, "Remove a .tact project")
 def delete_tact(name: TactNameParam, store: StoreDep) -> Response:
     """Remove a stored project."""
-    if not store.delete_tact(name):
-        raise library.not_stored(name, tact_library.NOT_STORED)
+    TACT.delete(store, name)
     return Response(status_code=204)
 
 

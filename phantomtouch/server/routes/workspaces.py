@@ -18,7 +18,7 @@ from phantomtouch.errors import FieldError
 from phantomtouch.server.deps import LimitParam, OffsetParam, StoreDep
 from phantomtouch.server.routes import library
 from phantomtouch.service import workspace_library
-from phantomtouch.service.errors import NotFoundError, responses
+from phantomtouch.service.document_library import WORKSPACES
 from phantomtouch.service.models import PATTERN_NAME_REGEX, name_rules
 from phantomtouch.service.workspace_models import WORKSPACE_EXAMPLE, WorkspaceInfo
 
@@ -65,7 +65,6 @@ DEPLOYMENT_BODY_OPENAPI = library.document_body(
     "levels every 20 ms); keys in any case (docs/bhaptics.md, SDK2).",
     EXAMPLE,
 )
-DEPLOYMENT_ANSWER = library.stored_document("deployment")
 
 
 async def deployment_body(request: Request) -> tuple[str, Deployment]:
@@ -82,34 +81,21 @@ async def deployment_body(request: Request) -> tuple[str, Deployment]:
     return text, deployment
 
 
-@router.get(
-    "",
-    response_model=list[WorkspaceInfo],
-    responses=responses(401, 422, 503),
-    summary="The bHaptics SDK2 workspaces",
-)
+@library.list_items(router, WorkspaceInfo, "The bHaptics SDK2 workspaces")
 def list_workspaces(
-    store: StoreDep,
-    limit: LimitParam = 100,
-    offset: OffsetParam = 0,
+    store: StoreDep, limit: LimitParam = 100, offset: OffsetParam = 0
 ) -> list[WorkspaceInfo]:
     """One page of the stored workspaces, sorted by id, with their game, size and events;
     fewer than `limit` means the last page. The deployments themselves are not read."""
-    return workspace_library.listed(store, limit=limit, offset=offset)
+    return WORKSPACES.listed(store, limit=limit, offset=offset)
 
 
-@router.get(
-    "/{workspace_id}",
-    response_class=Response,
-    responses={**DEPLOYMENT_ANSWER, **responses(401, 404, 422, 500, 503)},
-    summary="One stored workspace's deployment",
+@library.get_document(
+    router, "deployment", "One stored workspace's deployment", path="/{workspace_id}"
 )
 def get_workspace(workspace_id: WorkspaceIdParam, store: StoreDep) -> Response:
     """The deployment as stored: the JSON, compact, spelled as it was given."""
-    text = store.get_workspace(workspace_id)
-    if text is None:
-        raise _not_stored(workspace_id)
-    return Response(content=text, media_type="application/json")
+    return library.document(WORKSPACES.text(store, workspace_id))
 
 
 @library.put_item(
@@ -128,22 +114,11 @@ def put_workspace(
     `workspace_id` plays its events by name. The id in the path decides, whatever the
     deployment's own `workspaceId` says."""
     text, deployment = body
-    summary = workspace_library.summary(deployment)
-    store.put_workspace(workspace_id, text, summary)
-    return WorkspaceInfo(workspace_id=workspace_id, bytes=len(text.encode("utf-8")), **summary)
+    return WORKSPACES.put(store, workspace_id, text, workspace_library.summary(deployment))
 
 
 @library.delete_item(router, "Remove a workspace", path="/{workspace_id}")
 def delete_workspace(workspace_id: WorkspaceIdParam, store: StoreDep) -> Response:
     """Remove a stored workspace: its events are no longer known."""
-    if not store.delete_workspace(workspace_id):
-        raise _not_stored(workspace_id)
+    WORKSPACES.delete(store, workspace_id)
     return Response(status_code=204)
-
-
-def _not_stored(workspace_id: str) -> NotFoundError:
-    return NotFoundError(
-        f"workspace_id={workspace_id!r} is not {workspace_library.NOT_STORED}",
-        field="workspace_id",
-        value=workspace_id,
-    )

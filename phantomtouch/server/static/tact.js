@@ -5,10 +5,10 @@
 // The service is the one parser: the file's text is sent as it is (docs/bhaptics.md).
 
 import { api } from "./api.js";
+import { LIST_LIMIT, libraryItem, showPage } from "./library_list.js";
 import { formatNumber } from "./units.js";
 
 const $ = (id) => document.getElementById(id);
-const LIST_LIMIT = 20;
 const NAME_MAX_CHARS = 64;
 
 // A library name from a file name (the name rule [A-Za-z0-9._-]{1,64}, no leading dot):
@@ -125,34 +125,13 @@ export class TactPanel {
       this.showError(`Cannot list the .tact library: ${exc.message}`);
       return;
     }
-    const list = $("tact-list");
-    list.replaceChildren(...entries.map((entry) => this.item(entry)));
-    $("tact-empty").hidden = entries.length > 0;
-    $("tact-more").textContent = `The first ${LIST_LIMIT} by name; GET /tact pages through `
-      + "the rest.";
-    $("tact-more").hidden = entries.length < LIST_LIMIT;
-  }
-
-  item(entry) {
-    const li = document.createElement("li");
-    li.dataset.name = entry.name;
-    const text = document.createElement("div");
-    text.className = "library-text";
-    const name = document.createElement("strong");
-    name.textContent = entry.name;
-    const summary = document.createElement("span");
-    summary.textContent = describe(entry);
-    text.append(name, summary);
-    const buttons = document.createElement("div");
-    buttons.className = "library-buttons";
-    const play = document.createElement("button");
-    play.type = "button";
-    play.className = "secondary small";
-    play.textContent = "Play";
-    play.setAttribute("aria-label", `Play ${entry.name}`);
-    play.addEventListener("click", () => this.play(entry.name));
-    buttons.appendChild(play);
-    li.append(text, buttons);
-    return li;
+    const items = entries.map((entry) => libraryItem({ name: entry.name }, entry.name,
+      describe(entry), {
+        label: "Play",
+        ariaLabel: `Play ${entry.name}`,
+        onClick: () => this.play(entry.name),
+      }));
+    showPage("tact", items,
+      `The first ${LIST_LIMIT} by name; GET /tact pages through the rest.`);
   }
 }

@@ -7,9 +7,9 @@
 // is sent as it is (docs/bhaptics.md, SDK2).
 
 import { api } from "./api.js";
+import { LIST_LIMIT, libraryItem, showPage } from "./library_list.js";
 
 const $ = (id) => document.getElementById(id);
-const LIST_LIMIT = 20;
 
 // The workspace id a deployment names (message.workspaceId, keys in any case), or "".
 export function namedWorkspace(text) {
@@ -94,33 +94,13 @@ export class WorkspacesPanel {
       this.showError(`Cannot list the bHaptics games: ${exc.message}`);
       return;
     }
-    $("games-list").replaceChildren(...entries.map((entry) => this.item(entry)));
-    $("games-empty").hidden = entries.length > 0;
-    $("games-more").textContent = `The first ${LIST_LIMIT} by id; GET /bhaptics/workspaces `
-      + "pages through the rest.";
-    $("games-more").hidden = entries.length < LIST_LIMIT;
-  }
-
-  item(entry) {
-    const li = document.createElement("li");
-    li.dataset.workspace = entry.workspace_id;
-    const text = document.createElement("div");
-    text.className = "library-text";
-    const name = document.createElement("strong");
-    name.textContent = entry.workspace_id;
-    const summary = document.createElement("span");
-    summary.textContent = describe(entry);
-    text.append(name, summary);
-    const buttons = document.createElement("div");
-    buttons.className = "library-buttons";
-    const remove = document.createElement("button");
-    remove.type = "button";
-    remove.className = "secondary small";
-    remove.textContent = "Remove";
-    remove.setAttribute("aria-label", `Remove workspace ${entry.workspace_id}`);
-    remove.addEventListener("click", () => this.remove(entry.workspace_id));
-    buttons.appendChild(remove);
-    li.append(text, buttons);
-    return li;
+    const items = entries.map((entry) => libraryItem({ workspace: entry.workspace_id },
+      entry.workspace_id, describe(entry), {
+        label: "Remove",
+        ariaLabel: `Remove workspace ${entry.workspace_id}`,
+        onClick: () => this.remove(entry.workspace_id),
+      }));
+    showPage("games", items,
+      `The first ${LIST_LIMIT} by id; GET /bhaptics/workspaces pages through the rest.`);
   }
 }

@@ -10,7 +10,7 @@ import json
 import sys
 from collections.abc import Callable
 
-from phantomtouch.device_arg import load_device
+from phantomtouch.commands.device_arg import load_device
 
 
 def add_calibrate_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -7,8 +7,8 @@ import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, TouchPattern, render
 from phantomtouch.engine import CaptureSink, Engine
-from phantomtouch.engine.admission import CHURN_SHARE, CHURN_WINDOW_S
 from phantomtouch.engine.front import STEAL_FADE_S
+from phantomtouch.engine.render_budget import CHURN_SHARE, CHURN_WINDOW_S
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames

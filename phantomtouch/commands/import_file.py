@@ -96,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
         f"{len(clip.frequency)} frequency points, {len(clip.transients)} transients"
     )
     if args.output is not None:
-        from phantomtouch.cli_parser import check_output_file
+        from phantomtouch.commands.parser import check_output_file
 
         check_output_file(args.output, "--output")
         Path(args.output).write_text(clip.model_dump_json(indent=1) + "\n", encoding="utf-8")
@@ -127,7 +127,7 @@ def _import_tact(args: argparse.Namespace, path: Path) -> int:
         print(f"{path.name}: {described}; written to {args.output}")
         return 0
     name = _library_name(args, path)
-    verb, db_path = _stored(args, lambda store: store.put_tact(name, text, about))
+    verb, db_path = _stored(args, lambda store: store.put_document("tact", name, text, about))
     print(
         f"{verb} .tact project {name!r} from {path.name}: {described}, in {db_path}; "
         f"POST /tact/{name}/play plays it"
@@ -179,7 +179,9 @@ def _import_deployment(args: argparse.Namespace, path: Path) -> int:
         raise ParameterError(
             f"--workspace={workspace!r} must be 1-64 letters, digits, '.', '_' or '-'"
         )
-    verb, db_path = _stored(args, lambda store: store.put_workspace(workspace, text, about))
+    verb, db_path = _stored(
+        args, lambda store: store.put_document("workspaces", workspace, text, about)
+    )
     print(
         f"{verb} workspace {workspace!r} from {path.name} ({described}), in {db_path}; a game "
         "connecting with this workspace_id plays its events"

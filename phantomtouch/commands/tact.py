@@ -17,7 +17,7 @@ from pathlib import Path
 
 import soundfile
 
-from phantomtouch.device_arg import load_device
+from phantomtouch.commands.device_arg import load_device
 from phantomtouch.errors import ParameterError, PhantomTouchError
 
 

@@ -7,7 +7,7 @@ import threading
 import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, TouchPattern
-from phantomtouch.engine.commands import CommandQueue, ReleaseCommand, StartCommand
+from phantomtouch.engine.voice_queue import CommandQueue, ReleaseCommand, StartCommand
 from phantomtouch.engine.voices import PatternVoice
 from phantomtouch.renderer import plan
 
