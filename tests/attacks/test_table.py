@@ -363,9 +363,8 @@ def test_attack(table: Table, row: Row, request: pytest.FixtureRequest) -> None:
     if played.error is not None:
         raise AssertionError(f"{kind}: {row.id}: the attack could not be played") from played.error
     band = table.band
-    band.clock = played.clock
     start, end = played.span
-    whole = band.window(start, end)
+    whole = band.between(start, end, played.clock, played.clock)
     assert np.all(np.isfinite(whole)), f"{kind}: the wearer's band was driven with NaN or Inf"
     ceiling = table.stand.ceiling
     assert float(np.max(np.abs(whole), initial=0.0)) <= ceiling + 1e-6, (
@@ -374,15 +373,11 @@ def test_attack(table: Table, row: Row, request: pytest.FixtureRequest) -> None:
     for window in played.windows:
         loudest: int | None = None
         if window.channel is not None:
-            band.clock = played.clock
-            alone_block = band.window(*window.channel)
+            alone_block = band.between(*window.channel, played.clock, played.clock)
             assert alone_block.size, f"{kind}: the capture holds nothing of the touch alone"
             loudest = int(np.argmax(np.sum(alone_block**2, axis=0)))
         began, ended = (played.clock, played.clock) if window.clocks is None else window.clocks
-        band.clock = began
-        first = band.index(window.start_s)
-        band.clock = ended
-        block = band.samples[first : band.index(window.end_s)]
+        block = band.between(window.start_s, window.end_s, began, ended)
         if loudest is not None:
             block = block[:, [loudest]]
         if window.felt:

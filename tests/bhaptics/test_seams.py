@@ -52,7 +52,12 @@ class Standin:
         ).start()
         self.ws_url = f"ws://{HOST}:{self.port}/v2/feedbacks"
         self.device = httpx.get(f"{self.server.url}/device", timeout=10.0).json()
-        self.clock = httpx.get(f"{self.server.url}/clock", timeout=10.0).json()
+        self.clock = self.read_clock()
+
+    def read_clock(self) -> dict[str, Any]:
+        """``GET /clock``: the engine's frame count at a server time."""
+        clock: dict[str, Any] = httpx.get(f"{self.server.url}/clock", timeout=10.0).json()
+        return clock
 
     def stop(self) -> Capture:
         self.server.stop()
@@ -73,7 +78,7 @@ async def stop_during_planning(standin: Standin, marks: dict[str, Any]) -> None:
         before = len(game.statuses)
         await game.ws.send(json.dumps({"Submit": [{"Type": "key", "Key": "crowd"}]}))
         await asyncio.sleep(0.1)
-        marks["crowd_stop"] = (await http.post(f"{url}/stop")).json()["server_time_s"]
+        marks["crowd_stop"] = (await http.post(f"{url}/stop")).json()
         await game.wait_statuses(before + 1, timeout_s=120.0)
         marks["crowd_answered"] = game.statuses[before][0]
         await asyncio.sleep(8.5)
@@ -84,7 +89,7 @@ async def stop_during_planning(standin: Standin, marks: dict[str, Any]) -> None:
             await game.ws.send(json.dumps({"Submit": [{"Type": "key", "Key": "one"}]}))
             await asyncio.sleep(0.018 * trial / 39)
             stop = await http.post(f"{url}/stop")
-            marks["one_stops"].append(stop.json()["server_time_s"])
+            marks["one_stops"].append(stop.json())
             await asyncio.sleep(0.7)
         marks["end"] = time.monotonic()
 
@@ -103,16 +108,23 @@ def test_the_stop_voids_keys_being_planned(tmp_path: Path) -> None:
     finally:
         band = standin.stop()
     after = standin.after_stop_s
-    stop = marks["crowd_stop"]
+    # each stop's answer is a clock too (its server time and frame): a span after a stop is
+    # placed by it, so a stall of the engine earlier in the run cannot shift the span onto
+    # the next trial's key
+    crowd_stop = marks["crowd_stop"]
+    stop = crowd_stop["server_time_s"]
     assert marks["crowd_answered"] > stop, (
         "the 200-voice key was planned before the stop arrived: the race was not reached"
     )
-    felt = band.peak(stop + after, stop + 8.2)
+    felt = band.peak(stop + after, stop + 8.2, crowd_stop)
     assert felt <= SILENT, (
         f"the wearer felt the 200-voice key at {felt:.2f} FS after the emergency stop"
     )
     played_on = [
-        k for k, at in enumerate(marks["one_stops"]) if band.peak(at + after, at + 0.65) > SILENT
+        k
+        for k, answer in enumerate(marks["one_stops"])
+        if band.peak(answer["server_time_s"] + after, answer["server_time_s"] + 0.65, answer)
+        > SILENT
     ]
     assert not played_on, (
         f"the wearer felt {len(played_on)} of 40 one-voice keys after the emergency stop "
@@ -180,6 +192,7 @@ async def huge_work_beside_a_contact(standin: Standin, marks: dict[str, Any]) ->
 
         tasks = [asyncio.create_task(mover()), asyncio.create_task(reader())]
         await asyncio.sleep(1.0)
+        marks["began"] = await asyncio.to_thread(standin.read_clock)
         marks["start"] = time.monotonic()
         async with PlayerClient(standin.ws_url) as game:
             for _ in range(2):
@@ -187,6 +200,7 @@ async def huge_work_beside_a_contact(standin: Standin, marks: dict[str, Any]) ->
             marks["answers"] = [status for _, status in game.statuses[1:]]
         await asyncio.sleep(1.0)
         marks["end"] = time.monotonic()
+        marks["ended"] = await asyncio.to_thread(standin.read_clock)
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
@@ -210,7 +224,8 @@ def test_one_message_of_huge_work_holds_no_one_up(tmp_path: Path) -> None:
     assert not marks["released"], (
         f"the other client's hand was let go of during the flood: {marks['released']}"
     )
-    envelope = np.max(np.abs(band.window(marks["start"], marks["end"])), axis=1)
+    span = band.between(marks["start"], marks["end"], marks["began"], marks["ended"])
+    envelope = np.max(np.abs(span), axis=1)
     blocks = envelope[: len(envelope) // 480 * 480].reshape(-1, 480).max(axis=1)
     assert blocks.min() > SILENT, "the hand's touch dropped out while the message was handled"
     assert 'phantomtouch_bhaptics_messages_total{outcome="refused"}' in metrics

@@ -86,20 +86,35 @@ class Capture:
         self.channels = [a["channel"] - 1 for a in actuators]
         self.places = np.array([(a["x_cm"], a["y_cm"]) for a in actuators])
 
-    def index(self, at_s: float) -> int:
-        frame = self.clock["frames"] + (at_s - self.clock["server_time_s"]) * self.rate_hz
+    def index(self, at_s: float, clock: dict[str, Any] | None = None) -> int:
+        """The frame at server time ``at_s``, placed by ``clock`` (None: :attr:`clock`)."""
+        clock = self.clock if clock is None else clock
+        frame = clock["frames"] + (at_s - clock["server_time_s"]) * self.rate_hz
         return max(0, min(len(self.samples), round(frame)))
 
     def window(self, start_s: float, end_s: float) -> np.ndarray:
         return self.samples[self.index(start_s) : self.index(end_s)]
+
+    def between(
+        self, start_s: float, end_s: float, began: dict[str, Any], ended: dict[str, Any]
+    ) -> np.ndarray:
+        """The samples from ``start_s`` to ``end_s``, each end placed by its own clock:
+        ``GET /clock`` read just before the span began and just after it ended. A loaded
+        machine may stall the engine for a moment, and its frames then fall behind the
+        wall's, so one clock read long before a span would place its end on frames
+        rendered after it."""
+        return self.samples[self.index(start_s, began) : self.index(end_s, ended)]
 
     def centroid(self, start_s: float, end_s: float) -> np.ndarray:
         energy = np.sum(self.window(start_s, end_s)[:, self.channels] ** 2, axis=0)
         assert energy.sum() > 0, "nothing was felt there"
         return np.asarray(energy @ self.places / energy.sum())
 
-    def peak(self, start_s: float, end_s: float) -> float:
-        block = self.window(start_s, end_s)
+    def peak(self, start_s: float, end_s: float, clock: dict[str, Any] | None = None) -> float:
+        """The loudest sample from ``start_s`` to ``end_s``, placed by ``clock`` (None:
+        :attr:`clock`)."""
+        clock = self.clock if clock is None else clock
+        block = self.between(start_s, end_s, clock, clock)
         return float(np.max(np.abs(block))) if block.size else 0.0
 
     def sounding(self, start_s: float, end_s: float) -> tuple[float, float]:
