@@ -20,6 +20,7 @@ NAMES = {
     "bhaptics": "bHaptics SDK1 (`--bhaptics`)",
     "bhaptics-sdk2": "bHaptics SDK2",
     "fleet": "fleet (NATS)",
+    "fleet-gateway": "fleet gateway's WebSocket (`phantomtouch gateway`, `/ws`)",
 }
 HEADER = (
     "| input | deadline | contacts per source | messages/s: a source, its host or token "

@@ -19,11 +19,10 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1] / "phantomtouch"
 INPUTS = ("server", "osc", "fleet", "bhaptics")
 """The input packages whose adapters go through the admission (``bhaptics`` with its SDK2
 modules)."""
-NOT_YET = {"fleet/gateway_ws.py", "bhaptics/session.py"}
-"""Modules of :data:`INPUTS` not yet wholly over the admission: the fleet gateway's WebSocket
-runs in a process of its own with no engine (it relays to the armbands' nodes, whose
-admission holds the contacts); the SDK1 session still keeps its playing keys by name (what
-its status lists and what ``turnOff`` stops), beside the engine's job table."""
+NOT_YET = {"bhaptics/session.py"}
+"""Modules of :data:`INPUTS` not yet wholly over the admission: the SDK1 session still keeps
+its playing keys by name (what its status lists and what ``turnOff`` stops), beside the
+engine's job table."""
 
 OWNER_METHODS = frozenset(
     {

@@ -112,7 +112,7 @@ def attachment(
         f"phantomtouch {args.command}: armband {settings.armband!r} of site {settings.site!r} "
         f"on the fleet at {', '.join(settings.servers)}"
     )
-    return attach(settings)
+    return attach(settings, closed_cluster=not args.fleet_insecure)
 
 
 def _cmd_gateway(args: argparse.Namespace) -> int:

@@ -52,16 +52,23 @@ class FleetClient:
         *,
         start_at_unix_s: float | None = None,
         client: str = "gateway",
+        principal: str | None = None,
     ) -> FleetAnswer:
-        """Send one touch request (a ``POST /touch`` body) to ``armband``."""
+        """Send one touch request (a ``POST /touch`` body) to ``armband``, as a touch of
+        ``client`` of ``principal`` (None: the node's anonymous ``fleet:nats``;
+        docs/fleet.md, "Who a client is")."""
         envelope: dict[str, Any] = {"touch": touch, "client": client}
+        if principal is not None:
+            envelope["principal"] = principal
         if start_at_unix_s is not None:
             envelope["start_at_unix_s"] = start_at_unix_s
         data = await self._request(armband, subjects.touch(armband), json.dumps(envelope).encode())
         return FleetAnswer.model_validate_json(data)
 
-    async def contact_down(self, armband: str, message: dict[str, Any]) -> FleetAnswer:
-        """A ``down`` (with ``owner``), answered: the armband may refuse it."""
+    async def contact_request(self, armband: str, message: dict[str, Any]) -> FleetAnswer:
+        """A contact message (with ``owner``, and ``principal`` from a gateway) the armband
+        answers: ``{"status": 200}`` or the refusal (a ``down``, or a ``move`` or ``up``
+        whose sender waits for the verdict)."""
         data = await self._request(armband, subjects.contact(armband), json.dumps(message).encode())
         return FleetAnswer.model_validate_json(data)
 

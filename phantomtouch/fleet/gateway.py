@@ -40,10 +40,12 @@ from phantomtouch.fleet.gateway_settings import GatewaySettings
 from phantomtouch.fleet.gateway_ws import GatewaySession
 from phantomtouch.fleet.records import ArmbandRecord, FleetAnswer, StopScope
 from phantomtouch.fleet.registry_view import RegistryView
-from phantomtouch.fleet.requests import pop_start_at_unix_s, request_token
+from phantomtouch.fleet.requests import pop_start_at_unix_s, request_principal, request_token
 from phantomtouch.fleet.settings import FleetSettings
 from phantomtouch.fleet.startup import Deadline, exit_join_failed, open_registry
 from phantomtouch.service import errors
+from phantomtouch.service.admission import Slot, Slots
+from phantomtouch.service.admission.policy import gateway_row, policy_table
 from phantomtouch.service.app_state import app_state
 from phantomtouch.service.bodies import strict_body
 from phantomtouch.service.errors import UnauthorizedError
@@ -56,6 +58,7 @@ from phantomtouch.service.origin import (
     OriginPolicy,
     Refusals,
 )
+from phantomtouch.service.settings import Settings
 
 logger = logging.getLogger("phantomtouch.fleet")
 
@@ -74,6 +77,8 @@ class Gateway:
     registry: RegistryView
     metrics: Metrics
     nc: Any
+    slots: Slots[Slot]
+    """The WebSocket connections' slots, under the ``fleet-gateway`` row."""
 
     async def online(self, armband: str) -> ArmbandRecord:
         """The armband's record; :class:`ArmbandNotFoundError` when it is not online."""
@@ -83,9 +88,15 @@ class Gateway:
         return record
 
     async def touch(
-        self, armband: str, touch: dict[str, Any], start_at_unix_s: float | None, client: str
+        self,
+        armband: str,
+        touch: dict[str, Any],
+        start_at_unix_s: float | None,
+        client: str,
+        principal: str,
     ) -> FleetAnswer:
-        """Send a touch to the armband's node; its answer, or a refusal naming the armband.
+        """Send a touch of ``client`` of ``principal`` to the armband's node; its answer, or
+        a refusal naming the armband.
 
         The node's answer decides, not the registry: a node that answers is online even
         while NATS fails over and its heartbeats lapse. Only when nobody listens does the
@@ -93,7 +104,7 @@ class Gateway:
         """
         try:
             return await self.client.touch(
-                armband, touch, start_at_unix_s=start_at_unix_s, client=client
+                armband, touch, start_at_unix_s=start_at_unix_s, client=client, principal=principal
             )
         except NoNodeError:
             await self.online(armband)
@@ -201,7 +212,10 @@ async def post_armband_touch(
     grant.check(armband)
     body = await json_object(request)
     start_at_unix_s = pop_start_at_unix_s(body)
-    return answered(await gateway.touch(armband, body, start_at_unix_s, f"player:{grant.player}"))
+    principal = request_principal(request, checked=not gateway.grants.open)
+    return answered(
+        await gateway.touch(armband, body, start_at_unix_s, f"player:{grant.player}", principal)
+    )
 
 
 @router.post("/touch", status_code=202, summary="One touch on several armbands at once")
@@ -228,8 +242,9 @@ async def post_touch(request: Request, gateway: GatewayDep, grant: GrantDep) -> 
     if start_at_unix_s is None:
         start_at_unix_s = time.time() + gateway.fleet.sync_lead_s
     client = f"player:{grant.player}"
+    principal = request_principal(request, checked=not gateway.grants.open)
     outcomes = await asyncio.gather(
-        *(gateway.touch(a, body, start_at_unix_s, client) for a in armbands),
+        *(gateway.touch(a, body, start_at_unix_s, client, principal) for a in armbands),
         return_exceptions=True,
     )
     answers: dict[str, FleetAnswer] = {}
@@ -286,6 +301,7 @@ def create_gateway(settings: GatewaySettings, fleet: FleetSettings) -> FastAPI:
     """The gateway's app; it connects to NATS when it starts (lifespan)."""
     metrics = Metrics()
     gateway_id = secrets.token_hex(4)
+    row = gateway_row(settings, policy_table(Settings.model_construct())["fleet"])
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -314,6 +330,7 @@ def create_gateway(settings: GatewaySettings, fleet: FleetSettings) -> FastAPI:
                 registry=view,
                 metrics=metrics,
                 nc=nc,
+                slots=Slots({"fleet-gateway": row}, make=Slot),
             )
             logger.info(
                 "fleet: gateway %s on http://%s:%d", gateway_id, settings.host, settings.port

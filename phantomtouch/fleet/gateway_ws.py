@@ -3,19 +3,26 @@
 ``down``, ``move``, ``up`` and ``play`` name the armband they are for (``play`` may also
 carry ``start_at_unix_s``); ``stop`` stops one job (``armband`` and ``job_id``), one
 armband (``armband``) or every armband the token may address. ``hello`` is answered
-with the armbands online, ``ping`` with ``pong``. Contacts are tracked here per
-(armband, contact), so a step their state does not allow is answered with ``error`` as
-on an armband's own ``/ws``; ``down`` is a request the armband answers, ``move`` and
-``up`` are published (the latest position wins, nothing queues).
+with the armbands online, ``ping`` with ``pong``. ``down`` is a request the armband
+answers, and so are ``move`` and ``up`` when they carry an ``id``; without one they are
+published (the latest position wins, nothing queues).
 
 ``subscribe`` (``rate_hz`` 0–120, 0 stops; optional ``armband``) pushes ``state``
 messages at that rate: each armband the token may address (or the one named), with its
 status and load as its last heartbeat reported them (the gateway's view of the registry,
 so as fresh as the heartbeats).
 
-While the client talks, the gateway pings every armband it holds contacts on; when it
-goes silent for ``watchdog_s`` or disconnects, the gateway releases them, and if the
-gateway itself vanishes the armbands' own fleet watchdog does.
+The session is a thin adapter, as every input of a service is
+(:mod:`phantomtouch.service.admission`): the connection is a slot of the gateway's
+:class:`~phantomtouch.service.admission.Slots` (kind ``fleet-gateway``), which checks each
+message's size and rate against the row and makes room for a newcomer when the slots are
+full. What the client holds is held by the armbands' nodes alone: each message is
+forwarded with the connection's owner and the client's principal
+(:func:`~phantomtouch.fleet.requests.request_principal`), and each node's admission holds
+the contacts, their deadline and the shares among principals. Nothing here renews the
+client on its behalf: a message renews it on the armband it is sent to, and the client's
+``ping`` on every armband it has addressed; when it goes silent the nodes release its
+contacts, and when it closes the gateway tells those armbands to release them at once.
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ import contextlib
 import itertools
 import json
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from pydantic import ValidationError
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -34,46 +41,57 @@ from phantomtouch.errors import PhantomTouchError, ProtocolError
 from phantomtouch.fleet.auth import Grant
 from phantomtouch.fleet.errors import NoNodeError
 from phantomtouch.fleet.records import StopScope
-from phantomtouch.fleet.requests import pop_start_at_unix_s, request_token
+from phantomtouch.fleet.requests import pop_start_at_unix_s, request_principal, request_token
 from phantomtouch.fleet.subjects import check_name
+from phantomtouch.service.connections import is_loopback_address
 from phantomtouch.service.errors import (
     WS_CLOSE_MESSAGE_TOO_BIG,
     WS_CLOSE_POLICY_VIOLATION,
+    WS_CLOSE_TRY_AGAIN_LATER,
     WS_CLOSE_UNSUPPORTED_DATA,
     Problem,
+    SourcesFullError,
+    TooLargeError,
     describe,
 )
-from phantomtouch.service.flood import FloodGuard
 from phantomtouch.service.ws_messages import PROTOCOL_VERSION, MessageError, parse
 from phantomtouch.service.ws_sending import GONE, JsonSender
 
 if TYPE_CHECKING:
     from phantomtouch.fleet.gateway import Gateway
+    from phantomtouch.service.admission import Slot
 
+KIND: Final = "fleet-gateway"
+"""The gateway's row of the policy table."""
 _CONNECTIONS = itertools.count()
 
 
 class GatewaySession:
-    """One client connection to the gateway; :meth:`run` returns when it is closed."""
+    """One client connection to the gateway; :meth:`run` returns when it is closed.
+    Every method runs on the gateway's event loop unless its docstring says otherwise."""
 
     def __init__(self, websocket: WebSocket, gateway: Gateway) -> None:
         self.websocket = websocket
         self.gateway = gateway
-        self.settings = gateway.settings
         self.owner = f"gw-{gateway.id}-{next(_CONNECTIONS)}"
-        self.held: dict[str, set[str]] = {}
-        self.last_message_s = time.monotonic()
-        self.limiter = FloodGuard(self.settings.ws_messages_per_s)
+        self.principal = ""
+        self.addressed: set[str] = set()
+        """The armbands this connection sent a message to: where its ``ping`` and, when it
+        goes, its ``release`` are sent (what it holds there, the node knows)."""
         self.grant: Grant | None = None
         self.sender = JsonSender(websocket)
         self._state_task: asyncio.Task[None] | None = None
+        self._serve_task: asyncio.Task[Any] | None = None
+        self._yielded: str | None = None
 
     async def run(self) -> None:
+        """Accept, check the token, take a slot, serve frames until the connection ends;
+        then free the slot and release what the client held on every armband."""
         await self.websocket.accept()
         self.grant = self.gateway.grants.grant(request_token(self.websocket))
-        keepalive = asyncio.create_task(self._keepalive())
         code: int | None = None
         reason = ""
+        slot: Slot | None = None
         try:
             if self.grant is None:
                 code, reason = (
@@ -81,34 +99,72 @@ class GatewaySession:
                     "a token is required: ?token=... or Bearer",
                 )
             else:
-                code, reason = await self._serve()
+                self._serve_task = asyncio.current_task()
+                slot = self._open()
+                code, reason = await self._serve(slot)
+        except SourcesFullError as exc:
+            code, reason = WS_CLOSE_TRY_AGAIN_LATER, str(exc)[:120]
+        except asyncio.CancelledError:
+            if self._yielded is None:
+                raise
+            code, reason = WS_CLOSE_TRY_AGAIN_LATER, self._yielded
         except (WebSocketDisconnect, OSError):
             pass
         finally:
-            keepalive.cancel()
             self._subscribe(0.0, None)
+            if slot is not None:
+                slot.close()
             await self._release_all()
         if code is not None:
             with contextlib.suppress(*GONE):
                 await self.websocket.close(code, reason)
 
-    async def _serve(self) -> tuple[int, str]:
-        limit = self.settings.max_ws_message_bytes
+    def _open(self) -> Slot:
+        """The connection's slot (one yields to it when they are full).
+
+        Raises
+        ------
+        SourcesFullError
+            Every slot is held by connections that may not yield (1013).
+        """
+        self.principal = request_principal(self.websocket, checked=not self.gateway.grants.open)
+        peer = self.websocket.client
+        return self.gateway.slots.open(
+            KIND,
+            self.owner,
+            principal=self.principal,
+            on_yield=self._on_yield,
+            local=is_loopback_address(None if peer is None else peer.host),
+        )
+
+    def _on_yield(self, reason: str) -> None:
+        """The gateway gave this connection's slot to a newcomer: end the session with
+        1013 (the thread that opened the newcomer)."""
+        task = self._serve_task
+        if task is None:
+            return
+        self._yielded = reason[:120]
+        task.get_loop().call_soon_threadsafe(task.cancel)
+
+    async def _serve(self, slot: Slot) -> tuple[int, str]:
+        limit = slot.policy.max_message_bytes
         while True:
             frame = await self.websocket.receive()
             if frame["type"] == "websocket.disconnect":
                 raise WebSocketDisconnect(frame.get("code", 1000))
-            self.last_message_s = time.monotonic()
             text = frame.get("text")
             if text is None:
                 return WS_CLOSE_UNSUPPORTED_DATA, "binary frames are not supported; send JSON text"
-            if len(text.encode()) > limit:
+            try:
+                verdict = slot.receive(len(text) if 4 * len(text) <= limit else len(text.encode()))
+            except TooLargeError:
                 return WS_CLOSE_MESSAGE_TOO_BIG, f"message over the limit of {limit} bytes"
-            if not self.limiter.admit(self.last_message_s):
-                if self.limiter.sustained(self.last_message_s):
-                    return WS_CLOSE_POLICY_VIOLATION, "over the message rate limit"
-                continue
-            await self._handle(text)
+            if verdict.admitted:
+                await self._handle(text)
+            elif verdict.sustained:
+                return WS_CLOSE_POLICY_VIOLATION, "over the message rate limit"
+            elif verdict.flood_started:
+                await self.sender.error(Problem(429, "rate_limited", verdict.reason), None)
 
     async def _handle(self, text: str) -> None:
         message_id: Any = None
@@ -160,47 +216,39 @@ class GatewaySession:
                     "type": "welcome",
                     "protocol": PROTOCOL_VERSION,
                     "gateway": self.gateway.id,
-                    "watchdog_s": self.settings.watchdog_s,
+                    "watchdog_s": self.gateway.slots.policy(KIND).deadline_s,
                     "unix_time_s": time.time(),
                     "armbands": self.grant.within(r.armband for r in records),
                     "id": message_id,
                 }
             )
         elif kind == "ping":
+            await self._to_addressed({"type": "ping"})
             await self.sender.send({"type": "pong", "unix_time_s": time.time(), "id": message_id})
         elif kind == "play":
             target = self._need(armband, "play")
+            self.addressed.add(target)
             touch = {k: v for k, v in data.items() if k not in ("type", "id")}
-            answer = await self.gateway.touch(target, touch, start_at_unix_s, f"{self.owner}")
+            answer = await self.gateway.touch(
+                target, touch, start_at_unix_s, self.owner, self.principal
+            )
             await self._answer(answer.status, answer.body, message_id)
-        elif kind == "down":
-            target = self._need(armband, "down")
-            contact = data["contact"]
-            if contact in self.held.get(target, set()):
-                raise ProtocolError(
-                    f"contact={contact!r} is already down on armband {target!r}: expected move "
-                    "or up, got down"
-                )
+        elif kind == "down" or (kind in ("move", "up") and message_id is not None):
+            target = self._need(armband, kind)
+            self.addressed.add(target)
             try:
-                answer = await client.contact_down(target, {**data, "owner": self.owner})
+                answer = await client.contact_request(target, self._forwarded(data))
             except NoNodeError:
                 await self.gateway.online(target)
                 raise
-            if answer.status == 200:
-                self.held.setdefault(target, set()).add(contact)
+            if answer.status >= 400:
+                error = answer.body.get("error", {})
+                error["message"] = f"armband={target!r}: {error.get('message', 'refused')}"
             await self._answer(answer.status, None, message_id, answer.body)
         elif kind in ("move", "up"):
             target = self._need(armband, kind)
-            contact = data["contact"]
-            if contact not in self.held.get(target, set()):
-                raise ProtocolError(
-                    f"contact={contact!r} is not down on armband {target!r}: expected down, "
-                    f"got {kind}"
-                )
-            await client.contact(target, {**data, "owner": self.owner})
-            if kind == "up":
-                self.held[target].discard(contact)
-            await self.sender.ok(message_id)
+            self.addressed.add(target)
+            await client.contact(target, self._forwarded(data))
         elif kind == "stop":
             await self._stop(armband, data.get("job_id"), message_id)
         elif kind == "subscribe":
@@ -259,8 +307,6 @@ class GatewaySession:
             return
         scope = StopScope() if armband is None else StopScope(scope="armband", armband=armband)
         result = await self.gateway.stop(scope, self.grant)
-        for target in result["stopped"]:
-            self.held.pop(target, None)
         await self._answer(200, result, message_id)
 
     async def _answer(
@@ -279,29 +325,19 @@ class GatewaySession:
         else:
             await self.sender.ok(message_id, result)
 
-    async def _keepalive(self) -> None:
-        """Ping held armbands while the client talks; release them when it goes silent."""
-        period_s = self.settings.watchdog_s / 4
-        while True:
-            await asyncio.sleep(period_s)
-            if not self.held:
-                continue
-            if time.monotonic() - self.last_message_s > self.settings.watchdog_s:
-                released = {a: sorted(c) for a, c in self.held.items() if c}
-                await self._release_all()
-                if released:
-                    await self.sender.send_unless_gone(
-                        {"type": "released", "reason": "watchdog", "contacts": released}
-                    )
-                continue
-            for armband in list(self.held):
-                with contextlib.suppress(Exception):
-                    await self.gateway.client.contact(
-                        armband, {"type": "ping", "owner": self.owner}
-                    )
+    def _forwarded(self, data: dict[str, Any]) -> dict[str, Any]:
+        """A client's contact message as its armband's node takes it: with the connection's
+        owner and the client's principal."""
+        return {**data, "owner": self.owner, "principal": self.principal}
+
+    async def _to_addressed(self, message: dict[str, Any]) -> None:
+        """Publish ``message`` (a ``ping`` or a ``release``) of this connection to every
+        armband it has addressed; an armband gone meanwhile is skipped."""
+        for armband in sorted(self.addressed):
+            with contextlib.suppress(Exception):
+                await self.gateway.client.contact(armband, self._forwarded(message))
 
     async def _release_all(self) -> None:
-        held, self.held = self.held, {}
-        for armband in held:
-            with contextlib.suppress(Exception):
-                await self.gateway.client.contact(armband, {"type": "release", "owner": self.owner})
+        """The client went: every armband it addressed lets go of its contacts at once."""
+        await self._to_addressed({"type": "release"})
+        self.addressed.clear()

@@ -46,7 +46,7 @@ from phantomtouch.fleet.records import (
     Load,
     StopRequest,
 )
-from phantomtouch.fleet.remote_contacts import KIND, PRINCIPAL, RemoteContacts, drop_reason
+from phantomtouch.fleet.remote_contacts import KIND, Principals, RemoteContacts, drop_reason
 from phantomtouch.fleet.settings import FleetSettings
 from phantomtouch.fleet.startup import Deadline, announce, exit_join_failed, open_registry
 from phantomtouch.fleet.tasks import cancel_until_done
@@ -69,7 +69,9 @@ logger = logging.getLogger("phantomtouch.fleet")
 class ArmbandNode:
     """One armband on the fleet; :meth:`start`, then :meth:`close`."""
 
-    def __init__(self, service: Service, settings: FleetSettings) -> None:
+    def __init__(
+        self, service: Service, settings: FleetSettings, *, closed_cluster: bool = False
+    ) -> None:
         if settings.armband is None:
             raise ParameterError("armband=None: a node needs an armband id (--armband ID)")
         self.service = service
@@ -82,7 +84,10 @@ class ArmbandNode:
             ["subject", "outcome"],
             registry=service.metrics.registry,
         )
-        self.contacts = RemoteContacts(service.admission, on_silent=self._count_silent)
+        self.principals = Principals(named=closed_cluster)
+        self.contacts = RemoteContacts(
+            service.admission, principals=self.principals, on_silent=self._count_silent
+        )
         self.clock_offset_s: float | None = None
         self._in_flight = 0
         self._tasks: set[asyncio.Task[None]] = set()
@@ -250,7 +255,8 @@ class ArmbandNode:
             request = parse_touch_request(json.dumps(envelope.touch))
             if envelope.start_at_unix_s is not None:
                 request = self._at_unix(request, envelope.start_at_unix_s)
-            source = self.service.admission.open(KIND, envelope.client, principal=PRINCIPAL)
+            principal = self.principals.of(envelope.principal)
+            source = self.service.admission.open(KIND, envelope.client, principal=principal)
             accepted = await source.play(request, arrival=arrival)
         except (PhantomTouchError, ValidationError) as exc:
             problem = describe(exc)
@@ -351,8 +357,12 @@ class ArmbandNode:
             await msg.respond(answer.model_dump_json().encode())
 
 
-def attach(settings: FleetSettings) -> Callable[[Service], AbstractAsyncContextManager[None]]:
-    """What ``create_app(attach=...)`` enters once the service runs: this node on the fleet.
+def attach(
+    settings: FleetSettings, *, closed_cluster: bool = False
+) -> Callable[[Service], AbstractAsyncContextManager[None]]:
+    """What ``create_app(attach=...)`` enters once the service runs: this node on the fleet
+    (``closed_cluster``: the cluster was checked closed, so the principals gateways name
+    are believed; :class:`~phantomtouch.fleet.remote_contacts.Principals`).
 
     A node that cannot join says why in one line and the process exits with status 1
     (:func:`~phantomtouch.fleet.startup.exit_join_failed`), its engine and library closed.
@@ -360,7 +370,7 @@ def attach(settings: FleetSettings) -> Callable[[Service], AbstractAsyncContextM
 
     @asynccontextmanager
     async def joined(service: Service) -> AsyncIterator[None]:
-        node = ArmbandNode(service, settings)
+        node = ArmbandNode(service, settings, closed_cluster=closed_cluster)
         try:
             await node.start()
         except FleetJoinError as exc:

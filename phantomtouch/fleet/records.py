@@ -62,6 +62,12 @@ class FleetTouch(_Record):
         default=None, description="Start at this wall-clock time (hosts NTP-synced)."
     )
     client: Owner = Field(default="fleet", description="Whose quotas the touch counts against.")
+    principal: str | None = Field(
+        default=None,
+        max_length=40,
+        description="Who the client is (a gateway's: 'fleet:HOST' or 'token:DIGEST'); "
+        "believed on a closed cluster only.",
+    )
 
 
 class FleetAnswer(_Record):

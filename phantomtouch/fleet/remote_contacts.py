@@ -10,12 +10,16 @@ is malformed, oversized or not allowed in its contact's state is counted and dro
 Each owner is a source of the admission (kind ``fleet``, :mod:`phantomtouch.service.
 admission`): its handle checks the message's rate, renews the owner on every message of
 it (``ping`` included) and holds its contacts in the engine's front with the fleet row's
-deadline (``watchdog_s``) and contacts per owner. Every fleet publisher authenticates to
-the same NATS and the node cannot tell them apart, so they are one principal
-(:data:`PRINCIPAL`): shares go first between the fleet and the node's local inputs, then
-among the fleet's owners. No contact state is kept here; a gateway or a client that
-vanishes leaves nothing vibrating on any armband it touched, whatever happens to this
-node's NATS task.
+deadline (``watchdog_s``) and contacts per owner. A message may name its owner's
+``principal`` (a gateway names its client's: ``fleet:HOST`` or ``token:DIGEST``,
+:func:`~phantomtouch.fleet.requests.request_principal`), and shares go first among
+principals, then among one principal's owners (:class:`Principals`). A node believes a
+named principal only on a closed cluster, where nobody publishes on its subjects but a
+user the cluster authenticated (docs/fleet.md, "Auth"); on an open one (``serve
+--fleet-insecure``) anyone could name anyone, so every publisher is the one principal
+:data:`PRINCIPAL`, as is a message that names none. No contact state is kept here; a
+gateway or a client that vanishes leaves nothing vibrating on any armband it touched,
+whatever happens to this node's NATS task.
 """
 
 from __future__ import annotations
@@ -27,7 +31,8 @@ from typing import TYPE_CHECKING, Final
 
 from pydantic import ValidationError
 
-from phantomtouch.errors import PhantomTouchError, ProtocolError
+from phantomtouch.errors import ParameterError, PhantomTouchError, ProtocolError
+from phantomtouch.service.admission.principals import check_principal
 from phantomtouch.service.errors import QuotaError, RateLimitedError, TooLargeError
 from phantomtouch.service.ws_messages import Down, Move, Up
 
@@ -37,8 +42,49 @@ if TYPE_CHECKING:
 KIND: Final = "fleet"
 """The input's kind at the admission."""
 PRINCIPAL = "fleet:nats"
-"""The principal of every fleet owner (see the module docstring)."""
+"""The principal of a fleet owner whose message names none, and of every fleet owner on an
+open cluster (see the module docstring)."""
+NAMED_PREFIXES = ("fleet:", "token:")
+"""What a principal a gateway names begins with: its client's host or token
+(:func:`~phantomtouch.fleet.requests.request_principal`), never another input's."""
 MAX_OWNER_CHARS = 128
+
+
+@dataclass(frozen=True)
+class Principals:
+    """Who a fleet message's owner is, on one node (host, any thread; immutable).
+
+    Attributes
+    ----------
+    named : bool
+        Whether a principal a message names is believed: True only when the node checked
+        that its cluster is closed (no anonymous publisher; ``serve --fleet`` without
+        ``--fleet-insecure``), so that only a gateway or game server the cluster
+        authenticated publishes on its subjects.
+    """
+
+    named: bool
+
+    def of(self, claimed: object) -> str:
+        """The principal of a message naming ``claimed`` (None: it names none).
+
+        Raises
+        ------
+        ProtocolError
+            ``claimed`` is named, believed, and not a principal a gateway makes (a string
+            ``fleet:…`` or ``token:…`` of at most 40 characters, without ``/``).
+        """
+        if claimed is None or not self.named:
+            return PRINCIPAL
+        if not isinstance(claimed, str) or not claimed.startswith(NAMED_PREFIXES):
+            raise ProtocolError(
+                f"principal={claimed!r}: must be 'fleet:HOST' or 'token:DIGEST' "
+                "(a gateway's client)"
+            )
+        try:
+            return check_principal(claimed)
+        except ParameterError as exc:
+            raise ProtocolError(str(exc)) from None
 
 
 @dataclass(eq=False)
@@ -53,6 +99,7 @@ class RemoteContacts:
 
     admission: Admission
     _: KW_ONLY
+    principals: Principals
     on_silent: Callable[[str], None] | None = None
     _unsubscribe: Callable[[], None] = field(init=False)
 
@@ -83,6 +130,7 @@ class RemoteContacts:
         if not isinstance(message, dict):
             raise ProtocolError("expected a JSON object with 'type' and 'owner'")
         owner_id = message.pop("owner", None)
+        principal = self.principals.of(message.pop("principal", None))
         if not isinstance(owner_id, str) or not 0 < len(owner_id) <= MAX_OWNER_CHARS:
             raise ProtocolError(f"owner={owner_id!r}: must be a string of 1 to 128 characters")
         kind = message.get("type")
@@ -90,7 +138,7 @@ class RemoteContacts:
             raise ProtocolError(
                 f"type={kind!r} is not a contact message; expected down, move, up, ping, release"
             )
-        source = self.admission.open(KIND, owner_id, principal=PRINCIPAL)
+        source = self.admission.open(KIND, owner_id, principal=principal)
         if not source.receive(len(data)).admitted:
             raise RateLimitedError(
                 f"owner={owner_id!r}: over the fleet message rate", field="owner"

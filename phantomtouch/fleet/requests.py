@@ -1,4 +1,5 @@
-"""What a gateway reads off a request besides its body: the token, the start instant."""
+"""What a gateway reads off a request besides its body: the token, the client's principal,
+the start instant."""
 
 from __future__ import annotations
 
@@ -9,6 +10,11 @@ from starlette.datastructures import Headers
 from starlette.requests import HTTPConnection
 
 from phantomtouch.errors import ParameterError
+from phantomtouch.service.admission import principal_for
+
+PRINCIPAL_KIND = "fleet"
+"""The kind a gateway's clients' principals are named by: ``fleet:HOST`` for a client of
+a gateway without tokens, ``token:DIGEST`` for a client that gave one."""
 
 
 def request_token(connection: HTTPConnection) -> str | None:
@@ -20,6 +26,18 @@ def request_token(connection: HTTPConnection) -> str | None:
     if connection.scope["type"] == "websocket":
         return connection.query_params.get("token")
     return None
+
+
+def request_principal(connection: HTTPConnection, *, checked: bool) -> str:
+    """Who the client of a gateway's request is (host, the event loop): the token it gave
+    when the gateway ``checked`` tokens (every request with that token is one principal,
+    from any host), else its host (every connection of one host is one principal).
+    :func:`~phantomtouch.service.admission.principal_for` makes it; the gateway tells it
+    the node with every message it forwards (docs/fleet.md, "Who a client is")."""
+    peer = connection.client
+    host = None if peer is None else peer.host
+    token = request_token(connection) if checked else None
+    return principal_for(PRINCIPAL_KIND, host=host, token=token)
 
 
 def pop_start_at_unix_s(body: dict[str, Any]) -> float | None:

@@ -60,6 +60,12 @@ class ClientLimits(BaseSettings):
     """Messages per second one WebSocket connection may send (1 s of burst)."""
     watchdog_s: float = Field(default=2.0, ge=0.05, le=30.0)
     """Silence after which a connection's contacts are released, in seconds."""
+    max_ws_connections: int = Field(default=64, ge=1, le=100_000)
+    """WebSocket connections open at once in all, beyond which one from an address other than
+    loopback is refused (close 1013); loopback ones are never refused."""
+    max_ws_connections_per_address: int = Field(default=16, ge=1, le=100_000)
+    """WebSocket connections open at once from one address other than loopback (close 1013 beyond
+    it)."""
 
 
 def _loopback_listen(listen: str | None, example_port: int, why: str) -> str | None:
@@ -127,12 +133,6 @@ class Settings(ClientLimits):
     allowed_hosts: list[str] = Field(default_factory=list)
     """Host names the service answers to besides localhost, 127.0.0.1, [::1] and the bound address
     (any IP address when bound to 0.0.0.0 or ::); '*' allows any."""
-    max_ws_connections: int = Field(default=64, ge=1, le=100_000)
-    """WebSocket connections open at once in all, beyond which one from an address other than
-    loopback is refused (close 1013); loopback ones are never refused."""
-    max_ws_connections_per_address: int = Field(default=16, ge=1, le=100_000)
-    """WebSocket connections open at once from one address other than loopback (close 1013 beyond
-    it)."""
     header_timeout_s: float = Field(default=10.0, ge=0.5, le=300.0)
     """Longest wait for a request's headers, in seconds (408 and closed beyond it)."""
     max_header_bytes: int = Field(default=64 << 10, ge=4096, le=1 << 20)

@@ -19,6 +19,7 @@ from typing import Any
 import httpx
 from websockets.sync.client import connect
 
+from phantomtouch.fleet.nats_config import plan
 from tests.attacks.inputs import BIG_POINTS, SCORE_S, OscSource, polyline
 from tests.bhaptics.test_standin_live import RELEASE_S, Capture
 from tests.support.fleet import ArmbandNode, Gateway
@@ -107,8 +108,15 @@ def start_stand(kind: str, folder: Path) -> Stand:
         ).start()
         return Stand(server, wav, f"ws://{HOST}:{port}/v2/feedbacks")
     if kind == "fleet":
-        cluster = NatsCluster(folder / "nats", size=1).start()
-        node = ArmbandNode(folder, cluster, "a1", "lab", output=capture)
+        # Closed (phantomtouch fleet-config's users): only there does a node believe the
+        # principal the gateway names for each of its clients (docs/fleet.md, "Who a client
+        # is").
+        users = plan([("a1", "lab")], ["gateway"])
+        cluster = NatsCluster(folder / "nats", size=1, users=users).start()
+        # The node's deadline is the one the gateway announces in its welcome (2 s), which
+        # its clients keep to.
+        deadline = {"PHANTOMTOUCH_WATCHDOG_S": "2.0"}
+        node = ArmbandNode(folder, cluster, "a1", "lab", env=deadline, output=capture)
         node.start()
         gateway = Gateway(folder, cluster).start()
         wait_for_armband(gateway.ws_url, "a1")

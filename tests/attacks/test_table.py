@@ -342,13 +342,7 @@ def table(
     yield Table(stand, inp, played, band)
 
 
-NOT_YET: dict[tuple[str, str], str] = {
-    (
-        "fleet",
-        "crowd of minted identities: another client is felt throughout",
-    ): "every fleet publisher is one principal (fleet:nats): the node cannot tell the "
-    "gateway's clients apart, so one host's 64 gateway connections share with the victim",
-}
+NOT_YET: dict[tuple[str, str], str] = {}
 """Rows an input does not hold yet, and why: each is expected to fail (strictly: a row that
 starts to hold fails here until it is taken off this list)."""
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from typing import Any
 
+import pytest
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
 from tests.fleet.conftest import Fleet
@@ -53,9 +56,36 @@ def test_moves_reach_the_addressed_armband_and_the_latest_wins(fleet: Fleet) -> 
         answer = _ask(
             ws, {"type": "move", "armband": "a1", "contact": "hand", "x_cm": 1, "y_cm": 1, "id": 4}
         )
+        # The armband's node answers a move with an id (the gateway keeps no contact state).
         assert answer["type"] == "error"
-        assert "not down on armband 'a1'" in answer["message"]
+        assert answer["message"].startswith("armband='a1': contact='hand' is not down")
     wait_until(lambda: _remote_contacts(fleet, "a3") == [], 30.0, "contact released on close")
+
+
+def test_the_gateway_holds_each_connection_to_its_row_of_the_policy_table(fleet: Fleet) -> None:
+    """A message over the ``fleet-gateway`` row's size (the gateway's server has the same
+    frame limit, so it answers first) closes the connection 1009 naming the limit; a flood
+    over the row's rate is answered ``rate_limited`` once, then closed 1008 when it
+    is sustained; the welcome announces the row's deadline."""
+    with connect(fleet.gateways[0].ws_url, max_size=None) as ws:
+        assert _ask(ws, {"type": "hello", "id": 1})["watchdog_s"] == 2.0
+        ws.send(json.dumps({"type": "ping", "pad": "x" * 70_000}))
+        with pytest.raises(ConnectionClosed) as closed:
+            ws.recv(timeout=10.0)
+        assert closed.value.rcvd is not None and closed.value.rcvd.code == 1009
+        assert "limit of 65536 bytes" in closed.value.rcvd.reason
+    with connect(fleet.gateways[0].ws_url) as ws:
+        seen: list[dict[str, Any]] = []
+        started_s = time.monotonic()
+        with pytest.raises(ConnectionClosed) as closed:
+            while time.monotonic() - started_s < 30.0:
+                for _ in range(500):
+                    ws.send('{"type": "ping"}')
+                with contextlib.suppress(TimeoutError):
+                    while True:
+                        seen.append(json.loads(ws.recv(timeout=0)))
+        assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
+        assert [m["code"] for m in seen if m["type"] == "error"] == ["rate_limited"]
 
 
 def test_a_contact_without_an_armband_is_refused_by_name(fleet: Fleet) -> None:

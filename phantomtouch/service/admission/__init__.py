@@ -12,14 +12,16 @@ voiding (:class:`Arrival`). Shares go first among principals (:func:`principal_f
 then among a principal's sources.
 
 Modules: :mod:`.policy` (the table), :mod:`.principals` (principals and owner ids),
-:mod:`.rate` (a message's verdict), :mod:`.handle` (a source), :mod:`.table` (the
-admission and its slots).
+:mod:`.rate` (a message's verdict), :mod:`.slots` (the connection half: sources in slots,
+their size and rate, who yields; usable without an engine, as the fleet's gateway does),
+:mod:`.handle` (a source's owner half, over the engine), :mod:`.table` (the admission).
 """
 
-from phantomtouch.service.admission.handle import Handle, YieldCallback
+from phantomtouch.service.admission.handle import Handle
 from phantomtouch.service.admission.policy import KINDS, InputPolicy, Kind, policy_table
 from phantomtouch.service.admission.principals import owner_id, principal_for
 from phantomtouch.service.admission.rate import Arrival, Verdict
+from phantomtouch.service.admission.slots import Slot, Slots, YieldCallback
 from phantomtouch.service.admission.table import Admission
 
 __all__ = [
@@ -29,6 +31,8 @@ __all__ = [
     "Handle",
     "InputPolicy",
     "Kind",
+    "Slot",
+    "Slots",
     "Verdict",
     "YieldCallback",
     "owner_id",

@@ -25,7 +25,8 @@ from typing import TYPE_CHECKING
 
 from phantomtouch.errors import ParameterError, ProtocolError
 from phantomtouch.service.admission.principals import DETACHED, owner_id
-from phantomtouch.service.admission.rate import Arrival, Meter, Verdict, monotonic
+from phantomtouch.service.admission.rate import Arrival, Meter, monotonic
+from phantomtouch.service.admission.slots import Slot, YieldCallback
 from phantomtouch.service.errors import QuotaError
 from phantomtouch.service.scheduling import DETACHED_NAMES, QUOTA_NAMES, schedule_touch
 from phantomtouch.service.scores import ScoreJobs, schedule_score
@@ -44,13 +45,9 @@ SCOPE_KEY = "phantomtouch.handle"
 """Where a WebSocket session leaves its connection's :class:`Handle` in the ASGI scope, so
 that the protocol counts the connection's ping frames in the same rate
 (:mod:`phantomtouch.server.wire`)."""
-YieldCallback = Callable[[str], None]
-"""``on_yield(reason)``: the admission took the source's slot for a newcomer (or closed
-it); the adapter ends the source's transport (a WebSocket closes 1013 with ``reason``).
-Called in the thread that opened the newcomer; it must return at once."""
 
 
-class Handle:
+class Handle(Slot):
     """One source of one input, as the admission holds it (made by
     :meth:`~phantomtouch.service.admission.Admission.open`, never directly).
 
@@ -60,20 +57,13 @@ class Handle:
 
     Attributes
     ----------
-    kind : str
-        The input kind (a row of the policy table).
-    source : str
-        The source as the input names it (a connection id, ``HOST:PORT``, a fleet owner).
-    principal : str
-        Who the source really is (:func:`~phantomtouch.service.admission.principal_for`).
     owner : str
         The engine owner of what the source holds: ``PRINCIPAL/SOURCE``.
     detached_owner : str
         The owner of the source's detached touches: its principal's (they outlive it).
-    policy : InputPolicy
-        The input's row.
-    local : bool
-        The source is on this machine (its row's ``local_never_yields`` applies).
+
+    The others (``kind``, ``source``, ``principal``, ``policy``, ``local``) are a
+    :class:`~phantomtouch.service.admission.slots.Slot`'s.
     """
 
     def __init__(
@@ -86,27 +76,22 @@ class Handle:
         principal: str,
         meter: Meter,
         on_yield: YieldCallback | None,
-        on_close: Callable[[Handle], None],
+        on_close: Callable[[Slot], None],
         local: bool = False,
     ) -> None:
+        super().__init__(
+            policy,
+            source=source,
+            principal=principal,
+            meter=meter,
+            on_yield=on_yield,
+            on_close=on_close,
+            local=local,
+        )
         self.engine = engine
         self.store = store
-        self.policy = policy
-        self.kind = policy.kind
-        self.source = source
-        self.principal = principal
-        self.owner = owner_id(principal, source)
         self.detached_owner = owner_id(principal, DETACHED)
-        self.meter = meter
-        self.local = local
-        self.last_heard_s = monotonic(None)
-        self.closed = False
-        self._on_yield = on_yield
-        self._on_close = on_close
         self._unsubscribe: list[Callable[[], None]] = []
-
-    def __repr__(self) -> str:
-        return f"Handle({self.kind!r}, owner={self.owner!r})"
 
     # -- messages -----------------------------------------------------------------------
 
@@ -115,43 +100,25 @@ class Handle:
         message through :meth:`receive` (an HTTP request). Any thread."""
         return Arrival(self.engine.stop_count, monotonic(None))
 
-    def receive(self, size_bytes: int, *, now_s: float | None = None) -> Verdict:
-        """A message of ``size_bytes`` bytes of this source arrived: check its size and rate,
-        and when admitted renew the owner (only a message of the owner renews it: nothing
-        renews an owner on its behalf).
-
-        Parameters
-        ----------
-        size_bytes : int, >= 0
-            The message's size as it came off the wire.
-        now_s : float or None
-            Its arrival on the ``time.monotonic()`` clock (None: now).
-
-        Returns
-        -------
-        Verdict
-            Admitted (with its :class:`Arrival`, to pass on to what it asks for) or
-            dropped, and whether the drop began or sustains a flood.
-
-        Raises
-        ------
-        TooLargeError
-            Over the row's ``max_message_bytes`` (a WebSocket closes 1009).
-        """
-        self.meter.check_size(size_bytes)
-        now_s = monotonic(now_s)
-        verdict = self.meter.admit(now_s, self.engine.stop_count)
-        if verdict.admitted:
-            self.renew(now_s)
-        return verdict
+    @property
+    def stop_count(self) -> int:
+        """The engine's stop count: what a message's
+        :class:`~phantomtouch.service.admission.Arrival` is stamped with (a stop since
+        voids what it asked for). Any thread."""
+        return self.engine.stop_count
 
     def renew(self, now_s: float | None = None) -> None:
         """Push the deadline of the owner's contacts on: a message of this owner was heard
-        (:meth:`receive` does it for every admitted message; an input calls it itself only
-        for a message that does not pass :meth:`receive`, such as a transport ping frame)."""
+        (:meth:`~phantomtouch.service.admission.slots.Slot.receive` does it for every
+        admitted message; an input calls it itself only for a message that does not pass
+        it, such as a transport ping frame)."""
         now_s = monotonic(now_s)
-        self.last_heard_s = now_s
+        super().renew(now_s)
         self.engine.renew_owner(self.owner, now_s)
+
+    def holds_anything(self) -> bool:
+        """Whether the source holds a contact or a touch (the front's tables). Any thread."""
+        return bool(self.engine.contacts_of(self.owner)) or bool(self.engine.live_jobs(self.owner))
 
     def check_work(self, count: int, *, field: str) -> None:
         """Refuse a message asking for ``count`` units of work (voices, submits, messages of
@@ -373,23 +340,12 @@ class Handle:
 
     # -- the slot -----------------------------------------------------------------------
 
-    def close(self, reason: str = "closed") -> None:
-        """The source went: release its contacts (``released`` with ``reason``, heard by its
-        :meth:`on_released` listeners), stop its touches but the detached ones, free its
-        slot. Idempotent; any thread."""
-        if self.closed:
-            return
-        self.closed = True
+    def let_go(self, reason: str) -> None:
+        """What :meth:`~phantomtouch.service.admission.slots.Slot.close` lets go of: the
+        source's contacts (``released`` with ``reason``, heard by its :meth:`on_released`
+        listeners) and its touches but the detached ones. Any thread."""
         self.engine.release_owner(self.owner, reason)
         self.engine.stop_owner(self.owner, reason)
         for unsubscribe in self._unsubscribe:
             unsubscribe()
         self._unsubscribe.clear()
-        self._on_close(self)
-
-    def yield_slot(self, reason: str) -> None:
-        """The admission gives this source's slot to a newcomer: close it, then tell the
-        adapter (its ``on_yield``) to end the transport. Called by the admission only."""
-        self.close("quota")
-        if self._on_yield is not None:
-            self._on_yield(reason)

@@ -19,11 +19,20 @@ from phantomtouch.engine.jobs import OwnerQuota
 from phantomtouch.errors import ParameterError
 
 if TYPE_CHECKING:
-    from phantomtouch.service.settings import Settings
+    from phantomtouch.service.settings import ClientLimits, Settings
 
-Kind = Literal["ws", "rest", "osc", "bhaptics", "bhaptics-sdk2", "fleet"]
-"""The input kinds, one row each."""
-KINDS: tuple[Kind, ...] = ("ws", "rest", "osc", "bhaptics", "bhaptics-sdk2", "fleet")
+Kind = Literal["ws", "rest", "osc", "bhaptics", "bhaptics-sdk2", "fleet", "fleet-gateway"]
+"""The input kinds, one row each (``fleet-gateway``: a fleet gateway's WebSocket, in the
+gateway's own process, whose messages the nodes then take under their ``fleet`` row)."""
+KINDS: tuple[Kind, ...] = (
+    "ws",
+    "rest",
+    "osc",
+    "bhaptics",
+    "bhaptics-sdk2",
+    "fleet",
+    "fleet-gateway",
+)
 
 YIELDS = (
     "the host or token holding most slots first; there, a source holding nothing, "
@@ -221,4 +230,31 @@ def policy_table(settings: Settings) -> dict[Kind, InputPolicy]:
     ]
     rows[0] = rows[0].replace(local_never_yields=True)
     rows[-1] = rows[-1].replace(contacts_setting="fleet contacts per owner")
+    rows.append(gateway_row(settings, rows[-1]))
     return {policy.kind: policy for policy in rows}
+
+
+def gateway_row(limits: ClientLimits, fleet: InputPolicy) -> InputPolicy:
+    """The ``fleet-gateway`` row: a gateway's WebSocket connections under the gateway's own
+    ``limits`` (message rate and size, connection slots, loopback never yields, as a
+    service's ``ws`` row), and what they hold under the nodes' ``fleet`` row (deadline,
+    contacts, work, quotas: each node applies them to the connection's owner). Host, any
+    thread; pure.
+
+    Parameters
+    ----------
+    limits : ClientLimits
+        The gateway's settings.
+    fleet : InputPolicy
+        The nodes' ``fleet`` row (a gateway with no node of its own takes a node's default
+        settings: :func:`policy_table` of ``Settings.model_construct()``).
+    """
+    return fleet.replace(
+        kind="fleet-gateway",
+        deadline_s=limits.watchdog_s,
+        messages_per_s=limits.ws_messages_per_s,
+        max_message_bytes=limits.max_ws_message_bytes,
+        max_sources=limits.max_ws_connections,
+        max_sources_per_principal=limits.max_ws_connections_per_address,
+        local_never_yields=True,
+    )
