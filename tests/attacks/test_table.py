@@ -52,11 +52,6 @@ class Window:
     channel: tuple[float, float] | None = None
     """Only the channel loudest in this span counts (where another client's touch was
     felt on its own), None: any."""
-    clocks: tuple[dict[str, Any], dict[str, Any]] | None = None
-    """``GET /clock`` read as the span began and as it ended, None: the row's. A loaded
-    machine may stall the engine for a moment, and its frames then fall behind the wall's
-    (by up to half a second in a row under two CPU hogs): a span read by one clock would
-    be placed on frames rendered before or after it. Each end is placed by its own."""
 
 
 @dataclass
@@ -66,9 +61,28 @@ class Played:
     windows: list[Window] = field(default_factory=list)
     error: BaseException | None = None
     span: tuple[float, float] = (0.0, 0.0)
-    clock: dict[str, Any] = field(default_factory=dict)
-    """``GET /clock`` as the row began: the engine's frames against server time, read
-    again for every row (a loaded machine's audio clock may fall behind the wall's)."""
+    clocks: list[dict[str, Any]] = field(default_factory=list)
+    """``GET /clock`` (the engine's frame at a server time) read as the row began, at its
+    moments (:func:`mark`) and as it ended."""
+
+    def placed(self, start_s: float, end_s: float) -> tuple[dict[str, Any], dict[str, Any]]:
+        """The clocks that place a span: its start by the last read before it, its end by
+        the first read after it.
+
+        A loaded machine may stall the engine, and its frames then fall behind the wall's
+        (by up to half a second in one row under two CPU hogs); they never run ahead. A
+        time placed by a clock read before it therefore lands on a frame no earlier than
+        the one really played then, and by a clock read after it on one no later: the span
+        read is the span, or inside it, never frames of what came before or after it.
+        """
+        before = [c for c in self.clocks if c["server_time_s"] <= start_s] or self.clocks[:1]
+        after = [c for c in self.clocks if c["server_time_s"] >= end_s] or self.clocks[-1:]
+        return before[-1], after[0]
+
+
+def mark(stand: Stand, played: Played) -> None:
+    """Read the engine's clock at a moment of the row, to place the spans beside it."""
+    played.clocks.append(stand.read_clock())
 
 
 @dataclass
@@ -88,6 +102,7 @@ def silence(stand: Stand, inp: Input, played: Played) -> None:
     source = inp.source()
     source.hold()
     t = time.monotonic()
+    mark(stand, played)
     time.sleep(inp.silence_ends_s + 2.5)
     ends = t + inp.silence_ends_s + stand.after_stop_s
     played.windows += [
@@ -110,6 +125,7 @@ def hang(stand: Stand, inp: Input, played: Played) -> None:
         assert line.startswith("playing "), f"the client did not get to play: {line!r}"
         t = float(line.split()[1])
         client.send_signal(signal.SIGSTOP)
+        mark(stand, played)
         time.sleep(inp.silence_ends_s + 2.5)
     finally:
         client.kill()
@@ -127,6 +143,7 @@ def close_mid_play(stand: Stand, inp: Input, played: Played) -> None:
     if inp.close_ends_s == 0.0:
         source.long_score()
     time.sleep(0.6)
+    mark(stand, played)
     source.close()
     t = time.monotonic()
     time.sleep(inp.close_ends_s + 2.5)
@@ -146,7 +163,9 @@ def idle_crowd(stand: Stand, inp: Input, played: Played) -> None:
         newcomer = inp.source()
         newcomer.hold()
         t = time.monotonic()
+        mark(stand, played)
         time.sleep(1.0)
+        mark(stand, played)
         newcomer.close()
     finally:
         for idle in crowd:
@@ -156,20 +175,22 @@ def idle_crowd(stand: Stand, inp: Input, played: Played) -> None:
     )
 
 
-def alone(stand: Stand, inp: Input) -> tuple[float, float]:
+def alone(stand: Stand, inp: Input, played: Played) -> tuple[float, float]:
     """A touch at :data:`VICTIM_PLACE` held alone for a moment: the span where it was felt
     on its own, whose loudest channel is the one that tells it from others."""
     probe = inp.source()
     probe.hold(*VICTIM_PLACE, 1.0)
     t = time.monotonic()
+    mark(stand, played)
     time.sleep(0.5)
+    mark(stand, played)
     probe.close()
     settle(stand)
     return (t + 0.2, t + 0.45)
 
 
 def minted_identities(stand: Stand, inp: Input, played: Played) -> None:
-    own = alone(stand, inp)
+    own = alone(stand, inp, played)
     crowd = [inp.source(local="127.0.0.2") for _ in range(min(inp.slots, 64))]
     for attacker in crowd:
         attacker.hold(*ATTACKER_PLACE, 0.3)
@@ -179,12 +200,12 @@ def minted_identities(stand: Stand, inp: Input, played: Played) -> None:
     t = time.monotonic()
     lasts_s = min(2.3, inp.silence_ends_s - 0.2) if inp.kind == "rest" else 2.3
     end = t + lasts_s
-    began = stand.read_clock()
+    mark(stand, played)
     while time.monotonic() < end:
         for source in (victim, *crowd):
             source.renew()
         time.sleep(0.1)
-    ended = stand.read_clock()
+    mark(stand, played)
     victim.close()
     for attacker in crowd:
         attacker.close()
@@ -195,7 +216,6 @@ def minted_identities(stand: Stand, inp: Input, played: Played) -> None:
             True,
             f"another client's touch while one host held {len(crowd)} sources",
             own,
-            (began, ended),
         )
     )
 
@@ -225,17 +245,17 @@ class Mover:
 
 
 def huge_work(stand: Stand, inp: Input, played: Played) -> None:
-    own = alone(stand, WsInput(stand.ws_url))
+    own = alone(stand, WsInput(stand.ws_url), played)
     mover = Mover(stand)
     time.sleep(0.5)
-    began = stand.read_clock()
+    mark(stand, played)
     t = time.monotonic()
     source = inp.source()
     for _ in range(2):
         source.huge()
     time.sleep(1.0)
     end = time.monotonic()
-    ended = stand.read_clock()
+    mark(stand, played)
     source.close()
     released = mover.close()
     assert not released, f"the other client's hand was let go of: {released}"
@@ -246,7 +266,6 @@ def huge_work(stand: Stand, inp: Input, played: Played) -> None:
             True,
             "another client's hand, stroking while one message asked for huge work",
             own,
-            (began, ended),
         )
     )
 
@@ -261,6 +280,7 @@ def stop_during_planning(stand: Stand, inp: Input, played: Played) -> None:
     source.plan_big()
     time.sleep(0.1)
     stop = stop_url(stand)
+    mark(stand, played)
     time.sleep(8.5)
     source.close()
     played.windows.append(
@@ -277,7 +297,9 @@ def stop_during_score(stand: Stand, inp: Input, played: Played) -> None:
     source = inp.source()
     source.long_score()
     time.sleep(1.0)
+    mark(stand, played)
     stop = stop_url(stand)
+    mark(stand, played)
     time.sleep(3.0)
     source.close()
     played.windows += [
@@ -292,6 +314,7 @@ def bad_values(stand: Stand, inp: Input, played: Played) -> None:
     time.sleep(0.5)
     source.close()
     t = time.monotonic()
+    mark(stand, played)
     time.sleep(2.0)
     assert httpx.get(f"{stand.url}/health", timeout=10.0).status_code == 200
     ends = t + max(inp.close_ends_s, 1.0) + stand.after_stop_s
@@ -330,13 +353,15 @@ def table(
     try:
         for row in ROWS:
             settle(stand)
-            result = played[row.id] = Played(clock=stand.read_clock())
+            result = played[row.id] = Played()
+            mark(stand, result)
             start = time.monotonic()
             try:
                 row.run(stand, inp, result)
             except Exception as exc:  # the row fails alone; the others still run
                 result.error = exc
             result.span = (start, time.monotonic())
+            mark(stand, result)
     finally:
         band = stand.stop()
     yield Table(stand, inp, played, band)
@@ -358,7 +383,7 @@ def test_attack(table: Table, row: Row, request: pytest.FixtureRequest) -> None:
         raise AssertionError(f"{kind}: {row.id}: the attack could not be played") from played.error
     band = table.band
     start, end = played.span
-    whole = band.between(start, end, played.clock, played.clock)
+    whole = band.between(start, end, *played.placed(start, end))
     assert np.all(np.isfinite(whole)), f"{kind}: the wearer's band was driven with NaN or Inf"
     ceiling = table.stand.ceiling
     assert float(np.max(np.abs(whole), initial=0.0)) <= ceiling + 1e-6, (
@@ -367,11 +392,12 @@ def test_attack(table: Table, row: Row, request: pytest.FixtureRequest) -> None:
     for window in played.windows:
         loudest: int | None = None
         if window.channel is not None:
-            alone_block = band.between(*window.channel, played.clock, played.clock)
+            alone_block = band.between(*window.channel, *played.placed(*window.channel))
             assert alone_block.size, f"{kind}: the capture holds nothing of the touch alone"
             loudest = int(np.argmax(np.sum(alone_block**2, axis=0)))
-        began, ended = (played.clock, played.clock) if window.clocks is None else window.clocks
-        block = band.between(window.start_s, window.end_s, began, ended)
+        block = band.between(
+            window.start_s, window.end_s, *played.placed(window.start_s, window.end_s)
+        )
         if loudest is not None:
             block = block[:, [loudest]]
         if window.felt:
