@@ -143,6 +143,30 @@ def test_without_a_lane_offered_moves_go_over_ws(
         )
 
 
+def test_after_a_reconnection_moves_take_the_new_lane_once_the_downs_are_back(
+    restartable_server: LiveServer, observe: Callable[[LiveServer], Observer]
+) -> None:
+    live = restartable_server
+    errors: list[ApiError] = []
+    with Session(live.ws_url, on_error=errors.append) as ws:
+        first = ws.lane
+        ws.down("py-survivor", 1.9, 3.0)
+        live.stop()
+        wait_until(lambda: not ws.connected, timeout_s=5, what="the loss")
+        live.start()
+        wait_until(lambda: ws.connected and ws.reconnects >= 1, timeout_s=15, what="the return")
+        lane = ws.lane
+        assert lane is not None and lane is not first and first is not None and first.closed
+        wait_until(lambda: not lane.held, timeout_s=5, what="the restored down confirmed")
+        observer = observe(live)
+        _, lane_before = moves_in(live)
+        ws.move("py-survivor", 1.9, 9.0)
+        observer.wait_for("py-survivor", lambda p: p[1] == pytest.approx(9.0), timeout_s=5)
+        assert moves_in(live)[1] == lane_before + 1 and lane.moves_sent == 1
+        ws.up("py-survivor")
+    assert errors == [], "no move overtook its down"
+
+
 def test_a_move_the_lane_refuses_reaches_on_error(server: LiveServer) -> None:
     errors: list[ApiError] = []
     with Session(server.ws_url, on_error=errors.append) as ws:

@@ -73,6 +73,9 @@ class ContactLane:
         """How many moves went over the lane."""
         self.gave_up: str | None = None
         """Why the lane is no longer used (None while it is)."""
+        self.held = False
+        """True while moves must stay on ``/ws``: downs sent there are not confirmed yet,
+        and a move over the lane must not overtake its down."""
 
     @classmethod
     async def open(
@@ -112,8 +115,9 @@ class ContactLane:
         return self._transport.is_closing()
 
     def send_move(self, message: Mapping[str, Any]) -> bool:
-        """Send a ``move`` message over the lane; False (nothing sent) once it is given up."""
-        if self.gave_up is not None:
+        """Send a ``move`` message over the lane; False (nothing sent) while it is
+        :attr:`held` or once it is given up."""
+        if self.held or self.gave_up is not None:
             return False
         datagram = json.dumps({**message, "key": self._key}, separators=(",", ":"))
         self._transport.sendto(datagram.encode())

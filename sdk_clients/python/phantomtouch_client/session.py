@@ -224,7 +224,17 @@ class AsyncSession(SessionCalls):
         if self.use_lane and self.welcome.lane is not None and peer:
             host = str(peer[0])
             self.lane = await ContactLane.open(self.welcome.lane.model_dump(), host, self._dispatch)
+            if self.lane is not None:
+                # contacts to restore: their downs go over /ws first, unconfirmed
+                self.lane.held = bool(self._contacts)
         return self.welcome
+
+    async def _release_lane(self, lane: ContactLane) -> None:
+        """Moves take ``lane`` once a pong shows that the service has read what was sent
+        over ``/ws`` before it (the restored downs)."""
+        with contextlib.suppress(ClientError):
+            await self.ping()
+            lane.held = False
 
     def _close_lane(self) -> None:
         """The lane of the connection that ended is closed with it."""
@@ -279,6 +289,9 @@ class AsyncSession(SessionCalls):
                 log.info("connection lost again while restoring: %s", exc)
                 continue
             self.reconnects += 1
+            if self.lane is not None and self.lane.held:
+                release = self._release_lane(self.lane)
+                self._tasks.append(asyncio.create_task(release, name="phantomtouch-lane"))
             return
 
     async def _restore(self) -> None:
