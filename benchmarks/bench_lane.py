@@ -15,7 +15,9 @@ while the contact rests on it (measured once per run). The latency is from the m
 client's send returns to that sample. Moves are sent over ``/ws`` (every client) and, where
 the service offers one in its ``welcome``, over the contact lane (``docs/lane.md``). A third
 row sends bHaptics SDK1 frames (``--bhaptics``; one dot, 60 ms, from silence): from the
-send to the first sample on any channel.
+send to the first sample on any channel. ``--paths sdk-ws,sdk-lane`` measures the same move
+made through the Python client (``phantomtouch_client.AsyncSession.move``, awaited), with
+``lane=False`` and with the lane the client takes from the ``welcome``.
 
 Scenarios:
 
@@ -28,8 +30,9 @@ whose onset was not seen within a second. The device profile's block is the JACK
 Nothing is asserted: the figures depend on the machine and on what else runs on it.
 
 Run: ``python benchmarks/bench_lane.py [--quick] [--moves 200] [--rounds 2]
-[--other /work/main] [--json]``. Needs ``jackd`` (Debian ``jackd2``), ``wrk`` and
-JACK-Client; everything stays on the loopback interface and stops by itself.
+[--other /work/main] [--paths ws,lane,bhaptics,sdk-ws,sdk-lane] [--json]``. Needs
+``jackd`` (Debian ``jackd2``), ``wrk`` and JACK-Client; everything stays on the loopback
+interface and stops by itself.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ import tempfile
 import threading
 import time
 import uuid
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
@@ -73,6 +77,9 @@ THRESHOLD = 0.2
 SILENCE = 1e-4
 """A bHaptics frame's onset: the first sample past this, from silence."""
 """The onset: a sample past this share of the channel's level at rest on its actuator."""
+PATHS = ("ws", "lane", "bhaptics", "sdk-ws", "sdk-lane")
+"""What a move can go through: raw ``/ws`` and lane messages, a bHaptics frame, and the
+Python client's session without and with its contact lane."""
 
 
 class Onsets:
@@ -195,13 +202,7 @@ async def moves(server: LiveServer, onsets: Onsets, count: int, path: str) -> di
         lane = welcome.get("lane")
         if path == "lane" and lane is None:
             return None
-        actuators = welcome["device"]["actuators"]
-        near = actuators[0]
-        far = max(
-            actuators,
-            key=lambda a: math.hypot(a["x_cm"] - near["x_cm"], a["y_cm"] - near["y_cm"]),
-        )
-        far_channel = int(far["channel"]) - 1  # channels count from 1
+        near, far = _ends(welcome["device"])
         await ws.send(json.dumps({"type": "down", "contact": "hand", **_at(near), "id": 1}))
         while (answer := json.loads(await ws.recv())).get("id") != 1:
             pass
@@ -210,39 +211,101 @@ async def moves(server: LiveServer, onsets: Onsets, count: int, path: str) -> di
         heard: list[Any] = []
         reader = asyncio.create_task(_drain(ws, heard))
         udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+        async def send(actuator: dict[str, Any]) -> float:
+            return await _move(ws, udp, lane, server, actuator, path)
+
         try:
-            await asyncio.sleep(0.2)
-            onsets.peak[:] = 0.0
-            await _move(ws, udp, lane, server, far, path)
-            settled_s = time.monotonic() + SETTLE_S
-            while not onsets.peak[far_channel] and time.monotonic() < settled_s:
-                await asyncio.sleep(0.05)
-            await asyncio.sleep(0.3)
-            level = THRESHOLD * float(onsets.peak[far_channel])
-            if level <= 0.0:
-                raise RuntimeError(
-                    f"no signal on channel {far_channel + 1} with the contact there: "
-                    f"{onsets.peak}; heard {heard}"
-                )
-            found: list[float] = []
-            missed = 0
-            for _ in range(count):
-                await _move(ws, udp, lane, server, near, path)
-                if not await onsets.quiet(far_channel, level):
-                    missed += 1
-                    continue
-                await asyncio.sleep(GAP_S)
-                onsets.arm(far_channel, level)
-                sent_s = await _move(ws, udp, lane, server, far, path)
-                if await asyncio.to_thread(onsets.seen.wait, ONSET_TIMEOUT_S):
-                    found.append(onsets.onset_s - sent_s)
-                else:
-                    missed += 1
-                await asyncio.sleep(GAP_S)
+            found = await _measure(onsets, count, near, far, send, heard)
             await ws.send(json.dumps({"type": "up", "contact": "hand"}))
         finally:
             udp.close()
             reader.cancel()
+    return found
+
+
+async def sdk_moves(
+    server: LiveServer, onsets: Onsets, count: int, path: str
+) -> dict[str, Any] | None:
+    """``count`` measured moves through the Python client's ``AsyncSession.move``, with its
+    contact lane (``path`` "sdk-lane") or without (``lane=False``, "sdk-ws"); None: the
+    service offers no lane."""
+    from phantomtouch_client import ApiError, AsyncSession
+
+    heard: list[Any] = []
+
+    def errors(error: ApiError) -> None:
+        heard.append(str(error))
+
+    use_lane = path == "sdk-lane"
+    async with AsyncSession(server.ws_url, move_rate_hz=None, lane=use_lane, on_error=errors) as ws:
+        if use_lane and ws.lane is None:
+            return None
+        assert ws.welcome is not None
+        near, far = _ends(ws.welcome.device)
+        await ws.down("hand", **_at(near))
+
+        async def send(actuator: dict[str, Any]) -> float:
+            await ws.move("hand", **_at(actuator))
+            return time.monotonic()
+
+        found = await _measure(onsets, count, near, far, send, heard)
+        if use_lane and (ws.lane is None or not ws.lane.usable):
+            raise RuntimeError(f"the client gave the lane up: {heard}")
+        await ws.up("hand")
+    return found
+
+
+def _ends(device: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The device's first actuator and the one farthest from it."""
+    actuators = device["actuators"]
+    near = actuators[0]
+    far = max(
+        actuators,
+        key=lambda a: math.hypot(a["x_cm"] - near["x_cm"], a["y_cm"] - near["y_cm"]),
+    )
+    return near, far
+
+
+async def _measure(
+    onsets: Onsets,
+    count: int,
+    near: dict[str, Any],
+    far: dict[str, Any],
+    send: Callable[[dict[str, Any]], Awaitable[float]],
+    heard: list[Any],
+) -> dict[str, Any]:
+    """With the contact down at ``near``: ``count`` moves onto ``far`` (``send`` returns
+    when its send returned), each measured to its first sample there, and back."""
+    far_channel = int(far["channel"]) - 1  # channels count from 1
+    await asyncio.sleep(0.2)
+    onsets.peak[:] = 0.0
+    await send(far)
+    settled_s = time.monotonic() + SETTLE_S
+    while not onsets.peak[far_channel] and time.monotonic() < settled_s:
+        await asyncio.sleep(0.05)
+    await asyncio.sleep(0.3)
+    level = THRESHOLD * float(onsets.peak[far_channel])
+    if level <= 0.0:
+        raise RuntimeError(
+            f"no signal on channel {far_channel + 1} with the contact there: "
+            f"{onsets.peak}; heard {heard}"
+        )
+    found: list[float] = []
+    missed = 0
+    for _ in range(count):
+        await send(near)
+        if not await onsets.quiet(far_channel, level):
+            missed += 1
+            continue
+        await asyncio.sleep(GAP_S)
+        onsets.arm(far_channel, level)
+        sent_s = await send(far)
+        if await asyncio.to_thread(onsets.seen.wait, ONSET_TIMEOUT_S):
+            found.append(onsets.onset_s - sent_s)
+        else:
+            missed += 1
+        await asyncio.sleep(GAP_S)
     return quantiles(found, missed)
 
 
@@ -346,7 +409,7 @@ def measure_install(
             raise RuntimeError(f"{install.name}: expected the service's JACK client, got {new}")
         onsets.connect(sorted(new)[0])
         for scenario in ("quiet", "loaded"):
-            for path in ("ws", "lane", "bhaptics"):
+            for path in args.paths:
                 load: list[subprocess.Popen[bytes]] = []
                 if scenario == "loaded":
                     seconds = args.moves * 0.5 + 10.0
@@ -357,6 +420,8 @@ def measure_install(
                     found = asyncio.run(
                         frames(bhaptics_port, onsets, args.moves)
                         if path == "bhaptics"
+                        else sdk_moves(server, onsets, args.moves, path)
+                        if path.startswith("sdk-")
                         else moves(server, onsets, args.moves, path)
                     )
                 finally:
@@ -377,8 +442,17 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--hogs", type=int, default=2, choices=range(1, 9), metavar="N")
     parser.add_argument("--block-frames", type=int, default=PERIOD_FRAMES, choices=(0, 128, 256))
     parser.add_argument("--other", type=Path, help="a second checkout, measured in turns")
+    parser.add_argument(
+        "--paths",
+        type=lambda text: text.split(","),
+        default=["ws", "lane", "bhaptics"],
+        help=f"comma-separated, of {','.join(PATHS)} (default ws,lane,bhaptics)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    unknown = set(args.paths) - set(PATHS)
+    if unknown:
+        parser.error(f"--paths: {sorted(unknown)} not among {PATHS}")
     if args.quick:
         args.moves, args.rounds = 40, 1
     if shutil.which("wrk") is None:
@@ -426,12 +500,12 @@ def main() -> None:
         f"JACK dummy, {PERIOD_FRAMES}-frame periods; engine block {results['block_frames']}; "
         f"{args.moves} moves a row; loaded = {args.hogs} CPU hogs + wrk -c16 on /health"
     )
-    print(f"{'install':>10} {'round':>5} {'row':>12} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8}")
+    print(f"{'install':>10} {'round':>5} {'row':>16} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8}")
     for run in runs:
         for row, figures in run.items():
             if isinstance(figures, dict):
                 print(
-                    f"{run['install']:>10} {run['round']:>5} {row:>12} {figures['p50_ms']:8.2f} "
+                    f"{run['install']:>10} {run['round']:>5} {row:>16} {figures['p50_ms']:8.2f} "
                     f"{figures['p99_ms']:8.2f} {figures['max_ms']:8.2f}"
                     + (f"  ({figures['missed']} not seen)" if figures["missed"] else "")
                 )

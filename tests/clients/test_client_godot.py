@@ -4,7 +4,8 @@ by a real Godot engine (Godot 3, headless) to the live service.
 No Godot 4 engine is installed here, so the addon (sdk_clients/godot) is checked with
 gdtoolkit's parser and linter only. The protocol itself is proven from a game engine with
 ``godot3-server``: tests/clients/godot3/touch_and_stroke.gd POSTs a touch and streams a
-contact over the WebSocket, and the test checks on the server that both arrived.
+contact over the WebSocket (or its moves over the contact lane, with ``PacketPeerUDP``), and
+the test checks on the server that both arrived and which way the moves went.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import pytest
 
 from tests.clients.live import ROOT, Observer, get, require, require_tool
 from tests.support.live_server import LiveServer
+from tests.support.metrics import scrape
 
 ADDON = ROOT / "sdk_clients" / "godot" / "addons" / "phantomtouch"
 GODOT3_PROJECT = Path(__file__).parent / "godot3"
@@ -100,11 +102,22 @@ def test_godot3_script_parses(tmp_path: Path) -> None:
     assert "SCRIPT ERROR" not in output and "Parse Error" not in output, output
 
 
+def moves_in(server: LiveServer) -> tuple[float, float]:
+    """How many moves the service took so far: ``(over /ws, over the lane)``."""
+    counter = "phantomtouch_ws_messages_total"
+    return (
+        scrape(server.url, counter, direction="in", type="move"),
+        scrape(server.url, counter, direction="in", type="lane_move"),
+    )
+
+
+@pytest.mark.parametrize("lane", ["off", "on"])
 def test_godot3_engine_posts_a_touch_and_streams_a_contact(
-    tmp_path: Path, server: LiveServer, observe: Callable[[LiveServer], Observer]
+    tmp_path: Path, server: LiveServer, observe: Callable[[LiveServer], Observer], lane: str
 ) -> None:
     observer = observe(server)
-    output = godot3(tmp_path, env={"PHANTOMTOUCH_URL": server.url})
+    before = moves_in(server)
+    output = godot3(tmp_path, env={"PHANTOMTOUCH_URL": server.url, "PHANTOMTOUCH_LANE": lane})
     assert MARKER in output.splitlines(), output
     job_id = re.search(r"^JOB (\S+)$", output, re.MULTILINE)
     assert job_id is not None, output
@@ -116,3 +129,10 @@ def test_godot3_engine_posts_a_touch_and_streams_a_contact(
     ys = [y for _, y in positions]
     assert ys == sorted(ys) and len(set(ys)) >= 3, "the contact moved along the forearm"
     observer.wait_gone("godot3-stroke", timeout_s=5)
+    ws_moves, lane_moves = (a - b for a, b in zip(moves_in(server), before, strict=True))
+    if lane == "on":
+        assert re.search(r"^LANE \d+$", output, re.MULTILINE), output
+        assert "LANE_REFUSED y_cm" in output.splitlines(), output
+        assert (ws_moves, lane_moves) == (0, 60), "every move over the lane"
+    else:
+        assert (ws_moves, lane_moves) == (60, 0)

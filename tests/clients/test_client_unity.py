@@ -5,7 +5,7 @@ against a stub of the UnityEngine members they use (tests/clients/unity_stub); t
 transport core, which has no UnityEngine dependency, is compiled with a console harness
 (tests/clients/unity_harness) and run with mono against the live service: REST routes, a
 WebSocket stroke and a reconnect across a server restart, each checked from the server's
-side.
+side, and the moves over the contact lane, counted by the service in ``/metrics``.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 from tests.clients.live import ROOT, LineProcess, Observer, get, require_tool
-from tests.support.live_server import LiveServer
+from tests.support.live_server import HOST, LiveServer
+from tests.support.metrics import scrape
 
 UNITY = ROOT / "sdk_clients" / "unity"
 STUB = Path(__file__).parent / "unity_stub"
@@ -137,3 +138,54 @@ def test_unity_client_reconnects_after_a_server_restart(
         assert child.finish() == 0, child.stderr()
     finally:
         child.close()
+
+
+def moves_in(server: LiveServer) -> tuple[float, float, float]:
+    """How many moves the service took so far: ``(over /ws, over the lane, refused by the
+    lane)``."""
+    counter = "phantomtouch_ws_messages_total"
+    return (
+        scrape(server.url, counter, direction="in", type="move"),
+        scrape(server.url, counter, direction="in", type="lane_move"),
+        scrape(server.url, counter, direction="in", type="lane_refused"),
+    )
+
+
+@pytest.mark.parametrize("lane", ["on", "off", "not offered"])
+def test_unity_client_moves_over_the_contact_lane(
+    harness: list[str],
+    server: LiveServer,
+    observe: Callable[[LiveServer], Observer],
+    tmp_path: Path,
+    lane: str,
+) -> None:
+    if lane == "not offered":
+        env = {"PHANTOMTOUCH_CONTACT_LANE": "false"}
+        with LiveServer(tmp_path / "p.db", env=env) as own:
+            check_lane_run(harness, own, observe(own), lane)
+    else:
+        check_lane_run(harness, server, observe(server), lane)
+
+
+def check_lane_run(harness: list[str], server: LiveServer, observer: Observer, lane: str) -> None:
+    """Run the harness's ``lane`` command and check the server's side of it."""
+    contact = f"unity-lane-{lane.replace(' ', '-')}"
+    before = moves_in(server)
+    out = run(harness, "lane", server.url, contact, "off" if lane == "off" else "on")
+    positions = observer.positions(contact)
+    assert positions and positions[-1] == pytest.approx((1.9, 12.0)), positions[-3:]
+    assert out["REFUSED"].split()[0] == "invalid" and "y_cm" in out["REFUSED"], out["REFUSED"]
+    assert float(out["PING"]) > 0, "the session goes on after the refusal"
+    ws_moves, lane_moves, lane_refused = (
+        a - b for a, b in zip(moves_in(server), before, strict=True)
+    )
+    if lane == "on":
+        assert out["LANE"] == f"{HOST}:{int(out['OFFERED'])}"
+        assert int(out["LANE_SENT"]) == 20
+        assert (ws_moves, lane_moves, lane_refused) == (0, 20, 1), "every move on the lane"
+        assert out["CLOSED"] == "True", "the lane closes with the session"
+    else:
+        offered = out["OFFERED"] != "none"
+        assert offered == (lane == "off"), "lane off: offered, not taken"
+        assert out["LANE"] == "none"
+        assert (ws_moves, lane_moves, lane_refused) == (20, 0, 0)

@@ -41,6 +41,7 @@ from phantomtouch_client.errors import (
     TransportError,
     Unauthorized,
 )
+from phantomtouch_client.lane import ContactLane
 from phantomtouch_client.models import (
     ActiveWearer,
     ClipSummary,
@@ -51,6 +52,7 @@ from phantomtouch_client.models import (
     InputState,
     Job,
     JobStatus,
+    LaneOffer,
     PlanSummary,
     Released,
     RenderCurves,
@@ -88,6 +90,7 @@ __all__ = [
     "Clock",
     "ConnectionLost",
     "Contact",
+    "ContactLane",
     "ContactState",
     "DeviceFailed",
     "DeviceInfo",
@@ -97,6 +100,7 @@ __all__ = [
     "InvalidRequest",
     "Job",
     "JobStatus",
+    "LaneOffer",
     "MalformedMessage",
     "MethodNotAllowed",
     "NotFound",

@@ -75,7 +75,8 @@ class Contact:
         self.active = False
         if pending is not None:
             x_cm, y_cm, intensity = pending
-            await self.session.move(self.name, x_cm, y_cm, intensity=intensity)
+            # over /ws, so that it reaches the service before the up that follows it
+            await self.session._move(self.name, x_cm, y_cm, intensity=intensity, lane=False)
         await self.session.up(self.name, normal_velocity_m_s=normal_velocity_m_s)
 
     def _take_pending(self) -> tuple[float, float, float | None] | None:

@@ -243,6 +243,14 @@ class DeviceInfo(_Answer):
     max_level_db: float
 
 
+class LaneOffer(_Answer):
+    """The contact lane of a ``welcome``: a UDP ``port`` on the service's host (1-65535)
+    and the connection's ``key`` (see :mod:`phantomtouch_client.lane`)."""
+
+    port: int = Field(ge=1, le=65535)
+    key: str = Field(min_length=1)
+
+
 class Welcome(_Answer):
     """The server's answer to ``hello``."""
 
@@ -252,6 +260,8 @@ class Welcome(_Answer):
     device: dict[str, Any] = Field(default_factory=dict)
     wearer: dict[str, str] | None = None
     """The wearer the armband's output stage is fitted to (``{name, band}``), if any."""
+    lane: LaneOffer | None = None
+    """The contact lane this connection may send its moves over, if the service runs one."""
 
 
 class ContactState(_Answer):

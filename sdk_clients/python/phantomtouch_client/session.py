@@ -45,6 +45,7 @@ from phantomtouch_client.connection import (
 )
 from phantomtouch_client.contact import ContactHelpers, pace_frames
 from phantomtouch_client.errors import ApiError, ClientError, ConnectionLost, ReplyTimeout
+from phantomtouch_client.lane import ContactLane
 from phantomtouch_client.models import Released, State, Welcome
 from phantomtouch_client.session_calls import SessionCalls
 
@@ -87,6 +88,11 @@ class AsyncSession(SessionCalls):
     move_rate_hz : float or None
         Frame rate of the :meth:`contact` helpers: each sends at most one ``move`` per
         frame, the newest. ``None``: no timer; call :meth:`flush` once per frame yourself.
+    lane : bool
+        Send moves over the service's contact lane when its ``welcome`` offers one and its
+        host is reachable by UDP (default): a UDP datagram the service takes without
+        waiting behind its HTTP work (:mod:`phantomtouch_client.lane`). False: every
+        message goes over ``/ws``.
     """
 
     def __init__(
@@ -102,6 +108,7 @@ class AsyncSession(SessionCalls):
         ping_interval_s: float | None = None,
         reply_timeout_s: float = 5.0,
         move_rate_hz: float | None = 90.0,
+        lane: bool = True,
         on_state: Callable[[State], None] | None = None,
         on_released: Callable[[Released], None] | None = None,
         on_error: Callable[[ApiError], None] | None = None,
@@ -119,6 +126,7 @@ class AsyncSession(SessionCalls):
         self.ping_interval_s = ping_interval_s
         self.reply_timeout_s = reply_timeout_s
         self.move_rate_hz = move_rate_hz
+        self.use_lane = lane
         self.on_state = on_state
         self.on_released = on_released
         self.on_error = on_error
@@ -133,6 +141,8 @@ class AsyncSession(SessionCalls):
         """Round-trip time of the newest ping, s."""
 
         self._ws: ClientConnection | None = None
+        self.lane: ContactLane | None = None
+        """The contact lane of the current connection, if one was offered and reached."""
         self._connected = asyncio.Event()
         self._replies = PendingReplies()
         self._contacts: dict[str, dict[str, Any]] = {}
@@ -192,6 +202,7 @@ class AsyncSession(SessionCalls):
                 await task
         self._tasks = []
         self._replies.fail_all(ConnectionLost("the session was closed"))
+        self._close_lane()
         if self._ws is not None:
             await self._ws.close()
             self._ws = None
@@ -208,7 +219,28 @@ class AsyncSession(SessionCalls):
         )
         self.wearer = None  # named once: a reconnection leaves the armband's choice be
         self._last_send = time.monotonic()
+        self._close_lane()
+        peer = self._ws.remote_address
+        if self.use_lane and self.welcome.lane is not None and peer:
+            host = str(peer[0])
+            self.lane = await ContactLane.open(self.welcome.lane.model_dump(), host, self._dispatch)
+            if self.lane is not None:
+                # contacts to restore: their downs go over /ws first, unconfirmed
+                self.lane.held = bool(self._contacts)
         return self.welcome
+
+    async def _release_lane(self, lane: ContactLane) -> None:
+        """Moves take ``lane`` once a pong shows that the service has read what was sent
+        over ``/ws`` before it (the restored downs)."""
+        with contextlib.suppress(ClientError):
+            await self.ping()
+            lane.held = False
+
+    def _close_lane(self) -> None:
+        """The lane of the connection that ended is closed with it."""
+        if self.lane is not None:
+            self.lane.close()
+            self.lane = None
 
     def _set_connected(self) -> None:
         self.state = SessionState.CONNECTED
@@ -236,6 +268,7 @@ class AsyncSession(SessionCalls):
             if not self.reconnect:
                 self.state = SessionState.CLOSED
                 self._ws = None
+                self._close_lane()
                 return
             self.state = SessionState.RECONNECTING
             await self._reconnect()
@@ -256,6 +289,9 @@ class AsyncSession(SessionCalls):
                 log.info("connection lost again while restoring: %s", exc)
                 continue
             self.reconnects += 1
+            if self.lane is not None and self.lane.held:
+                release = self._release_lane(self.lane)
+                self._tasks.append(asyncio.create_task(release, name="phantomtouch-lane"))
             return
 
     async def _restore(self) -> None:
@@ -275,7 +311,8 @@ class AsyncSession(SessionCalls):
                     message["x_cm"],
                     message["y_cm"],
                 ):
-                    await self.move(contact, message["x_cm"], message["y_cm"])
+                    # over /ws, behind the downs just sent and not yet confirmed
+                    await self._move(contact, message["x_cm"], message["y_cm"], lane=False)
 
     def _dispatch(self, frame: str) -> None:
         try:

@@ -5,9 +5,11 @@
 Requests with an ``id`` (``down``,
 ``up``, ``play``, ``stop``, ``subscribe``, ``ping``) wait for their reply; an ``error``
 reply raises the :class:`~phantomtouch_client.ApiError` of its code. ``move`` carries no
-id: it is the newest position, sent and forgotten (latest wins). While the session
-reconnects, requests wait up to ``reply_timeout_s`` for it to come back, and the contact
-table it restores is the truth.
+id: it is the newest position, sent and forgotten (latest wins), over the contact lane when
+the service offers one (:mod:`phantomtouch_client.lane`); a move sent with
+:meth:`~SessionCalls.request` (with an ``id``, waiting for its ``ok``) stays on ``/ws``.
+While the session reconnects, requests wait up to ``reply_timeout_s`` for it to come back,
+and the contact table it restores is the truth.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from websockets.exceptions import ConnectionClosed
 from phantomtouch_client.connection import PendingReplies, SessionState
 from phantomtouch_client.contact import Contact, ContactHelpers
 from phantomtouch_client.errors import ApiError, ConnectionLost, ReplyTimeout
+from phantomtouch_client.lane import ContactLane
 from phantomtouch_client.models import Job, JobId, PatternArg, contact_message, touch_request
 
 
@@ -37,6 +40,7 @@ class SessionCalls:
     state: SessionState
     rtt_s: float | None
     _ws: ClientConnection | None
+    lane: ContactLane | None
     _connected: asyncio.Event
     _replies: PendingReplies
     _contacts: dict[str, dict[str, Any]]
@@ -101,7 +105,21 @@ class SessionCalls:
         self, contact: str, x_cm: float, y_cm: float, *, intensity: float | None = None
     ) -> None:
         """The contact's newest position; sent at once, without reply (errors go to
-        ``on_error``). While reconnecting, only remembered for the contact's return."""
+        ``on_error``), over the contact lane when the session has one, else over ``/ws``.
+        While reconnecting, only remembered for the contact's return."""
+        await self._move(contact, x_cm, y_cm, intensity=intensity, lane=True)
+
+    async def _move(
+        self,
+        contact: str,
+        x_cm: float,
+        y_cm: float,
+        *,
+        intensity: float | None = None,
+        lane: bool,
+    ) -> None:
+        """:meth:`move`; ``lane`` False keeps it on ``/ws``, in order with what was sent
+        there before and after it (a move just before ``up``, or behind restored downs)."""
         message = contact_message("move", contact, x_cm=x_cm, y_cm=y_cm, intensity=intensity)
         tracked = self._contacts.get(contact)
         if tracked is not None:
@@ -109,7 +127,8 @@ class SessionCalls:
             if intensity is not None:
                 tracked["intensity"] = intensity
         if self.connected:
-            await self._send(message)
+            if not (lane and self.lane is not None and self.lane.send_move(message)):
+                await self._send(message)
         elif self.state is SessionState.CLOSED or not self.reconnect:
             raise ConnectionLost(f"cannot move contact {contact!r}: the session is closed")
 

@@ -17,6 +17,7 @@ from typing import Any, Self, TypeVar
 
 from phantomtouch_client.connection import DEFAULT_WS_URL, SessionState
 from phantomtouch_client.contact import Contact
+from phantomtouch_client.lane import ContactLane
 from phantomtouch_client.models import Job, JobId, PatternArg, State, Welcome
 from phantomtouch_client.session import AsyncSession
 
@@ -81,6 +82,11 @@ class Session:
     @property
     def last_state(self) -> State | None:
         return self._async.last_state
+
+    @property
+    def lane(self) -> ContactLane | None:
+        """The contact lane the moves go over, if any (see :class:`AsyncSession`)."""
+        return self._async.lane
 
     @property
     def reconnects(self) -> int:

@@ -4,8 +4,11 @@
 #
 # POSTs a tap to /touch (HTTPRequest), then over the WebSocket (WebSocketClient, polled
 # every frame at 90 fps): hello, welcome, a contact down at the wrist end, one move per
-# frame along the forearm to y = 12 cm, up. Prints "JOB <id>" and, when everything
-# answered as the protocol says, the success marker; any failure prints FAILED and exits 1.
+# frame along the forearm to y = 12 cm, up. With PHANTOMTOUCH_LANE=on the moves go over the
+# contact lane the welcome offers instead (PacketPeerUDP, one datagram a move with the
+# lane's key), and a move off the armband is sent there too, whose refusal must name the
+# field ("LANE_REFUSED y_cm"). Prints "JOB <id>" and, when everything answered as the
+# protocol says, the success marker; any failure prints FAILED and exits 1.
 extends SceneTree
 
 const MARKER := "PHANTOMTOUCH_GODOT3_OK"
@@ -15,6 +18,8 @@ var base_url := ""
 var ws := WebSocketClient.new()
 var inbox := []
 var open := false
+var lane := PacketPeerUDP.new()
+var lane_key := ""
 
 
 func _init():
@@ -45,6 +50,16 @@ func _on_data():
 	var parsed = JSON.parse(ws.get_peer(1).get_packet().get_string_from_utf8())
 	if parsed.error == OK and typeof(parsed.result) == TYPE_DICTIONARY:
 		inbox.append(parsed.result)
+
+
+func _send_move(message):
+	if lane_key == "":
+		_send(message)
+		return
+	message["key"] = lane_key
+	var error = lane.put_packet(to_json(message).to_utf8())
+	if error != OK:
+		_fail("PacketPeerUDP.put_packet: %d" % error)
 
 
 func _take(kind):
@@ -120,10 +135,35 @@ func _run():
 			_fail("down refused: " + to_json(refused))
 			return
 	print("DOWN ok")
+	if OS.get_environment("PHANTOMTOUCH_LANE") == "on":
+		var offer = welcome.get("lane")
+		if typeof(offer) != TYPE_DICTIONARY:
+			_fail("the welcome offers no lane: " + to_json(welcome))
+			return
+		var host = base_url.replace("http://", "").split("/")[0].split(":")[0]
+		error = lane.connect_to_host(host, int(offer["port"]))
+		if error != OK:
+			_fail("PacketPeerUDP.connect_to_host: %d" % error)
+			return
+		lane_key = offer["key"]
+		print("LANE " + str(offer["port"]))
 	var frames = 60
 	for frame in range(1, frames + 1):
-		_send({"type": "move", "contact": CONTACT, "x_cm": 1.9, "y_cm": 2.0 + 10.0 * frame / frames})
+		_send_move({"type": "move", "contact": CONTACT, "x_cm": 1.9, "y_cm": 2.0 + 10.0 * frame / frames})
 		yield(_frame(), "completed")
+	if lane_key != "":
+		_send_move({"type": "move", "contact": CONTACT, "x_cm": 1.9, "y_cm": 5000.0, "id": 3})
+		deadline = OS.get_ticks_msec() + 5000
+		while lane.get_available_packet_count() == 0:
+			if OS.get_ticks_msec() > deadline:
+				_fail("no answer from the lane")
+				return
+			yield(_frame(), "completed")
+		var answer = parse_json(lane.get_packet().get_string_from_utf8())
+		if typeof(answer) != TYPE_DICTIONARY or answer.get("type") != "error" or answer.get("id") != 3.0:
+			_fail("the lane did not refuse the move: " + str(answer))
+			return
+		print("LANE_REFUSED " + answer["fields"][0]["field"])
 	for _i in range(10):
 		yield(_frame(), "completed")
 	_send({"type": "up", "contact": CONTACT})
@@ -142,5 +182,6 @@ func _run():
 		return
 	print("PONG " + str(pong["server_time_s"]))
 	ws.disconnect_from_host()
+	lane.close()
 	print(MARKER)
 	quit(0)

@@ -4,6 +4,8 @@
 //   harness.exe selftest                 JSON and forearm mapping, no server
 //   harness.exe rest URL                 every REST route; prints "JOB <id>" for the touch
 //   harness.exe stroke URL CONTACT       a WebSocket down, moves (faster than frames), up
+//   harness.exe lane URL CONTACT on|off  a down, moves and an up with the contact lane on
+//                                        or off, then a move the lane refuses
 //   harness.exe reconnect URL CONTACT    holds a contact across a server restart, driven
 //                                        by lines on stdin (see the test)
 //
@@ -30,6 +32,7 @@ namespace PhantomTouch.Harness
                     case "rest": Rest(args[1]); break;
                     case "stroke": Stroke(args[1], args[2]); break;
                     case "reconnect": Reconnect(args[1], args[2]); break;
+                    case "lane": Lane(args[1], args[2], args[3] == "on"); break;
                     default:
                         Console.Error.WriteLine("usage: harness.exe selftest | rest URL | stroke URL CONTACT | reconnect URL CONTACT");
                         return 2;
@@ -183,6 +186,43 @@ namespace PhantomTouch.Harness
             client.Up(contact);
             Thread.Sleep(200);
             client.Dispose();
+        }
+
+        static void Lane(string url, string contact, bool useLane)
+        {
+            var client = NewClient(url);
+            var session = client.Connect("unity-lane", useLane);
+            session.MoveRateHz = 200;
+            var refusals = new System.Collections.Concurrent.ConcurrentQueue<PhantomTouchException>();
+            session.ErrorReceived += refusals.Enqueue;
+            Check(session.WaitConnected(10000), "connected to " + client.WebSocketUri);
+            var offer = session.Welcome.GetObject("lane");
+            Say("OFFERED", offer != null ? offer.GetNumber("port").ToString(CultureInfo.InvariantCulture) : "none");
+            var lane = session.Lane;
+            Say("LANE", lane != null ? lane.Address.ToString() : "none");
+            client.Down(contact, 1.9, 2.0, 0.5);
+            // The pong comes after the down's ok: the down is confirmed, so its moves may
+            // take the lane (before that they go over the socket, behind the down).
+            session.PingAsync().Wait();
+            // One move every 20 ms (slower than the 200 Hz frames): each is sent.
+            for (int i = 1; i <= 20; i++)
+            {
+                Thread.Sleep(20);
+                client.Move(contact, 1.9, 2.0 + i * 0.5);
+            }
+            Thread.Sleep(300);
+            Say("LANE_SENT", lane != null ? lane.MovesSent : 0);
+            client.Move(contact, 1.9, 5000.0);   // far off the armband: refused
+            var deadline = DateTime.UtcNow.AddSeconds(10);
+            while (refusals.IsEmpty && DateTime.UtcNow < deadline) Thread.Sleep(10);
+            PhantomTouchException refused;
+            Check(refusals.TryDequeue(out refused), "the refusal of a move off the armband");
+            Say("REFUSED", refused.Code + " " + refused.Message);
+            Say("PING", session.PingAsync().Result);
+            client.Up(contact);
+            Thread.Sleep(200);
+            client.Dispose();
+            Say("CLOSED", lane != null ? (!lane.Usable).ToString() : "none");
         }
 
         static string Expect(string line)

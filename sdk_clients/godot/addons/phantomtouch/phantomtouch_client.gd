@@ -9,6 +9,14 @@ extends Node
 ## of the service's [code]watchdog_s[/code], and a lost connection is retried with
 ## exponential back-off. After each (re)connection the client says hello again, puts every
 ## contact that is still down back where it is now, and re-subscribes.
+## When the welcome offers the service's contact lane ([code]"lane": {"port", "key"}[/code],
+## the service's docs/lane.md) and [member use_contact_lane] is on, the moves sent each frame
+## go as UDP datagrams ([PacketPeerUDP]) to that port on the service's host, which takes them
+## without waiting behind its HTTP work. Everything else stays on the WebSocket, and so do a
+## contact's moves until the service confirmed its down (each down carries an id for that)
+## and the move [method up] sends first. The lane's refusals come as [signal error_received].
+## No lane offered, a datagram the socket cannot send, or a key the lane refuses: moves go
+## over the WebSocket. The lane closes with the connection; each reconnection opens its own.
 ## REST goes through [member rest] ([PhantomTouchRest], HTTPRequest nodes).
 ## [member server_url], [member token] and [member client_name] are read from the project
 ## settings "phantomtouch/..." (the plugin adds them) when the node enters the tree.
@@ -35,6 +43,8 @@ const POLICY_VIOLATION := 1008
 @export var reply_timeout_s := 5.0
 @export var reconnect_initial_s := 0.1
 @export var reconnect_max_s := 5.0
+## Send moves over the service's contact lane when it offers one; off: all on the WebSocket.
+@export var use_contact_lane := true
 
 var rest: PhantomTouchRest
 var phase := Phase.IDLE
@@ -42,6 +52,8 @@ var phase := Phase.IDLE
 var welcome: Dictionary = {}
 ## How many times the client reconnected after losing the socket.
 var reconnects := 0
+## How many moves went over the contact lane.
+var lane_moves_sent := 0
 
 var _ws := WebSocketPeer.new()
 var _contacts := {}
@@ -55,6 +67,8 @@ var _last_send_msec := 0
 var _last_receive_msec := 0
 var _ever_connected := false
 var _clock_offset_s := 0.0
+var _lane := PacketPeerUDP.new()
+var _lane_key := ""
 
 
 func _ready() -> void:
@@ -95,6 +109,10 @@ func _process(_delta: float) -> void:
 		_send({"type": "hello", "client": client_name, "protocol": PROTOCOL})
 		phase = Phase.WAITING_WELCOME
 		_deadline_msec = now + int(reply_timeout_s * 1000)
+	while _lane_key != "" and _lane.get_available_packet_count() > 0:
+		var answer: Variant = JSON.parse_string(_lane.get_packet().get_string_from_utf8())
+		if answer is Dictionary:
+			_on_lane_answer(answer)
 	while _ws.get_available_packet_count() > 0:
 		_last_receive_msec = now
 		var parsed: Variant = JSON.parse_string(_ws.get_packet().get_string_from_utf8())
@@ -123,6 +141,7 @@ func disconnect_from_service() -> void:
 	var was_connected := phase == Phase.CONNECTED
 	phase = Phase.IDLE
 	_ws.close()
+	_close_lane()
 	_fail_pending("disconnected")
 	if was_connected:
 		connection_changed.emit(false)
@@ -130,6 +149,11 @@ func disconnect_from_service() -> void:
 
 func is_connected_to_service() -> bool:
 	return phase == Phase.CONNECTED
+
+
+## True while moves go over the service's contact lane.
+func is_using_contact_lane() -> bool:
+	return _lane_key != ""
 
 
 ## A contact touches down at (x_cm, y_cm); intensity 0-1, or negative for the default.
@@ -264,6 +288,7 @@ func _open() -> void:
 func _lose(reason: String) -> void:
 	var was_connected := phase == Phase.CONNECTED
 	_ws.close()
+	_close_lane()
 	_moves.clear()
 	_fail_pending(reason)
 	var delay_s := minf(reconnect_max_s, reconnect_initial_s * pow(2.0, mini(_attempt, 16)))
@@ -292,7 +317,61 @@ func _down_message(contact: String) -> Dictionary:
 	var message := {"type": "down", "contact": contact, "x_cm": c.x_cm, "y_cm": c.y_cm}
 	if c.intensity >= 0.0:
 		message["intensity"] = c.intensity
+	# Its moves take the lane once the service confirmed it (they must not overtake it).
+	c["down_id"] = _next_id
+	c["confirmed"] = false
+	message["id"] = _next_id
+	_next_id += 1
 	return message
+
+
+func _open_lane(host: String, offer: Variant) -> void:
+	if not use_contact_lane or not offer is Dictionary:
+		return
+	var port := int(offer.get("port", 0))
+	var key := str(offer.get("key", ""))
+	var address := host if host.is_valid_ip_address() else IP.resolve_hostname(host, IP.TYPE_IPV4)
+	if port < 1 or port > 65535 or key == "" or address == "":
+		return
+	_lane = PacketPeerUDP.new()
+	if _lane.connect_to_host(address, port) == OK:
+		_lane_key = key
+	else:
+		push_warning("PhantomTouch: the lane at %s:%d cannot be reached" % [address, port])
+
+
+func _close_lane() -> void:
+	_lane_key = ""
+	_lane.close()
+
+
+func _send_move(contact: String, message: Dictionary) -> void:
+	var c: Dictionary = _contacts.get(contact, {})
+	if _lane_key != "" and c.get("confirmed", false):
+		var datagram := message.duplicate()
+		datagram["key"] = _lane_key
+		if _lane.put_packet(JSON.stringify(datagram).to_utf8_buffer()) == OK:
+			lane_moves_sent += 1
+			return
+		push_warning("PhantomTouch: the lane cannot send; moves go over the WebSocket")
+		_close_lane()
+	_send(message)
+
+
+func _on_lane_answer(answer: Dictionary) -> void:
+	if answer.get("type") == "error":
+		for field in answer.get("fields", []):
+			if field is Dictionary and field.get("field") == "key":
+				push_warning("PhantomTouch: the lane refused the key; moves go over the WebSocket")
+				_close_lane()
+	_dispatch(answer)
+
+
+func _host() -> String:
+	var rest_of_url := server_url.get_slice("://", 1).get_slice("/", 0)
+	if rest_of_url.begins_with("["):
+		return rest_of_url.get_slice("]", 0).trim_prefix("[")
+	return rest_of_url.get_slice(":", 0)
 
 
 func _on_welcome(message: Dictionary) -> void:
@@ -303,6 +382,8 @@ func _on_welcome(message: Dictionary) -> void:
 	if _ever_connected:
 		reconnects += 1
 	_ever_connected = true
+	_close_lane()
+	_open_lane(_host(), message.get("lane"))
 	for contact in _contacts:
 		_send(_down_message(contact))
 	if _subscribed_hz > 0.0:
@@ -318,6 +399,11 @@ func _dispatch(message: Dictionary) -> void:
 		if kind == "pong":
 			_clock_offset_s = float(message.server_time_s) - Time.get_ticks_usec() / 1e6
 		reply_received.emit(int(id), message)
+		return
+	if kind == "ok" and (id is int or id is float):
+		for contact in _contacts:
+			if _contacts[contact].get("down_id", -1) == int(id):
+				_contacts[contact]["confirmed"] = true
 		return
 	match kind:
 		"welcome":
@@ -339,7 +425,7 @@ func _dispatch(message: Dictionary) -> void:
 
 func _tick(now: int) -> void:
 	for contact in _moves:
-		_send(_moves[contact])
+		_send_move(contact, _moves[contact])
 	_moves.clear()
 	var watchdog_s: float = welcome.get("watchdog_s", 2.0)
 	var ping_msec := maxi(50, int(watchdog_s * 1000 / 4))

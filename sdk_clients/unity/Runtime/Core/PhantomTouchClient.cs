@@ -62,11 +62,13 @@ namespace PhantomTouch
             }
         }
 
-        /// <summary>Opens the WebSocket session (in the background; it reconnects by itself).</summary>
-        public WebSocketSession Connect(string clientName = "phantomtouch-csharp")
+        /// <summary>Opens the WebSocket session (in the background; it reconnects by itself).
+        /// useLane: send moves over the service's contact lane when it offers one (see
+        /// WebSocketSession.UseLane).</summary>
+        public WebSocketSession Connect(string clientName = "phantomtouch-csharp", bool useLane = true)
         {
             if (Session != null) return Session;
-            Session = new WebSocketSession(WebSocketUri, Token, clientName);
+            Session = new WebSocketSession(WebSocketUri, Token, clientName) { UseLane = useLane };
             Session.Start();
             return Session;
         }

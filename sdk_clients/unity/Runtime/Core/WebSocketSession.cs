@@ -11,6 +11,14 @@
 // contact that is still down back at its newest position and re-subscribes. Reconnect
 // attempts back off exponentially (ReconnectInitialMs doubling up to ReconnectMaxMs).
 //
+// Contact lane: when the welcome offers one (docs/lane.md) and UseLane is true, the moves
+// taken from the latest-wins slots go as UDP datagrams to the service's host (ContactLane),
+// which takes them without waiting behind its HTTP work; everything else, the moves of a
+// contact whose down the server has not confirmed yet (each down carries an id for that),
+// and the move an Up sends first (so that it arrives before the up), stays on the socket. No lane offered,
+// or the lane given up (port unreachable, key refused): moves go over the socket. The lane
+// closes with the connection; each reconnection opens its own.
+//
 // Events are raised on a background thread; a Unity component hands them to the main
 // thread (see PhantomTouchManager).
 using System;
@@ -32,6 +40,10 @@ namespace PhantomTouch
         sealed class ActiveContact
         {
             public double X, Y, Intensity = double.NaN;
+            // The id of the contact's newest down, and whether the server confirmed it: a
+            // move goes over the lane only then (it must not overtake its down).
+            public string DownId;
+            public bool Confirmed;
         }
 
         readonly Uri uri;
@@ -39,7 +51,7 @@ namespace PhantomTouch
         readonly string clientName;
         readonly object gate = new object();
         readonly Queue<string> queue = new Queue<string>();
-        readonly Dictionary<string, string> moveSlot = new Dictionary<string, string>();
+        readonly Dictionary<string, JsonObject> moveSlot = new Dictionary<string, JsonObject>();
         readonly Dictionary<string, ActiveContact> contacts = new Dictionary<string, ActiveContact>();
         readonly ConcurrentDictionary<string, TaskCompletionSource<JsonObject>> pending =
             new ConcurrentDictionary<string, TaskCompletionSource<JsonObject>>();
@@ -60,6 +72,9 @@ namespace PhantomTouch
         public int ReconnectMaxMs = 5000;
         /// <summary>How long a connection attempt and a request may take, ms.</summary>
         public int TimeoutMs = 5000;
+        /// <summary>Send moves over the service's contact lane when its welcome offers one
+        /// (set before Start); false: every message goes over the WebSocket.</summary>
+        public bool UseLane = true;
 
         public SessionState State { get; private set; }
         public bool IsConnected { get { return State == SessionState.Connected; } }
@@ -67,6 +82,9 @@ namespace PhantomTouch
         public int Reconnects { get; private set; }
         /// <summary>The newest welcome (protocol, server_time_s, watchdog_s, device).</summary>
         public JsonObject Welcome { get; private set; }
+        /// <summary>The contact lane of the current connection; null when none is offered,
+        /// UseLane is false, or the session is not connected.</summary>
+        public ContactLane Lane { get; private set; }
 
         /// <summary>true when (re)connected, false when the socket is lost.</summary>
         public event Action<bool> ConnectionChanged;
@@ -120,11 +138,21 @@ namespace PhantomTouch
         {
             lock (gate)
             {
-                contacts[contact] = new ActiveContact { X = xCm, Y = yCm, Intensity = intensity };
+                var active = new ActiveContact { X = xCm, Y = yCm, Intensity = intensity };
+                contacts[contact] = active;
                 moveSlot.Remove(contact);
-                if (IsConnected) queue.Enqueue(Json.Serialize(Messages.Down(contact, xCm, yCm, intensity)));
+                if (IsConnected) queue.Enqueue(DownMessage(contact, active));
             }
             Wake();
+        }
+
+        string DownMessage(string contact, ActiveContact active)
+        {
+            active.DownId = "cs-down-" + Interlocked.Increment(ref nextId);
+            active.Confirmed = false;
+            var down = Messages.Down(contact, active.X, active.Y, active.Intensity);
+            down["id"] = active.DownId;
+            return Json.Serialize(down);
         }
 
         /// <summary>The contact's newest position: replaces a move not sent yet (latest wins).</summary>
@@ -137,7 +165,7 @@ namespace PhantomTouch
                 active.X = xCm;
                 active.Y = yCm;
                 if (!double.IsNaN(intensity)) active.Intensity = intensity;
-                if (IsConnected) moveSlot[contact] = Json.Serialize(Messages.Move(contact, xCm, yCm, intensity));
+                if (IsConnected) moveSlot[contact] = Messages.Move(contact, xCm, yCm, intensity);
             }
             Wake();
         }
@@ -148,10 +176,10 @@ namespace PhantomTouch
             lock (gate)
             {
                 if (!contacts.Remove(contact)) return;
-                string move;
+                JsonObject move;
                 if (moveSlot.TryGetValue(contact, out move))
                 {
-                    queue.Enqueue(move);
+                    queue.Enqueue(Json.Serialize(move));
                     moveSlot.Remove(contact);
                 }
                 if (IsConnected) queue.Enqueue(Json.Serialize(Messages.Up(contact)));
@@ -245,7 +273,15 @@ namespace PhantomTouch
             {
                 try { loop.Wait(1000); } catch (AggregateException) { }
             }
+            CloseLane();
             FailPending(new PhantomTouchException("transport", "the session was closed"));
+        }
+
+        void CloseLane()
+        {
+            var lane = Lane;
+            Lane = null;
+            if (lane != null) lane.Dispose();
         }
 
         void Wake()
@@ -275,6 +311,7 @@ namespace PhantomTouch
                         attempt = 0;
                         if (everConnected) Reconnects++;
                         everConnected = true;
+                        if (UseLane) Lane = ContactLane.Open(Welcome, uri.Host, Dispatch, Say);
                         Restore();
                         Raise(ConnectionChanged, true);
                         using (var linked = CancellationTokenSource.CreateLinkedTokenSource(stop))
@@ -293,6 +330,7 @@ namespace PhantomTouch
                     {
                         if (!stop.IsCancellationRequested) Say("cannot connect to " + uri + ": " + e.GetBaseException().Message);
                     }
+                    CloseLane();
                     lock (gate)
                     {
                         if (State != SessionState.Closed) State = SessionState.Connecting;
@@ -358,7 +396,7 @@ namespace PhantomTouch
                 queue.Clear();
                 moveSlot.Clear();
                 foreach (var c in contacts)
-                    queue.Enqueue(Json.Serialize(Messages.Down(c.Key, c.Value.X, c.Value.Y, c.Value.Intensity)));
+                    queue.Enqueue(DownMessage(c.Key, c.Value));
                 if (subscribedHz > 0) queue.Enqueue(Json.Serialize(Messages.Subscribe(subscribedHz)));
                 lastReceiveMs = clock.ElapsedMilliseconds;
                 if (State != SessionState.Closed) State = SessionState.Connected;
@@ -377,6 +415,10 @@ namespace PhantomTouch
         async Task SendLoopAsync(ClientWebSocket ws, CancellationToken stop)
         {
             var batch = new List<string>();
+            // The moves of this round, each with whether it may take the lane (its down is
+            // confirmed), and those that do.
+            var moves = new List<KeyValuePair<JsonObject, bool>>();
+            var laneMoves = new List<JsonObject>();
             while (!stop.IsCancellationRequested)
             {
                 int pingMs = PingIntervalNow();
@@ -394,21 +436,39 @@ namespace PhantomTouch
                 if (wait > 0) await wake.WaitAsync((int)Math.Min(wait, pingMs), stop).ConfigureAwait(false);
                 now = clock.ElapsedMilliseconds;
                 batch.Clear();
+                moves.Clear();
                 lock (gate)
                 {
                     while (queue.Count > 0) batch.Add(queue.Dequeue());
                     if (moveSlot.Count > 0 && now >= nextMoveMs)
                     {
-                        batch.AddRange(moveSlot.Values);
+                        foreach (var slot in moveSlot)
+                        {
+                            ActiveContact active;
+                            var confirmed = contacts.TryGetValue(slot.Key, out active) && active.Confirmed;
+                            moves.Add(new KeyValuePair<JsonObject, bool>(slot.Value, confirmed));
+                        }
                         moveSlot.Clear();
                         nextMoveMs = now + (long)(1000.0 / Math.Max(1.0, MoveRateHz));
                     }
+                }
+                var lane = Lane;
+                laneMoves.Clear();
+                foreach (var move in moves)
+                {
+                    if (lane != null && lane.Usable && move.Value) laneMoves.Add(move.Key);
+                    else batch.Add(Json.Serialize(move.Key));
                 }
                 if (batch.Count == 0 && now - lastSendMs >= pingMs) batch.Add(Json.Serialize(Messages.Ping()));
                 foreach (var text in batch)
                 {
                     await SendTextAsync(ws, text, stop).ConfigureAwait(false);
                     lastSendMs = clock.ElapsedMilliseconds;
+                }
+                foreach (var move in laneMoves)
+                {
+                    if (!lane.TrySend(move))
+                        await SendTextAsync(ws, Json.Serialize(move), stop).ConfigureAwait(false);
                 }
             }
         }
@@ -461,6 +521,14 @@ namespace PhantomTouch
             }
             switch (type)
             {
+                case "ok":
+                    if (id == null) break;
+                    lock (gate)
+                    {
+                        foreach (var c in contacts.Values)
+                            if (c.DownId == id) c.Confirmed = true;
+                    }
+                    break;
                 case "pong":
                     clockOffsetS = message.GetNumber("server_time_s") - clock.Elapsed.TotalSeconds;
                     break;

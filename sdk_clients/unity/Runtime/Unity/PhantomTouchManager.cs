@@ -26,6 +26,8 @@ namespace PhantomTouch
         [Tooltip("Most contact moves sent per second (one per frame at 90 Hz)")]
         [Range(10f, 240f)]
         public float moveRateHz = 90f;
+        [Tooltip("Send moves over the service's contact lane (UDP) when it offers one")]
+        public bool useContactLane = true;
         [Tooltip("Ask the service for state messages (levels, contacts) at this rate; 0: none")]
         [Range(0f, 120f)]
         public float stateRateHz = 0f;
@@ -71,7 +73,7 @@ namespace PhantomTouch
         public void Connect()
         {
             if (Client.Session != null) return;
-            var session = Client.Connect(clientName);
+            var session = Client.Connect(clientName, useContactLane);
             session.MoveRateHz = moveRateHz;
             session.ConnectionChanged += up => mainThread.Enqueue(() => OnConnection(up));
             session.StateReceived += state => mainThread.Enqueue(() => { if (StateReceived != null) StateReceived(state); });
