@@ -15,6 +15,7 @@ from phantomtouch.engine.checks import check_channel_gains, check_int, check_ran
 from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.events import apply_events
 from phantomtouch.engine.job_calls import JobCalls
+from phantomtouch.engine.job_ids import JobIds
 from phantomtouch.engine.jobs import JobTable, Policy
 from phantomtouch.engine.messages import Event, PlanReleased, SetWearerGains
 from phantomtouch.engine.owners import ContactCalls, DeadlineThread, OwnerTable
@@ -157,6 +158,7 @@ class EngineFront(JobCalls, ContactCalls):
         self._policy = self._check_policy(voice_policy)
         self._lock = threading.RLock()
         self._jobs = JobTable()
+        self._job_ids = JobIds()
         self._contacts = OwnerTable(settings.max_contacts)
         self._listeners = []
         self._deadlines = DeadlineThread(self._expire_deadlines)

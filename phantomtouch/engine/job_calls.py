@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import threading
-import uuid
 from typing import TYPE_CHECKING, Any, cast
 
 from phantomtouch.engine.checks import check_ahead, check_frame, check_id
@@ -27,6 +26,7 @@ from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
 
 if TYPE_CHECKING:
+    from phantomtouch.engine.job_ids import JobIds
     from phantomtouch.engine.local_audio import LocalAudio
     from phantomtouch.engine.plans import HeldPlan, PlanCache
     from phantomtouch.engine.process import ChildAudio
@@ -68,6 +68,7 @@ class JobCalls:
     _lock: threading.RLock
     _audio: LocalAudio | ChildAudio
     _jobs: JobTable
+    _job_ids: JobIds
     _admission: Admission
     _policy: Policy
     _queue_capacity: int
@@ -152,7 +153,7 @@ class JobCalls:
         rate_hz = self.device.sample_rate_hz
         if frame is not None:
             check_ahead(frame, self._audio.now_frames, rate_hz, MAX_SCHEDULE_AHEAD_S)
-        job_id = uuid.uuid4().hex
+        job_id = self._job_ids.next()
         carrier = None if prerendered is not None else resolved.pattern.carrier
         self._audio.prepare(carrier)
         with self._lock:

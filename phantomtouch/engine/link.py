@@ -110,8 +110,12 @@ class ReportBox:
         while True:
             self._wake.acquire()
             while waiting:
+                # plain pickle, which the host's ``recv`` reads as it reads ``send``'s:
+                # ``Connection.send`` makes a ForkingPickler, copying the whole copyreg
+                # table, for every report, holding the lock the callback waits for
+                frame = pickle.dumps(waiting[0], protocol=pickle.HIGHEST_PROTOCOL)
                 try:
-                    self._connection.send(waiting[0])
+                    self._connection.send_bytes(frame)
                 except OSError:  # the host is gone: nothing more is sent
                     return
                 waiting.popleft()

@@ -98,6 +98,18 @@ class PlanCache:
         key = pattern.model_dump_json()
         return self._entry(key, lambda: plan(pattern, self.device), render=False).plan
 
+    def ready(self, pattern: TouchPattern) -> Plan | None:
+        """The plan of ``pattern`` if the cache holds it with its samples rendered whole, so
+        that scheduling it plans and renders nothing (host, any thread; costs a dump of the
+        pattern to JSON, no planning); None: it is not held so."""
+        key = pattern.model_dump_json()
+        with self._lock:
+            known = self._entries.get(key)
+            if known is None or known.prerendered is None:
+                return None
+            self._entries.move_to_end(key)
+            return known.plan
+
     def entry(self, pattern: TouchPattern | Plan) -> HeldPlan:
         """The entry of a pattern, or of a plan made for the device, with its samples
         rendered if it is short enough (an entry the cache does not keep when too large).

@@ -15,6 +15,7 @@ from phantomtouch.service.models import (
     AnyTouch,
     JobAccepted,
     NamedTouch,
+    PatternTouch,
     PresetTouch,
     Timing,
 )
@@ -26,6 +27,10 @@ if TYPE_CHECKING:
 
 LATE_START_TOLERANCE_S = 1.0
 """How far in the past a ``start_at_s`` may lie (it then starts at once)."""
+LOOP_PATH_POINTS = 64
+"""Most path points (or keyframes) of a touch the event loop resolves itself
+(:func:`loop_pattern`): a few tens of µs of work; a longer path is resolved in a worker
+thread."""
 
 
 def preset_pattern(name: str) -> TouchPattern:
@@ -173,6 +178,78 @@ def quota_error(
     )
 
 
+def path_points(pattern: TouchPattern) -> int:
+    """The points (or keyframes) of a pattern's path; an arc has none."""
+    path = pattern.path
+    return len(getattr(path, "points_cm", None) or getattr(path, "keyframes", None) or ())
+
+
+def small_inline(pattern: TouchPattern) -> bool:
+    """Whether ``pattern`` is cheap to resolve on the event loop: at most
+    :data:`LOOP_PATH_POINTS` path points and no clip carrier (a clip is the library's, or
+    samples as long as its request allows)."""
+    return path_points(pattern) <= LOOP_PATH_POINTS and not isinstance(pattern.carrier, ClipCarrier)
+
+
+def loop_pattern(request: AnyTouch) -> TouchPattern | None:
+    """The pattern of ``request`` when resolving it reads no library and is cheap (host,
+    the event loop): a preset, or a whole pattern, that is :func:`small_inline`, whatever
+    the overrides; None for any other request (it is resolved in a worker thread).
+
+    Raises
+    ------
+    NotFoundError
+        An unknown preset.
+    ParameterError
+        Overrides that make the preset invalid.
+    """
+    if isinstance(request, PresetTouch):
+        overrides = request.overrides
+        if overrides is not None and isinstance(getattr(overrides, "carrier", None), ClipCarrier):
+            return None
+        pattern = request.apply(preset_pattern(request.preset))
+    elif isinstance(request, PatternTouch) and small_inline(request):
+        pattern = request.pattern()
+    else:
+        return None
+    return pattern if small_inline(pattern) else None
+
+
+def schedule_held(
+    engine: EngineFront,
+    request: AnyTouch,
+    *,
+    owner: str,
+    quota: OwnerQuota,
+    stop_count: int,
+    names: tuple[str, str] = QUOTA_NAMES,
+) -> JobAccepted | None:
+    """:func:`schedule_touch` for a request that reads no library and whose plan the
+    engine's cache holds rendered whole (host, the event loop: it plans and renders
+    nothing, so no worker thread is needed; a repeated touch in a flood is one); None:
+    anything else, for :func:`schedule_touch` in a worker thread.
+
+    Raises
+    ------
+    QuotaError, NotFoundError, ParameterError, EngineBusyError
+        As :func:`schedule_touch`.
+    """
+    pattern = loop_pattern(request)
+    planned = None if pattern is None else engine.plans.ready(pattern)
+    if pattern is None or planned is None:
+        return None
+    return schedule_pattern(
+        engine,
+        pattern,
+        request,
+        owner=owner,
+        quota=quota,
+        stop_count=stop_count,
+        names=names,
+        planned=planned,
+    )
+
+
 def schedule_touch(
     engine: EngineFront,
     store: PatternStore | None,
@@ -198,14 +275,40 @@ def schedule_touch(
     NotFoundError, MissingReferenceError, ParameterError
         The request names what is not there, or cannot be planned.
     """
-    pattern = resolve(request, store)
+    return schedule_pattern(
+        engine,
+        resolve(request, store),
+        request,
+        owner=owner,
+        quota=quota,
+        stop_count=stop_count,
+        names=names,
+    )
+
+
+def schedule_pattern(
+    engine: EngineFront,
+    pattern: TouchPattern,
+    timing: Timing,
+    *,
+    owner: str,
+    quota: OwnerQuota,
+    stop_count: int,
+    names: tuple[str, str],
+    planned: Plan | None = None,
+) -> JobAccepted:
+    """Schedule the resolved ``pattern`` of a request with ``timing`` (host; the thread
+    :func:`schedule_touch` or :func:`schedule_held` runs in): ``owner``'s ``quota`` is
+    checked first, then it is planned through the engine's plan cache (unless ``planned``
+    is its plan already) and scheduled; a stop since ``stop_count`` voids it."""
     least_s = least_duration_s(pattern)
     try:
         engine.check_quota(owner, quota, least_s)
     except QuotaRefused as refused:
         raise quota_error(refused, least_s, names) from refused
-    planned = engine.plans.plan(pattern)
-    first = start_frame(engine, request.timing())
+    if planned is None:
+        planned = engine.plans.plan(pattern)
+    first = start_frame(engine, timing)
     try:
         job = engine.schedule(
             planned, start_frame=first, owner=owner, stop_count=stop_count, quota=quota

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import pickle
+import pickletools
 
 import numpy as np
 import pytest
@@ -66,6 +67,26 @@ def test_messages_and_events_cross_a_pickle_unchanged() -> None:
         Refused("plan", 1, "not handed over"),
     ):
         assert pickle.loads(pickle.dumps(event)) == event
+
+
+@pytest.mark.parametrize(
+    "message",
+    [
+        StartJob(3, 4, None),
+        ReleaseJob(3, 96, 240),
+        Started("job", 5, 5, False),
+        Ended("job", 1, 9),
+        StoppedAll(11),
+    ],
+    ids=lambda message: type(message).__name__,
+)
+def test_a_message_pickles_as_its_class_and_values_not_a_state_to_set(message: object) -> None:
+    """A slotted dataclass's own state is set field by field after it is made (BUILD);
+    these are rebuilt by their ``__init__`` from their values in one step."""
+    frame = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    opcodes = {opcode.name for opcode, _, _ in pickletools.genops(frame)}
+    assert "BUILD" not in opcodes and "REDUCE" in opcodes, opcodes
+    assert pickle.loads(frame) == message
 
 
 def test_a_command_is_applied_through_the_table_and_a_void_one_plays_nothing() -> None:

@@ -132,3 +132,21 @@ def test_the_audio_side_holds_what_it_was_handed_until_released(
         wait_until(lambda: not engine.plans.releasing)  # every drop acknowledged
         wait_until(lambda: all(engine.job_state(j.job_id).state == "finished" for j in jobs), 30.0)
         assert engine.status().refused_commands == 0
+
+
+def test_ready_only_once_the_samples_are_rendered_whole() -> None:
+    cache = PlanCache(DeviceProfile.default())
+    tap = preset("vr/tap")
+    assert cache.ready(tap) is None, "nothing held yet"
+    planned = cache.plan(tap)
+    assert cache.ready(tap) is None, "planned, but scheduling it would still render it"
+    held = cache.entry(tap)
+    assert held.prerendered is not None and cache.ready(tap) is planned
+    assert cache.ready(preset("vr/stroke")) is None, "another pattern is not held"
+
+
+def test_a_plan_too_long_to_render_whole_is_never_ready() -> None:
+    cache = PlanCache(DeviceProfile.default(), prerender_max_s=0.1)
+    tap = preset("vr/tap")  # 0.15 s
+    assert cache.entry(tap).prerendered is None
+    assert cache.ready(tap) is None

@@ -28,7 +28,12 @@ from phantomtouch.service.admission.principals import DETACHED, owner_id
 from phantomtouch.service.admission.rate import Arrival, Meter, monotonic
 from phantomtouch.service.admission.slots import Slot, YieldCallback
 from phantomtouch.service.errors import QuotaError
-from phantomtouch.service.scheduling import DETACHED_NAMES, QUOTA_NAMES, schedule_touch
+from phantomtouch.service.scheduling import (
+    DETACHED_NAMES,
+    QUOTA_NAMES,
+    schedule_held,
+    schedule_touch,
+)
 from phantomtouch.service.scores import ScoreJobs, schedule_score
 
 if TYPE_CHECKING:
@@ -264,9 +269,13 @@ class Handle(Slot):
         self, request: AnyTouch, *, arrival: Arrival, detached: bool = False
     ) -> JobAccepted:
         """Resolve, plan and schedule a touch request as a job of this source (host, the
-        event loop: the work runs in a worker thread); the one touch path
+        event loop); the one touch path
         (:func:`~phantomtouch.service.scheduling.schedule_touch`): the quota is checked
-        before planning, and a stop after ``arrival`` voids it.
+        before planning, and a stop after ``arrival`` voids it. A touch whose plan the
+        engine holds rendered whole and that reads no library (a repeated tap) is
+        scheduled on the event loop at once
+        (:func:`~phantomtouch.service.scheduling.schedule_held`); any other is resolved
+        and planned in a worker thread.
 
         Parameters
         ----------
@@ -282,6 +291,16 @@ class Handle(Slot):
         ------
         QuotaError, NotFoundError, MissingReferenceError, ParameterError, EngineBusyError
         """
+        held = schedule_held(
+            self.engine,
+            request,
+            owner=self.detached_owner if detached else self.owner,
+            quota=self.policy.detached_quota if detached else self.policy.quota,
+            stop_count=arrival.stop_count,
+            names=DETACHED_NAMES if detached else QUOTA_NAMES,
+        )
+        if held is not None:
+            return held
         return await asyncio.to_thread(self.play_now, request, arrival=arrival, detached=detached)
 
     def play_now(
