@@ -16,9 +16,9 @@ Scenarios (run in the order given by ``--scenarios``; default ``a,c,n``):
   ``vr/tap`` per second over 2 connections (20 s);
 - ``b`` the same while busy Python loops, one per core at normal priority, keep every
   core busy (a stand-in for a VR game on the same PC);
-- ``c`` flood: ``wrk -t1 -c16`` posts ``vr/tap`` touches as fast as it can (10 s); the
+- ``c`` flood: ``wrk -t1 -c16`` posts a 20 ms touch as fast as it can (10 s); the
   excess must be refused (503 ``busy``) or stolen, never heard as a glitch. The per-client
-  voice quota is lifted to the voice cap, so the flood keeps 64 voices sounding. Right
+  voice quota is lifted to the voice cap, so the quota refuses none of it. Right
   after it ``wrk`` gets ``GET /health`` the same way: the flood's throughput (``POST
   /touch`` accepted per second) is set beside that rate;
 - ``s`` soak (not in the default order): ``POST /touch`` of patterns no request repeats,
