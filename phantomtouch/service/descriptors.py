@@ -29,7 +29,8 @@ from pathlib import Path
 UNLIMITED = 1 << 20
 """What an open-file limit of "unlimited" counts as (more than any budget needs)."""
 STOP_LANE = 16
-"""Connections beyond the budget that may ask for ``POST /stop``."""
+"""Connections beyond the budget that may ask for ``POST /stop``, over two of the event
+loop's accept bursts (:meth:`ConnectionBudget.plan`)."""
 HEADROOM = 64
 """Descriptors kept for the files the service opens while it runs."""
 MAX_BACKLOG = 2048
@@ -102,7 +103,11 @@ class ConnectionBudget:
         """
         usable = (limit if limit is not None else UNLIMITED) - (in_use or 64) - HEADROOM
         backlog = max(8, min(MAX_BACKLOG, usable // 8))
-        lane = STOP_LANE
+        # The event loop accepts up to ``backlog`` connections at once before it reads
+        # any, and each newcomer of a full lane closes the lane's oldest: a lane of two
+        # bursts and more keeps a stop accepted in one burst through the next, until
+        # its request, sent whole with its connection, is read.
+        lane = STOP_LANE + 2 * backlog
         connections = max(1, usable - backlog - lane)
         return cls(limit, connections, lane, backlog)
 
