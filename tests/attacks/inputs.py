@@ -366,6 +366,9 @@ class Input:
     """What a source holds ends this long after it goes (0: at once, with the release)."""
     slots: ClassVar[int]
     """Sources an idle crowd opens: the input's connection slots."""
+    transit_s: ClassVar[float] = 0.0
+    """How long a message may take to reach the armband's engine after it is sent, beyond
+    the service's own handling: a deadline or a release counts from there."""
 
     def __init__(self, target: str) -> None:
         self.target = target
@@ -426,6 +429,7 @@ class FleetInput(Input):
     silence_ends_s = 2.0  # the watchdog_s the gateway announces in its welcome
     close_ends_s = 0.0
     slots = 64
+    transit_s = 0.25  # through the gateway and NATS to the armband's node, on a loaded machine
 
     def source(self, local: str = "127.0.0.1") -> WsSource:
         url, armband = self.target.split(" ")

@@ -104,7 +104,7 @@ def silence(stand: Stand, inp: Input, played: Played) -> None:
     t = time.monotonic()
     mark(stand, played)
     time.sleep(inp.silence_ends_s + 2.5)
-    ends = t + inp.silence_ends_s + stand.after_stop_s
+    ends = t + inp.silence_ends_s + inp.transit_s + stand.after_stop_s
     played.windows += [
         Window(t + 0.2, t + 0.4, True, "the held touch"),
         Window(ends, ends + 2.0, False, "the touch of a source silent past its deadline"),
@@ -130,7 +130,7 @@ def hang(stand: Stand, inp: Input, played: Played) -> None:
     finally:
         client.kill()
         client.wait()
-    ends = t + inp.silence_ends_s + stand.after_stop_s
+    ends = t + inp.silence_ends_s + inp.transit_s + stand.after_stop_s
     played.windows += [
         Window(t + 0.2, t + 0.4, True, "the hung client's touch"),
         Window(ends, ends + 2.0, False, "the touch of a client frozen after one message"),
@@ -147,7 +147,7 @@ def close_mid_play(stand: Stand, inp: Input, played: Played) -> None:
     source.close()
     t = time.monotonic()
     time.sleep(inp.close_ends_s + 2.5)
-    ends = t + inp.close_ends_s + stand.after_stop_s
+    ends = t + inp.close_ends_s + inp.transit_s + stand.after_stop_s
     played.windows += [
         Window(t - 0.3, t - 0.1, True, "the touch before the source went"),
         Window(ends, ends + 2.0, False, "the touch of a source that went"),
@@ -317,7 +317,7 @@ def bad_values(stand: Stand, inp: Input, played: Played) -> None:
     mark(stand, played)
     time.sleep(2.0)
     assert httpx.get(f"{stand.url}/health", timeout=10.0).status_code == 200
-    ends = t + max(inp.close_ends_s, 1.0) + stand.after_stop_s
+    ends = t + max(inp.close_ends_s, 1.0) + inp.transit_s + stand.after_stop_s
     played.windows.append(Window(ends, t + 2.0, False, "anything of the bad values"))
 
 
