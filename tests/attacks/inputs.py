@@ -366,9 +366,10 @@ class Input:
     """What a source holds ends this long after it goes (0: at once, with the release)."""
     slots: ClassVar[int]
     """Sources an idle crowd opens: the input's connection slots."""
-    transit_s: ClassVar[float] = 0.0
-    """How long a message may take to reach the armband's engine after it is sent, beyond
-    the service's own handling: a deadline or a release counts from there."""
+    transit_s: ClassVar[float] = 0.1
+    """How long after it is sent a message may count at the armband's engine: a deadline
+    or a release counts from its arrival there, once the service's event loop and the
+    engine's deadline thread have had their turn on a busy machine."""
 
     def __init__(self, target: str) -> None:
         self.target = target
