@@ -47,17 +47,20 @@ class Stand:
 
     def __post_init__(self) -> None:
         self.device = httpx.get(f"{self.url}/device", timeout=10.0).json()
-        self.clock = self.read_clock()
+        self.clocks: list[dict[str, Any]] = []
+        self.read_clock()
 
     def read_clock(self) -> dict[str, Any]:
         """``GET /clock``: the engine's frame count at a server time (this machine's
-        ``time.monotonic()``)."""
+        ``time.monotonic()``); the capture places spans by every clock read
+        (:mod:`tests.support.clocks`)."""
         asked_s = time.monotonic()
         clock: dict[str, Any] = httpx.get(f"{self.url}/clock", timeout=10.0).json()
         answered_s = time.monotonic()
         if not asked_s - 1.0 < clock["server_time_s"] < answered_s + 1.0:
             # a fleet node keeps the fleet's clock: place its frame count on this machine's
             clock["server_time_s"] = (asked_s + answered_s) / 2
+        self.clocks.append(clock)
         return clock
 
     @property
@@ -82,7 +85,7 @@ class Stand:
         for process in self.others:
             process.stop()
         self.server.stop()
-        return Capture(self.wav, self.clock, self.device)
+        return Capture(self.wav, self.clocks, self.device)
 
 
 def wait_for_armband(ws_url: str, armband: str, timeout_s: float = 60.0) -> None:

@@ -33,6 +33,7 @@ import pytest
 from tests.attacks.inputs import INPUT_CLASSES, Input, WsInput, WsSource
 from tests.attacks.stands import Stand, start_stand
 from tests.bhaptics.test_standin_live import RELEASE_S, SILENT
+from tests.support.clocks import placed
 
 ROOT = Path(__file__).resolve().parents[2]
 BLOCK_S = 0.01
@@ -66,18 +67,8 @@ class Played:
     moments (:func:`mark`) and as it ended."""
 
     def placed(self, start_s: float, end_s: float) -> tuple[dict[str, Any], dict[str, Any]]:
-        """The clocks that place a span: its start by the last read before it, its end by
-        the first read after it.
-
-        A loaded machine may stall the engine, and its frames then fall behind the wall's
-        (by up to half a second in one row under two CPU hogs); they never run ahead. A
-        time placed by a clock read before it therefore lands on a frame no earlier than
-        the one really played then, and by a clock read after it on one no later: the span
-        read is the span, or inside it, never frames of what came before or after it.
-        """
-        before = [c for c in self.clocks if c["server_time_s"] <= start_s] or self.clocks[:1]
-        after = [c for c in self.clocks if c["server_time_s"] >= end_s] or self.clocks[-1:]
-        return before[-1], after[0]
+        """The clocks that place a span (:func:`tests.support.clocks.placed`)."""
+        return placed(self.clocks, start_s, end_s)
 
 
 def mark(stand: Stand, played: Played) -> None:

@@ -52,16 +52,19 @@ class Standin:
         ).start()
         self.ws_url = f"ws://{HOST}:{self.port}/v2/feedbacks"
         self.device = httpx.get(f"{self.server.url}/device", timeout=10.0).json()
-        self.clock = self.read_clock()
+        self.clocks: list[dict[str, Any]] = []
+        self.read_clock()
 
     def read_clock(self) -> dict[str, Any]:
-        """``GET /clock``: the engine's frame count at a server time."""
+        """``GET /clock``: the engine's frame count at a server time; the capture places
+        spans by every clock read (:mod:`tests.support.clocks`)."""
         clock: dict[str, Any] = httpx.get(f"{self.server.url}/clock", timeout=10.0).json()
+        self.clocks.append(clock)
         return clock
 
     def stop(self) -> Capture:
         self.server.stop()
-        return Capture(self.wav, self.clock, self.device)
+        return Capture(self.wav, self.clocks, self.device)
 
     @property
     def after_stop_s(self) -> float:

@@ -25,7 +25,8 @@ from tests.bhaptics.sdk2.deployments import (
 )
 from tests.bhaptics.sdk2.library import PORT, library_python, run_steps
 from tests.bhaptics.sdk2.raw_client import RawClient, envelope
-from tests.bhaptics.test_standin_live import RELEASE_S, SILENT, Capture, place
+from tests.bhaptics.test_standin_live import RELEASE_S, SILENT, TRANSIT_S, Capture, place
+from tests.support.clocks import ClockReads
 from tests.support.live_server import HOST, LiveServer, free_port
 
 WORKSPACE = "phantomtest-workspace"
@@ -136,18 +137,18 @@ def test_bhaptics_python_plays_every_call_as_the_study_says(tmp_path: Path) -> N
     base = f"wss://{HOST}:{PORT}/v3/feedback"
     try:
         device = httpx.get(f"{server.url}/device", timeout=5.0).json()
-        clock = httpx.get(f"{server.url}/clock", timeout=5.0).json()
-        told = asyncio.run(
-            define_events(
-                f"{base}?workspace_id={WORKSPACE}&api_key=k&version=0.0.4",
-                f"{base}/?workspace_id={GAME_WORKSPACE}&api_key=k&version=1",
+        with ClockReads(server.url) as clocks:
+            told = asyncio.run(
+                define_events(
+                    f"{base}?workspace_id={WORKSPACE}&api_key=k&version=0.0.4",
+                    f"{base}/?workspace_id={GAME_WORKSPACE}&api_key=k&version=1",
+                )
             )
-        )
-        records = run_steps(steps(), tmp_path)
+            records = run_steps(steps(), tmp_path)
         assert httpx.get(f"{server.url}/health", timeout=5.0).status_code == 200
     finally:
         server.stop()
-    band = Capture(wav, clock, device)
+    band = Capture(wav, clocks, device)
     got = {r["name"]: r for r in records}
 
     def result(name: str) -> Any:
@@ -227,7 +228,7 @@ def test_bhaptics_python_plays_every_call_as_the_study_says(tmp_path: Path) -> N
     for name in ("stop_id", "stop_name", "stop_all"):
         t = at(name)
         assert band.peak(t - 0.3, t - 0.05) > SILENT, f"{name}: nothing played before"
-        assert band.peak(t + stop_s, t + 0.5) <= SILENT, name
+        assert band.peak(t + TRANSIT_S + stop_s, t + 0.5) <= SILENT, name
     assert (result("long_1_after"), result("long_2_after"), result("all_after")) == (
         False,
         False,
