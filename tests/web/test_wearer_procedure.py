@@ -180,8 +180,13 @@ def _answer(page: Any, wearer: Wearer, answer: Answer, *, stop_after: int | None
     checks every trial's progress line, lit actuator and levels on the way."""
     ceiling_db = httpx.get(f"{wearer.url}/device", timeout=5.0).json()["max_level_db"]
     answered = 0
-    asked = int(page.get_attribute("#wearer-trial", "data-question") or 0)
-    pending = page.get_attribute("#wearer-trial", "data-state") == "asking"
+    # both read at once: read one by one, the page may ask its first question in between
+    asked, pending = page.evaluate(
+        """() => {
+            const trial = document.getElementById('wearer-trial');
+            return [Number(trial.dataset.question || 0), trial.dataset.state === 'asking'];
+        }"""
+    )
     first_number = asked if pending else asked + 1
     while stop_after is None or answered < stop_after:
         try:
