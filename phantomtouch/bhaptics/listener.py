@@ -209,6 +209,9 @@ class _Connection:
         self._wake = asyncio.Event()
         self._sending = asyncio.Lock()
         self._last: dict[str, object] | None = None
+        self._read_large = False
+        """Whether a message over :data:`INLINE_BYTES` came: what reading it took is handed
+        back when the connection closes, registered or refused."""
 
     def _changed(self) -> None:
         self._wake.set()
@@ -234,7 +237,7 @@ class _Connection:
             registered = bool(self.session.registered)
             self.session.close()
             logger.info("bhaptics: %s disconnected", self.handle.owner)
-            if registered:  # its projects are freed: hand their memory back
+            if registered or self._read_large:  # its projects and buffers are freed
                 await asyncio.to_thread(give_back_memory)
 
     async def _message(self, data: str | bytes) -> None:
@@ -247,6 +250,7 @@ class _Connection:
             if len(text) <= INLINE_BYTES:
                 prepared: Prepared = prepare(text, self.session.room_points)
             else:
+                self._read_large = True
                 prepared = await asyncio.get_running_loop().run_in_executor(
                     self.listener.reader, prepare, text, self.session.room_points
                 )
