@@ -23,6 +23,10 @@ the contacts, their deadline and the shares among principals. Nothing here renew
 client on its behalf: a message renews it on the armband it is sent to, and the client's
 ``ping`` on every armband it has addressed; when it goes silent the nodes release its
 contacts, and when it closes the gateway tells those armbands to release them at once.
+When a node lets go of the client's contacts (its silence, a stop, a quota) it says so on
+its armband's subject for the connection (:func:`~phantomtouch.fleet.subjects.released`),
+and the client is sent ``released`` with the ``armband``, as the service's ``/ws`` sends
+it.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import asyncio
 import contextlib
 import itertools
 import json
+import logging
 import time
 from typing import TYPE_CHECKING, Any, Final
 
@@ -38,6 +43,7 @@ from pydantic import ValidationError
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from phantomtouch.errors import PhantomTouchError, ProtocolError
+from phantomtouch.fleet import subjects
 from phantomtouch.fleet.auth import Grant
 from phantomtouch.fleet.errors import NoNodeError
 from phantomtouch.fleet.records import StopScope
@@ -60,6 +66,8 @@ from phantomtouch.service.ws_sending import GONE, JsonSender
 if TYPE_CHECKING:
     from phantomtouch.fleet.gateway import Gateway
     from phantomtouch.service.admission import Slot
+
+logger = logging.getLogger("phantomtouch.fleet")
 
 KIND: Final = "fleet-gateway"
 """The gateway's row of the policy table."""
@@ -92,6 +100,7 @@ class GatewaySession:
         code: int | None = None
         reason = ""
         slot: Slot | None = None
+        listening: Any = None
         try:
             if self.grant is None:
                 code, reason = (
@@ -101,6 +110,9 @@ class GatewaySession:
             else:
                 self._serve_task = asyncio.current_task()
                 slot = self._open()
+                subject = subjects.released_to(self.owner)
+                assert subject is not None  # gw-ID-N is one token
+                listening = await self.gateway.nc.subscribe(subject, cb=self._released)
                 code, reason = await self._serve(slot)
         except SourcesFullError as exc:
             code, reason = WS_CLOSE_TRY_AGAIN_LATER, str(exc)[:120]
@@ -112,6 +124,9 @@ class GatewaySession:
             pass
         finally:
             self._subscribe(0.0, None)
+            if listening is not None:
+                with contextlib.suppress(Exception):  # NATS is gone: so is the subscription
+                    await listening.unsubscribe()
             if slot is not None:
                 slot.close()
             await self._release_all()
@@ -136,6 +151,23 @@ class GatewaySession:
             on_yield=self._on_yield,
             local=is_loopback_address(None if peer is None else peer.host),
         )
+
+    async def _released(self, msg: Any) -> None:
+        """A node let go of this connection's contacts on its armband (the watchdog, a
+        stop, a quota): ``released`` with the ``armband``, as the service's ``/ws`` tells
+        its client (docs/fleet.md)."""
+        try:
+            notice = json.loads(msg.data)
+            message = {
+                "type": "released",
+                "armband": subjects.released_armband(msg.subject),
+                "reason": str(notice["reason"]),
+                "contacts": [str(contact) for contact in notice["contacts"]],
+            }
+        except (ValueError, KeyError, TypeError):
+            logger.warning("fleet: a release notice that does not read: %r", msg.data[:200])
+            return
+        await self.sender.send_unless_gone(message)
 
     def _on_yield(self, reason: str) -> None:
         """The gateway gave this connection's slot to a newcomer: end the session with

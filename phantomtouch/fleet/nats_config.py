@@ -7,10 +7,12 @@
 
 - nobody connects without a user (no anonymous client);
 - a node subscribes only to its own armband's subjects, its site's stop and the fleet's
-  stop, answers the requests it receives (``allow_responses``), and of the registry may
-  write only its own key; it cannot publish a touch, a contact or a stop anywhere;
+  stop, answers the requests it receives (``allow_responses``), publishes only its own
+  armband's release notices, and of the registry may write only its own key; it cannot
+  publish a touch, a contact or a stop anywhere;
 - a gateway publishes on ``phantomtouch.>`` (what it serves: touches, contacts, stops and
-  clock requests of every armband) and reads the registry; it cannot write in it.
+  clock requests of every armband), hears every armband's release notices, and reads the
+  registry; it cannot write in it.
 
 The cluster's route ports are closed too: ``route-authorization.conf``, to be ``include``d
 in every server's ``cluster { }`` block, admits only servers that give the route user
@@ -69,12 +71,16 @@ class FleetUser:
         if self.armband is None:
             return {
                 "publish": {"allow": ["phantomtouch.>", *REGISTRY_API]},
-                "subscribe": {"allow": [inbox]},
+                "subscribe": {"allow": [f"{subjects.PREFIX}.released.>", inbox]},
             }
         assert self.site is not None
         return {
             "publish": {
-                "allow": [f"$KV.{REGISTRY_BUCKET}.{self.armband}", *REGISTRY_API],
+                "allow": [
+                    f"$KV.{REGISTRY_BUCKET}.{self.armband}",
+                    f"{subjects.PREFIX}.released.{self.armband}.*",
+                    *REGISTRY_API,
+                ],
             },
             "subscribe": {
                 "allow": [

@@ -86,13 +86,14 @@ class ArmbandNode:
         )
         self.principals = Principals(named=closed_cluster)
         self.contacts = RemoteContacts(
-            service.admission, principals=self.principals, on_silent=self._count_silent
+            service.admission, principals=self.principals, on_released=self._released
         )
         self.clock_offset_s: float | None = None
         self._in_flight = 0
         self._tasks: set[asyncio.Task[None]] = set()
         self._loops: list[asyncio.Task[None]] = []
         self._nc: Any = None
+        self._loop: asyncio.AbstractEventLoop | None = None
         self._kv: Any = None
         self._watcher: Any = None
         self._beat_failing = False
@@ -109,6 +110,7 @@ class ArmbandNode:
             ``start_deadline_s`` (each step is retried with backoff until then).
         """
         deadline = Deadline(self.settings.start_deadline_s)
+        self._loop = asyncio.get_running_loop()
         self._nc, self._kv = await open_registry(self.settings, f"armband-{self.armband}", deadline)
         handlers: dict[str, Callable[[Any], Any]] = {
             subjects.touch(self.armband): self._on_touch,
@@ -208,11 +210,32 @@ class ArmbandNode:
                 sent = ArmbandRecord.model_validate_json(entry.value)
                 self.clock_offset_s = sent.unix_time_s - entry.created.timestamp()
 
-    def _count_silent(self, owner_id: str) -> None:
-        """Count and log an owner released for silence, as the front's deadline thread
-        releases it (that thread)."""
-        self.messages.labels("contact", "watchdog_release").inc()
-        logger.info("fleet: %r silent; its contacts on %r released", owner_id, self.armband)
+    def _released(self, owner_id: str, contacts: tuple[str, ...], reason: str) -> None:
+        """The front let go of a remote owner's contacts (the thread that released them):
+        count and log a silent one, and tell the owner's gateway connection
+        (:func:`~phantomtouch.fleet.subjects.released`), as the service's ``/ws`` tells its
+        client."""
+        if reason == "watchdog":
+            self.messages.labels("contact", "watchdog_release").inc()
+            logger.info("fleet: %r silent; its contacts on %r released", owner_id, self.armband)
+        subject = subjects.released(self.armband, owner_id)
+        if subject is None or not contacts or self._loop is None:
+            return
+        notice = {"contacts": sorted(contacts), "reason": reason}
+        with contextlib.suppress(RuntimeError):  # the loop has closed: so has NATS
+            self._loop.call_soon_threadsafe(self._tell, subject, json.dumps(notice).encode())
+
+    def _tell(self, subject: str, payload: bytes) -> None:
+        """Publish ``payload`` on ``subject`` (the event loop); NATS buffers it."""
+        task = asyncio.ensure_future(self._publish(subject, payload))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _publish(self, subject: str, payload: bytes) -> None:
+        try:
+            await self._nc.publish(subject, payload)
+        except Exception as exc:  # NATS closing or reconnecting: the notice is lost
+            logger.debug("fleet: release notice on %s not sent: %s", subject, exc)
 
     # -- touch --------------------------------------------------------------------------
 

@@ -93,23 +93,24 @@ class RemoteContacts:
 
     Call :meth:`close` when the node stops listening.
 
-    ``on_silent(owner_id)`` is called as the front lets go of an owner for silence, in
-    the thread that released it (the front's deadline thread): it must return at once.
+    ``on_released(owner_id, contacts, reason)`` is called as the front lets go of a remote
+    owner's contacts (``watchdog``, ``stop``, ``quota``, ``released``...), in the thread
+    that released them (the front's deadline thread, a stop's): it must return at once.
     """
 
     admission: Admission
     _: KW_ONLY
     principals: Principals
-    on_silent: Callable[[str], None] | None = None
+    on_released: Callable[[str, tuple[str, ...], str], None] | None = None
     _unsubscribe: Callable[[], None] = field(init=False)
 
     def __post_init__(self) -> None:
         self._unsubscribe = self.admission.on_released(KIND, self._released)
 
     def _released(self, handle: Handle, contacts: tuple[str, ...], reason: str) -> None:
-        """The front's deadline thread let go of a silent owner (any thread)."""
-        if reason == "watchdog" and self.on_silent is not None:
-            self.on_silent(handle.source)
+        """The front let go of a remote owner's contacts (any thread)."""
+        if self.on_released is not None:
+            self.on_released(handle.source, contacts, reason)
 
     def close(self) -> None:
         self._unsubscribe()

@@ -49,10 +49,11 @@ async def _reach_past(url: str, access: dict[str, str]) -> list[str]:
         await nc.publish("phantomtouch.armband.a2.contact", b'{"type": "ping", "owner": "x"}')
         await nc.publish("phantomtouch.armband.a1.touch", b'{"touch": {"preset": "vr/tap"}}')
         await nc.publish("$KV.phantomtouch_armbands.a2", b"{}")
+        await nc.publish("phantomtouch.released.a2.gw-x-1", b'{"contacts": [], "reason": "x"}')
         await nc.subscribe("phantomtouch.armband.a2.touch")
         await nc.flush()
         for _ in range(50):
-            if len(refused) >= 5:
+            if len(refused) >= 6:
                 break
             await asyncio.sleep(0.05)
         return refused
@@ -78,6 +79,7 @@ def test_a_node_cannot_publish_on_another_armbands_subjects(fleet: Fleet) -> Non
         'publish to "phantomtouch.armband.a2.contact"',
         'publish to "phantomtouch.armband.a1.touch"',
         'publish to "$kv.phantomtouch_armbands.a2"',
+        'publish to "phantomtouch.released.a2.gw-x-1"',
         'subscription to "phantomtouch.armband.a2.touch"',
     ):
         assert f"permissions violation for {subject}" in text, refused

@@ -128,3 +128,26 @@ def test_a_vanished_gateway_releases_its_contacts_on_every_armband(fleet: Fleet)
         ws.close()
     finally:
         gateway.kill()
+
+
+def test_a_client_is_told_when_an_armband_lets_go_of_its_contacts(fleet: Fleet) -> None:
+    """A node's release reaches its client through the gateway, as the service's
+    ``released`` with the armband: a stop of one armband, and the client's silence on the
+    other (docs/fleet.md, "Live contacts")."""
+    with connect(fleet.gateways[0].ws_url) as ws:
+        for armband in ("a1", "a2"):
+            down = {"type": "down", "armband": armband, "contact": "c", "x_cm": 1.9, "y_cm": 7.2}
+            assert _ask(ws, {**down, "id": armband})["type"] == "ok"
+        ws.send(json.dumps({"type": "stop", "armband": "a1", "id": "stop"}))
+        released: list[dict[str, Any]] = []
+        end_s = time.monotonic() + 10 * WATCHDOG_S + 10.0
+        while len(released) < 2 and time.monotonic() < end_s:
+            with contextlib.suppress(TimeoutError):
+                message = json.loads(ws.recv(timeout=1.0))
+                if message["type"] == "released":
+                    released.append(message)
+        assert sorted(released, key=lambda m: str(m["armband"])) == [
+            {"type": "released", "armband": "a1", "reason": "stop", "contacts": ["c"]},
+            {"type": "released", "armband": "a2", "reason": "watchdog", "contacts": ["c"]},
+        ]
+        assert _remote_contacts(fleet, "a1") == _remote_contacts(fleet, "a2") == []

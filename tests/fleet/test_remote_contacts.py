@@ -22,7 +22,8 @@ DEVICE = DeviceProfile.default()
 WATCHDOG_S = 0.5
 
 
-SILENT: list[str] = []
+RELEASED: list[tuple[str, tuple[str, ...], str]] = []
+"""What ``on_released`` was told: owner, contacts, reason."""
 
 
 @pytest.fixture
@@ -36,9 +37,11 @@ def captured() -> Iterator[tuple[RemoteContacts, CaptureSink]]:
         table["fleet"] = table["fleet"].replace(
             deadline_s=WATCHDOG_S, contacts_per_owner=2, max_message_bytes=1024
         )
-        SILENT.clear()
+        RELEASED.clear()
         contacts = RemoteContacts(
-            Admission(engine, table), principals=Principals(named=True), on_silent=SILENT.append
+            Admission(engine, table),
+            principals=Principals(named=True),
+            on_released=lambda owner, held, reason: RELEASED.append((owner, held, reason)),
         )
         yield contacts, sink
         contacts.close()
@@ -67,10 +70,10 @@ def test_a_silent_owner_is_released_by_its_deadline(
     contacts.handle(_message(type="ping"))  # a message of the owner's own renews it
     heard_s = time.monotonic()
     engine.release_expired(now_s=heard_s + WATCHDOG_S / 2)
-    assert contacts.count() == 1 and SILENT == []
+    assert contacts.count() == 1 and RELEASED == []
     engine.release_expired(now_s=time.monotonic() + WATCHDOG_S * 1.01)
     assert contacts.count() == 0
-    assert SILENT == ["gw-1"]
+    assert RELEASED == [("gw-1", ("f",), "watchdog")]
     sink.pull(40)  # the release ramp
     assert not np.any(sink.pull(2))
 
