@@ -41,7 +41,7 @@ from typing import Any, Final
 import numpy as np
 from pydantic import ValidationError
 
-from phantomtouch.engine.thread_priority import raise_thread_priority
+from phantomtouch.service.thread_priority import raise_thread_priority
 from phantomtouch.errors import (
     DeviceError,
     ParameterError,
