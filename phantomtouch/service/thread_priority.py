@@ -20,8 +20,8 @@ from phantomtouch.engine.process import REALTIME_PRIORITY
 logger = logging.getLogger("phantomtouch.service")
 
 INPUT_PRIORITY = REALTIME_PRIORITY
-"""``SCHED_RR`` priority of input threads: the engine process's own, so neither starves
-the other."""
+"""``SCHED_RR`` priority of input threads: the engine process's own (the lowest real-time
+one), so neither starves the other."""
 
 
 def raise_thread_priority(name: str, priority: int = INPUT_PRIORITY) -> bool:
