@@ -42,10 +42,10 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import Field, ValidationError
 
-from phantomtouch.service.thread_priority import raise_thread_priority
 from phantomtouch.errors import PhantomTouchError
 from phantomtouch.service.errors import Problem, describe, validation_problem
 from phantomtouch.service.flood import FloodGuard
+from phantomtouch.service.thread_priority import raise_thread_priority
 from phantomtouch.service.ws_messages import Move
 
 if TYPE_CHECKING:
