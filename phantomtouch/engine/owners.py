@@ -403,15 +403,6 @@ class ContactCalls:
         with self._lock:
             return list(self._contacts.held(owner))
 
-    def contact_owners(self, prefix: str = "") -> dict[str, list[str]]:
-        """The contacts down of every owner whose name starts with ``prefix``. Any thread."""
-        with self._lock:
-            found: dict[str, list[str]] = {}
-            for owner, contact, _ in self._contacts.items():
-                if owner.startswith(prefix):
-                    found.setdefault(owner, []).append(contact)
-            return found
-
     def subscribe_released(
         self, listener: ReleasedListener, owner: str | None = None
     ) -> Callable[[], None]:
