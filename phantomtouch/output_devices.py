@@ -91,7 +91,9 @@ def split_host_api(output: str, host_apis: Sequence[str]) -> tuple[str | None, s
     return (chosen[0], name.strip()) if len(chosen) == 1 else (None, output)
 
 
-def find_output_device(output: int | str | None, channels: int) -> dict[str, Any]:
+def find_output_device(
+    output: int | str | None, channels: int, *, exclusive: bool = False
+) -> dict[str, Any]:
     """The output device to open, as listed by :func:`list_output_devices`.
 
     Parameters
@@ -103,11 +105,14 @@ def find_output_device(output: int | str | None, channels: int) -> dict[str, Any
         enough outputs, else the first device that has.
     channels : int
         Outputs needed.
+    exclusive : bool
+        It is to be opened in WASAPI's exclusive mode: it must be a WASAPI device.
 
     Raises
     ------
     DeviceError
-        No such device, several match the name, or it has fewer than ``channels`` outputs.
+        No such device, several match the name, it has fewer than ``channels`` outputs,
+        or ``exclusive`` is asked of a device that is not a WASAPI one.
     """
     devices = list_output_devices()
     asked, host_api = output, None
@@ -145,6 +150,11 @@ def find_output_device(output: int | str | None, channels: int) -> dict[str, Any
         raise DeviceError(
             f"output device {found['name']!r} has {found['max_output_channels']} outputs; "
             f"{channels} needed"
+        )
+    if exclusive and "wasapi" not in found["hostapi"].lower():
+        raise DeviceError(
+            f"exclusive mode is WASAPI's; output device {found['name']!r} is a "
+            f"{found['hostapi']} device (name a WASAPI one: 'WASAPI:{found['name']}')"
         )
     return found
 

@@ -140,7 +140,7 @@ class SoundDeviceSink:
         self._check_latency(latency)
         stream_channels = int(self._map.max()) + 1 if self._map is not None else self.channels
         sd = sounddevice_module()
-        found = find_output_device(output, stream_channels)
+        found = find_output_device(output, stream_channels, exclusive=exclusive)
         self.output_device: str = found["name"]
         self.period_frames, self.block_frames, self.period_source = resolve_period(
             found["hostapi"], host_period_frames(found), period_frames, device.block_frames
@@ -149,14 +149,7 @@ class SoundDeviceSink:
         self._render: RenderFn | None = None
         self.underruns = 0
         self._dac_delay_s: float | None = None
-        extra_settings = None
-        if exclusive:
-            if "wasapi" not in found["hostapi"].lower():
-                raise DeviceError(
-                    f"exclusive mode is WASAPI's; output device {found['name']!r} is a "
-                    f"{found['hostapi']} device (name a WASAPI one: 'WASAPI:{found['name']}')"
-                )
-            extra_settings = sd.WasapiSettings(exclusive=True)
+        extra_settings = sd.WasapiSettings(exclusive=True) if exclusive else None
         try:
             self._stream = sd.OutputStream(
                 samplerate=self.sample_rate_hz,

@@ -77,7 +77,7 @@ def test_exclusive_mode_is_refused_on_a_device_that_is_not_wasapi(
     ("flags", "message"),
     [
         (["--output", "JACK:nothing"], "output='JACK:nothing' matches no output device"),
-        (["--output", "system", "--exclusive"], "--exclusive is WASAPI's exclusive mode"),
+        (["--output", "system", "--exclusive"], "exclusive mode is WASAPI's"),
     ],
 )
 def test_serve_refuses_an_output_it_cannot_open_in_one_line(
