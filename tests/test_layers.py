@@ -4,9 +4,10 @@ The layers, lowest first (docs/architecture.md)::
 
     base         phantomtouch.errors (the exception root), phantomtouch.schema
     renderer     phantomtouch.renderer                       -> base
+    devices      phantomtouch.output_devices (PortAudio's)   -> base
     clips        phantomtouch.clips (a file in, a clip out)  -> base only
     package      phantomtouch/__init__.py (the public names) -> renderer, base
-    engine       phantomtouch.engine                         -> renderer, base
+    engine       phantomtouch.engine                         -> renderer, devices, base
     service      phantomtouch.service                         -> engine, clips, package, ...
     server, fleet, osc, bhaptics                             -> service and below; never
                                                                 each other
@@ -33,6 +34,7 @@ LAYER_OF = {
     "phantomtouch.errors": "base",
     "phantomtouch.schema": "base",
     "phantomtouch.renderer": "renderer",
+    "phantomtouch.output_devices": "devices",
     "phantomtouch.clips": "clips",
     "phantomtouch.engine": "engine",
     "phantomtouch.service": "service",
@@ -49,13 +51,14 @@ LAYER_OF = {
 }
 """A module's layer: that of the longest name here that is the module or a package of it."""
 
-_BELOW_SERVICE = {"base", "renderer", "clips", "package", "engine"}
+_BELOW_SERVICE = {"base", "renderer", "devices", "clips", "package", "engine"}
 ALLOWED = {
     "base": {"base"},
     "renderer": {"base", "renderer"},
+    "devices": {"base", "devices"},
     "clips": {"base", "clips"},
     "package": {"base", "renderer", "package"},
-    "engine": {"base", "renderer", "engine"},
+    "engine": {"base", "renderer", "devices", "engine"},
     "service": _BELOW_SERVICE | {"service"},
     "server": _BELOW_SERVICE | {"service", "server"},
     "fleet": _BELOW_SERVICE | {"service", "fleet"},

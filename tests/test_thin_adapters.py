@@ -34,7 +34,6 @@ OWNER_METHODS = frozenset(
         "release_expired",
         "stop_owner",
         "contacts_of",
-        "contact_owners",
         "subscribe_released",
         "check_quota",
         "schedule",

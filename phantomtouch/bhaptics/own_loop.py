@@ -4,7 +4,7 @@ A game's frames move live contacts (:mod:`~phantomtouch.bhaptics.frames`). Read 
 service's event loop, they would wait behind every HTTP request it serves; here the
 stand-in's listener (:mod:`~phantomtouch.bhaptics.listener`, unchanged) runs in its own
 thread, which asks for real-time priority where the user may
-(:mod:`~phantomtouch.engine.thread_priority`), with its own asyncio loop. What it shares
+(:mod:`~phantomtouch.service.thread_priority`), with its own asyncio loop. What it shares
 with the rest of the service is made for any thread: the engine's front, the connection
 caps, the metrics registry.
 """
@@ -19,7 +19,7 @@ from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING
 
 from phantomtouch.bhaptics.listener import attach as attach_listener
-from phantomtouch.engine.thread_priority import raise_thread_priority
+from phantomtouch.service.thread_priority import raise_thread_priority
 
 if TYPE_CHECKING:
     from phantomtouch.service.running import Service

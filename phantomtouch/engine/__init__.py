@@ -10,12 +10,7 @@ from phantomtouch.engine.jobs import Job
 from phantomtouch.engine.local_audio import Engine
 from phantomtouch.engine.process import ProcessEngine
 from phantomtouch.engine.sinks import CaptureSink, NullSink, Sink
-from phantomtouch.engine.soundcard import (
-    SinkSpec,
-    SoundDeviceSink,
-    list_output_devices,
-    open_default_sink,
-)
+from phantomtouch.engine.soundcard import SinkSpec, SoundDeviceSink, open_default_sink
 
 __all__ = [
     "CaptureSink",
@@ -28,6 +23,5 @@ __all__ = [
     "Sink",
     "SinkSpec",
     "SoundDeviceSink",
-    "list_output_devices",
     "open_default_sink",
 ]

@@ -21,7 +21,7 @@ from phantomtouch.engine.messages import DropPlan, HoldPlan, ReleaseJob, StartJo
 from phantomtouch.engine.owners import post_release
 from phantomtouch.engine.render_budget import Admission
 from phantomtouch.errors import ParameterError
-from phantomtouch.renderer.plan import Plan, plan
+from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 from phantomtouch.schema.pattern import TouchPattern
 
@@ -36,27 +36,6 @@ MAX_SCHEDULE_AHEAD_S = 3600.0
 PREPARE_BLOCKS = 1
 """Blocks after the next that a job asked for as soon as possible and not prerendered is
 promised: its voice is prepared outside the callback meanwhile (``docs/engine.md``)."""
-
-
-def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
-    """The plan of a pattern for ``device`` (a given plan must be made for ``device``, at
-    any block size: a plan's samples do not depend on it).
-
-    Raises
-    ------
-    ParameterError
-        The pattern cannot be planned, or the plan is for another device.
-    """
-    if isinstance(pattern, Plan):
-        if pattern.device.at_block(device.block_frames) != device:
-            raise ParameterError(
-                f"pattern is a Plan for device {pattern.device.name!r} at "
-                f"{pattern.sample_rate_hz} Hz; plan it for this engine's device"
-            )
-        return pattern
-    if isinstance(pattern, TouchPattern):
-        return plan(pattern, device)
-    raise ParameterError(f"pattern must be a TouchPattern or a Plan, got {type(pattern).__name__}")
 
 
 class JobCalls:

@@ -153,12 +153,11 @@ class OwnerTable:
         owners, self._owners = self._owners, {}
         return owners
 
-    def expired(self, now_s: float, prefix: str = "") -> dict[str, dict[str, ContactRecord]]:
-        """Take out every contact whose deadline is at or before ``now_s``, by owner
-        (only owners whose name starts with ``prefix``)."""
+    def expired(self, now_s: float) -> dict[str, dict[str, ContactRecord]]:
+        """Take out every contact whose deadline is at or before ``now_s``, by owner."""
         due: dict[str, dict[str, ContactRecord]] = {}
         for owner, contact, record in list(self.items()):
-            if owner.startswith(prefix) and record.deadline_s <= now_s:
+            if record.deadline_s <= now_s:
                 due.setdefault(owner, {})[contact] = record
                 self.pop(owner, contact)
         return due
@@ -403,15 +402,6 @@ class ContactCalls:
         with self._lock:
             return list(self._contacts.held(owner))
 
-    def contact_owners(self, prefix: str = "") -> dict[str, list[str]]:
-        """The contacts down of every owner whose name starts with ``prefix``. Any thread."""
-        with self._lock:
-            found: dict[str, list[str]] = {}
-            for owner, contact, _ in self._contacts.items():
-                if owner.startswith(prefix):
-                    found.setdefault(owner, []).append(contact)
-            return found
-
     def subscribe_released(
         self, listener: ReleasedListener, owner: str | None = None
     ) -> Callable[[], None]:
@@ -443,13 +433,13 @@ class ContactCalls:
                     except Exception:
                         logger.exception("a released listener failed")
 
-    def release_expired(self, now_s: float | None = None, prefix: str = "") -> None:
-        """Release every contact whose deadline is at or before ``now_s`` (None: now)
-        of owners whose name starts with ``prefix``. Any thread: the front's deadline
-        thread does this on its own, an input may ask sooner."""
+    def release_expired(self, now_s: float | None = None) -> None:
+        """Release every contact whose deadline is at or before ``now_s`` (None: now).
+        Any thread: the front's deadline thread does this on its own, an input may ask
+        sooner."""
         now_s = time.monotonic() if now_s is None else now_s
         with self._lock:
-            due = self._contacts.expired(now_s, prefix)
+            due = self._contacts.expired(now_s)
             for held in due.values():
                 for record in held.values():
                     self._lift(record, ContactUp((record.handle,), None, None))

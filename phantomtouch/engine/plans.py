@@ -12,9 +12,9 @@ from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from phantomtouch.engine.job_calls import resolve_plan
 from phantomtouch.engine.plan_memory import heavy_bytes
 from phantomtouch.engine.prerender import PRERENDER_MAX_S, Prerendered, prerender
+from phantomtouch.errors import ParameterError
 from phantomtouch.renderer import plan
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema import DeviceProfile, TouchPattern
@@ -29,6 +29,27 @@ characters is a tuple of two floats, about 110 bytes (measured with ``tracemallo
 def plan_bytes(resolved: Plan, key_chars: int) -> int:
     """Bytes a kept plan holds: its pattern (from the JSON's length) and its timelines."""
     return PATTERN_BYTES_PER_CHAR * key_chars + heavy_bytes(resolved, None)
+
+
+def resolve_plan(pattern: TouchPattern | Plan, device: DeviceProfile) -> Plan:
+    """The plan of a pattern for ``device`` (a given plan must be made for ``device``, at
+    any block size: a plan's samples do not depend on it).
+
+    Raises
+    ------
+    ParameterError
+        The pattern cannot be planned, or the plan is for another device.
+    """
+    if isinstance(pattern, Plan):
+        if pattern.device.at_block(device.block_frames) != device:
+            raise ParameterError(
+                f"pattern is a Plan for device {pattern.device.name!r} at "
+                f"{pattern.sample_rate_hz} Hz; plan it for this engine's device"
+            )
+        return pattern
+    if isinstance(pattern, TouchPattern):
+        return plan(pattern, device)
+    raise ParameterError(f"pattern must be a TouchPattern or a Plan, got {type(pattern).__name__}")
 
 
 @dataclass(eq=False)

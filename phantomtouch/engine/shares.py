@@ -1,32 +1,16 @@
-"""Fair shares: who yields a slot when every slot is taken (``docs/owners.md``).
+"""Fair shares: who yields a slot when every slot is taken; the rule, its reasons and
+where each pool uses it are in ``docs/owners.md`` (Fair shares).
 
 One rule for every pool of slots owners compete for: the engine's contact slots
 (:class:`~phantomtouch.engine.owners.OwnerTable`), its pattern voices
 (:meth:`~phantomtouch.engine.jobs.JobTable.admit`) and an input's connection slots
-(:mod:`phantomtouch.service.admission`). Shares go first among **principals** (who a
-source really is), then among the owners of one principal, so that opening more
-connections or source ports buys a program nothing (as CPU shares go first among groups,
-then among a group's processes). An owner's principal is the part of its name before
-:data:`PRINCIPAL_SEPARATOR` (:func:`principal_of`; a name without one is a principal of
-its own); the service names owners that way (``phantomtouch.service.admission``).
-
-Between holders of one level, a holder with ``m`` asks for one slot more; the largest
-other holders hold ``M``:
-
-- if ``M >= m + 2``, one of them yields (the take evens the shares out; between holders one
-  apart a take would only swap which of the two is short, and they would take the slot back
-  and forth);
-- if ``m == 0`` and ``M >= 1``, one of them yields too: a newcomer holding nothing always
-  gets one slot, also when every holder holds one (then the slots pass round, oldest first);
-- otherwise none yields.
-
-The rule runs first over the principals' totals: when other principals yield, the owners
-holding the most within those principals are the ones that yield. When no other principal
-yields, it runs over the owners of the asker's own principal (a program's sources share
-what the program holds). When neither yields, the ask is refused (``busy``).
-
-Among the owners that yield the caller lets the one whose slot is oldest yield its oldest
-slot (voices: the oldest or the quietest, as the voice policy orders them).
+(:mod:`phantomtouch.service.admission`). It runs first over the principals' totals (an
+owner's principal: :func:`principal_of`; in a principal that yields, its owners holding the
+most yield), then, when none does, over the owners of the asker's own principal. At one
+level, a holder with ``m`` asks for one slot more and the largest other holders hold ``M``:
+one of them yields if ``M >= m + 2``, or if ``m == 0`` and ``M >= 1`` (a newcomer always
+gets one); otherwise none does, and the ask is refused (``busy``). The caller picks which
+of them yields (the one whose slot is oldest; voices: as the voice policy orders them).
 """
 
 from __future__ import annotations

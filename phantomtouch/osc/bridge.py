@@ -41,7 +41,6 @@ from typing import Any, Final
 import numpy as np
 from pydantic import ValidationError
 
-from phantomtouch.engine.thread_priority import raise_thread_priority
 from phantomtouch.errors import (
     DeviceError,
     ParameterError,
@@ -59,6 +58,7 @@ from phantomtouch.service.admission import Admission, Arrival, Handle, principal
 from phantomtouch.service.flood import LimitedLog
 from phantomtouch.service.models import AnyTouch, NamedTouch, PresetTouch
 from phantomtouch.service.running import InputHealth
+from phantomtouch.service.thread_priority import raise_thread_priority
 
 try:
     from phantomtouch.osc.packets import BadDatagram, messages_of

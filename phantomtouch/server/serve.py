@@ -68,7 +68,7 @@ def check_output(settings: Settings) -> None:
     DeviceError
         PortAudio (or ``sounddevice``) is missing or cannot list the devices (exit 1).
     """
-    from phantomtouch.engine.soundcard import find_output_device, list_output_devices
+    from phantomtouch.output_devices import find_output_device, list_output_devices
     from phantomtouch.service.engine_access import NULL_OUTPUT, output_of
 
     output = output_of(settings)
@@ -79,14 +79,9 @@ def check_output(settings: Settings) -> None:
     list_output_devices()  # a failure to list is the machine's, not the input's
     channels = profile_channels(settings)
     try:
-        found = find_output_device(output, channels)
+        find_output_device(output, channels, exclusive=settings.wasapi_exclusive)
     except DeviceError as exc:
         raise ParameterError(str(exc)) from exc
-    if settings.wasapi_exclusive and "wasapi" not in found["hostapi"].lower():
-        raise ParameterError(
-            f"--exclusive is WASAPI's exclusive mode; output device {found['name']!r} is a "
-            f"{found['hostapi']} device (name a WASAPI one: 'WASAPI:{found['name']}')"
-        )
 
 
 def profile_channels(settings: Settings) -> int:

@@ -4,7 +4,7 @@ A ``/ws`` connection's frames are read by the service's event loop, which also s
 HTTP request: under a stream of requests a move waits its turn behind them. The lane is a
 UDP socket beside the service (on its host, a port of its own) read by a thread of its own
 that runs at real-time priority where the user may ask for it
-(:mod:`~phantomtouch.engine.thread_priority`) and decodes nothing but moves. It hands each
+(:mod:`~phantomtouch.service.thread_priority`) and decodes nothing but moves. It hands each
 to the connection's admission handle at once (its ``move``: the move slot the audio callback
 drains at its next block), so a move is late neither behind HTTP work nor behind busy processes.
 
@@ -42,10 +42,10 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import Field, ValidationError
 
-from phantomtouch.engine.thread_priority import raise_thread_priority
 from phantomtouch.errors import PhantomTouchError
 from phantomtouch.service.errors import Problem, describe, validation_problem
 from phantomtouch.service.flood import FloodGuard
+from phantomtouch.service.thread_priority import raise_thread_priority
 from phantomtouch.service.ws_messages import Move
 
 if TYPE_CHECKING:

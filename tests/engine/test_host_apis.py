@@ -16,8 +16,8 @@ import pytest
 from phantomtouch import DeviceProfile
 from phantomtouch.cli import main
 from phantomtouch.engine import SoundDeviceSink
-from phantomtouch.engine.soundcard import find_output_device, split_host_api
 from phantomtouch.errors import DeviceError
+from phantomtouch.output_devices import find_output_device, split_host_api
 from tests.support.jack import JackServer
 
 WINDOWS = ["MME", "Windows DirectSound", "ASIO", "Windows WASAPI", "Windows WDM-KS"]
@@ -77,7 +77,7 @@ def test_exclusive_mode_is_refused_on_a_device_that_is_not_wasapi(
     ("flags", "message"),
     [
         (["--output", "JACK:nothing"], "output='JACK:nothing' matches no output device"),
-        (["--output", "system", "--exclusive"], "--exclusive is WASAPI's exclusive mode"),
+        (["--output", "system", "--exclusive"], "exclusive mode is WASAPI's"),
     ],
 )
 def test_serve_refuses_an_output_it_cannot_open_in_one_line(
@@ -108,13 +108,13 @@ def test_asio_is_asked_for_before_sounddevice_is_imported_on_windows() -> None:
     """sounddevice reads ``SD_ENABLE_ASIO`` once, as it loads its bundled PortAudio."""
     script = (
         "import os, sys\n"
-        "from phantomtouch.engine import soundcard\n"
+        "from phantomtouch import output_devices\n"
         "from phantomtouch.errors import DeviceError\n"
         "os.environ.pop('SD_ENABLE_ASIO', None)\n"
         "sys.modules.pop('sounddevice', None)\n"
         "sys.platform = 'win32'\n"
         "try:\n"
-        "    soundcard._sounddevice()\n"
+        "    output_devices.sounddevice_module()\n"
         "except DeviceError:\n"
         "    pass  # the Windows DLL is not on this machine\n"
         "print(os.environ.get('SD_ENABLE_ASIO'))\n"

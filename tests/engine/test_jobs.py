@@ -6,8 +6,8 @@ import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, TouchPattern
 from phantomtouch.engine import CaptureSink, Engine
-from phantomtouch.engine.job_calls import resolve_plan
 from phantomtouch.engine.jobs import JobRecord, JobTable, OwnerQuota, QuotaRefused
+from phantomtouch.engine.plans import resolve_plan
 from phantomtouch.renderer import plan
 
 

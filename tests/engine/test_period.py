@@ -18,12 +18,9 @@ import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
 from phantomtouch.engine import Engine, NullSink, ProcessEngine, SinkSpec, SoundDeviceSink
-from phantomtouch.engine.soundcard import (
-    find_output_device,
-    host_period_frames,
-    resolve_period,
-)
+from phantomtouch.engine.soundcard import resolve_period
 from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.output_devices import find_output_device, host_period_frames
 from tests.support.jack import JackRecorder, JackServer, start_jack_or_skip
 from tests.support.live_server import LiveServer
 

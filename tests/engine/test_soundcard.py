@@ -10,15 +10,9 @@ import pytest
 
 from phantomtouch import DeviceProfile, ParameterError, TouchPattern, render
 from phantomtouch.cli import main
-from phantomtouch.engine import (
-    Engine,
-    NullSink,
-    SoundDeviceSink,
-    list_output_devices,
-    open_default_sink,
-)
-from phantomtouch.engine.soundcard import find_output_device
+from phantomtouch.engine import Engine, NullSink, SoundDeviceSink, open_default_sink
 from phantomtouch.errors import DeviceError
+from phantomtouch.output_devices import find_output_device, list_output_devices
 from phantomtouch.schema import Actuator
 from tests.support.jack import JackRecorder, JackServer
 

@@ -15,11 +15,13 @@ import logging
 import os
 import sys
 
-logger = logging.getLogger("phantomtouch.engine")
+from phantomtouch.engine.process import REALTIME_PRIORITY
 
-INPUT_PRIORITY = 1
-"""``SCHED_RR`` priority of input threads: the lowest real-time one, at the engine's own
-(:data:`phantomtouch.engine.process.REALTIME_PRIORITY`), so neither starves the other."""
+logger = logging.getLogger("phantomtouch.service")
+
+INPUT_PRIORITY = REALTIME_PRIORITY
+"""``SCHED_RR`` priority of input threads: the engine process's own (the lowest real-time
+one), so neither starves the other."""
 
 
 def raise_thread_priority(name: str, priority: int = INPUT_PRIORITY) -> bool:
