@@ -25,8 +25,8 @@ from typing import TYPE_CHECKING
 
 from phantomtouch.errors import ParameterError, ProtocolError
 from phantomtouch.service.admission.principals import DETACHED, owner_id
-from phantomtouch.service.admission.rate import Arrival, Meter, monotonic
-from phantomtouch.service.admission.slots import Slot, YieldCallback
+from phantomtouch.service.admission.rate import Arrival, monotonic
+from phantomtouch.service.admission.slots import Opening, Slot
 from phantomtouch.service.errors import QuotaError
 from phantomtouch.service.scheduling import (
     DETACHED_NAMES,
@@ -41,7 +41,6 @@ if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
     from phantomtouch.engine.owners import ReleasedListener
     from phantomtouch.schema.pattern import Carrier
-    from phantomtouch.service.admission.policy import InputPolicy
     from phantomtouch.service.models import AnyTouch, JobAccepted
     from phantomtouch.service.store import PatternStore
     from phantomtouch.service.ws_messages import Down
@@ -71,31 +70,11 @@ class Handle(Slot):
     :class:`~phantomtouch.service.admission.slots.Slot`'s.
     """
 
-    def __init__(
-        self,
-        engine: EngineFront,
-        store: PatternStore | None,
-        policy: InputPolicy,
-        *,
-        source: str,
-        principal: str,
-        meter: Meter,
-        on_yield: YieldCallback | None,
-        on_close: Callable[[Slot], None],
-        local: bool = False,
-    ) -> None:
-        super().__init__(
-            policy,
-            source=source,
-            principal=principal,
-            meter=meter,
-            on_yield=on_yield,
-            on_close=on_close,
-            local=local,
-        )
+    def __init__(self, engine: EngineFront, store: PatternStore | None, opening: Opening) -> None:
+        super().__init__(opening)
         self.engine = engine
         self.store = store
-        self.detached_owner = owner_id(principal, DETACHED)
+        self.detached_owner = owner_id(opening.principal, DETACHED)
         self._unsubscribe: list[Callable[[], None]] = []
 
     # -- messages -----------------------------------------------------------------------
