@@ -30,7 +30,7 @@ from phantomtouch.service.admission.slots import Opening, Slot
 from phantomtouch.service.errors import QuotaError
 from phantomtouch.service.scheduling import (
     DETACHED_NAMES,
-    QUOTA_NAMES,
+    Account,
     schedule_held,
     schedule_touch,
 )
@@ -271,12 +271,7 @@ class Handle(Slot):
         QuotaError, NotFoundError, MissingReferenceError, ParameterError, EngineBusyError
         """
         held = schedule_held(
-            self.engine,
-            request,
-            owner=self.detached_owner if detached else self.owner,
-            quota=self.policy.detached_quota if detached else self.policy.quota,
-            stop_count=arrival.stop_count,
-            names=DETACHED_NAMES if detached else QUOTA_NAMES,
+            self.engine, request, account=self._account(detached), stop_count=arrival.stop_count
         )
         if held is not None:
             return held
@@ -291,11 +286,17 @@ class Handle(Slot):
             self.engine,
             self.store,
             request,
-            owner=self.detached_owner if detached else self.owner,
-            quota=self.policy.detached_quota if detached else self.policy.quota,
+            account=self._account(detached),
             stop_count=arrival.stop_count,
-            names=DETACHED_NAMES if detached else QUOTA_NAMES,
         )
+
+    def _account(self, detached: bool) -> Account:
+        """What a touch of this source goes on: the source's own owner and the row's
+        quota, or (``detached``) the principal's :attr:`detached_owner` and the row's
+        ``detached_quota``."""
+        if detached:
+            return Account(self.detached_owner, self.policy.detached_quota, DETACHED_NAMES)
+        return Account(self.owner, self.policy.quota)
 
     def play_score(
         self,
