@@ -160,12 +160,10 @@ def event_score(
     Parameters
     ----------
     event : Event
-    arm_map : ArmMap
-        Which arms play here and where their points land.
-    device : DeviceProfile
-    scale : ScaleOption or None
-        ``SdkPlay``'s ``intensity`` and ``duration`` (a ratio: 2 plays twice as long);
-        None: 1 and 1. The event's own :attr:`Event.intensity` multiplies ``intensity``.
+    arm_map, device, scale
+        As for :func:`~phantomtouch.clips.tact_score.score`: ``scale`` is ``SdkPlay``'s
+        ``intensity`` and ``duration`` (a ratio: 2 plays twice as long), and the event's
+        own :attr:`Event.intensity` multiplies its ``intensity``.
 
     Returns
     -------

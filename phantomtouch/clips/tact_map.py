@@ -27,16 +27,14 @@ a picture.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from phantomtouch.clips.tact import TACTOSY2_LAYOUT
-from phantomtouch.errors import ParameterError
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.schema.pattern import Carrier, Law, Point, SineCarrier
-from phantomtouch.schema.validation import read_model_file
+from phantomtouch.schema.validation import TomlFileModel
 
 ArmName = Literal["ForearmL", "ForearmR"]
 
@@ -70,9 +68,11 @@ def span_placement(device: DeviceProfile) -> ArmPlacement:
     return ArmPlacement(origin_cm=(x0, y0), x_end_cm=(x0, y1), y_end_cm=(x1, y0))
 
 
-class ArmMap(BaseModel):
-    """Which arm positions play on the band, where, and how strongly."""
+class ArmMap(TomlFileModel):
+    """Which arm positions play on the band, where, and how strongly (a file of its own:
+    :meth:`~phantomtouch.schema.validation.TomlFileModel.load`)."""
 
+    FILE_KIND = "bHaptics arm map"
     model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True)
 
     arms: list[ArmName] = Field(
@@ -92,19 +92,6 @@ class ArmMap(BaseModel):
         if len(set(self.arms)) != len(self.arms):
             raise ValueError(f"arms={self.arms!r} names an arm twice")
         return self
-
-    @classmethod
-    def load(cls, path: str | Path) -> ArmMap:
-        """Read an arm map file (TOML).
-
-        Raises
-        ------
-        ParameterError
-            Unreadable, not TOML, or a field out of range (the message names it).
-        """
-        return read_model_file(
-            cls, Path(path), what="bHaptics arm map", error=ParameterError, json_unless_toml=False
-        )
 
     def placement(self, position: str, device: DeviceProfile) -> ArmPlacement | None:
         """Where ``position``'s unit square lands on ``device``; None: it plays nothing here."""

@@ -62,6 +62,7 @@ from phantomtouch.service.errors import (
 )
 from phantomtouch.service.ws_messages import PROTOCOL_VERSION, MessageError, parse
 from phantomtouch.service.ws_sending import GONE, JsonSender
+from phantomtouch.service.ws_yield import MAX_REASON_CHARS, ServingTask
 
 if TYPE_CHECKING:
     from phantomtouch.fleet.gateway import Gateway
@@ -89,8 +90,7 @@ class GatewaySession:
         self.grant: Grant | None = None
         self.sender = JsonSender(websocket)
         self._state_task: asyncio.Task[None] | None = None
-        self._serve_task: asyncio.Task[Any] | None = None
-        self._yielded: str | None = None
+        self._serving = ServingTask()
 
     async def run(self) -> None:
         """Accept, check the token, take a slot, serve frames until the connection ends;
@@ -108,18 +108,16 @@ class GatewaySession:
                     "a token is required: ?token=... or Bearer",
                 )
             else:
-                self._serve_task = asyncio.current_task()
+                self._serving.start()
                 slot = self._open()
                 subject = subjects.released_to(self.owner)
                 assert subject is not None  # gw-ID-N is one token
                 listening = await self.gateway.nc.subscribe(subject, cb=self._released)
                 code, reason = await self._serve(slot)
         except SourcesFullError as exc:
-            code, reason = WS_CLOSE_TRY_AGAIN_LATER, str(exc)[:120]
-        except asyncio.CancelledError:
-            if self._yielded is None:
-                raise
-            code, reason = WS_CLOSE_TRY_AGAIN_LATER, self._yielded
+            code, reason = WS_CLOSE_TRY_AGAIN_LATER, str(exc)[:MAX_REASON_CHARS]
+        except asyncio.CancelledError as cancelled:
+            code, reason = self._serving.close_frame(cancelled)
         except (WebSocketDisconnect, OSError):
             pass
         finally:
@@ -148,7 +146,7 @@ class GatewaySession:
             KIND,
             self.owner,
             principal=self.principal,
-            on_yield=self._on_yield,
+            on_yield=self._serving.yield_slot,
             local=is_loopback_address(None if peer is None else peer.host),
         )
 
@@ -168,15 +166,6 @@ class GatewaySession:
             logger.warning("fleet: a release notice that does not read: %r", msg.data[:200])
             return
         await self.sender.send_unless_gone(message)
-
-    def _on_yield(self, reason: str) -> None:
-        """The gateway gave this connection's slot to a newcomer: end the session with
-        1013 (the thread that opened the newcomer)."""
-        task = self._serve_task
-        if task is None:
-            return
-        self._yielded = reason[:120]
-        task.get_loop().call_soon_threadsafe(task.cancel)
 
     async def _serve(self, slot: Slot) -> tuple[int, str]:
         limit = slot.policy.max_message_bytes

@@ -30,10 +30,9 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from phantomtouch.clips.tact import TACTOSY2_LAYOUT
 from phantomtouch.clips.tact_map import ArmMap
-from phantomtouch.errors import ParameterError
 from phantomtouch.schema import DeviceProfile, limits
 from phantomtouch.schema.pattern import Carrier, SineCarrier
-from phantomtouch.schema.validation import read_model_file
+from phantomtouch.schema.validation import TomlFileModel
 
 MAX_RECEIVERS = 256
 """Receivers one map may place."""
@@ -59,9 +58,11 @@ class Receiver(BaseModel):
     y_cm: float = Field(ge=-limits.MAX_COORD_CM, le=limits.MAX_COORD_CM, allow_inf_nan=False)
 
 
-class ReceiverMap(BaseModel):
-    """Where the receivers are and how their proximities become contacts."""
+class ReceiverMap(TomlFileModel):
+    """Where the receivers are and how their proximities become contacts (a file of its
+    own: :meth:`~phantomtouch.schema.validation.TomlFileModel.load`)."""
 
+    FILE_KIND = "OSC map"
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     receiver: list[Receiver] = Field(min_length=1, max_length=MAX_RECEIVERS)
@@ -83,20 +84,6 @@ class ReceiverMap(BaseModel):
                 )
             seen.add(receiver.address)
         return self
-
-    @classmethod
-    def load(cls, path: str | Path) -> ReceiverMap:
-        """Read a map file (TOML).
-
-        Raises
-        ------
-        ParameterError
-            The file cannot be read, is not TOML, or a field is out of range (the
-            message names the file and the field).
-        """
-        return read_model_file(
-            cls, Path(path), what="OSC map", error=ParameterError, json_unless_toml=False
-        )
 
 
 def default_map(device: DeviceProfile) -> ReceiverMap:

@@ -6,7 +6,7 @@ union's tag such as ``sine``); they are no field a user wrote and are left out. 
 field is answered with the closest field names (did you mean ...?). An error of a whole
 model whose message starts with ``name=value`` (the project's own checks) names that
 field rather than the model. :func:`read_model_file` reads a model from a file with
-the same messages.
+the same messages; :class:`TomlFileModel` is a model whose file is TOML.
 """
 
 from __future__ import annotations
@@ -16,9 +16,11 @@ import json
 import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, ClassVar, Self, TypeVar
 
 from pydantic import BaseModel, ValidationError
+
+from phantomtouch.errors import ParameterError
 
 SCHEMA_TAGS = frozenset(
     {"polyline", "arc", "spline", "keyframes", "sine", "noise", "combined", "clip"}
@@ -240,3 +242,25 @@ def read_model_file(
         return model.model_validate(data)
     except ValidationError as exc:
         raise error(f"{what} {str(path)!r}: {describe_validation_error(exc)}") from exc
+
+
+class TomlFileModel(BaseModel):
+    """A model kept in a TOML file of its own (an arm map, an OSC map), read by
+    :meth:`load`; a subclass names its file's kind in ``FILE_KIND``."""
+
+    FILE_KIND: ClassVar[str]
+    """The file's kind in the messages, e.g. ``"OSC map"``."""
+
+    @classmethod
+    def load(cls, path: str | Path) -> Self:
+        """Read the file (TOML, UTF-8).
+
+        Raises
+        ------
+        ParameterError
+            The file cannot be read, is not TOML, or a field is out of range (the message
+            names the file and the field).
+        """
+        return read_model_file(
+            cls, Path(path), what=cls.FILE_KIND, error=ParameterError, json_unless_toml=False
+        )

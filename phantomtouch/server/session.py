@@ -76,6 +76,7 @@ from phantomtouch.service.ws_messages import (
     parse,
 )
 from phantomtouch.service.ws_sending import GONE, JsonSender
+from phantomtouch.service.ws_yield import MAX_REASON_CHARS, ServingTask
 
 if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
@@ -109,8 +110,7 @@ class Session:
             websocket, sent=lambda kind: service.metrics.ws_messages.labels("out", kind).inc()
         )
         self._state_task: asyncio.Task[None] | None = None
-        self._serve_task: asyncio.Task[None] | None = None
-        self._yielded: str | None = None
+        self._serving = ServingTask()
         self._notices: set[asyncio.Task[None]] = set()
         self._count_in = service.metrics.ws_messages.labels("in", "move")
         self.handle: Handle | None = None
@@ -143,16 +143,14 @@ class Session:
                 raise SessionClosed(
                     WS_CLOSE_POLICY_VIOLATION, "a token is required: ?token=... or Bearer"
                 )
-            self._serve_task = asyncio.current_task()
+            self._serving.start()
             handle = self.handle = self._open()
             handle.on_released(released)
             await self._serve(handle)
         except SessionClosed as closed:
             code, reason = closed.code, closed.reason
-        except asyncio.CancelledError:
-            if self._yielded is None:
-                raise
-            code, reason = WS_CLOSE_TRY_AGAIN_LATER, self._yielded
+        except asyncio.CancelledError as cancelled:
+            code, reason = self._serving.close_frame(cancelled)
         except (WebSocketDisconnect, OSError):
             pass
         finally:
@@ -191,19 +189,16 @@ class Session:
             )
         except SourcesFullError as exc:
             self.service.metrics.ws_refused.labels("full").inc()
-            raise SessionClosed(WS_CLOSE_TRY_AGAIN_LATER, str(exc)[:120]) from exc
+            raise SessionClosed(WS_CLOSE_TRY_AGAIN_LATER, str(exc)[:MAX_REASON_CHARS]) from exc
         self.websocket.scope[SCOPE_KEY] = handle
         return handle
 
     def _on_yield(self, reason: str) -> None:
         """The admission gave this connection's slot to a newcomer (its handle is closed):
         end the session with 1013 (any thread)."""
-        task = self._serve_task
-        if task is None:
-            return
-        self._yielded = reason[:120]
-        self.service.metrics.ws_refused.labels("yielded").inc()
-        task.get_loop().call_soon_threadsafe(task.cancel)
+        if self._serving.serving:
+            self.service.metrics.ws_refused.labels("yielded").inc()
+        self._serving.yield_slot(reason)
 
     async def _serve(self, handle: Handle) -> None:
         receive = self.websocket.receive

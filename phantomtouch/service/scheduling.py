@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from phantomtouch.engine.jobs import OwnerQuota, QuotaRefused
@@ -146,6 +147,26 @@ DETACHED_NAMES = ("max_detached_voices_per_client", "max_detached_seconds_per_cl
 """The settings of a client's quota of detached touches (``docs/owners.md``)."""
 
 
+@dataclass(frozen=True)
+class Account:
+    """Whom a touch is scheduled for and what it may hold (host, any thread; immutable).
+
+    Attributes
+    ----------
+    owner : str
+        The engine owner of the touch's job.
+    quota : OwnerQuota
+        What ``owner``'s jobs may hold together, this one included.
+    names : tuple of str
+        The settings ``quota`` comes from (voices, seconds), named by a refusal
+        (:func:`quota_error`): :data:`QUOTA_NAMES` or :data:`DETACHED_NAMES`.
+    """
+
+    owner: str
+    quota: OwnerQuota
+    names: tuple[str, str] = QUOTA_NAMES
+
+
 def client_quota(settings: Settings) -> OwnerQuota:
     """The quota of every client, from the settings (the admission's rows carry it:
     :func:`~phantomtouch.service.admission.policy_table`)."""
@@ -216,13 +237,7 @@ def loop_pattern(request: AnyTouch) -> TouchPattern | None:
 
 
 def schedule_held(
-    engine: EngineFront,
-    request: AnyTouch,
-    *,
-    owner: str,
-    quota: OwnerQuota,
-    stop_count: int,
-    names: tuple[str, str] = QUOTA_NAMES,
+    engine: EngineFront, request: AnyTouch, *, account: Account, stop_count: int
 ) -> JobAccepted | None:
     """:func:`schedule_touch` for a request that reads no library and whose plan the
     engine's cache holds rendered whole (host, the event loop: it plans and renders
@@ -239,14 +254,7 @@ def schedule_held(
     if pattern is None or planned is None:
         return None
     return schedule_pattern(
-        engine,
-        pattern,
-        request,
-        owner=owner,
-        quota=quota,
-        stop_count=stop_count,
-        names=names,
-        planned=planned,
+        engine, pattern, request, account=account, stop_count=stop_count, planned=planned
     )
 
 
@@ -255,13 +263,11 @@ def schedule_touch(
     store: PatternStore | None,
     request: AnyTouch,
     *,
-    owner: str,
-    quota: OwnerQuota,
+    account: Account,
     stop_count: int,
-    names: tuple[str, str] = QUOTA_NAMES,
 ) -> JobAccepted:
     """The one path a touch request takes to the engine (host, a worker thread: reading the
-    store and planning take time): resolve it, check ``owner``'s ``quota`` before planning
+    store and planning take time): resolve it, check the ``account``'s quota before planning
     (a refusal costs no planning), plan it through the engine's plan cache, schedule it.
     ``stop_count`` is the engine's ``stop_count`` when the request arrived: a stop since
     voids it. Inputs reach it through their handle
@@ -270,19 +276,13 @@ def schedule_touch(
     Raises
     ------
     QuotaError
-        The touch would take ``owner`` past ``quota`` (the message names the setting of
-        ``names``).
+        The touch would take the account's owner past its quota (the message names the
+        setting of its ``names``).
     NotFoundError, MissingReferenceError, ParameterError
         The request names what is not there, or cannot be planned.
     """
     return schedule_pattern(
-        engine,
-        resolve(request, store),
-        request,
-        owner=owner,
-        quota=quota,
-        stop_count=stop_count,
-        names=names,
+        engine, resolve(request, store), request, account=account, stop_count=stop_count
     )
 
 
@@ -291,16 +291,15 @@ def schedule_pattern(
     pattern: TouchPattern,
     timing: Timing,
     *,
-    owner: str,
-    quota: OwnerQuota,
+    account: Account,
     stop_count: int,
-    names: tuple[str, str],
     planned: Plan | None = None,
 ) -> JobAccepted:
     """Schedule the resolved ``pattern`` of a request with ``timing`` (host; the thread
-    :func:`schedule_touch` or :func:`schedule_held` runs in): ``owner``'s ``quota`` is
+    :func:`schedule_touch` or :func:`schedule_held` runs in): the ``account``'s quota is
     checked first, then it is planned through the engine's plan cache (unless ``planned``
     is its plan already) and scheduled; a stop since ``stop_count`` voids it."""
+    owner, quota, names = account.owner, account.quota, account.names
     least_s = least_duration_s(pattern)
     try:
         engine.check_quota(owner, quota, least_s)

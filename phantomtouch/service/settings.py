@@ -90,6 +90,15 @@ def _loopback_listen(listen: str | None, example_port: int, why: str) -> str | N
     return listen
 
 
+def _address(listen: str | None) -> tuple[str, int] | None:
+    """A checked ``HOST:PORT`` listen setting as (host, port), brackets of an IPv6 host
+    removed; None stays None (pure)."""
+    if listen is None:
+        return None
+    host, _, port = listen.rpartition(":")
+    return host.strip("[]"), int(port)
+
+
 class Settings(ClientLimits):
     """Everything the service needs to start; each field has a sane default."""
 
@@ -228,30 +237,23 @@ class Settings(ClientLimits):
 
     @property
     def bhaptics_address(self) -> tuple[str, int] | None:
-        """``bhaptics_listen`` as (host, port), brackets of an IPv6 host removed."""
-        if self.bhaptics_listen is None:
-            return None
-        host, _, port = self.bhaptics_listen.rpartition(":")
-        return host.strip("[]"), int(port)
+        """``bhaptics_listen`` as (host, port) (:func:`_address`)."""
+        return _address(self.bhaptics_listen)
 
     @property
     def bhaptics_sdk2_address(self) -> tuple[str, int] | None:
         """Where SDK2 is served: ``bhaptics_sdk2_listen``, else port 15882 on the host of
         ``bhaptics_listen``; None when neither is set."""
         if self.bhaptics_sdk2_listen is not None:
-            host, _, port = self.bhaptics_sdk2_listen.rpartition(":")
-            return host.strip("[]"), int(port)
+            return _address(self.bhaptics_sdk2_listen)
         if self.bhaptics_address is None:
             return None
         return self.bhaptics_address[0], 15882
 
     @property
     def osc_address(self) -> tuple[str, int] | None:
-        """``osc_listen`` as (host, port), brackets of an IPv6 host removed."""
-        if self.osc_listen is None:
-            return None
-        host, _, port = self.osc_listen.rpartition(":")
-        return host.strip("[]"), int(port)
+        """``osc_listen`` as (host, port) (:func:`_address`)."""
+        return _address(self.osc_listen)
 
     @field_validator("output_device")
     @classmethod

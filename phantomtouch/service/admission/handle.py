@@ -25,12 +25,12 @@ from typing import TYPE_CHECKING
 
 from phantomtouch.errors import ParameterError, ProtocolError
 from phantomtouch.service.admission.principals import DETACHED, owner_id
-from phantomtouch.service.admission.rate import Arrival, Meter, monotonic
-from phantomtouch.service.admission.slots import Slot, YieldCallback
+from phantomtouch.service.admission.rate import Arrival, monotonic
+from phantomtouch.service.admission.slots import Opening, Slot
 from phantomtouch.service.errors import QuotaError
 from phantomtouch.service.scheduling import (
     DETACHED_NAMES,
-    QUOTA_NAMES,
+    Account,
     schedule_held,
     schedule_touch,
 )
@@ -41,7 +41,6 @@ if TYPE_CHECKING:
     from phantomtouch.engine import EngineFront
     from phantomtouch.engine.owners import ReleasedListener
     from phantomtouch.schema.pattern import Carrier
-    from phantomtouch.service.admission.policy import InputPolicy
     from phantomtouch.service.models import AnyTouch, JobAccepted
     from phantomtouch.service.store import PatternStore
     from phantomtouch.service.ws_messages import Down
@@ -71,31 +70,11 @@ class Handle(Slot):
     :class:`~phantomtouch.service.admission.slots.Slot`'s.
     """
 
-    def __init__(
-        self,
-        engine: EngineFront,
-        store: PatternStore | None,
-        policy: InputPolicy,
-        *,
-        source: str,
-        principal: str,
-        meter: Meter,
-        on_yield: YieldCallback | None,
-        on_close: Callable[[Slot], None],
-        local: bool = False,
-    ) -> None:
-        super().__init__(
-            policy,
-            source=source,
-            principal=principal,
-            meter=meter,
-            on_yield=on_yield,
-            on_close=on_close,
-            local=local,
-        )
+    def __init__(self, engine: EngineFront, store: PatternStore | None, opening: Opening) -> None:
+        super().__init__(opening)
         self.engine = engine
         self.store = store
-        self.detached_owner = owner_id(principal, DETACHED)
+        self.detached_owner = owner_id(opening.principal, DETACHED)
         self._unsubscribe: list[Callable[[], None]] = []
 
     # -- messages -----------------------------------------------------------------------
@@ -292,12 +271,7 @@ class Handle(Slot):
         QuotaError, NotFoundError, MissingReferenceError, ParameterError, EngineBusyError
         """
         held = schedule_held(
-            self.engine,
-            request,
-            owner=self.detached_owner if detached else self.owner,
-            quota=self.policy.detached_quota if detached else self.policy.quota,
-            stop_count=arrival.stop_count,
-            names=DETACHED_NAMES if detached else QUOTA_NAMES,
+            self.engine, request, account=self._account(detached), stop_count=arrival.stop_count
         )
         if held is not None:
             return held
@@ -312,11 +286,17 @@ class Handle(Slot):
             self.engine,
             self.store,
             request,
-            owner=self.detached_owner if detached else self.owner,
-            quota=self.policy.detached_quota if detached else self.policy.quota,
+            account=self._account(detached),
             stop_count=arrival.stop_count,
-            names=DETACHED_NAMES if detached else QUOTA_NAMES,
         )
+
+    def _account(self, detached: bool) -> Account:
+        """What a touch of this source goes on: the source's own owner and the row's
+        quota, or (``detached``) the principal's :attr:`detached_owner` and the row's
+        ``detached_quota``."""
+        if detached:
+            return Account(self.detached_owner, self.policy.detached_quota, DETACHED_NAMES)
+        return Account(self.owner, self.policy.quota)
 
     def play_score(
         self,

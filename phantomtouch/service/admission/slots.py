@@ -30,6 +30,38 @@ it); the adapter ends the source's transport (a WebSocket closes 1013 with ``rea
 Called in the thread that opened the newcomer; it must return at once."""
 
 
+@dataclass(frozen=True)
+class Opening:
+    """What a source's slot is made from (:meth:`Slots.open` builds it, ``make`` of
+    :class:`Slots` turns it into the slot; host, any thread; immutable).
+
+    Attributes
+    ----------
+    policy : InputPolicy
+        The input's row.
+    source : str
+        The source as the input names it.
+    principal : str
+        Who the source really is.
+    meter : Meter
+        The source's size and rate checks, with its principal's shared bucket.
+    on_yield : YieldCallback or None
+        The adapter's: end the source's transport when its slot is taken.
+    on_close : callable
+        ``on_close(slot)``: the table forgets the closed slot.
+    local : bool
+        The source is on this machine.
+    """
+
+    policy: InputPolicy
+    source: str
+    principal: str
+    meter: Meter
+    on_yield: YieldCallback | None
+    on_close: Callable[[Slot], None]
+    local: bool = False
+
+
 class Slot:
     """One source of one input in a slot of :class:`Slots` (made by :meth:`Slots.open`,
     never directly).
@@ -59,28 +91,18 @@ class Slot:
         The source went (or yielded its slot).
     """
 
-    def __init__(
-        self,
-        policy: InputPolicy,
-        *,
-        source: str,
-        principal: str,
-        meter: Meter,
-        on_yield: YieldCallback | None,
-        on_close: Callable[[Slot], None],
-        local: bool = False,
-    ) -> None:
-        self.policy = policy
-        self.kind = policy.kind
-        self.source = source
-        self.principal = principal
-        self.owner = owner_id(principal, source)
-        self.meter = meter
-        self.local = local
+    def __init__(self, opening: Opening) -> None:
+        self.policy = opening.policy
+        self.kind = opening.policy.kind
+        self.source = opening.source
+        self.principal = opening.principal
+        self.owner = owner_id(opening.principal, opening.source)
+        self.meter = opening.meter
+        self.local = opening.local
         self.last_heard_s = monotonic(None)
         self.closed = False
-        self._on_yield = on_yield
-        self._on_close = on_close
+        self._on_yield = opening.on_yield
+        self._on_close = opening.on_close
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.kind!r}, owner={self.owner!r})"
@@ -178,11 +200,13 @@ class Slots(Generic[S]):
         The policy table (:func:`~phantomtouch.service.admission.policy_table`); a kind
         missing from it cannot be opened.
     make : callable
-        ``make(policy, source=..., principal=..., meter=..., on_yield=..., on_close=...,
-        local=...)``: the slot of a newcomer (:class:`Slot` itself, or a subclass).
+        ``make(opening)``: the slot of a newcomer from its :class:`Opening` (:class:`Slot`
+        itself, or a subclass).
     """
 
-    def __init__(self, policies: Mapping[Kind, InputPolicy], *, make: Callable[..., S]) -> None:
+    def __init__(
+        self, policies: Mapping[Kind, InputPolicy], *, make: Callable[[Opening], S]
+    ) -> None:
         self._policies: dict[Kind, InputPolicy] = dict(policies)
         self._make = make
         self._lock = threading.Lock()
@@ -294,15 +318,8 @@ class Slots(Generic[S]):
             meter = Meter(
                 kind, policy.max_message_bytes, FloodGuard(policy.messages_per_s), group.rate
             )
-            slot = self._make(
-                policy,
-                source=source,
-                principal=principal,
-                meter=meter,
-                on_yield=on_yield,
-                on_close=self._closed,
-                local=local,
-            )
+            opening = Opening(policy, source, principal, meter, on_yield, self._closed, local)
+            slot = self._make(opening)
             slot.last_heard_s = now_s
             self._open[key] = slot
             self._owners[slot.owner] = slot
