@@ -30,7 +30,23 @@ def sounddevice_module() -> ModuleType:
         ) from exc
     except OSError as exc:  # the PortAudio library itself is missing
         raise DeviceError(f"PortAudio is not available: {exc}") from exc
+    if sounddevice._initialized == 0:  # released by release_portaudio: open it again
+        sounddevice._initialize()
     return sounddevice
+
+
+def release_portaudio() -> None:
+    """Close PortAudio in this process if it is open (the service's own process, once it
+    has looked the device up: the engine process plays); :func:`sounddevice_module` opens
+    it again.
+
+    Open, PortAudio is a client of a JACK server (``sounddevice`` opens it as it is
+    imported). JACK wakes every client each period and the cycle waits for them all: an
+    idle one is one more thread that must be scheduled in time, or the period is lost.
+    """
+    sd = sys.modules.get("sounddevice")
+    if sd is not None and sd._initialized > 0:
+        sd._terminate()
 
 
 def list_output_devices() -> list[dict[str, Any]]:

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError, install_hint
 from phantomtouch.fleet import cli as fleet_cli
 from phantomtouch.osc.command import add_osc_command
+from phantomtouch.output_devices import release_portaudio
 from phantomtouch.schema import describe_validation_error
 
 if TYPE_CHECKING:
@@ -78,6 +79,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         raise ParameterError(f"invalid settings: {describe_validation_error(exc)}") from exc
     check_device_profile(settings)
     check_output(settings)
+    release_portaudio()  # the engine process plays: no idle client of this one in JACK's graph
     fleet = fleet_cli.attachment(args)
     try:
         check_library(settings)
