@@ -242,9 +242,10 @@ class NamedPlays:
         self._groups = Counter()
 
     def _drop(self, play: NamedPlay) -> None:
-        if self._plays.get(play.name) is play:
-            del self._plays[play.name]
-            self._groups[play.group] -= 1
+        plays, groups = self._plays, self._groups  # as they are if clear() comes meanwhile
+        if plays.get(play.name) is play:
+            plays.pop(play.name, None)
+            groups[play.group] -= 1
 
     def _stop(self, plays: Sequence[NamedPlay], *, keep: str | None = None) -> None:
         engine = self._handle.engine
