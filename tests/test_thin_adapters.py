@@ -1,7 +1,8 @@
 """Every input is a thin adapter over the admission (phantomtouch/service/admission): no
-module of an input package builds its own ``FloodGuard``, keeps a record of held contacts,
-or calls the engine front's owner methods itself (docs/architecture.md, "One admission for
-every input").
+module of an input package builds its own ``FloodGuard``, keeps a record of held contacts
+or of what it plays (by name: the handle's ``named`` plays are that record, read from the
+engine's tables), or calls the engine front's owner methods itself (docs/architecture.md,
+"One admission for every input").
 
 Read from the source (``ast``), like tests/test_layers.py: every call and every
 annotated attribute of every module of the packages in :data:`INPUTS` counts.
@@ -19,10 +20,6 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1] / "phantomtouch"
 INPUTS = ("server", "osc", "fleet", "bhaptics")
 """The input packages whose adapters go through the admission (``bhaptics`` with its SDK2
 modules)."""
-NOT_YET = {"bhaptics/session.py"}
-"""Modules of :data:`INPUTS` not yet wholly over the admission: the SDK1 session still keeps
-its playing keys by name (what its status lists and what ``turnOff`` stops), beside the
-engine's job table."""
 
 OWNER_METHODS = frozenset(
     {
@@ -42,13 +39,27 @@ OWNER_METHODS = frozenset(
     }
 )
 """The engine front's owner and touch-admission methods; an adapter uses its handle's."""
-HELD_NAMES = frozenset({"held", "_held", "live", "keys", "_keys", "holding", "contacts"})
-"""Attribute names that, holding a dict or set, would be a record of held contacts."""
+HELD_NAMES = frozenset(
+    {
+        "held",
+        "_held",
+        "live",
+        "keys",
+        "_keys",
+        "holding",
+        "contacts",
+        "plays",
+        "_plays",
+        "frames",
+        "_frames",
+    }
+)
+"""Attribute names that, holding a dict or set, would be a record of held contacts or of
+what an input plays (by name or request id)."""
 
 
 def modules() -> list[Path]:
-    found = [path for name in INPUTS for path in sorted((PACKAGE_DIR / name).rglob("*.py"))]
-    return [path for path in found if path.relative_to(PACKAGE_DIR).as_posix() not in NOT_YET]
+    return [path for name in INPUTS for path in sorted((PACKAGE_DIR / name).rglob("*.py"))]
 
 
 def _calls(tree: ast.AST) -> list[tuple[int, str]]:
@@ -80,7 +91,6 @@ def _held_records(tree: ast.AST) -> list[tuple[int, str]]:
 
 def test_the_inputs_list_names_packages_that_exist() -> None:
     assert all((PACKAGE_DIR / name / "__init__.py").is_file() for name in INPUTS)
-    assert all((PACKAGE_DIR / name).is_file() for name in NOT_YET)
     assert len(modules()) > 30
 
 
@@ -99,6 +109,7 @@ def test_the_check_sees_what_it_looks_for() -> None:
         "class A:\n"
         "    def __init__(self, engine):\n"
         "        self.held: dict[str, set[str]] = {}\n"
+        "        self.plays: dict[int, object] = {}\n"
         "        self.guard = FloodGuard(10.0)\n"
         "        engine.renew_owner('o')\n"
         "        self.engine.contact_down('o', 'c', 0.0, 0.0)\n"
@@ -109,4 +120,5 @@ def test_the_check_sees_what_it_looks_for() -> None:
         "engine.renew_owner",
         "engine.contact_down",
         "held: dict[str, set[str]]",
+        "plays: dict[int, object]",
     ]

@@ -10,8 +10,11 @@ contacts its previous frame put down (nothing restarts); contacts it no longer n
 off, new ones touch down. Positions the band does not play (vest, head, hands, feet, an
 arm left out of the map) give no contact. The contacts are the connection's, through its
 admission handle: the engine's owner table is the one record of which are down, and they
-end one deadline after the connection's last message, however long the frame. Host, the
-event loop.
+end one deadline after the connection's last message, however long the frame. The frame is
+on show under its key in the handle's named plays
+(:class:`~phantomtouch.service.admission.NamedPlays`), with the prefix of its contacts' ids
+(:func:`frame_prefix`): its end, a stop or ``turnOff`` lifts them there. Host, the event
+loop.
 """
 
 from __future__ import annotations
@@ -123,10 +126,3 @@ def show_frame(handle: Handle, name: str, spots: Sequence[Spot], arm_map: ArmMap
             carrier=arm_map.carrier,
             law=arm_map.law,
         )
-
-
-def lift_frame(handle: Handle, name: str) -> None:
-    """Lift every contact of the frames of key ``name`` (host, the event loop; never
-    refused)."""
-    for contact in frame_contacts(handle, name):
-        handle.up(contact)

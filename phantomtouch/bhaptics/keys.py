@@ -7,10 +7,11 @@ as ``POST /tact/{name}/play`` schedules a stored project: every voice a job of t
 connection's owner, sample-exact, under its quota, and void if a stop came after the message
 that asked for it (also while its voices were planned). A voice the engine refuses is left
 out (the Player plays what it can). ``startTimeMillis`` skips the voices that begin before it
-and starts the rest that much sooner. The playback is active (``ActiveKeys``) for the
-score's length, until a stop; ``turnOff`` stops its jobs (each fades out over the release).
-Host: a worker thread schedules (planning takes a millisecond or so per voice), the event
-loop stops.
+and starts the rest that much sooner. The session indexes the playback under its name in the
+handle's named plays (:class:`~phantomtouch.service.admission.NamedPlays`): it is active
+(``ActiveKeys``) for the score's length unless a stop voids it or the engine stops its jobs,
+and ``turnOff`` stops its jobs by that name (each fades out over the release).
+Host: a worker thread schedules (planning takes a millisecond or so per voice).
 """
 
 from __future__ import annotations
@@ -28,37 +29,21 @@ if TYPE_CHECKING:
     from phantomtouch.service.scores import ScoreJobs
 
 
-@dataclass
+@dataclass(frozen=True)
 class KeyPlayback:
-    """One playing instance of a registered project: its jobs and when it ends."""
+    """One playing instance of a registered project: what its levels are read from, and
+    its jobs."""
 
-    name: str
     project: TactProject
     scale: ScaleOption
     start_ms: int
     scheduled: ScoreJobs
-    stop_count: int
-    """The engine's stop count when it was asked for: a stop since ended it."""
-
-    @property
-    def ends_s(self) -> float:
-        """When it stops counting as active, ``time.monotonic()`` clock."""
-        return self.scheduled.ends_s
 
     def levels(self, now_s: float) -> dict[str, list[int]]:
         """The equivalent motor levels of each arm at ``now_s`` (any thread)."""
         elapsed_ms = (now_s - self.scheduled.start_s) * 1000.0
         stretched_start_ms = self.start_ms * self.scale.duration
         return motor_levels(self.project, elapsed_ms + stretched_start_ms, self.scale)
-
-    def over(self, now_s: float, stop_count: int) -> bool:
-        """Whether it no longer plays at server time ``now_s``, the engine's stop count
-        being ``stop_count`` (any thread)."""
-        return self.ends_s <= now_s or stop_count != self.stop_count
-
-    def stop(self, handle: Handle) -> None:
-        """Stop every job of it (each fades out over the release; never refused)."""
-        self.scheduled.stop(handle.engine)
 
 
 def start_key(
@@ -82,11 +67,4 @@ def start_key(
         skip_s=request.start_ms / 1000.0 * scale.duration,
         partial=True,
     )
-    return KeyPlayback(
-        name=request.name,
-        project=project,
-        scale=scale,
-        start_ms=request.start_ms,
-        scheduled=scheduled,
-        stop_count=arrival.stop_count,
-    )
+    return KeyPlayback(project=project, scale=scale, start_ms=request.start_ms, scheduled=scheduled)

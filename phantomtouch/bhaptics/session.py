@@ -4,19 +4,22 @@ A :class:`PlayerSession` is what the Player keeps for one connection. It holds t
 projects the client registered (bounded: :data:`MAX_KEYS` keys per connection, and
 :data:`MAX_REGISTERED_POINTS` points for every connection of one principal together,
 :class:`PointBudget`; beyond them a registration is refused and logged, and the status,
-which lists only what is registered, says so to the client) and the playbacks active by
-name (a key, or its ``altKey``): frames as live contacts
-(:mod:`~phantomtouch.bhaptics.frames`), keys as jobs (:mod:`~phantomtouch.bhaptics.keys`).
-A submit under a name that is active replaces it (a frame of the same key glides).
+which lists only what is registered, says so to the client). It plays frames as live
+contacts (:mod:`~phantomtouch.bhaptics.frames`) and keys as jobs
+(:mod:`~phantomtouch.bhaptics.keys`), each under its name (a key, or its ``altKey``); a
+submit under a name that is active replaces it (a frame of the same key glides).
 
 Everything it plays goes through the connection's admission handle
 (:class:`~phantomtouch.service.admission.Handle`): the engine's owner table is the one
 record of its contacts, the handle's policy row gives their deadline (renewed only by a
 message of the client), the contacts one connection holds, the quota, and the stop voiding;
 :meth:`close` closes the handle, which releases the contacts and stops the jobs, whatever
-happened. What it keeps is what the status shows: the registrations, and each active
-playback's name with its frame or job ids. Every method runs on the event loop, except
-:func:`prepare` (any thread).
+happened. What plays by which name is the handle's named plays
+(:class:`~phantomtouch.service.admission.NamedPlays`, ``handle.named``), read from the
+engine's tables: a key whose jobs the engine stopped, a frame or key past its end or voided
+by a stop, is no longer active, and ``turnOff`` stops a name there. The session keeps only
+its registrations. Every method runs on the event loop, except :func:`prepare` (any
+thread).
 """
 
 from __future__ import annotations
@@ -28,13 +31,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from phantomtouch.bhaptics import levels
-from phantomtouch.bhaptics.frames import (
-    frame_levels,
-    frame_prefix,
-    frame_spots,
-    lift_frame,
-    show_frame,
-)
+from phantomtouch.bhaptics.frames import frame_levels, frame_prefix, frame_spots, show_frame
 from phantomtouch.bhaptics.keys import KeyPlayback, start_key
 from phantomtouch.bhaptics.requests import (
     BadRequest,
@@ -69,6 +66,8 @@ MAX_SPOTS_PER_FRAME = 4
 """Phantoms one frame may place (its strongest path points and its dots' centroid)."""
 MAX_ACTIVE_FRAMES = 64
 """Frames one connection shows at once under distinct keys; a newer one ends the oldest."""
+FRAMES = "frame"
+"""The group of the named plays :data:`MAX_ACTIVE_FRAMES` bounds."""
 SLICE_REQUESTS = 8
 """Requests of one message applied before the event loop is let go of for a moment."""
 LOG_INTERVAL_S = 10.0
@@ -142,16 +141,6 @@ class PointBudget:
             self._taken.pop(principal, None)
 
 
-@dataclass(frozen=True)
-class Shown:
-    """A frame on show: the frame, when it ends (server time, s), the stop count it came
-    under (a stop since ended it)."""
-
-    frame: Frame
-    ends_s: float
-    stop_count: int
-
-
 class PlayerSession:
     """The Player's state for one connection.
 
@@ -183,8 +172,6 @@ class PlayerSession:
         self.budget = budget
         self.positions = list(arm_map.arms)
         self.registered: dict[str, tuple[TactProject, int]] = {}
-        self.keys: dict[str, KeyPlayback] = {}
-        self.frames: dict[str, Shown] = {}
         self._changed = changed
         self._log = LimitedLog(logger, LOG_INTERVAL_S)
         loop = asyncio.get_running_loop()
@@ -210,11 +197,13 @@ class PlayerSession:
 
     @property
     def active(self) -> list[str]:
-        """Names playing now (a playback ends by time or a stop; see :meth:`expire`)."""
-        return [*self.keys, *self.frames]
+        """Names playing as the last :meth:`expire` left them (a playback ends by time, a
+        stop, or the engine stopping its jobs)."""
+        return [str(play.name) for play in self.handle.named.plays()]
 
     def status(self) -> dict[str, object]:
-        """The status object now (:mod:`~phantomtouch.bhaptics.status`)."""
+        """The status object as the last :meth:`expire` left the active names
+        (:mod:`~phantomtouch.bhaptics.status`)."""
         now_s = self.engine.server_time_s()
         arms: dict[str, list[float]] = {}
 
@@ -223,39 +212,35 @@ class PlayerSession:
                 current = arms.get(position, [0.0] * levels.ARM_MOTORS)
                 arms[position] = [max(a, float(b)) for a, b in zip(current, found, strict=False)]
 
-        for playback in self.keys.values():
-            for position, found in playback.levels(now_s).items():
-                add(position, found)
-        for shown in self.frames.values():
-            add(shown.frame.position, frame_levels(shown.frame))
+        plays = self.handle.named.plays()
+        for play in plays:
+            if isinstance(play.what, KeyPlayback):
+                for position, found in play.what.levels(now_s).items():
+                    add(position, found)
+            elif isinstance(play.what, Frame):
+                add(play.what.position, frame_levels(play.what))
         return status_message(
-            registered=self.registered, active=self.active, positions=self.positions, levels=arms
+            registered=self.registered,
+            active=[str(play.name) for play in plays],
+            positions=self.positions,
+            levels=arms,
         )
 
     def expire(self) -> bool:
-        """End what is over: key playbacks and frames past their end or a stop (``POST
-        /stop``), and, once the client was silent for its deadline, everything it plays
-        (its contacts the front releases by itself; its jobs are stopped here, reason
-        ``watchdog``). Whether anything changed."""
+        """End what is over (:meth:`~phantomtouch.service.admission.NamedPlays.playing`:
+        key playbacks and frames past their end or a stop, ``POST /stop``, keys whose jobs
+        the engine stopped), and, once the client was silent for its deadline, everything
+        it plays (its contacts the front releases by itself; its jobs are stopped here,
+        reason ``watchdog``). Whether anything changed."""
         now_s = self.engine.server_time_s()
-        stops = self.handle.arrival().stop_count
-        if now_s - self.handle.last_heard_s > self.handle.policy.deadline_s and self.active:
+        named = self.handle.named
+        if now_s - self.handle.last_heard_s > self.handle.policy.deadline_s and len(named):
             self.handle.stop_touches("watchdog")
-            self.keys.clear()
-            for name in list(self.frames):
-                self._end_frame(name)
+            named.stop_all()
             return True
-        over = [name for name, playback in self.keys.items() if playback.over(now_s, stops)]
-        for name in over:
-            del self.keys[name]
-        ended = [
-            name
-            for name, shown in self.frames.items()
-            if shown.ends_s <= now_s or shown.stop_count != stops
-        ]
-        for name in ended:
-            self._end_frame(name)
-        return bool(over or ended)
+        before = len(named)
+        named.playing(now_s)
+        return len(named) != before
 
     # -- requests -------------------------------------------------------------------------
 
@@ -297,10 +282,9 @@ class PlayerSession:
         elif isinstance(request, PlayKey):
             await self._play_key(request, arrival)
         elif isinstance(request, TurnOff):
-            self._stop(request.key)
+            self.handle.named.stop(request.key)
         elif isinstance(request, TurnOffAll):
-            for name in self.active:
-                self._stop(name)
+            self.handle.named.stop_all()
 
     def _register(self, key: str, project: TactProject | BadRequest | None) -> None:
         if isinstance(project, BadRequest) or project is None:
@@ -327,52 +311,45 @@ class PlayerSession:
         found = self.registered.get(request.key)
         if found is None:
             raise BadRequest("bad_request", f"key={request.key!r} is not registered")
-        self._stop(request.name)
+        self.handle.named.stop(request.name)
         playback = await asyncio.to_thread(
             start_key, self.handle, request, found[0], self.arm_map, arrival=arrival
         )
-        self._stop(request.name)  # one submitted meanwhile under the same name
-        if self.handle.closed:
-            playback.stop(self.handle)
-        elif not playback.over(self.engine.server_time_s(), self.handle.arrival().stop_count):
-            self.keys[request.name] = playback
+        self.handle.named.start(
+            request.name,
+            playback,
+            stop_count=arrival.stop_count,
+            ends_s=playback.scheduled.ends_s,
+            jobs=playback.scheduled.jobs,
+        )
 
     def _play_frame(self, request: PlayFrame, arrival: Arrival) -> None:
         name = request.key
-        if name in self.keys:
-            self.keys.pop(name).stop(self.handle)
         frame = request.frame
         if frame.empty:
-            self._stop(name)
+            self.handle.named.stop(name)
             return
-        if name not in self.frames and len(self.frames) >= MAX_ACTIVE_FRAMES:
-            self._end_frame(next(iter(self.frames)))
-        self.frames.pop(name, None)  # newest last: the oldest is the first to end
-        self.frames[name] = Shown(
-            frame, self.engine.server_time_s() + frame.duration_ms / 1000.0, arrival.stop_count
+        shown = self.handle.named.start(
+            name,
+            frame,
+            stop_count=arrival.stop_count,
+            ends_s=self.engine.server_time_s() + frame.duration_ms / 1000.0,
+            contacts=_prefix(name),
+            group=FRAMES,
+            most=MAX_ACTIVE_FRAMES,
         )
+        if not shown:  # a stop came after it, or the connection closed
+            return
         held = self.handle.contacts()
         mine = sum(contact.startswith(_prefix(name)) for contact in held)
         room = min(MAX_SPOTS_PER_FRAME, self.handle.policy.contacts_per_owner - len(held) + mine)
         spots = frame_spots(frame, self.arm_map, self.engine.device, max_spots=max(0, room))
         show_frame(self.handle, name, spots, self.arm_map)
 
-    def _end_frame(self, name: str) -> None:
-        if self.frames.pop(name, None) is not None:
-            lift_frame(self.handle, name)
-
-    def _stop(self, name: str) -> None:
-        playback = self.keys.pop(name, None)
-        if playback is not None:
-            playback.stop(self.handle)
-        self._end_frame(name)
-
     def close(self) -> None:
         """Close the handle: every contact of the connection released, every job stopped,
         also one planned meanwhile; its registrations' points given back (never refused)."""
         self.handle.close()
-        self.keys.clear()
-        self.frames.clear()
         self.budget.change(self.handle.principal, -sum(p for _, p in self.registered.values()))
         self.registered.clear()
 

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, cast
 
 from phantomtouch.engine.checks import check_ahead, check_frame, check_id
@@ -13,6 +14,7 @@ from phantomtouch.engine.jobs import (
     Job,
     JobRecord,
     JobState,
+    JobStateName,
     JobTable,
     OwnerQuota,
     Policy,
@@ -217,6 +219,15 @@ class JobCalls:
         with self._lock:
             record = self._jobs.get(job_id) if isinstance(job_id, str) else None
             return None if record is None else record.snapshot()
+
+    def job_states(self, job_ids: Sequence[str]) -> list[JobStateName | None]:
+        """The state name of each of ``job_ids`` (None: unknown, or forgotten with its
+        owner's history), in one hold of the lock, one look-up per id (host, any thread).
+        Unlike :meth:`job_state` it does not wait for the audio side's newest reports: a job
+        whose end is not yet reported reads ``playing`` a housekeeping tick longer."""
+        with self._lock:
+            found = [self._jobs.get(job_id) for job_id in job_ids]
+            return [None if record is None else record.state for record in found]
 
     def stop(self, job_id: str) -> bool:
         """Stop a job: it fades out over ``contact.release_s`` (or never starts); host,

@@ -8,7 +8,8 @@ arrived; waits for it to end; and for a loop
 (``SdkPlayLoop``) plays it again ``interval_ms`` after each end, ``count`` times in all
 (``interval`` is the silence between two repetitions, sample-exact when it is at least
 :data:`~phantomtouch.service.scores.START_AHEAD_S`). After an emergency stop
-(``POST /stop``, ``phantomtouch stop``) it plays nothing more: a loop ends at once.
+(``POST /stop``, ``phantomtouch stop``), or once the connection's handle is closed, it plays
+nothing more: a loop ends at once (within :data:`POLL_S`).
 
 A pause stops the jobs and remembers how far into the score it was; a resume plays the rest
 from there as a start time does (:func:`~phantomtouch.service.scores.schedule_score`'s
@@ -124,6 +125,11 @@ class Play:
         """Its task has ended (played out, stopped, or voided by an emergency stop)."""
         return self._task is not None and self._task.done()
 
+    def told(self) -> bool:
+        """Whether it is done and the client was shown it: nothing more is told of it (the
+        session's named plays drop it then)."""
+        return self.done and not self.listed
+
     def start(self) -> None:
         """Begin (event loop)."""
         self._task = asyncio.get_running_loop().create_task(self._run())
@@ -215,7 +221,9 @@ class Play:
             work.result().stop(self.handle.engine)
 
     def _voided(self) -> bool:
-        return self.handle.arrival().stop_count != self.arrival.stop_count
+        """An emergency stop since the request, or the handle closed (its named plays
+        forgotten: a yielded slot closes it before the session hears of it)."""
+        return self.handle.closed or self.handle.stop_count != self.arrival.stop_count
 
     async def _sleep(self, duration_s: float) -> bool:
         return await self._sleep_until(self.handle.engine.server_time_s() + duration_s)

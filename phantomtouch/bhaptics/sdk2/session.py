@@ -2,8 +2,12 @@
 
 A :class:`Sdk2Session` is the Player's state for one v3 connection (or one v4 connection,
 whose envelope is opened before the text reaches it): the workspace it plays for, its plays
-by request id (:mod:`~phantomtouch.bhaptics.sdk2.plays`), and the messages it reads
-(:func:`~phantomtouch.bhaptics.sdk2.wire.server_message`):
+(:mod:`~phantomtouch.bhaptics.sdk2.plays`), and the messages it reads
+(:func:`~phantomtouch.bhaptics.sdk2.wire.server_message`). Its plays are in the handle's
+named plays by request id (:class:`~phantomtouch.service.admission.NamedPlays`,
+``handle.named``): a stop by request id, by event or of all is a stop there, closing the
+handle forgets them, and a play is dropped from them once it is over and was shown to the
+client; the session keeps no record of its own. It sends:
 
 - ``ServerReady`` then ``ServerDevices`` on connect and after every auth; the devices are
   the band's arms, each connected, as the Player reports a Tactosy2 sleeve;
@@ -112,7 +116,6 @@ class Sdk2Session:
         self.workspace = workspace
         self.workspaces = workspaces
         self._send = send
-        self.plays: dict[int, Play] = {}
         self._sent: tuple[list[str], list[int]] | None = None
         self._wake = asyncio.Event()
         self._events_changed = False
@@ -135,24 +138,27 @@ class Sdk2Session:
             self._unsubscribe()
         if self._pusher is not None:
             self._pusher.cancel()
-        for play in self.plays.values():
-            play.stop()
-        self.plays.clear()
+        self.handle.named.stop_all()
         self.handle.close()
 
     # -- what the client is told -----------------------------------------------------------
 
+    def plays(self) -> list[Play]:
+        """The connection's plays by request id, oldest first (the handle's named
+        plays)."""
+        return [play.what for play in self.handle.named.plays() if isinstance(play.what, Play)]
+
     def active(self) -> tuple[list[str], list[int]]:
         """The names of the events playing and the request ids playing, now (each play
         that started is in them at least once: :attr:`Play.listed`)."""
-        listed = [play for play in self.plays.values() if play.listed]
+        listed = [play for play in self.plays() if play.listed]
         names = sorted({play.event for play in listed if play.event is not None})
         return names, sorted(play.request_id for play in listed)
 
     async def send_active(self) -> None:
         """Push both active lists; a play shown that is already over is pushed off them
         next."""
-        shown = [play for play in self.plays.values() if play.listed]
+        shown = [play for play in self.plays() if play.listed]
         names, ids = self._sent = self.active()
         for play in shown:
             play.announced = True
@@ -186,12 +192,12 @@ class Sdk2Session:
 
     async def _push(self) -> None:
         """Send what changed: the events when the workspace's changed, the active lists
-        when they differ from those last sent; forget plays that are over."""
+        when they differ from those last sent; plays over and shown are dropped from the
+        named plays (:meth:`Play.told`)."""
         while True:
             await self._wake.wait()
             self._wake.clear()
-            for request_id in [r for r, p in self.plays.items() if p.done and not p.listed]:
-                del self.plays[request_id]
+            self.handle.named.playing()
             if self._events_changed:
                 self._events_changed = False
                 await self.send_events()
@@ -229,7 +235,7 @@ class Sdk2Session:
         elif isinstance(request, StopRequest):
             self._stop(request)
         elif isinstance(request, PauseRequest):
-            for play in self.plays.values():
+            for play in self.plays():
                 if request.event is not None and play.event != request.event:
                     continue
                 if request.resume:
@@ -305,23 +311,22 @@ class Sdk2Session:
         )
 
     def _begin(self, play: Play) -> None:
-        previous = self.plays.pop(play.request_id, None)
-        if previous is not None:
-            previous.stop()
-        if len(self.plays) >= MAX_PLAYS:
+        named = self.handle.named
+        named.stop(play.request_id)
+        if len(named) >= MAX_PLAYS:
             raise BadRequest(
                 "bad_request",
                 f"requestId={play.request_id}: {MAX_PLAYS} plays are going, the most one "
                 "connection may have; stop one first",
             )
-        self.plays[play.request_id] = play
-        play.start()
+        if named.start(play.request_id, play, stop_count=None, until=play.told, on_stop=play.stop):
+            play.start()
 
     def _stop(self, request: StopRequest) -> None:
-        for request_id, play in list(self.plays.items()):
+        for play in self.plays():
             if (request.request_id is None and request.event is None) or (
-                request.request_id == request_id or (request.event and play.event == request.event)
+                request.request_id == play.request_id
+                or (request.event and play.event == request.event)
             ):
-                play.stop()
-                del self.plays[request_id]
+                self.handle.named.stop(play.request_id)
         self._changed()

@@ -14,10 +14,13 @@ then among a principal's sources.
 Modules: :mod:`.policy` (the table), :mod:`.principals` (principals and owner ids),
 :mod:`.rate` (a message's verdict), :mod:`.slots` (the connection half: sources in slots,
 their size and rate, who yields; usable without an engine, as the fleet's gateway does),
-:mod:`.handle` (a source's owner half, over the engine), :mod:`.table` (the admission).
+:mod:`.handle` (a source's owner half, over the engine), :mod:`.named` (a handle's plays
+by the names its client gives them, a view onto the engine's tables), :mod:`.table` (the
+admission).
 """
 
 from phantomtouch.service.admission.handle import Handle
+from phantomtouch.service.admission.named import NamedPlay, NamedPlays
 from phantomtouch.service.admission.policy import KINDS, InputPolicy, Kind, policy_table
 from phantomtouch.service.admission.principals import owner_id, principal_for
 from phantomtouch.service.admission.rate import Arrival, Verdict
@@ -31,6 +34,8 @@ __all__ = [
     "Handle",
     "InputPolicy",
     "Kind",
+    "NamedPlay",
+    "NamedPlays",
     "Slot",
     "Slots",
     "Verdict",

@@ -24,6 +24,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from phantomtouch.errors import ParameterError, ProtocolError
+from phantomtouch.service.admission.named import NamedPlays
 from phantomtouch.service.admission.principals import DETACHED, owner_id
 from phantomtouch.service.admission.rate import Arrival, monotonic
 from phantomtouch.service.admission.slots import Opening, Slot
@@ -65,6 +66,10 @@ class Handle(Slot):
         The engine owner of what the source holds: ``PRINCIPAL/SOURCE``.
     detached_owner : str
         The owner of the source's detached touches: its principal's (they outlive it).
+    named : NamedPlays
+        What the source plays under names its client gave (:mod:`.named`: a view onto the
+        engine's tables, for a protocol that lists or stops its plays by name); emptied
+        when it closes.
 
     The others (``kind``, ``source``, ``principal``, ``policy``, ``local``) are a
     :class:`~phantomtouch.service.admission.slots.Slot`'s.
@@ -75,6 +80,7 @@ class Handle(Slot):
         self.engine = engine
         self.store = store
         self.detached_owner = owner_id(opening.principal, DETACHED)
+        self.named = NamedPlays(self)
         self._unsubscribe: list[Callable[[], None]] = []
 
     # -- messages -----------------------------------------------------------------------
@@ -334,7 +340,8 @@ class Handle(Slot):
 
     def stop_touches(self, reason: str = "closed") -> int:
         """Stop every touch of this source scheduled or playing (release ramp); returns how
-        many. Any thread."""
+        many (a named play of them is over at the next look of :attr:`named`). Any
+        thread."""
         return self.engine.stop_owner(self.owner, reason)
 
     # -- the slot -----------------------------------------------------------------------
@@ -342,7 +349,9 @@ class Handle(Slot):
     def let_go(self, reason: str) -> None:
         """What :meth:`~phantomtouch.service.admission.slots.Slot.close` lets go of: the
         source's contacts (``released`` with ``reason``, heard by its :meth:`on_released`
-        listeners) and its touches but the detached ones. Any thread."""
+        listeners) and its touches but the detached ones; its named plays are forgotten.
+        Any thread."""
+        self.named.clear()
         self.engine.release_owner(self.owner, reason)
         self.engine.stop_owner(self.owner, reason)
         for unsubscribe in self._unsubscribe:
