@@ -14,6 +14,7 @@ import numpy as np
 from phantomtouch.analysis.calibration import PlayRecord
 from phantomtouch.analysis.twin import amplitude_m_s2
 from phantomtouch.errors import DeviceError, ParameterError, install_hint
+from phantomtouch.output_devices import sounddevice_module
 
 
 def input_scale(
@@ -59,8 +60,8 @@ def sounddevice_loop(
         sounddevice (or PortAudio) is missing, or the sound card refuses.
     """
     try:
-        import sounddevice as sd
-    except (ImportError, OSError) as exc:
+        sd = sounddevice_module()  # PortAudio open, though a serve in this process closed it
+    except DeviceError as exc:
         raise DeviceError(
             f"calibrate needs sounddevice and PortAudio, the audio extra: {install_hint('audio')} "
             f"({exc})"

@@ -31,17 +31,19 @@ from typing import NoReturn
 
 import numpy as np
 
+from phantomtouch.output_devices import release_portaudio, sounddevice_module
+
 
 class JackUnavailable(RuntimeError):
     """jackd, libjack, PortAudio or JACK-Client is missing, or the server did not start."""
 
 
 def refresh_portaudio() -> None:
-    """Re-initialise PortAudio (if sounddevice is loaded) so it sees the current server."""
-    sd = sys.modules.get("sounddevice")
-    if sd is not None:
-        sd._terminate()
-        sd._initialize()
+    """Re-open PortAudio (if sounddevice is loaded) so it sees the current server; it may
+    have been closed already (an in-process ``serve`` closes it: ``release_portaudio``)."""
+    if "sounddevice" in sys.modules:
+        release_portaudio()
+        sounddevice_module()
 
 
 class JackServer:
@@ -94,7 +96,11 @@ class JackServer:
                 [jack_lsp, "-s", self.name], capture_output=True, text=True, check=False
             )
             if "system:playback_1" in listing.stdout:
-                refresh_portaudio()
+                try:
+                    refresh_portaudio()
+                except BaseException:
+                    self.stop()  # no server outlives a start that failed
+                    raise
                 return self
             time.sleep(0.1)
         output = self.output()
@@ -110,9 +116,8 @@ class JackServer:
 
     def stop(self) -> None:
         """Release PortAudio's connection, stop jackd, re-initialise PortAudio without it."""
-        sd = sys.modules.get("sounddevice")
-        if sd is not None:
-            sd._terminate()
+        loaded = "sounddevice" in sys.modules
+        release_portaudio()
         process, self.process = self.process, None
         if process is not None:
             process.terminate()
@@ -127,8 +132,8 @@ class JackServer:
             os.environ.pop("JACK_DEFAULT_SERVER", None)
         else:
             os.environ["JACK_DEFAULT_SERVER"] = self._previous_env
-        if sd is not None:
-            sd._initialize()
+        if loaded:
+            sounddevice_module()
 
     def __enter__(self) -> JackServer:
         return self.start()
