@@ -12,7 +12,7 @@ callback's own work is timed: ``Scheduler.render`` on one block, wall time
 
 The moves and taps go through the engine's own front between blocks, as a WebSocket or a
 ``POST /touch`` would; that host work is not timed. The yardstick is one numpy copy of a
-128 x 8 float32 block (the median of 2,000 timed copies, each in a loop of 100), in the
+128 x 8 float32 block (``yardstick.py``: the median of 2,000 timings of 100 copies), in the
 same process: targets are stated in yardsticks so they carry from machine to machine
 (issue 40: the ``vr`` scene at 128 frames, p50 <= 200 and p99 <= 1,100).
 
@@ -33,6 +33,7 @@ import time
 from typing import Any
 
 import numpy as np
+from yardstick import block_copy_s
 
 import phantomtouch as pt
 from phantomtouch.engine import CaptureSink, Engine
@@ -41,18 +42,6 @@ CONTACTS = 4
 TAP_EVERY_S = 0.02
 """50 ``vr/tap`` a second, as in the issue's VR load."""
 WARM_BLOCKS = 200
-
-
-def yardstick_s() -> float:
-    """One numpy copy of a 128 x 8 float32 block, s (median of 2,000 timings of 100)."""
-    block = np.zeros((128, 8), dtype=np.float32)
-    samples = []
-    for _ in range(2000):
-        began = time.perf_counter()
-        for _ in range(100):
-            block.copy()
-        samples.append((time.perf_counter() - began) / 100)
-    return statistics.median(samples)
 
 
 def scene_s(scene: str, block_frames: int, blocks: int) -> np.ndarray:
@@ -88,7 +77,7 @@ def scene_s(scene: str, block_frames: int, blocks: int) -> np.ndarray:
 
 
 def measure(blocks: int) -> dict[str, Any]:
-    stick = yardstick_s()
+    stick = block_copy_s()
     rows: dict[str, Any] = {"yardstick_us": stick * 1e6}
     for block_frames in (128, 64):
         for scene in ("idle", "vr"):

@@ -44,7 +44,8 @@ makes every figure worse), and a ``cyclictest`` probe's late wake-ups beside it,
 of JACK's xruns set beside what the probe saw at that moment: an xrun during a stall of
 the probe's is the machine's (``realtime_floor.in_stalls``, which also says how many would
 fall in one by chance). The yardstick, measured in this process, is a numpy copy of one
-128 x 8 float32 block.
+128 x 8 float32 block (``yardstick.py``: timed 100 copies at a time, so the clock's own cost
+is not counted as the copy's).
 
 Paired mode, ``--pair CHECKOUT``: another checkout, served by the Python of its own
 ``.venv``, runs each scenario right after (or, every other scenario, right before) this
@@ -73,18 +74,17 @@ import shutil
 import signal
 import sys
 import tempfile
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from realtime_floor import LatencyProbe, floor
 from realtime_http import REQUEST_TIMEOUT_S, render_load_window_s
 from realtime_load import flood, stop
 from realtime_measure import measure
 from realtime_report import TITLES, print_report
 from realtime_scenarios import MEMORY_EVERY_S, scenario_loads
+from yardstick import block_copy_s
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.support
 
@@ -94,8 +94,6 @@ from tests.support.live_server import HOST, LiveServer
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_RATE_HZ = 48000
 CHANNELS = 8
-YARDSTICK_FRAMES = 128
-"""The yardstick is a numpy copy of one 128 x 8 float32 block, whatever the period."""
 
 
 class Install:
@@ -136,17 +134,6 @@ class Service(LiveServer):
             str(self.db_path),
             *self.args,
         ]
-
-
-def block_copy_us(frames: int, copies: int = 50_000) -> float:
-    """Median time of ``block.copy()`` for one ``frames`` x 8 float32 block, in µs."""
-    block = np.zeros((frames, CHANNELS), dtype=np.float32)
-    times = np.empty(copies)
-    for k in range(copies):
-        started = time.perf_counter()
-        block.copy()
-        times[k] = time.perf_counter() - started
-    return float(np.median(times) * 1e6)
 
 
 def within(kind: Callable[[str], float], low: float, high: float) -> Callable[[str], Any]:
@@ -256,7 +243,7 @@ def run(args: argparse.Namespace, folder: Path, hogs: list[Any]) -> dict[str, An
     results: dict[str, Any] = {
         "cpus": os.cpu_count(),
         "load_avg_1min": os.getloadavg()[0],
-        "block_copy_us": block_copy_us(YARDSTICK_FRAMES),
+        "block_copy_us": block_copy_s() * 1e6,
         "period_frames": args.period_frames,
         "profile_block_frames": args.profile_block,
         "sample_rate_hz": SAMPLE_RATE_HZ,
