@@ -179,8 +179,9 @@ class MoveSlots(_Rows):
         self._free = list(range(self.capacity - 1, -1, -1))
         self._generation = 0
         # the engine process's side
-        self._seen = np.zeros(self.capacity)
-        self._bound: list[tuple[int, float] | None] = [None] * self.capacity
+        self._seen = [0.0] * self.capacity
+        self._bound: dict[int, tuple[int, float]] = {}
+        """Bound slot -> (contact, generation): only these rows are read at each block."""
 
     # -- the host ---------------------------------------------------------------------
 
@@ -215,37 +216,42 @@ class MoveSlots(_Rows):
 
     def bind(self, slot: int, generation: int, contact: int) -> None:
         """The contact (the front's integer for it) is down in the engine: apply what the
-        host writes for it."""
+        host writes for it (the newest position, also one written before this)."""
         self._bound[slot] = (contact, float(generation))
 
     def unbind(self, contacts: tuple[int, ...]) -> None:
         """Stop applying the slots of ``contacts`` (the front's integers)."""
-        for slot, bound in enumerate(self._bound):
-            if bound is not None and bound[0] in contacts:
-                self._bound[slot] = None
+        for slot in [s for s, bound in self._bound.items() if bound[0] in contacts]:
+            del self._bound[slot]
 
     def unbind_all(self) -> None:
         """Stop applying every slot (the engine process)."""
-        self._bound = [None] * self.capacity
+        self._bound = {}
 
     def drain(self, post: Callable[[int, np.ndarray, float | None, int | None], None]) -> None:
-        """Hand every new position to ``post(contact, unit_gains, intensity, frame)``
-        (``unit_gains`` float32; real time, the audio callback). A row caught mid-write, or
-        every row while the host holds the lock, waits for the next block."""
+        """Hand every new position of a bound slot to ``post(contact, unit_gains,
+        intensity, frame)`` (``unit_gains`` float32; real time, the audio callback). Only
+        the bound slots' rows are read (a few of the ``capacity``, each on cache lines the
+        host writes). A row caught mid-write, or every row while the host holds the lock,
+        waits for the next block."""
+        if not self._bound:
+            return
         rows = self._read(wait=False)
         if rows is None:
             return
-        for slot in np.flatnonzero(rows[:, 0] != self._seen).tolist():
+        seen = self._seen
+        for slot, (contact, generation) in self._bound.items():
+            if rows[slot, 0] == seen[slot]:
+                continue
             row = self._row(rows, slot)
             if row is None:
                 continue
-            self._seen[slot] = row[0]
-            bound = self._bound[slot]
-            if bound is None or bound[1] != row[1]:
+            seen[slot] = float(row[0])
+            if row[1] != generation:
                 continue
             intensity = None if math.isnan(row[2]) else float(row[2])
             frame = None if math.isnan(row[3]) else int(row[3])
-            post(bound[0], row[_SLOT_FIELDS:].astype(np.float32), intensity, frame)
+            post(contact, row[_SLOT_FIELDS:].astype(np.float32), intensity, frame)
 
 
 STATUS_FIELDS = (
