@@ -35,9 +35,10 @@ INTAKE_SHARE = 0.15
 """Share of a block's playing time the callback spends on the host's messages."""
 MESSAGES_PER_BLOCK = 256
 """Most of the host's messages the callback performs per block."""
-FIGURES_EVERY_S = 0.01
-"""How often the callback writes its figures into the status block, s (rounded to whole
-blocks); the heartbeat is written every block."""
+REPORT_EVERY_S = 0.01
+"""How often the callback hands its events to the report box (waking its thread once the
+block is rendered), unmaps what no voice reads, and writes its figures into the status
+block, s (rounded to whole blocks); the heartbeat is written every block."""
 
 
 @dataclasses.dataclass
@@ -60,8 +61,8 @@ class Intake:
         self.leave = threading.Event()
         device = self.core.device
         self.budget_s = INTAKE_SHARE * (device.block_frames / device.sample_rate_hz)
-        self.figures_every = max(
-            1, round(FIGURES_EVERY_S * device.sample_rate_hz / device.block_frames)
+        self.report_every = max(
+            1, round(REPORT_EVERY_S * device.sample_rate_hz / device.block_frames)
         )
         self._blocks = 0
 
@@ -85,12 +86,15 @@ class Intake:
         self.slots.drain(self.core.board.post_checked)
 
     def report(self) -> None:
-        """Queue the last block's events for the report box (:meth:`ReportBox.wake` sends
-        them once the block is rendered), write a heartbeat, and every
-        ``figures_every`` blocks the figures (real time)."""
+        """Write a heartbeat, and every ``report_every`` blocks queue the events since for
+        the report box (:meth:`finished` wakes its thread once the block is rendered),
+        unmap what no voice reads any more, and write the figures (real time)."""
         core = self.core
-        state = self.state
         self.status.beat(time.monotonic(), core.scheduler.frames)
+        self._blocks += 1
+        if self._blocks % self.report_every:
+            return
+        state = self.state
         self.loops.collect()
         events = core.events()
         events.extend(PlanReleased(handle) for handle in self.arrays.collect())
@@ -99,12 +103,17 @@ class Intake:
             del state.reports[:taken]
         if events:
             self.report_box.put(events)
-        self._blocks += 1
-        if self._blocks % self.figures_every:
-            return
         figures = core.figures(loads=False)  # the render loads: the host's to sum up
         figures.update(dropped_reports=self.report_box.dropped, refused_commands=state.refused)
         self.status.write(figures)
+
+    def finished(self) -> None:
+        """At the end of the callback (real time): on a block that queued reports, wake
+        the report box's thread, so that no thread wakes to take the interpreter's lock
+        while a block renders, and a thread is woken at most every ``report_every``
+        blocks."""
+        if self._blocks % self.report_every == 0:
+            self.report_box.wake()
 
     def check_mark(self) -> None:
         """Apply a ``stop_all`` the host raised (real time)."""
@@ -251,7 +260,7 @@ def serve(
         status,
     )
     core.scheduler.intake = intake.run
-    core.scheduler.finished = intake.report_box.wake
+    core.scheduler.finished = intake.finished
     gc.freeze()  # what start-up made is never scanned again: collections stay short
     if not _wait_for_start(intake):
         core.close(fade=False)
