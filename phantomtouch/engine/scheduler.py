@@ -241,9 +241,12 @@ class Scheduler:
         if count + ahead > self._rows.shape[0]:  # more voices than ever: room for twice as many
             self._rows = np.empty((2 * (count + ahead), *self._rows.shape[1:]), dtype=np.float32)
         rows = self._rows[ahead : ahead + count, :frames]
-        rows.fill(0.0)
-        if ahead:
-            self.future.take(self._rows[0, :frames], start)
+        if count:
+            rows.fill(0.0)
+            if ahead:
+                self.future.take(self._rows[0, :frames], start)
+        elif ahead:  # the ring's slice alone: its own sum
+            self.future.take(out, start)
         summed = self._rows[: ahead + count, :frames]
         clocked = self.clocked
         began_s = time.perf_counter()
@@ -254,13 +257,14 @@ class Scheduler:
                 now_s = time.perf_counter()
                 done[index] = self._over_budget(voice, now_s - began_s) or done[index]
                 began_s = now_s
-        if not contacts:
+        if count:
             np.add.reduce(summed, axis=0, out=out)
-        elif count + ahead:
-            np.add.reduce(summed, axis=0, out=out)
-            out += self.contact_mix.render(contacts, start, frames, work)
-        else:
-            out[...] = self.contact_mix.render(contacts, start, frames, work)
+        if contacts:
+            mixed = self.contact_mix.render(contacts, start, frames, work)
+            if count + ahead:
+                out += mixed
+            else:
+                out[...] = mixed
         if not math.isfinite(float(np.add.reduce(out, axis=None))):
             self._remix(out, rows, rendered, through, done)
         for index, contact in zip(through, contacts, strict=True):
