@@ -109,6 +109,18 @@ def test_only_the_newest_position_of_a_bound_slot_is_posted_once(locked: bool) -
     assert posted(slots) == []  # applied once
 
 
+def test_a_position_written_before_the_slot_is_bound_is_posted_once_it_is(locked: bool) -> None:
+    slots = MoveSlots(128, CHANNELS, locked=locked)
+    first, second = slots.allocate() or (0, 0), slots.allocate() or (0, 0)
+    slots.bind(first[0], first[1], 1)
+    slots.write(second[0], second[1], gains(0.5, 1.5), None, None)  # its touchdown in transit
+    slots.write(first[0], first[1], gains(2.0, 3.0), None, None)
+    assert posted(slots) == [(1, 2.0, 3.0, None, None)]  # the bound slot alone
+    slots.bind(second[0], second[1], 2)
+    assert posted(slots) == [(2, 0.5, 1.5, None, None)]
+    assert posted(slots) == []
+
+
 def test_a_slot_that_changes_hands_never_posts_what_it_held_before(locked: bool) -> None:
     slots = MoveSlots(1, CHANNELS, locked=locked)
     slot, old = slots.allocate() or (0, 0)
