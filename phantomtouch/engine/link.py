@@ -17,6 +17,9 @@ REPORTS_WAITING = 1024
 """Most blocks' reports waiting to be sent to the host (more are dropped and counted)."""
 OUTBOX_BYTES = 64 << 20
 """Most bytes of the host's messages waiting in its :class:`Outbox` (more are refused)."""
+OUTBOX_GATHER_S = 0.0005
+"""How long the outbox's thread, once woken, lets a burst's messages gather before it
+writes them all, s: while it gathers or writes, queuing a message wakes no thread."""
 
 
 class Inbox:
@@ -156,22 +159,28 @@ class Outbox:
             return True
 
     def _run(self) -> None:
+        """The outbox's thread: once woken, let the messages of a burst gather
+        (:data:`OUTBOX_GATHER_S`), then write all that waits, oldest first."""
         while True:
             with self._ready:
                 self._ready.wait_for(lambda: self._frames or self._closed)
                 if not self._frames:
                     return
-                frame = self._frames.popleft()
-            try:
-                self._connection.send_bytes(frame)
-            except OSError:
-                with self._ready:
-                    self.broken = True
-                    self._frames.clear()
-                    self._bytes = 0
-                return
+            time.sleep(OUTBOX_GATHER_S)
             with self._ready:
-                self._bytes -= len(frame)
+                frames = list(self._frames)
+                self._frames.clear()
+            for frame in frames:
+                try:
+                    self._connection.send_bytes(frame)
+                except OSError:
+                    with self._ready:
+                        self.broken = True
+                        self._frames.clear()
+                        self._bytes = 0
+                    return
+            with self._ready:
+                self._bytes -= sum(len(frame) for frame in frames)
 
     def close(self, timeout_s: float) -> None:
         """Write what waits (at most ``timeout_s``), stop the thread, close the pipe
