@@ -35,7 +35,8 @@ from typing import Any
 import numpy as np
 
 import phantomtouch as pt
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
+from phantomtouch.output.sinks import CaptureSink
 
 CONTACTS = 4
 TAP_EVERY_S = 0.02
