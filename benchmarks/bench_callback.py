@@ -36,7 +36,8 @@ import numpy as np
 from yardstick import block_copy_s
 
 import phantomtouch as pt
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
+from phantomtouch.output.sinks import CaptureSink
 
 CONTACTS = 4
 TAP_EVERY_S = 0.02

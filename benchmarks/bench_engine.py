@@ -44,7 +44,7 @@ import phantomtouch as pt
 from phantomtouch.engine import Engine
 from phantomtouch.engine.front import MAX_VOICES
 from phantomtouch.engine.local_audio import RENDER_AHEAD_FRAMES
-from phantomtouch.engine.sinks import RenderFn, Sink
+from phantomtouch.output.sinks import RenderFn, Sink
 
 PATTERN_PRESETS = [n for n in pt.preset_names() if n.startswith("exp1/") and "-v3" in n][::2]
 
@@ -236,8 +236,8 @@ def underrun_run(seconds: float, *, json_thread: bool, own_process: bool) -> dic
     """One run on a private ``jackd -p 128``; the JSON thread runs in this process."""
     import sounddevice  # noqa: F401 (PortAudio is initialised before the server starts)
 
-    from phantomtouch.engine import SoundDeviceSink
-    from phantomtouch.engine.process import ProcessEngine, SinkSpec
+    from phantomtouch.engine.process import ProcessEngine
+    from phantomtouch.output.soundcard import SinkSpec, SoundDeviceSink
     from tests.support.jack import JackServer, JackXrunCounter
 
     device = pt.DeviceProfile.default().model_copy(update={"block_frames": 128})

@@ -41,9 +41,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from phantomtouch.engine import ProcessEngine, SinkSpec
+from phantomtouch.engine import ProcessEngine
 from phantomtouch.osc.bridge import OscBridge
 from phantomtouch.osc.mapping import default_map
+from phantomtouch.output.soundcard import SinkSpec
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.service.admission import Admission, policy_table
 from phantomtouch.service.settings import Settings

@@ -242,7 +242,7 @@ def _cmd_stimuli(args: argparse.Namespace) -> int:
 
 
 def _cmd_devices(args: argparse.Namespace) -> int:
-    from phantomtouch.output_devices import list_output_devices
+    from phantomtouch.output.devices import list_output_devices
 
     needed = load_device(args.device).channels
     devices = [

@@ -4,10 +4,10 @@ The layers, lowest first (docs/architecture.md)::
 
     base         phantomtouch.errors (the exception root), phantomtouch.schema
     renderer     phantomtouch.renderer                       -> base
-    devices      phantomtouch.output_devices (PortAudio's)   -> base
+    output       phantomtouch.output (devices, sinks)        -> base only
     clips        phantomtouch.clips (a file in, a clip out)  -> base only
     package      phantomtouch/__init__.py (the public names) -> renderer, base
-    engine       phantomtouch.engine                         -> renderer, devices, base
+    engine       phantomtouch.engine                         -> renderer, output, base
     service      phantomtouch.service                         -> engine, clips, package, ...
     server, fleet, osc, bhaptics                             -> service and below; never
                                                                 each other
@@ -34,7 +34,7 @@ LAYER_OF = {
     "phantomtouch.errors": "base",
     "phantomtouch.schema": "base",
     "phantomtouch.renderer": "renderer",
-    "phantomtouch.output_devices": "devices",
+    "phantomtouch.output": "output",
     "phantomtouch.clips": "clips",
     "phantomtouch.engine": "engine",
     "phantomtouch.service": "service",
@@ -51,14 +51,14 @@ LAYER_OF = {
 }
 """A module's layer: that of the longest name here that is the module or a package of it."""
 
-_BELOW_SERVICE = {"base", "renderer", "devices", "clips", "package", "engine"}
+_BELOW_SERVICE = {"base", "renderer", "output", "clips", "package", "engine"}
 ALLOWED = {
     "base": {"base"},
     "renderer": {"base", "renderer"},
-    "devices": {"base", "devices"},
+    "output": {"base", "output"},
     "clips": {"base", "clips"},
     "package": {"base", "renderer", "package"},
-    "engine": {"base", "renderer", "devices", "engine"},
+    "engine": {"base", "renderer", "output", "engine"},
     "service": _BELOW_SERVICE | {"service"},
     "server": _BELOW_SERVICE | {"service", "server"},
     "fleet": _BELOW_SERVICE | {"service", "fleet"},
@@ -176,3 +176,21 @@ def test_clips_import_only_the_schema_and_the_exception_root() -> None:
     }
     assert imports <= {"phantomtouch.errors", "phantomtouch.schema"}
     assert "phantomtouch.schema" in imports
+
+
+def test_the_output_layer_imports_only_the_base_and_the_engine_plays_into_it() -> None:
+    graph = import_graph()
+    output_imports = {
+        layer_of(target)
+        for name, targets in graph.items()
+        if layer_of(name) == "output"
+        for target in targets
+    }
+    assert output_imports == {"base", "output"}
+    engine_imports = {
+        target
+        for name, targets in graph.items()
+        if layer_of(name) == "engine"
+        for target in targets
+    }
+    assert {"phantomtouch.output.sinks", "phantomtouch.output.soundcard"} <= engine_imports

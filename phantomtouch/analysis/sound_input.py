@@ -14,7 +14,7 @@ import numpy as np
 from phantomtouch.analysis.calibration import PlayRecord
 from phantomtouch.analysis.twin import amplitude_m_s2
 from phantomtouch.errors import DeviceError, ParameterError, install_hint
-from phantomtouch.output_devices import sounddevice_module
+from phantomtouch.output.devices import sounddevice_module
 
 
 def input_scale(

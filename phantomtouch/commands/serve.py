@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 from phantomtouch.errors import DeviceError, ParameterError, PhantomTouchError, install_hint
 from phantomtouch.fleet import cli as fleet_cli
 from phantomtouch.osc.command import add_osc_command
-from phantomtouch.output_devices import release_portaudio
+from phantomtouch.output.devices import release_portaudio
 from phantomtouch.schema import describe_validation_error
 
 if TYPE_CHECKING:

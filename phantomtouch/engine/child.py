@@ -25,7 +25,7 @@ from phantomtouch.engine.messages import prepare as prepare_message
 from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.plan_memory import HeldArrays
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
-from phantomtouch.engine.soundcard import SinkSpec
+from phantomtouch.output.soundcard import SinkSpec
 from phantomtouch.renderer.carriers import refuse_building
 from phantomtouch.schema.device import DeviceProfile
 
@@ -200,7 +200,7 @@ def serve(
         events (:mod:`phantomtouch.engine.messages`), sent by the report box's thread.
     device_json : str
         The device profile as JSON; the engine plays it at the block its sink found
-        (the sound card's period, :class:`~phantomtouch.engine.sinks.Sink`).
+        (the sound card's period, :class:`~phantomtouch.output.sinks.Sink`).
     spec : SinkSpec
     options : dict
         ``queue_capacity``, ``max_voices``, ``contact`` (one move slot per

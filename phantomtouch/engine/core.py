@@ -16,10 +16,10 @@ from phantomtouch.engine.contacts import ContactSettings
 from phantomtouch.engine.messages import Cancelled, Ended, Event, Released, Started, StoppedAll
 from phantomtouch.engine.prerender import Prerendered
 from phantomtouch.engine.scheduler import Scheduler, load_percentiles, ring_percentiles
-from phantomtouch.engine.sinks import CaptureSink, Sink
 from phantomtouch.engine.voice_queue import CommandQueue
 from phantomtouch.engine.voices import DONE, PatternVoice
 from phantomtouch.errors import DeviceError
+from phantomtouch.output.sinks import CaptureSink, Sink
 from phantomtouch.renderer.plan import Plan
 from phantomtouch.schema.device import DeviceProfile
 

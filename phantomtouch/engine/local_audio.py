@@ -15,8 +15,8 @@ from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core, measure_costs
 from phantomtouch.engine.front import EngineFront, Links
 from phantomtouch.engine.messages import AudioState, Command, ContactMove, Event, perform
-from phantomtouch.engine.sinks import NullSink, Sink
 from phantomtouch.errors import DeviceError, ParameterError
+from phantomtouch.output.sinks import NullSink, Sink
 from phantomtouch.renderer.plan import plan
 from phantomtouch.renderer.presets import preset
 from phantomtouch.schema.device import DeviceProfile
@@ -190,8 +190,8 @@ class Engine(EngineFront):
     sink : Sink or None
         Where the blocks go; the engine owns it from now on and closes it, and renders
         in its ``block_frames`` (the sound card's period: :attr:`device` is the profile
-        at that block). None: a :class:`~phantomtouch.engine.sinks.NullSink` (use
-        :func:`~phantomtouch.engine.soundcard.open_default_sink` for the sound card).
+        at that block). None: a :class:`~phantomtouch.output.sinks.NullSink` (use
+        :func:`~phantomtouch.output.soundcard.open_default_sink` for the sound card).
     render_ahead_frames : int, >= 0
         Frames a pattern voice renders ahead at a time; 0 renders every block directly.
     clock : SampleClock or None

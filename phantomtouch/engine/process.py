@@ -30,9 +30,9 @@ from phantomtouch.engine.messages import (
 from phantomtouch.engine.noise import SharedLoops, loop_key
 from phantomtouch.engine.plan_memory import SharedPlans
 from phantomtouch.engine.scheduler import load_percentiles, ring_percentiles
-from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.engine.spawn import CLOSE_TIMEOUT_S, START_TIMEOUT_S, ChildProcess
 from phantomtouch.errors import DeviceError, EngineBusyError
+from phantomtouch.output.soundcard import SinkSpec
 from phantomtouch.renderer.carriers import noise_loop
 from phantomtouch.schema.device import DeviceProfile
 

@@ -17,8 +17,8 @@ from phantomtouch.engine.child import serve
 from phantomtouch.engine.link import Outbox
 from phantomtouch.engine.scheduler import RENDER_TIMES
 from phantomtouch.engine.shared import MoveSlots, SharedClock, StatusBlock
-from phantomtouch.engine.soundcard import SinkSpec
 from phantomtouch.errors import DeviceError
+from phantomtouch.output.soundcard import SinkSpec
 from phantomtouch.schema.device import DeviceProfile
 
 START_TIMEOUT_S = 60.0
@@ -32,7 +32,7 @@ class ChildProcess:
     ``read_reports(child)``), and in shared memory its ``clock``, move ``slots``,
     ``status``, stop ``mark``, render ``loads`` and callback ``seconds``; and what its
     sink found at start: ``block_frames``, ``period_frames`` and ``period_source``
-    (:class:`~phantomtouch.engine.sinks.Sink`). Host.
+    (:class:`~phantomtouch.output.sinks.Sink`). Host.
 
     Parameters
     ----------

@@ -68,7 +68,7 @@ def check_output(settings: Settings) -> None:
     DeviceError
         PortAudio (or ``sounddevice``) is missing or cannot list the devices (exit 1).
     """
-    from phantomtouch.output_devices import find_output_device, list_output_devices
+    from phantomtouch.output.devices import find_output_device, list_output_devices
     from phantomtouch.service.engine_access import NULL_OUTPUT, output_of
 
     output = output_of(settings)

@@ -38,15 +38,9 @@ def open_engine(
     ``engine_process`` (the default) the engine runs in a child process, and
     ``on_fault(state)`` is called when that process died or stalled and is restarted.
     """
-    from phantomtouch.engine import (
-        CaptureSink,
-        Engine,
-        NullSink,
-        ProcessEngine,
-        Sink,
-        SinkSpec,
-        open_default_sink,
-    )
+    from phantomtouch.engine import Engine, ProcessEngine
+    from phantomtouch.output.sinks import CaptureSink, NullSink, Sink
+    from phantomtouch.output.soundcard import SinkSpec, open_default_sink
 
     engine: EngineFront
     output = output_of(settings)

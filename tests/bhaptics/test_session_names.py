@@ -12,7 +12,8 @@ from typing import Any
 
 from phantomtouch.bhaptics.session import MAX_ACTIVE_FRAMES, PlayerSession, PointBudget, prepare
 from phantomtouch.clips.tact_map import ArmMap
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.service.admission import Admission, Handle, policy_table
 from tests.bhaptics.test_standin_live import dot_project

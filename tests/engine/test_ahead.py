@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
-from phantomtouch.engine import CaptureSink, Engine, SoundDeviceSink
-from phantomtouch.engine.process import ProcessEngine, SinkSpec
+from phantomtouch.engine import Engine
+from phantomtouch.engine.process import ProcessEngine
+from phantomtouch.output.sinks import CaptureSink
+from phantomtouch.output.soundcard import SinkSpec, SoundDeviceSink
 from phantomtouch.renderer import PatternRenderer
 from tests.support.jack import JackRecorder, JackServer
 from tests.support.waiting import wait_until

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
-from phantomtouch.engine import CaptureSink, ContactSettings, Engine
+from phantomtouch.engine import ContactSettings, Engine
 from phantomtouch.engine.mixer import WEARER_RAMP_S, Mixer
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.renderer.carriers import SineSource
 from phantomtouch.renderer.levels import amplitude_for_level
 

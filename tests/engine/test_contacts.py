@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, ProtocolError, gains_at
-from phantomtouch.engine import CaptureSink, ContactSettings, Engine
+from phantomtouch.engine import ContactSettings, Engine
 from phantomtouch.engine.future_mix import AHEAD_FRAMES
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.renderer.carriers import NoiseSource, SineSource
 from phantomtouch.renderer.levels import amplitude_for_level
 from phantomtouch.schema import NoiseCarrier, SineCarrier

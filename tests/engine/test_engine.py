@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, TouchPattern, render
-from phantomtouch.engine import CaptureSink, Engine, Job, NullSink
+from phantomtouch.engine import Engine, Job
 from phantomtouch.errors import DeviceError
+from phantomtouch.output.sinks import CaptureSink, NullSink
 from phantomtouch.renderer import plan
 from phantomtouch.schema import Calibration
 

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.front import STEAL_FADE_S
 from phantomtouch.engine.future_mix import AHEAD_FRAMES
+from phantomtouch.output.sinks import CaptureSink
 from tests.engine.test_voice_guard import nan_plan
 
 PROFILE = DeviceProfile.default()

@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, gains_at, render
-from phantomtouch.engine import Engine, SoundDeviceSink
+from phantomtouch.engine import Engine
 from phantomtouch.engine.front import MAX_VOICES
 from phantomtouch.engine.prerender import PRERENDER_MAX_S
+from phantomtouch.output.soundcard import SoundDeviceSink
 from phantomtouch.renderer.carriers import SineSource
 from phantomtouch.renderer.levels import amplitude_for_level
 from phantomtouch.schema import NoiseCarrier, SafetyLimits

@@ -5,9 +5,10 @@ from __future__ import annotations
 import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, ParameterError, TouchPattern
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.jobs import JobRecord, JobTable, OwnerQuota, QuotaRefused
 from phantomtouch.engine.plans import resolve_plan
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.renderer import plan
 
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from phantomtouch import DeviceProfile, ParameterError, TouchPattern
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
+from phantomtouch.output.sinks import CaptureSink
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, plan
-from phantomtouch.engine import CaptureSink, Engine, messages
+from phantomtouch.engine import Engine, messages
 from phantomtouch.engine.messages import (
     APPLIERS,
     AudioState,
@@ -28,6 +28,7 @@ from phantomtouch.engine.messages import (
     StoppedAll,
     perform,
 )
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.schema.pattern import SineCarrier
 
 DEVICE = DeviceProfile.default()

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.mixer import THRESHOLD_RATIO, Limiter, Mixer
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.renderer import OutputStage
 from phantomtouch.renderer.dc_blocker import DcBlocker
 from phantomtouch.schema import Calibration, SafetyLimits

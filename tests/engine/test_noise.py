@@ -22,7 +22,8 @@ from phantomtouch.engine.messages import (
     prepare,
 )
 from phantomtouch.engine.noise import NOISE_LOOPS, HeldLoops, SharedLoops, loop_key
-from phantomtouch.engine.process import ProcessEngine, SinkSpec
+from phantomtouch.engine.process import ProcessEngine
+from phantomtouch.output.soundcard import SinkSpec
 from phantomtouch.renderer import plan
 from phantomtouch.renderer.carriers import NoiseSource
 from phantomtouch.schema.pattern import NoiseCarrier
@@ -118,7 +119,8 @@ def test_a_band_held_again_while_its_drop_waits_for_the_callback_is_held() -> No
     """Staged as the engine process stages them (its inbox thread prepares each message
     in order, the callback performs what is left a block later), a band dropped and held
     again before that block is held at the end, as the host believes."""
-    from phantomtouch.engine import CaptureSink, Engine
+    from phantomtouch.engine import Engine
+    from phantomtouch.output.sinks import CaptureSink
 
     shared = SharedLoops(capacity=1)
     first, second = loop_key(band(0), RATE), loop_key(band(1), RATE)
@@ -174,7 +176,8 @@ def test_the_engine_process_refuses_a_loop_it_was_not_handed() -> None:
 
 
 def test_a_local_audio_side_with_no_shared_loops_refuses_a_handle() -> None:
-    from phantomtouch.engine import CaptureSink, Engine
+    from phantomtouch.engine import Engine
+    from phantomtouch.output.sinks import CaptureSink
 
     with Engine(DEVICE, CaptureSink(DEVICE)) as engine:
         state = AudioState(engine.core)

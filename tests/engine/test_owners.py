@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError
-from phantomtouch.engine import CaptureSink, ContactSettings, Engine
+from phantomtouch.engine import ContactSettings, Engine
 from phantomtouch.engine.jobs import JobRecord, JobTable, Policy
 from phantomtouch.engine.owners import ContactRecord, OwnerTable
+from phantomtouch.output.sinks import CaptureSink
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames

@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
-from phantomtouch.engine import Engine, NullSink, ProcessEngine, SinkSpec, SoundDeviceSink
-from phantomtouch.engine.soundcard import resolve_period
+from phantomtouch.engine import Engine, ProcessEngine
 from phantomtouch.errors import DeviceError, ParameterError
-from phantomtouch.output_devices import find_output_device, host_period_frames
+from phantomtouch.output.devices import find_output_device, host_period_frames
+from phantomtouch.output.sinks import NullSink
+from phantomtouch.output.soundcard import SinkSpec, SoundDeviceSink, resolve_period
 from tests.support.jack import JackRecorder, JackServer, start_jack_or_skip
 from tests.support.live_server import LiveServer
 

@@ -8,11 +8,13 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.messages import AudioState, HoldPlan, StartJob, perform
 from phantomtouch.engine.plan_memory import SHARE_MIN_BYTES, SharedArrays, heavy_bytes
 from phantomtouch.engine.prerender import prerender
-from phantomtouch.engine.process import ProcessEngine, SinkSpec
+from phantomtouch.engine.process import ProcessEngine
+from phantomtouch.output.sinks import CaptureSink
+from phantomtouch.output.soundcard import SinkSpec
 from phantomtouch.renderer import plan
 from tests.support.waiting import wait_until
 

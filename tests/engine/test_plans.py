@@ -10,10 +10,12 @@ from typing import Any
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, preset
-from phantomtouch.engine import CaptureSink, Engine, NullSink
+from phantomtouch.engine import Engine
 from phantomtouch.engine.messages import DropPlan, HoldPlan, StartJob
 from phantomtouch.engine.plans import PlanCache, plan_bytes
-from phantomtouch.engine.process import ProcessEngine, SinkSpec
+from phantomtouch.engine.process import ProcessEngine
+from phantomtouch.output.sinks import CaptureSink, NullSink
+from phantomtouch.output.soundcard import SinkSpec
 from phantomtouch.renderer import plan
 from tests.support.waiting import wait_until
 

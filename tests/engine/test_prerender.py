@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.plans import PlanCache
 from phantomtouch.engine.prerender import prerender
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.renderer import plan
 
 DEVICE = DeviceProfile.default()

@@ -27,8 +27,9 @@ from phantomtouch import (
 )
 from phantomtouch.engine import plans as plan_cache
 from phantomtouch.engine.contacts import ContactSettings
-from phantomtouch.engine.process import ProcessEngine, SinkSpec
+from phantomtouch.engine.process import ProcessEngine
 from phantomtouch.errors import DeviceError
+from phantomtouch.output.soundcard import SinkSpec
 from tests.support.jack import JackRecorder, JackServer
 from tests.support.waiting import wait_until
 from tests.support.yardstick import WakeUpLag
@@ -117,7 +118,8 @@ def test_the_engine_process_ends_when_its_host_dies(tmp_path: Path) -> None:
     script.write_text(
         "import os, sys\n"
         "from phantomtouch import DeviceProfile\n"
-        "from phantomtouch.engine.process import ProcessEngine, SinkSpec\n"
+        "from phantomtouch.engine.process import ProcessEngine\n"
+        "from phantomtouch.output.soundcard import SinkSpec\n"
         "if __name__ == '__main__':\n"
         "    engine = ProcessEngine(DeviceProfile.default(), SinkSpec('null'))\n"
         "    engine.start()\n"

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, EngineBusyError, TouchPattern, render
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.front import STEAL_FADE_S
 from phantomtouch.engine.render_budget import CHURN_SHARE, CHURN_WINDOW_S
+from phantomtouch.output.sinks import CaptureSink
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames

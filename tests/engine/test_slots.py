@@ -11,8 +11,9 @@ from pathlib import Path
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.messages import Command, Ended, Event, Released, Started, VoiceEvent
+from phantomtouch.output.sinks import CaptureSink
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames

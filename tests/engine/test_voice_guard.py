@@ -17,13 +17,15 @@ import numpy as np
 import soundfile
 
 from phantomtouch import DeviceProfile, TouchPattern, render
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.messages import ContactDown
-from phantomtouch.engine.process import ProcessEngine, SinkSpec
+from phantomtouch.engine.process import ProcessEngine
 from phantomtouch.engine.scheduler import OVERRUN_BLOCKS, Scheduler
 from phantomtouch.engine.voice_queue import CommandQueue
 from phantomtouch.engine.voices import Voice, Workspace
+from phantomtouch.output.sinks import CaptureSink
+from phantomtouch.output.soundcard import SinkSpec
 from phantomtouch.renderer import PatternRenderer, plan
 from phantomtouch.renderer.carriers import SineSource
 from phantomtouch.renderer.plan import Plan

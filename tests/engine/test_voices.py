@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile, TouchPattern, render
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.local_audio import RENDER_AHEAD_RINGS
 from phantomtouch.engine.voices import PatternVoice, RingPool, Workspace
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.renderer import plan
 
 DEVICE = DeviceProfile.default()

@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 
 from phantomtouch import DeviceProfile
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.engine.messages import AudioState, SetWearerGains, perform
 from phantomtouch.engine.mixer import WEARER_RAMP_S, Mixer
-from phantomtouch.engine.process import ProcessEngine, SinkSpec
+from phantomtouch.engine.process import ProcessEngine
 from phantomtouch.errors import ParameterError
+from phantomtouch.output.sinks import CaptureSink
+from phantomtouch.output.soundcard import SinkSpec
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from phantomtouch.engine import CaptureSink, ContactSettings, Engine
+from phantomtouch.engine import ContactSettings, Engine
 from phantomtouch.errors import ProtocolError
 from phantomtouch.fleet.remote_contacts import PRINCIPAL, Principals, RemoteContacts
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.schema import DeviceProfile
 from phantomtouch.service.admission import Admission, policy_table
 from phantomtouch.service.errors import QuotaError, TooLargeError

@@ -17,9 +17,10 @@ import pytest
 from pythonosc.udp_client import SimpleUDPClient
 
 from phantomtouch.clips.tact_map import ArmMap
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.osc.bridge import OscBridge
 from phantomtouch.osc.mapping import BHAPTICS_PREFIX, bhaptics_map, load_map
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.schema import DeviceProfile
 from tests.osc.support import energy_track, osc_admission
 

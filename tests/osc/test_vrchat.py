@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 from pythonosc.udp_client import SimpleUDPClient
 
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.osc.bridge import OscBridge
 from phantomtouch.osc.mapping import ReceiverMap, default_map
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.schema import DeviceProfile
 from tests.osc.support import FRAME_S, energy_track, osc_admission, proximity, send_stream
 from tests.support.yardstick import WakeUpLag

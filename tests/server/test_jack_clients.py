@@ -5,7 +5,7 @@ server.
 running JACK server. JACK wakes every client each period and the cycle waits for them
 all, so the service's own process, which only looks the output device up, closes
 PortAudio again before the engine process opens the device and plays
-(``phantomtouch.output_devices.release_portaudio``).
+(``phantomtouch.output.devices.release_portaudio``).
 """
 
 from __future__ import annotations

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from phantomtouch.clips.tact_score import Score, Voice
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
 from phantomtouch.errors import ParameterError, ProtocolError
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.schema import DeviceProfile, TouchPattern
 from phantomtouch.service.admission import (
     KINDS,

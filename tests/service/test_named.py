@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 
 from phantomtouch.clips.tact_score import Score, Voice
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.schema import DeviceProfile, TouchPattern
 from phantomtouch.service.admission import Admission, Handle, policy_table
 from phantomtouch.service.scores import ScoreJobs

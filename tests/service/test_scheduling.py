@@ -14,7 +14,8 @@ from typing import Any
 
 import pytest
 
-from phantomtouch.engine import CaptureSink, Engine
+from phantomtouch.engine import Engine
+from phantomtouch.output.sinks import CaptureSink
 from phantomtouch.schema import DeviceProfile, TouchPattern
 from phantomtouch.service.admission import Admission, Handle, policy_table
 from phantomtouch.service.errors import NotFoundError, QuotaError

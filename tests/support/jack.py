@@ -31,7 +31,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from phantomtouch.output_devices import release_portaudio, sounddevice_module
+from phantomtouch.output.devices import release_portaudio, sounddevice_module
 
 
 class JackUnavailable(RuntimeError):

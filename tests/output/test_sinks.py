@@ -10,8 +10,8 @@ import pytest
 import soundfile
 
 from phantomtouch import DeviceProfile, ParameterError
-from phantomtouch.engine import CaptureSink, NullSink
 from phantomtouch.errors import DeviceError
+from phantomtouch.output.sinks import CaptureSink, NullSink
 
 DEVICE = DeviceProfile.default()
 BLOCK = DEVICE.block_frames

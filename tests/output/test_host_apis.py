@@ -15,9 +15,9 @@ import pytest
 
 from phantomtouch import DeviceProfile
 from phantomtouch.cli import main
-from phantomtouch.engine import SoundDeviceSink
 from phantomtouch.errors import DeviceError
-from phantomtouch.output_devices import find_output_device, split_host_api
+from phantomtouch.output.devices import find_output_device, split_host_api
+from phantomtouch.output.soundcard import SoundDeviceSink
 from tests.support.jack import JackServer
 
 WINDOWS = ["MME", "Windows DirectSound", "ASIO", "Windows WASAPI", "Windows WDM-KS"]
@@ -108,13 +108,13 @@ def test_asio_is_asked_for_before_sounddevice_is_imported_on_windows() -> None:
     """sounddevice reads ``SD_ENABLE_ASIO`` once, as it loads its bundled PortAudio."""
     script = (
         "import os, sys\n"
-        "from phantomtouch import output_devices\n"
+        "from phantomtouch.output import devices\n"
         "from phantomtouch.errors import DeviceError\n"
         "os.environ.pop('SD_ENABLE_ASIO', None)\n"
         "sys.modules.pop('sounddevice', None)\n"
         "sys.platform = 'win32'\n"
         "try:\n"
-        "    output_devices.sounddevice_module()\n"
+        "    devices.sounddevice_module()\n"
         "except DeviceError:\n"
         "    pass  # the Windows DLL is not on this machine\n"
         "print(os.environ.get('SD_ENABLE_ASIO'))\n"

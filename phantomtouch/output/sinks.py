@@ -1,5 +1,5 @@
 """The sinks that need no audio hardware: a clocked null sink and a capture sink (the sound
-card's is in :mod:`phantomtouch.engine.soundcard`)."""
+card's is in :mod:`phantomtouch.output.soundcard`)."""
 
 from __future__ import annotations
 

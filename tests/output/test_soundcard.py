@@ -10,9 +10,11 @@ import pytest
 
 from phantomtouch import DeviceProfile, ParameterError, TouchPattern, render
 from phantomtouch.cli import main
-from phantomtouch.engine import Engine, NullSink, SoundDeviceSink, open_default_sink
+from phantomtouch.engine import Engine
 from phantomtouch.errors import DeviceError
-from phantomtouch.output_devices import find_output_device, list_output_devices
+from phantomtouch.output.devices import find_output_device, list_output_devices
+from phantomtouch.output.sinks import NullSink
+from phantomtouch.output.soundcard import SoundDeviceSink, open_default_sink
 from phantomtouch.schema import Actuator
 from tests.support.jack import JackRecorder, JackServer
 

@@ -1,5 +1,5 @@
 """The sound card sink (PortAudio through ``sounddevice``), on a device found by
-:mod:`phantomtouch.output_devices`.
+:mod:`phantomtouch.output.devices`.
 
 ``sounddevice`` is imported only when a sound card is asked for (``phantomtouch[audio]``
 installs it); without it the engine falls back to the null sink.
@@ -14,14 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from phantomtouch.engine.sinks import CaptureSink, NullSink, RenderFn, Sink
 from phantomtouch.errors import DeviceError, ParameterError
-from phantomtouch.output_devices import (
+from phantomtouch.output.devices import (
     PERIOD_HOST_APIS,
     find_output_device,
     host_period_frames,
     sounddevice_module,
 )
+from phantomtouch.output.sinks import CaptureSink, NullSink, RenderFn, Sink
 from phantomtouch.schema import limits
 from phantomtouch.schema.device import DeviceProfile
 

@@ -2,8 +2,8 @@
 listing, lookup by index, name or host API, and the period a host API reports.
 
 ``sounddevice`` is imported only when a sound card is asked for (``phantomtouch[audio]``
-installs it). Nothing here plays: the engine's sound card sink
-(:mod:`phantomtouch.engine.soundcard`) opens the device found here.
+installs it). Nothing here plays: the sound card sink
+(:mod:`phantomtouch.output.soundcard`) opens the device found here.
 """
 
 from __future__ import annotations
