@@ -65,6 +65,7 @@ class Intake:
             1, round(REPORT_EVERY_S * device.sample_rate_hz / device.block_frames)
         )
         self._blocks = 0
+        self._reported = False
 
     def run(self) -> None:
         """At the start of each block (real time): the host's messages come from the
@@ -94,6 +95,7 @@ class Intake:
         self._blocks += 1
         if self._blocks % self.report_every:
             return
+        self._reported = True
         state = self.state
         self.loops.collect()
         events = core.events()
@@ -108,11 +110,12 @@ class Intake:
         self.status.write(figures)
 
     def finished(self) -> None:
-        """At the end of the callback (real time): on a block that queued reports, wake
-        the report box's thread, so that no thread wakes to take the interpreter's lock
-        while a block renders, and a thread is woken at most every ``report_every``
+        """At the end of the callback (real time): when one of its blocks queued reports,
+        wake the report box's thread, so that no thread wakes to take the interpreter's
+        lock while a block renders, and one is woken at most every ``report_every``
         blocks."""
-        if self._blocks % self.report_every == 0:
+        if self._reported:
+            self._reported = False
             self.report_box.wake()
 
     def check_mark(self) -> None:
