@@ -302,6 +302,14 @@ class ContactMix:
         ahead = self._index.shape[0]
         self._sines = np.empty((capacity, ahead), dtype=np.float32)
         self._phases = np.empty((2, capacity, ahead))
+        self._steady = np.empty(capacity * ahead)
+        self._steady_rows = self._steady[:0].reshape(0, 0)
+        self._steady_voices: list[ContactVoice] = []
+        self._steady_used = 0
+        self._steady_end = -1
+        self._row_starts: list[np.ndarray | None] = [None] * capacity
+        self._row_moving = [True] * capacity
+        self._taken = self.carriers[:0].T
 
     def render(
         self, contacts: list[ContactVoice], block_start: int, frames: int, work: Workspace
@@ -309,24 +317,100 @@ class ContactMix:
         """The sum of ``contacts`` (each sounding through the block of ``frames`` from
         ``block_start``), shape (frames, channels), float64, valid until the next call;
         their carriers move on by the block (real time). :meth:`ContactVoice.end_block`
-        ends each one's block. The sine carriers among them are computed together
-        (:func:`~phantomtouch.renderer.carriers.sine_blocks`) ``AHEAD_FRAMES`` at a time
-        into each contact's :attr:`~ContactVoice.carrier_ahead`, the same samples as block
-        by block (the phase of frame ``n`` is ``n`` times the cycles per frame whatever the
-        block), whenever one of them runs out; the others one by one."""
+        ends each one's block.
+
+        While the same sine contacts sound on without an envelope (the steady state of a
+        scene's hands), their carriers are one slice of :attr:`_steady`, the next
+        ``AHEAD_FRAMES`` of each computed together
+        (:func:`~phantomtouch.renderer.carriers.sine_blocks`) whenever they run out or the
+        contacts change, and a row of gains is written only when it changed: no copy per
+        contact. Otherwise each one's carrier is copied into :attr:`carriers`: a sine's
+        from its own :attr:`~ContactVoice.carrier_ahead` (those that ran out computed
+        together), any other carrier's block by block, then times its envelope. Both give
+        each sine's samples bit for bit (the phase of frame ``n`` is ``n`` times the cycles
+        per frame whatever the block)."""
         count = len(contacts)
         if count > self.capacity:  # more contacts than ever before: room for twice as many
             self._allocate(2 * count)
         self.count = count
-        carriers = self.carriers[:count, :frames]
-        starts, deltas = self.starts[:count], self.deltas[:count]
+        starts, deltas = self.starts, self.deltas
+        row_starts, row_moving = self._row_starts, self._row_moving
+        firsts: list[int] = []
+        moved = False
+        plain = True  # no contact has an envelope over this block
+        for row, voice in enumerate(contacts):
+            firsts.append(voice.advance_carrier(frames))
+            gains, target = voice.gains, voice.target
+            if row_starts[row] is not gains:  # each row written only when it changed
+                starts[row] = gains
+                row_starts[row] = gains
+            if target is not gains:
+                np.subtract(target, gains, out=deltas[row], dtype=np.float64)
+                row_moving[row] = moved = True
+            elif row_moving[row]:
+                deltas[row] = 0.0
+                row_moving[row] = False
+            if plain and voice.envelope(block_start, frames, work) is not None:
+                plain = False
+        used = self._steady_used
+        if (
+            plain
+            and block_start == self._steady_end  # the last block took them so too, and
+            and contacts == self._steady_voices  # of the same voices: each moved on by it
+            and used + frames <= self._index.shape[0]
+        ):
+            self._taken = self._steady_rows[used : used + frames]
+            self._steady_used = used + frames
+            self._steady_end = block_start + frames
+        elif plain and all(voice.carrier_ahead is not None for voice in contacts):
+            self._fill_steady(contacts, firsts)
+            self._taken = self._steady_rows[:frames]
+            self._steady_used = frames
+            self._steady_end = block_start + frames
+        else:
+            self._copy_carriers(contacts, firsts, block_start, frames, work)
+        self.moved = moved
+        return self._sum(self._taken, self.starts[:count], self.deltas[:count], frames)
+
+    def _fill_steady(self, contacts: list[ContactVoice], firsts: list[int]) -> None:
+        """Compute the next ``AHEAD_FRAMES`` of every contact's sine from ``firsts`` into
+        :attr:`_steady`, float64."""
+        count = len(contacts)
+        starts = self._sine_starts[:count]
+        starts[:] = firsts
+        cycles = self._sine_cycles[:count]
+        for k, voice in enumerate(contacts):
+            source = voice.source
+            assert isinstance(source, SineSource)
+            cycles[k] = source.cycles_per_frame
+        sines = sine_blocks(
+            starts,
+            cycles,
+            self._index,
+            out=self._sines[:count],
+            scratch=(self._phases[0, :count], self._phases[1, :count]),
+        )
+        ahead = self._index.shape[0]
+        self._steady_rows = self._steady[: ahead * count].reshape(ahead, count)
+        np.copyto(self._steady_rows, sines.T)
+        self._steady_voices = list(contacts)
+
+    def _copy_carriers(
+        self,
+        contacts: list[ContactVoice],
+        firsts: list[int],
+        block_start: int,
+        frames: int,
+        work: Workspace,
+    ) -> None:
+        """Copy each contact's carrier into :attr:`carriers` (the sines that ran out of
+        their own buffers computed together), times its envelope."""
+        carriers = self.carriers[: len(contacts), :frames]
         sine_rows, sine_starts = self._sine_rows, self._sine_starts
         sines = 0
-        moved = False
-        for row, voice in enumerate(contacts):
+        for row, (voice, first) in enumerate(zip(contacts, firsts, strict=True)):
             ahead = voice.carrier_ahead
             if ahead is not None:
-                first = voice.advance_carrier(frames)
                 at = first - voice.ahead_first
                 if at + frames <= voice.ahead_frames:
                     carriers[row] = ahead[at : at + frames]
@@ -335,22 +419,14 @@ class ContactMix:
                     sine_starts[sines] = first
                     sines += 1
             else:
-                carriers[row] = voice.source.block(voice.advance_carrier(frames), frames)
-            gains, target = voice.gains, voice.target
-            starts[row] = gains
-            if target is gains:
-                deltas[row] = 0.0
-            else:
-                np.subtract(target, gains, out=deltas[row], dtype=np.float64)
-                moved = True
+                carriers[row] = voice.source.block(first, frames)
         if sines:
             self._sines_ahead(contacts, sines, frames)
         for row, voice in enumerate(contacts):
-            env = voice.envelope(block_start, frames, work)
+            env = voice.envelope(block_start, frames, work)  # a view of work: used at once
             if env is not None:
                 carriers[row] *= env
-        self.moved = moved
-        return self._sum(carriers, starts, deltas, frames)
+        self._taken = carriers.T
 
     def _sines_ahead(self, contacts: list[ContactVoice], sines: int, frames: int) -> None:
         """Compute the next ``AHEAD_FRAMES`` of the ``sines`` sine carriers that ran out
@@ -382,11 +458,13 @@ class ContactMix:
     def _sum(
         self, carriers: np.ndarray, starts: np.ndarray, deltas: np.ndarray, frames: int
     ) -> np.ndarray:
+        """``carriers @ starts + ramp * (carriers @ deltas)``; ``carriers`` (frames,
+        contacts), float64."""
         total = self._total[:frames]
-        np.dot(carriers.T, starts, out=total)
+        np.dot(carriers, starts, out=total)
         if self.moved:
             ramped = self._ramped[:frames]
-            np.dot(carriers.T, deltas, out=ramped)
+            np.dot(carriers, deltas, out=ramped)
             ramped *= self._ramp if frames == self.block_frames else self._ramp_for(frames)
             total += ramped
         return total
@@ -400,7 +478,7 @@ class ContactMix:
         """Which contacts of the last :meth:`render` have finite carriers and gains, shape
         (contacts,), bool."""
         count = self.count
-        rows = np.isfinite(self.carriers[:count]).all(axis=1)
+        rows = np.isfinite(self._taken).all(axis=0)
         rows &= np.isfinite(self.starts[:count]).all(axis=1)
         rows &= np.isfinite(self.deltas[:count]).all(axis=1)
         return np.asarray(rows)
@@ -410,7 +488,7 @@ class ContactMix:
         alone, as that call would have given it without the others (real time, rarely:
         a block that came out not finite)."""
         return self._sum(
-            self.carriers[: self.count, :frames][rows],
+            self._taken[:frames, rows],
             self.starts[: self.count][rows],
             self.deltas[: self.count][rows],
             frames,

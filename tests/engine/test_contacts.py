@@ -366,3 +366,32 @@ def test_sine_carriers_computed_ahead_are_each_contacts_sine_bit_for_bit() -> No
         carrier = SineSource(100.0, RATE).block(0, len(recording) - frame)
         np.testing.assert_array_equal(recording[frame:, channel], carrier * np.float32(HALF))
         assert not np.any(recording[:frame, channel])
+
+
+TOUCHES = ((8 * BLOCK, 9 * BLOCK), (20 * BLOCK + 17, 40 * BLOCK + 5))
+"""Frames where another contact touches down and is lifted: on a block's start, lifted
+during its attack; then mid-block, lifted after its attack and after the steady
+contact's sines ran out once."""
+
+
+def test_a_contact_keeps_its_sine_while_others_touch_down_fade_and_lift_off() -> None:
+    """A steady contact's carrier stays its own sine, bit for bit, across blocks where
+    another contact touches down, fades in, sounds through, is lifted and fades out: the
+    blocks where every contact sounds plainly through and those where one fades or renders
+    alone take the carriers two ways, and neither may shift or repeat the steady
+    contact's samples (one contact a channel, as above)."""
+    sink = CaptureSink(DEVICE)
+    with Engine(DEVICE, sink) as engine:
+        engine.contact_down("c", "a", 0.0, 0.0, intensity=0.5, at_frame=0)
+        for down, up in TOUCHES:
+            engine.contact_down("c", "b", 3.8, 14.4, intensity=0.5, at_frame=down)
+            engine.contact_up("c", "b", at_frame=up)
+        recording = sink.pull(8 * AHEAD_FRAMES // BLOCK)
+    carrier = SineSource(100.0, RATE).block(0, len(recording))
+    np.testing.assert_array_equal(recording[ATTACK:, 0], carrier[ATTACK:] * np.float32(HALF))
+    (first_down, first_up), (second_down, second_up) = TOUCHES
+    assert not np.any(recording[:first_down, 7])
+    assert np.any(recording[first_down:first_up, 7])
+    assert not np.any(recording[first_up + RELEASE : second_down, 7])
+    assert np.any(recording[second_down:second_up, 7])
+    assert not np.any(recording[second_up + RELEASE :, 7])
