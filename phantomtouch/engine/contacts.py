@@ -376,23 +376,10 @@ class ContactMix:
         """Compute the next ``AHEAD_FRAMES`` of every contact's sine from ``firsts`` into
         :attr:`_steady`, float64."""
         count = len(contacts)
-        starts = self._sine_starts[:count]
-        starts[:] = firsts
-        cycles = self._sine_cycles[:count]
-        for k, voice in enumerate(contacts):
-            source = voice.source
-            assert isinstance(source, SineSource)
-            cycles[k] = source.cycles_per_frame
-        sines = sine_blocks(
-            starts,
-            cycles,
-            self._index,
-            out=self._sines[:count],
-            scratch=(self._phases[0, :count], self._phases[1, :count]),
-        )
+        self._sine_starts[:count] = firsts
         ahead = self._index.shape[0]
         self._steady_rows = self._steady[: ahead * count].reshape(ahead, count)
-        np.copyto(self._steady_rows, sines.T)
+        np.copyto(self._steady_rows, self._next_sines(contacts).T)
         self._steady_voices = list(contacts)
 
     def _copy_carriers(
@@ -434,18 +421,7 @@ class ContactMix:
         this block's from them."""
         rows = self._sine_rows[:sines].tolist()
         voices = [contacts[row] for row in rows]
-        cycles = self._sine_cycles[:sines]
-        for k, voice in enumerate(voices):
-            source = voice.source
-            assert isinstance(source, SineSource)
-            cycles[k] = source.cycles_per_frame
-        blocks = sine_blocks(
-            self._sine_starts[:sines],
-            cycles,
-            self._index,
-            out=self._sines[:sines],
-            scratch=(self._phases[0, :sines], self._phases[1, :sines]),
-        )
+        blocks = self._next_sines(voices)
         for k, (row, voice) in enumerate(zip(rows, voices, strict=True)):
             ahead = voice.carrier_ahead
             assert ahead is not None
@@ -454,6 +430,24 @@ class ContactMix:
             voice.ahead_first = int(self._sine_starts[k])
             voice.ahead_frames = kept
             self.carriers[row, :frames] = blocks[k, :frames]
+
+    def _next_sines(self, voices: list[ContactVoice]) -> np.ndarray:
+        """The next ``AHEAD_FRAMES`` of the sine carriers of ``voices``, each from its first
+        frame in :attr:`_sine_starts`, computed together, shape (voices, AHEAD_FRAMES),
+        float32 (a view of :attr:`_sines`)."""
+        count = len(voices)
+        cycles = self._sine_cycles[:count]
+        for k, voice in enumerate(voices):
+            source = voice.source
+            assert isinstance(source, SineSource)
+            cycles[k] = source.cycles_per_frame
+        return sine_blocks(
+            self._sine_starts[:count],
+            cycles,
+            self._index,
+            out=self._sines[:count],
+            scratch=(self._phases[0, :count], self._phases[1, :count]),
+        )
 
     def _sum(
         self, carriers: np.ndarray, starts: np.ndarray, deltas: np.ndarray, frames: int
