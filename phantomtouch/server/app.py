@@ -8,6 +8,7 @@ on shut-down.
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
 from collections.abc import AsyncIterator, Sequence
 from contextlib import AsyncExitStack, asynccontextmanager
@@ -89,7 +90,14 @@ def _lifespan(settings: Settings, metrics: Metrics, attach: Sequence[Attachment]
                 attached.enter_context(running_lane(service))
                 for attachment in attach:
                     await attached.enter_async_context(attachment(service))
-                yield
+                # what start-up made is never scanned again: a full collection, which
+                # holds the interpreter (the event loop, the contact lane) while it runs,
+                # looks only at what the service made since (docs/engine.md, Threads)
+                gc.freeze()
+                try:
+                    yield
+                finally:
+                    gc.unfreeze()  # collectable again once the service closes
         finally:
             metrics.watch_engine(None)
             engine.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 from pathlib import Path
 
 import pytest
@@ -30,6 +31,21 @@ def test_lifespan_runs_the_engine(tmp_path: Path, engine_process: bool) -> None:
         running = False
     assert not running
     assert (tmp_path / "patterns.db").exists()
+
+
+def test_a_started_service_keeps_what_start_up_made_out_of_full_collections(
+    tmp_path: Path,
+) -> None:
+    """Start-up's objects are frozen while the service runs, so a full collection scans
+    only what came after them, and are collectable again once it closes (a process that
+    starts many services, as this one does, keeps none of them for good)."""
+    assert gc.get_freeze_count() == 0
+    with TestClient(create_app(make_settings(tmp_path))) as client:
+        client.get("/health")
+        frozen = gc.get_freeze_count()
+        unfrozen = len(gc.get_objects())
+    assert frozen > unfrozen, (frozen, unfrozen)
+    assert gc.get_freeze_count() == 0
 
 
 def test_openapi_documents_error_bodies(client: TestClient) -> None:
