@@ -9,6 +9,13 @@ from typing import Any, Protocol
 
 from phantomtouch.errors import PhantomTouchError
 
+KEEP_ALIVE_S = 75
+"""How long an idle kept-alive HTTP connection stays open, s: longer than the clients of
+the service keep theirs (httpx 5 s, aiohttp 15 s, .NET's ``HttpClient`` 60 s), so that a
+client gives its connection up first and never sends a request on one the server is
+closing at that moment (uvicorn's own 5 s is httpx's too: a request sent 5 s after the
+one before was then, now and then, lost with the connection)."""
+
 
 def log_config() -> dict[str, Any]:
     """uvicorn's logging, plus the ``phantomtouch`` logger (start-up lines, errors), less
@@ -47,8 +54,8 @@ class Listening(Protocol):
 def run_http(app: Any, settings: Listening, **options: Any) -> None:
     """Serve ``app`` under uvicorn until SIGTERM or SIGINT, as every HTTP server of the
     project runs: on ``settings.host`` and ``settings.port``, WebSocket messages up to
-    ``settings.max_ws_message_bytes``, :func:`log_config`'s logging, no access log and no
-    ``Server`` header.
+    ``settings.max_ws_message_bytes``, idle connections kept :data:`KEEP_ALIVE_S`,
+    :func:`log_config`'s logging, no access log and no ``Server`` header.
 
     Called by the command that serves, on its main thread.
 
@@ -74,6 +81,7 @@ def run_http(app: Any, settings: Listening, **options: Any) -> None:
         host=settings.host,
         port=settings.port,
         ws_max_size=settings.max_ws_message_bytes,
+        timeout_keep_alive=KEEP_ALIVE_S,
         log_config=log_config(),
         access_log=False,
         server_header=False,
