@@ -209,3 +209,29 @@ def test_contact_sends_at_most_one_move_per_frame_the_newest() -> None:
     ys = [m["y_cm"] for m in moves]
     assert ys == sorted(ys)
     assert [m["type"] for m in recorder.received][-1] == "up"
+
+
+def test_a_ping_cancelled_as_its_pong_arrives_ends_cancelled() -> None:
+    """The session's close cancels its ping loop; when the cancel comes in the moment
+    the pong does, the ping must end cancelled. With ``asyncio.wait_for`` on Python 3.11
+    it returned the pong instead, the loop pinged on, and close waited for it for ever."""
+    recorder = _Recorder()
+
+    async def main() -> None:
+        async with serve(recorder.handler, "127.0.0.1", 0) as server:
+            port = server.sockets[0].getsockname()[1]
+            async with AsyncSession(f"ws://127.0.0.1:{port}/ws") as ws:
+                ping = asyncio.create_task(ws.ping())
+                settle = ws._replies.settle
+
+                def settle_then_cancel(message: Any) -> bool:
+                    settled = settle(message)
+                    if message.get("type") == "pong":
+                        ping.cancel()
+                    return settled
+
+                ws._replies.settle = settle_then_cancel  # type: ignore[method-assign]
+                with pytest.raises(asyncio.CancelledError):
+                    await ping
+
+    asyncio.run(asyncio.wait_for(main(), 10))

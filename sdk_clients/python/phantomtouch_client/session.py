@@ -51,6 +51,10 @@ from phantomtouch_client.session_calls import SessionCalls
 
 log = logging.getLogger("phantomtouch_client")
 
+CANCEL_AGAIN_S = 0.05
+"""How long :meth:`AsyncSession.close` waits for one of its tasks to end before it
+cancels it again, s."""
+
 
 class AsyncSession(SessionCalls):
     """A WebSocket session with the service.
@@ -196,10 +200,7 @@ class AsyncSession(SessionCalls):
         self.state = SessionState.CLOSED
         self._connected.clear()
         for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            await _cancel_until_done(task)
         self._tasks = []
         self._replies.fail_all(ConnectionLost("the session was closed"))
         self._close_lane()
@@ -365,6 +366,18 @@ class AsyncSession(SessionCalls):
                     await self._ws.close()
             except ClientError as exc:
                 log.debug("ping failed: %s", exc)
+
+
+async def _cancel_until_done(task: asyncio.Task[Any]) -> None:
+    """Cancel ``task`` again every :data:`CANCEL_AGAIN_S` until it has ended (a library
+    it waits in may swallow a cancel that comes as its result does); how it ended is
+    dropped."""
+    while not task.done():
+        task.cancel()
+        await asyncio.wait({task}, timeout=CANCEL_AGAIN_S)
+    if not task.cancelled():
+        with contextlib.suppress(Exception):
+            task.result()
 
 
 __all__ = ["AsyncSession"]

@@ -193,7 +193,10 @@ class SessionCalls:
         request_id, future = self._replies.expect()
         try:
             await self._send({**message, "id": request_id})
-            return await asyncio.wait_for(future, self.reply_timeout_s)
+            # asyncio.timeout, not wait_for: on Python 3.11, wait_for swallows a cancel
+            # that comes as the reply does, and a cancelled task would go on
+            async with asyncio.timeout(self.reply_timeout_s):
+                return await future
         except TimeoutError:
             raise ReplyTimeout(
                 f"no reply to {message.get('type')!r} (id {request_id}) "
@@ -219,7 +222,8 @@ class SessionCalls:
         if self.state is SessionState.CLOSED or self.state is SessionState.IDLE:
             raise ConnectionLost(f"the session is {self.state.value}")
         try:
-            await asyncio.wait_for(self._connected.wait(), self.reply_timeout_s)
+            async with asyncio.timeout(self.reply_timeout_s):
+                await self._connected.wait()
         except TimeoutError:
             raise ConnectionLost(
                 f"not reconnected within {self.reply_timeout_s} s ({self.url})"
