@@ -279,8 +279,11 @@ class _Connection:
         messages do)."""
         while True:
             if self.session.active:
+                # asyncio.timeout: wait_for on Python 3.11 swallows a cancel that comes
+                # as the wake-up does, and the ticker would go on after its connection
                 with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(self._wake.wait(), TICK_S)
+                    async with asyncio.timeout(TICK_S):
+                        await self._wake.wait()
             else:
                 await self._wake.wait()
             self._wake.clear()

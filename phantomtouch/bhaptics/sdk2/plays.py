@@ -238,6 +238,8 @@ class Play:
             left_s = end_s - engine.server_time_s()
             if left_s <= 0:
                 return True
+            # not wait_for: on Python 3.11 it swallows a cancel that comes as the wake-up does
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), min(left_s, POLL_S))
+                async with asyncio.timeout(min(left_s, POLL_S)):
+                    await self._wake.wait()
         return True
