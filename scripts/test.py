@@ -3,7 +3,7 @@
 The same on Windows (PowerShell: ``py scripts\\test.py``), macOS and Linux. It installs
 the package with its ``dev`` extra and the Python client into ``.venv`` (once; see
 ``scripts/dotvenv.py``), runs the checks of ``scripts/check`` (ruff, mypy for this
-platform, Windows and macOS) and then pytest.
+platform, Windows and macOS) and then pytest, which names the suite's 30 slowest tests.
 
 With arguments (``py scripts\\test.py tests\\test_cli.py``) and outside CI (``CI`` not
 ``true``) it runs pytest alone: no checks, and no install unless ``pyproject.toml``
@@ -80,7 +80,8 @@ def main() -> int:
             return 1
     if subprocess.call([python, "-m", "mypy"], cwd=ROOT / "sdk_clients" / "python") != 0:
         return 1
-    return subprocess.call([python, "-m", "pytest", *sys.argv[1:]], cwd=ROOT)
+    arguments = sys.argv[1:] or ["--durations=30"]  # the whole suite: its slowest named
+    return subprocess.call([python, "-m", "pytest", *arguments], cwd=ROOT)
 
 
 if __name__ == "__main__":
