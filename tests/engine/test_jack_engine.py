@@ -228,8 +228,10 @@ def test_the_sound_card_sink_reports_its_device_and_latency(jack_server: JackSer
     sink = SoundDeviceSink(DEVICE, "system", latency="low")
     with Engine(DEVICE, sink) as engine:
         wait_frames(engine, 10 * BLOCK)
+        before = sink.underruns
         status = engine.status()
+        after = sink.underruns  # JACK may drop a period on a busy machine at any time
     assert status.backend == "sounddevice"
     assert status.output_device == "system"
     assert status.output_latency_s >= 0.0
-    assert status.underruns == sink.underruns
+    assert before <= status.underruns <= after, "the status reports the sink's count"
