@@ -8,13 +8,17 @@ Expiry follows the registry's own clock. A record is online while its NATS time 
 plus its ``ttl_s`` lies ahead of the newest time stamp the view has seen (any node's
 heartbeat moves that clock on), so a node that stopped beating drops out when the others'
 heartbeats show its TTL ran out, whatever the gateway's own clock says. That clock counts
-only time in which the registry took writes: once the view follows the bucket, a rise of
-the newest time stamp by more than a heartbeat (the registry took no write meanwhile: its
-stream was electing a leader) counts as one heartbeat, so the first nodes whose heartbeats
-land after a failover do not make the others look expired. While nothing at all arrives
-(the registry is failing over, or every node is gone) the clock stands still for
-:data:`STALL_S`, then runs on with the gateway's monotonic clock: records are kept through
-a failover, and the last ones expire ``STALL_S`` after their TTL when all nodes have died.
+time in which the registry could take writes. While nothing arrives, the clock runs on
+with the gateway's monotonic clock only while the registry answers (a watch started on
+it: its stream has a leader; a start that fails stops it again), so nodes that all died
+expire a TTL and a few heartbeats after their last write, while a failover, however
+long, expires nobody.
+Once the view follows the bucket, a rise of the newest time stamp counts as the time the
+registry was seen answering meanwhile, and at least one heartbeat: the rest of it the
+registry took no write (its stream was electing a leader), so the first nodes whose
+heartbeats land after a failover do not make the others look expired. A registry that
+does not answer for :data:`UNREACHABLE_S` (its only server is gone) no longer holds the
+clock: it runs on from then, and the records expire.
 
 The watch is started again when it has been silent for :data:`SILENT_HEARTBEATS`
 heartbeats (its consumer may have lived on the server that died; with no record at all,
@@ -38,8 +42,8 @@ from phantomtouch.fleet.tasks import cancel_until_done
 
 logger = logging.getLogger("phantomtouch.fleet")
 
-STALL_S = 10.0
-"""How long the registry's clock stands still while no heartbeat at all arrives, s."""
+UNREACHABLE_S = 60.0
+"""How long the registry's clock stands still while the registry does not answer, s."""
 SILENT_HEARTBEATS = 3
 """Heartbeat periods of silence after which the watch is started again."""
 FIRST_READ_S = 2.0
@@ -67,6 +71,11 @@ class RegistryView:
         """The records' heartbeats, s: how many records hold each."""
         self._newest_created_s = 0.0
         self._newest_received_s = time.monotonic()
+        self._answered_s: float | None = None
+        """When the registry began answering again in the present silence (monotonic), s;
+        None while it does not answer."""
+        self._answered_before_s = 0.0
+        """How long the registry answered in the present silence before it stopped again, s."""
         self._skipped_s = 0.0
         """Time stamps' rises the registry's clock does not count (its silences), s."""
         self._following = False
@@ -76,9 +85,24 @@ class RegistryView:
 
     # -- reads ----------------------------------------------------------------------------
 
+    def _silence_counted_s(self) -> float:
+        """How much of the present silence counts on the registry's clock, s."""
+        now_s = time.monotonic()
+        answered_s = self._answered_before_s
+        if self._answered_s is not None:
+            answered_s += now_s - self._answered_s
+        return max(answered_s, now_s - self._newest_received_s - UNREACHABLE_S)
+
+    def _answering(self, answers: bool) -> None:
+        """The registry answers (a watch started) or not (starting one failed)."""
+        if answers and self._answered_s is None:
+            self._answered_s = time.monotonic()
+        elif not answers and self._answered_s is not None:
+            self._answered_before_s += time.monotonic() - self._answered_s
+            self._answered_s = None
+
     def _registry_time_s(self) -> float:
-        silent_s = time.monotonic() - self._newest_received_s
-        return self._newest_created_s - self._skipped_s + max(0.0, silent_s - STALL_S)
+        return self._newest_created_s - self._skipped_s + self._silence_counted_s()
 
     def lookup(self, armband: str) -> ArmbandRecord | None:
         """The armband's record, or None when it is not online."""
@@ -156,7 +180,12 @@ class RegistryView:
         while not self._closing:
             try:
                 if self._watcher is None:
-                    await self._rewatch()
+                    try:
+                        await self._rewatch()
+                    except Exception:
+                        self._answering(False)
+                        raise
+                    self._answering(True)
                 entry = await self._watcher.updates(timeout=self._silence_s())
             except (nats.errors.Error, TimeoutError) as exc:
                 if self._watcher is not None and self._entries:
@@ -175,9 +204,12 @@ class RegistryView:
         if created_s > self._newest_created_s:
             if self._following:
                 rise_s = created_s - self._newest_created_s
-                self._skipped_s += max(0.0, rise_s - self._heartbeat_s())
+                counted_s = max(self._heartbeat_s(), self._silence_counted_s())
+                self._skipped_s += max(0.0, rise_s - counted_s)
             self._newest_created_s = created_s
             self._newest_received_s = time.monotonic()
+            self._answered_s = None
+            self._answered_before_s = 0.0
         record = None if entry.operation is not None else read_record(entry.value)
         if known is not None:
             self._beats[known.record.heartbeat_s] -= 1
