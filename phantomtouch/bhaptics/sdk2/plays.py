@@ -225,9 +225,6 @@ class Play:
         forgotten: a yielded slot closes it before the session hears of it)."""
         return self.handle.closed or self.handle.stop_count != self.arrival.stop_count
 
-    async def _sleep(self, duration_s: float) -> bool:
-        return await self._sleep_until(self.handle.engine.server_time_s() + duration_s)
-
     async def _sleep_until(self, end_s: float) -> bool:
         """Until ``end_s`` (server time) or a pause: True; an emergency stop: False."""
         engine = self.handle.engine
