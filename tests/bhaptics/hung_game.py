@@ -19,31 +19,31 @@ from tests.bhaptics.test_standin_live import dot_project
 
 
 def main(url: str, length_ms: int) -> None:
-    ws = connect(url, compression=None, max_size=None)
-    ws.recv()  # the status on connecting
-    ws.send(
-        json.dumps(
-            {"Register": [{"Key": "long", "Project": dot_project("ForearmR", 0, length_ms)}]}
+    with connect(url, compression=None, max_size=None) as ws:
+        ws.recv()  # the status on connecting
+        ws.send(
+            json.dumps(
+                {"Register": [{"Key": "long", "Project": dot_project("ForearmR", 0, length_ms)}]}
+            )
         )
-    )
-    ws.recv()
-    submit = [
-        {"Type": "key", "Key": "long"},
-        {
-            "Type": "frame",
-            "Key": "held",
-            "Frame": {
-                "Position": "ForearmL",
-                "DotPoints": [{"Index": 5, "Intensity": 60}],
-                "PathPoints": [],
-                "DurationMillis": length_ms,
+        ws.recv()
+        submit = [
+            {"Type": "key", "Key": "long"},
+            {
+                "Type": "frame",
+                "Key": "held",
+                "Frame": {
+                    "Position": "ForearmL",
+                    "DotPoints": [{"Index": 5, "Intensity": 60}],
+                    "PathPoints": [],
+                    "DurationMillis": length_ms,
+                },
             },
-        },
-    ]
-    ws.send(json.dumps({"Register": [], "Submit": submit}))
-    ws.recv()
-    print(f"playing {time.monotonic()}", flush=True)
-    time.sleep(3600.0)
+        ]
+        ws.send(json.dumps({"Register": [], "Submit": submit}))
+        ws.recv()
+        print(f"playing {time.monotonic()}", flush=True)
+        time.sleep(3600.0)
 
 
 if __name__ == "__main__":
