@@ -9,11 +9,13 @@ plus its ``ttl_s`` lies ahead of the newest time stamp the view has seen (any no
 heartbeat moves that clock on), so a node that stopped beating drops out when the others'
 heartbeats show its TTL ran out, whatever the gateway's own clock says. That clock counts
 time in which the registry could take writes. While nothing arrives, the clock runs on
-with the gateway's monotonic clock only while the registry answers (a watch started on
-it: its stream has a leader; a start that fails stops it again), so nodes that all died
-expire a TTL and a few heartbeats after their last write, while a failover, however
-long, expires nobody.
-Once the view follows the bucket, a rise of the newest time stamp counts as the time the
+with the gateway's monotonic clock only while the registry answers and has taken no write
+the view has not read: when the watch falls silent and is started again, the bucket's
+last revision is asked for, and the clock runs from an answer that holds nothing new (no
+answer: a failover; a newer revision: the watch does not deliver, say through a server
+that has only just come back). So nodes that all died expire a TTL and a few heartbeats
+after their last write, while a failover, however long, expires nobody. Once the view
+follows the bucket, a rise of the newest time stamp counts as the time the
 registry was seen answering meanwhile, and at least one heartbeat: the rest of it the
 registry took no write (its stream was electing a leader), so the first nodes whose
 heartbeats land after a failover do not make the others look expired. A registry that
@@ -76,6 +78,8 @@ class RegistryView:
         None while it does not answer."""
         self._answered_before_s = 0.0
         """How long the registry answered in the present silence before it stopped again, s."""
+        self._newest_revision = 0
+        """The highest revision the view has read."""
         self._skipped_s = 0.0
         """Time stamps' rises the registry's clock does not count (its silences), s."""
         self._following = False
@@ -94,7 +98,7 @@ class RegistryView:
         return max(answered_s, now_s - self._newest_received_s - UNREACHABLE_S)
 
     def _answering(self, answers: bool) -> None:
-        """The registry answers (a watch started) or not (starting one failed)."""
+        """The registry answers with nothing new, or not (module docstring)."""
         if answers and self._answered_s is None:
             self._answered_s = time.monotonic()
         elif not answers and self._answered_s is not None:
@@ -182,10 +186,11 @@ class RegistryView:
                 if self._watcher is None:
                     try:
                         await self._rewatch()
+                        status = await self.kv.status()
                     except Exception:
                         self._answering(False)
                         raise
-                    self._answering(True)
+                    self._answering(status.stream_info.state.last_seq <= self._newest_revision)
                 entry = await self._watcher.updates(timeout=self._silence_s())
             except (nats.errors.Error, TimeoutError) as exc:
                 if self._watcher is not None and self._entries:
@@ -197,6 +202,7 @@ class RegistryView:
                 self._apply(entry)
 
     def _apply(self, entry: Any) -> None:
+        self._newest_revision = max(self._newest_revision, entry.revision)
         known = self._entries.get(entry.key)
         if known is not None and entry.revision <= known.revision:
             return  # a watch started again replays what the view holds

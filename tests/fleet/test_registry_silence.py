@@ -9,7 +9,9 @@ whole-suite run: 36 of 50 lookups answered 404). Here a real bucket on a one-ser
 cluster is written by three "nodes" at the tests' heartbeat, then its server is killed
 for eight TTLs (12 s) and started again, then two of the nodes write: the third stays listed
 until the two have written for its TTL, then drops out. And nodes that all stop while the
-registry answers drop out a TTL and a few heartbeats after their last write.
+registry answers drop out a TTL and a few heartbeats after their last write. And a watch
+that delivers nothing while the nodes' writes land (a consumer reached through a server that
+has only just come back: the same lookups in a later whole-suite run) expires nobody.
 """
 
 from __future__ import annotations
@@ -50,6 +52,38 @@ async def _beat(kv: Any, names: list[str], beats: int) -> None:
         for name in names:
             await _put(kv, name)
         await asyncio.sleep(HEARTBEAT_S)
+
+
+class _Deafened:
+    """The real registry bucket, except that once :attr:`deaf` is set its watches deliver
+    nothing (their updates time out) while the bucket goes on taking writes."""
+
+    def __init__(self, kv: Any) -> None:
+        self.kv = kv
+        self.deaf = False
+        self.watches = 0
+
+    async def status(self) -> Any:
+        return await self.kv.status()
+
+    async def watchall(self) -> Any:
+        self.watches += 1
+        return _Watch(await self.kv.watchall(), self)
+
+
+class _Watch:
+    def __init__(self, watcher: Any, bucket: _Deafened) -> None:
+        self.watcher = watcher
+        self.bucket = bucket
+
+    async def updates(self, timeout: float) -> Any:
+        if self.bucket.deaf:
+            await asyncio.sleep(timeout)
+            raise TimeoutError
+        return await self.watcher.updates(timeout=timeout)
+
+    async def stop(self) -> None:
+        await self.watcher.stop()
 
 
 def _listed(view: RegistryView) -> list[str]:
@@ -118,3 +152,29 @@ def test_nodes_that_all_stop_drop_out_while_the_registry_answers(tmp_path: Path)
     print(f"every node gone {gone_s:.2f} s after its last heartbeat (TTL {TTL_S:g} s)")
     assert gone_s >= TTL_S, "a record expired before its TTL"
     assert gone_s < TTL_S + noticed_s + 2.0, "dead nodes listed long after their TTL"
+
+
+async def _listed_through_a_deaf_watch(cluster: NatsCluster) -> tuple[list[str], int]:
+    """What the view lists when its watches deliver nothing while every node goes on
+    beating for four TTLs; how many watches it started."""
+    settings = FleetSettings(servers=cluster.urls, heartbeat_s=HEARTBEAT_S, ttl_s=TTL_S)
+    nc, kv = await open_registry(settings, "gateway-test", Deadline(settings.start_deadline_s))
+    bucket = _Deafened(kv)
+    view = RegistryView(bucket)
+    try:
+        await _beat(kv, NODES, 1)
+        await view.start("gateway test", Deadline(settings.start_deadline_s))
+        await _beat(kv, NODES, 2)
+        bucket.deaf = True
+        await _beat(kv, NODES, round(4 * TTL_S / HEARTBEAT_S))
+        return _listed(view), bucket.watches
+    finally:
+        await view.close()
+        await nc.close()
+
+
+def test_a_watch_that_delivers_nothing_while_nodes_beat_expires_nobody(tmp_path: Path) -> None:
+    with NatsCluster(tmp_path / "nats", size=1) as cluster:
+        listed, watches = asyncio.run(_listed_through_a_deaf_watch(cluster))
+    assert watches >= 3, "the view did not start its watch again"
+    assert listed == NODES, "a live node dropped while the view could not read the registry"
