@@ -17,7 +17,9 @@ has only just come back: the same lookups in a later whole-suite run) expires no
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
@@ -90,15 +92,28 @@ def _listed(view: RegistryView) -> list[str]:
     return [r.armband for r in view.online()]
 
 
-async def _outage(cluster: NatsCluster) -> dict[str, list[str]]:
-    """What the view lists: before the outage, at its end, after the first writes that
-    follow it, and once two nodes have written for a TTL and two heartbeats more."""
+@contextlib.asynccontextmanager
+async def _watched(
+    cluster: NatsCluster, bucket: Callable[[Any], Any] = lambda kv: kv
+) -> AsyncIterator[tuple[Any, RegistryView]]:
+    """The registry bucket, after one heartbeat of every node, and a view of
+    ``bucket(kv)`` started on it; both closed on leaving."""
     settings = FleetSettings(servers=cluster.urls, heartbeat_s=HEARTBEAT_S, ttl_s=TTL_S)
     nc, kv = await open_registry(settings, "gateway-test", Deadline(settings.start_deadline_s))
-    view = RegistryView(kv)
+    view = RegistryView(bucket(kv))
     try:
         await _beat(kv, NODES, 1)
         await view.start("gateway test", Deadline(settings.start_deadline_s))
+        yield kv, view
+    finally:
+        await view.close()
+        await nc.close()
+
+
+async def _outage(cluster: NatsCluster) -> dict[str, list[str]]:
+    """What the view lists: before the outage, at its end, after the first writes that
+    follow it, and once two nodes have written for a TTL and two heartbeats more."""
+    async with _watched(cluster) as (kv, view):
         await _beat(kv, NODES, 4)
         seen = {"before": _listed(view)}
         await asyncio.to_thread(cluster.kill, 0)
@@ -109,9 +124,6 @@ async def _outage(cluster: NatsCluster) -> dict[str, list[str]]:
         seen["after"] = _listed(view)
         await _beat(kv, ["l1", "l3"], round(TTL_S / HEARTBEAT_S) + 2)
         seen["later"] = _listed(view)
-    finally:
-        await view.close()
-        await nc.close()
     return seen
 
 
@@ -126,12 +138,7 @@ def test_an_outage_of_the_registry_counts_against_no_ttl(tmp_path: Path) -> None
 
 async def _gone_after_s(cluster: NatsCluster) -> float:
     """Seconds from the nodes' last heartbeat until the view lists none of them."""
-    settings = FleetSettings(servers=cluster.urls, heartbeat_s=HEARTBEAT_S, ttl_s=TTL_S)
-    nc, kv = await open_registry(settings, "gateway-test", Deadline(settings.start_deadline_s))
-    view = RegistryView(kv)
-    try:
-        await _beat(kv, NODES, 1)
-        await view.start("gateway test", Deadline(settings.start_deadline_s))
+    async with _watched(cluster) as (kv, view):
         await _beat(kv, NODES, 3)
         for name in NODES:
             await _put(kv, name)
@@ -140,9 +147,6 @@ async def _gone_after_s(cluster: NatsCluster) -> float:
         while _listed(view) and time.monotonic() - last_s < OUTAGE_S:
             await asyncio.sleep(0.02)
         return time.monotonic() - last_s
-    finally:
-        await view.close()
-        await nc.close()
 
 
 def test_nodes_that_all_stop_drop_out_while_the_registry_answers(tmp_path: Path) -> None:
@@ -157,20 +161,17 @@ def test_nodes_that_all_stop_drop_out_while_the_registry_answers(tmp_path: Path)
 async def _listed_through_a_deaf_watch(cluster: NatsCluster) -> tuple[list[str], int]:
     """What the view lists when its watches deliver nothing while every node goes on
     beating for four TTLs; how many watches it started."""
-    settings = FleetSettings(servers=cluster.urls, heartbeat_s=HEARTBEAT_S, ttl_s=TTL_S)
-    nc, kv = await open_registry(settings, "gateway-test", Deadline(settings.start_deadline_s))
-    bucket = _Deafened(kv)
-    view = RegistryView(bucket)
-    try:
-        await _beat(kv, NODES, 1)
-        await view.start("gateway test", Deadline(settings.start_deadline_s))
+    buckets: list[_Deafened] = []
+
+    def deafened(kv: Any) -> _Deafened:
+        buckets.append(_Deafened(kv))
+        return buckets[0]
+
+    async with _watched(cluster, deafened) as (kv, view):
         await _beat(kv, NODES, 2)
-        bucket.deaf = True
+        buckets[0].deaf = True
         await _beat(kv, NODES, round(4 * TTL_S / HEARTBEAT_S))
-        return _listed(view), bucket.watches
-    finally:
-        await view.close()
-        await nc.close()
+        return _listed(view), buckets[0].watches
 
 
 def test_a_watch_that_delivers_nothing_while_nodes_beat_expires_nobody(tmp_path: Path) -> None:
