@@ -266,12 +266,13 @@ class ContactVoice(Voice):
 
 
 class ContactMix:
-    """The sum of the contacts that sound through a block, as two matrix products.
+    """The sum of the contacts that sound through a block, in one compiled loop.
 
     With carriers ``c`` (contacts, frames), gains ``s`` where the last block ended and
     ``d = target - s`` (contacts, channels), the contacts' sum at frame ``k`` is
     ``(c.T @ s)[k] + ramp[k] * (c.T @ d)[k]``, ``ramp[k] = (k + 1) / frames``: each
-    contact's gains ramped linearly across the block, in float64. Buffers for up to
+    contact's gains ramped linearly across the block, in float64
+    (:func:`~phantomtouch.renderer.kernels.add_contacts`). Buffers for up to
     :attr:`capacity` contacts, grown when more sound (non real time on construction).
 
     Parameters
@@ -285,8 +286,9 @@ class ContactMix:
         self.channels = int(channels)
         self._ramp = self._ramp_for(self.block_frames)
         self._index = np.arange(max(AHEAD_FRAMES, self.block_frames), dtype=np.float64)
-        self._total = np.empty((self.block_frames, self.channels))
-        self._ramped = np.empty((self.block_frames, self.channels))
+        from phantomtouch.renderer import kernels  # numba: loaded with a mix, not at import
+
+        self._add_contacts = kernels.add_contacts
         self._allocate(int(capacity))
         self.count = 0
         self.moved = False
@@ -312,12 +314,18 @@ class ContactMix:
         self._taken = self.carriers[:0].T
 
     def render(
-        self, contacts: list[ContactVoice], block_start: int, frames: int, work: Workspace
-    ) -> np.ndarray:
-        """The sum of ``contacts`` (each sounding through the block of ``frames`` from
-        ``block_start``), shape (frames, channels), float64, valid until the next call;
-        their carriers move on by the block (real time). :meth:`ContactVoice.end_block`
-        ends each one's block.
+        self,
+        contacts: list[ContactVoice],
+        block_start: int,
+        work: Workspace,
+        out: np.ndarray,
+        add: bool,
+    ) -> bool:
+        """The sum of ``contacts`` (each sounding through the block from ``block_start``)
+        into ``out`` (frames, channels), float32: added to it when ``add``, else written;
+        summed in float64 and rounded once. True when every sample of ``out`` is finite
+        after it. Their carriers move on by the block (real time).
+        :meth:`ContactVoice.end_block` ends each one's block.
 
         While the same sine contacts sound on without an envelope (the steady state of a
         scene's hands), their carriers are one slice of :attr:`_steady`, the next
@@ -330,6 +338,7 @@ class ContactMix:
         each sine's samples bit for bit (the phase of frame ``n`` is ``n`` times the cycles
         per frame whatever the block)."""
         count = len(contacts)
+        frames = out.shape[0]
         if count > self.capacity:  # more contacts than ever before: room for twice as many
             self._allocate(2 * count)
         self.count = count
@@ -370,7 +379,7 @@ class ContactMix:
         else:
             self._copy_carriers(contacts, firsts, block_start, frames, work)
         self.moved = moved
-        return self._sum(self._taken, self.starts[:count], self.deltas[:count], frames)
+        return self._sum(self._taken, self.starts[:count], self.deltas[:count], out, add)
 
     def _fill_steady(self, contacts: list[ContactVoice], firsts: list[int]) -> None:
         """Compute the next ``AHEAD_FRAMES`` of every contact's sine from ``firsts`` into
@@ -450,23 +459,23 @@ class ContactMix:
         )
 
     def _sum(
-        self, carriers: np.ndarray, starts: np.ndarray, deltas: np.ndarray, frames: int
-    ) -> np.ndarray:
-        """``carriers @ starts + ramp * (carriers @ deltas)``; ``carriers`` (frames,
-        contacts), float64."""
-        total = self._total[:frames]
-        np.dot(carriers, starts, out=total)
-        if self.moved:
-            ramped = self._ramped[:frames]
-            np.dot(carriers, deltas, out=ramped)
-            ramped *= self._ramp if frames == self.block_frames else self._ramp_for(frames)
-            total += ramped
-        return total
+        self,
+        carriers: np.ndarray,
+        starts: np.ndarray,
+        deltas: np.ndarray,
+        out: np.ndarray,
+        add: bool,
+    ) -> bool:
+        """``carriers @ starts + ramp * (carriers @ deltas)`` into ``out``; ``carriers``
+        (frames, contacts), float64; True when ``out`` is finite after it."""
+        frames = out.shape[0]
+        ramp = self._ramp if frames == self.block_frames else self._ramp_for(frames)
+        return bool(self._add_contacts(out, carriers, starts, deltas, ramp, self.moved, add))
 
     @staticmethod
     def _ramp_for(frames: int) -> np.ndarray:
-        """``(k + 1) / frames``, shape (frames, 1), float64."""
-        return np.arange(1, frames + 1, dtype=np.float64)[:, None] / frames
+        """``(k + 1) / frames``, shape (frames,), float64."""
+        return np.arange(1, frames + 1, dtype=np.float64) / frames
 
     def finite_rows(self) -> np.ndarray:
         """Which contacts of the last :meth:`render` have finite carriers and gains, shape
@@ -477,13 +486,14 @@ class ContactMix:
         rows &= np.isfinite(self.deltas[:count]).all(axis=1)
         return np.asarray(rows)
 
-    def sum_of(self, rows: np.ndarray, frames: int) -> np.ndarray:
-        """The sum of the last :meth:`render` over the contacts ``rows`` (a bool mask)
-        alone, as that call would have given it without the others (real time, rarely:
-        a block that came out not finite)."""
-        return self._sum(
-            self._taken[:frames, rows],
+    def add_sum_of(self, rows: np.ndarray, out: np.ndarray) -> None:
+        """Add into ``out`` the sum of the last :meth:`render` over the contacts ``rows``
+        (a bool mask) alone, as that call would have given it without the others (real
+        time, rarely: a block that came out not finite)."""
+        self._sum(
+            self._taken[: out.shape[0], rows],
             self.starts[: self.count][rows],
             self.deltas[: self.count][rows],
-            frames,
+            out,
+            True,
         )

@@ -112,6 +112,12 @@ class WearerGains:
         from the next block on (real time, from an applier: any thread of the audio side)."""
         self._pending = gains
 
+    @property
+    def holds_unity(self) -> bool:
+        """Every gain is 1, no ramp runs and none is pending: :meth:`apply` would leave a
+        block as it is."""
+        return self._pending is None and self._unity and self._done >= self.ramp_frames
+
     def apply(self, block: np.ndarray) -> bool:
         """Scale ``block`` (frames, channels), float32, in place; False when every gain
         is 1 (the block is left as it is)."""
@@ -176,6 +182,7 @@ class Mixer:
         self.levels = np.zeros(device.channels, dtype=np.float32)
         self.peak = 0.0
         self._untouched_peak = min(self.limiter.threshold, float(self.stage.ceiling))
+        self._calibrates = bool(np.any(self.limiter.calibration != 1.0))
         # channels first: a max along each row is far cheaper than one down the columns
         self._magnitude = np.empty((device.channels, device.block_frames), dtype=np.float32)
 
@@ -190,7 +197,21 @@ class Mixer:
         limiter uses the largest of those peaks. Both ways give the same samples and levels.
         The mix's peaks are found first: the DC blocker's bound takes them, and they stay
         the levels unless the blocker or the wearer's gains changed the block.
+
+        While the wearer's gains are all 1 and hold, the limiter's gain is 1 and the device
+        has no FIR, a plain block (finite, within the DC blocker's dead band and the
+        limiter's threshold) takes all of that in one compiled pass
+        (:meth:`DcBlocker.plain_pass <phantomtouch.renderer.dc_blocker.DcBlocker.plain_pass>`):
+        the same samples, levels and state.
         """
+        if self.wearer.holds_unity and self.limiter.gain >= 1.0 and not self.stage.has_fir:
+            loudest = self.dc_blocker.plain_pass(
+                block, self.levels, self.limiter.calibration, self._calibrates, self._untouched_peak
+            )
+            if loudest >= 0.0:
+                if loudest > self.peak:
+                    self.peak = loudest
+                return
         levels = self._channel_peaks(block)
         changed = self.dc_blocker.process(block, float(levels.max()))
         if self.wearer.apply(block) or changed:

@@ -212,8 +212,9 @@ class Scheduler:
     def _mix(self, out: np.ndarray, start: int, end: int) -> None:
         """Mix the voices' block into ``out``.
 
-        Contacts that sound through the block are summed together in one array operation
-        (:class:`~phantomtouch.engine.contacts.ContactMix`); every other voice renders into
+        Contacts that sound through the block are summed together in one compiled loop
+        (:class:`~phantomtouch.engine.contacts.ContactMix`), which also says whether the
+        block came out finite; every other voice renders into
         a zeroed row of its own, timed against its budget when blocks are due at a clock's
         pace. The rows are summed in the voices' order (the samples of adding them one by
         one) after the future-mix ring's slice (the prerendered voices, summed ahead in
@@ -260,12 +261,10 @@ class Scheduler:
         if count:
             np.add.reduce(summed, axis=0, out=out)
         if contacts:
-            mixed = self.contact_mix.render(contacts, start, frames, work)
-            if count + ahead:
-                out += mixed
-            else:
-                out[...] = mixed
-        if not math.isfinite(float(np.add.reduce(out, axis=None))):
+            finite = self.contact_mix.render(contacts, start, work, out, add=count + ahead > 0)
+        else:
+            finite = math.isfinite(float(np.add.reduce(out, axis=None)))
+        if not finite:
             self._remix(out, rows, rendered, through, done)
         for index, contact in zip(through, contacts, strict=True):
             if not done[index]:
@@ -324,7 +323,7 @@ class Scheduler:
         if through:
             finite = self.contact_mix.finite_rows()
             if finite.any():
-                out += self.contact_mix.sum_of(finite, out.shape[0])
+                self.contact_mix.add_sum_of(finite, out)
             for index, kept in zip(through, finite.tolist(), strict=True):
                 if not kept:
                     done[index] = True

@@ -30,7 +30,8 @@ The state is one float64 per channel, carried from block to block, so blocks of 
 give the samples of one whole run.
 
 Most blocks cannot reach the band's edge, and for them the state is advanced in closed
-form, without filtering a sample: over a block of ``N`` frames with peak ``p``,
+form, without filtering a sample (a compiled loop, ``renderer/kernels.py``): over a block
+of ``N`` frames with peak ``p``,
 ``|m[n]| <= |m[-1]| + (1 - r) N p`` for every ``n`` in it, so when that bound is within
 the band the block is left as it is and the state becomes ``r**N m[-1] + w @ x`` with
 ``w[k] = (1 - r) r**(N - 1 - k)`` (one dot product per block). Only a block whose bound
@@ -78,6 +79,9 @@ class DcBlocker:
         self._a = np.array([1.0, -self.pole])
         self._state = np.zeros((1, channels))
         self._closed: dict[int, tuple[np.ndarray, float, float]] = {}
+        from phantomtouch.renderer import kernels  # numba: loaded with a blocker, not at import
+
+        self._kernels = kernels
 
     def response(self, freq_hz: np.ndarray, sample_rate_hz: int) -> np.ndarray:
         """Magnitude of the high-pass beyond the dead band at ``freq_hz`` (shape (n,), Hz),
@@ -96,6 +100,39 @@ class DcBlocker:
             self._closed[frames] = closed
         return closed
 
+    def plain_pass(
+        self,
+        block: np.ndarray,
+        levels: np.ndarray,
+        calibration: np.ndarray,
+        calibrate: bool,
+        threshold: float,
+    ) -> float:
+        """The output chain's pass over ``block`` (frames, channels), float32, when it is
+        plain, with this blocker's state (real time; :func:`kernels.plain_pass
+        <phantomtouch.renderer.kernels.plain_pass>`): the state advanced in closed form,
+        the block times ``calibration`` (shape (channels,), float32) in place when
+        ``calibrate``, ``levels`` (shape (channels,), float32) its calibrated peaks, their
+        largest returned. -1.0:
+        the block is not plain (not finite, past the dead band's reach, or a calibrated
+        peak over ``threshold``), nothing changed but ``levels``."""
+        weights, decay, reach = self._closed_form(block.shape[0])
+        return float(
+            self._kernels.plain_pass(
+                block,
+                levels,
+                self._state[0],
+                weights,
+                decay,
+                reach,
+                self.pole,
+                self.dead_band,
+                calibration,
+                calibrate,
+                threshold,
+            )
+        )
+
     def process(self, block: np.ndarray, peak: float | None = None) -> bool:
         """Block DC in ``block`` (frames, channels), float32, in place (real time: the
         callback; or the offline caller); True when it changed a sample. A block that
@@ -111,9 +148,7 @@ class DcBlocker:
             peak = float(np.abs(block).max())
         state = self._state
         if float(np.abs(state).max()) / self.pole + reach * peak <= self.dead_band:  # most
-            state *= decay
-            if peak != 0.0:
-                state += weights @ block
+            self._kernels.advance_dc(state[0], weights, decay, block, peak)
             return False
         slow, self._state = lfilter(self._b, self._a, block, axis=0, zi=state)
         if not math.isfinite(float(self._state.sum())):

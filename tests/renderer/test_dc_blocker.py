@@ -97,3 +97,24 @@ def test_a_nan_block_does_not_poison_the_state() -> None:
     quiet = np.full((128, CHANNELS), 0.01, dtype=np.float32)
     blocker.process(quiet)
     assert np.isfinite(quiet).all()
+
+
+def test_the_closed_form_carries_the_low_pass_state_of_the_whole_run(
+    rng: np.random.Generator,
+) -> None:
+    """Over blocks within the dead band the state advances in closed form (a compiled
+    loop), and stays the one-pole low-pass ``m[n] = (1 - r) x[n] + r m[n-1]`` run sample
+    by sample (the state kept is ``z = r m``), to float64 rounding."""
+    blocker = DcBlocker(CHANNELS, FS, 1.0)
+    t_s = np.arange(20 * 128) / FS
+    signal = (0.5 * np.sin(2 * np.pi * 100.0 * t_s)[:, None] * [1.0, 0.3]).astype(np.float32)
+    signal += (0.002 * rng.standard_normal(signal.shape)).astype(np.float32)
+    out = signal.copy()
+    for at in range(0, len(out), 128):
+        assert not blocker.process(out[at : at + 128])  # plain: left as it is
+    np.testing.assert_array_equal(out, signal)
+    r = blocker.pole
+    low = np.zeros(CHANNELS)
+    for x in signal.astype(np.float64):
+        low = (1.0 - r) * x + r * low
+    np.testing.assert_allclose(blocker._state[0], r * low, rtol=1e-9, atol=1e-15)
