@@ -297,7 +297,7 @@ class ContactMix:
         self.capacity = capacity
         self.carriers = np.empty((capacity, self.block_frames))
         self.starts = np.empty((capacity, self.channels))
-        self.deltas = np.empty((capacity, self.channels))
+        self.targets = np.empty((capacity, self.channels))
         self._sine_rows = np.empty(capacity, dtype=np.intp)
         self._sine_starts = np.empty(capacity)
         self._sine_cycles = np.empty(capacity)
@@ -310,7 +310,7 @@ class ContactMix:
         self._steady_used = 0
         self._steady_end = -1
         self._row_starts: list[np.ndarray | None] = [None] * capacity
-        self._row_moving = [True] * capacity
+        self._row_targets: list[np.ndarray | None] = [None] * capacity
         self._taken = self.carriers[:0].T
 
     def render(
@@ -342,8 +342,8 @@ class ContactMix:
         if count > self.capacity:  # more contacts than ever before: room for twice as many
             self._allocate(2 * count)
         self.count = count
-        starts, deltas = self.starts, self.deltas
-        row_starts, row_moving = self._row_starts, self._row_moving
+        starts, targets = self.starts, self.targets
+        row_starts, row_targets = self._row_starts, self._row_targets
         firsts: list[int] = []
         moved = False
         plain = True  # no contact has an envelope over this block
@@ -353,12 +353,11 @@ class ContactMix:
             if row_starts[row] is not gains:  # each row written only when it changed
                 starts[row] = gains
                 row_starts[row] = gains
+            if row_targets[row] is not target:
+                targets[row] = target
+                row_targets[row] = target
             if target is not gains:
-                np.subtract(target, gains, out=deltas[row], dtype=np.float64)
-                row_moving[row] = moved = True
-            elif row_moving[row]:
-                deltas[row] = 0.0
-                row_moving[row] = False
+                moved = True
             if plain and voice.envelope(block_start, frames, work) is not None:
                 plain = False
         used = self._steady_used
@@ -379,7 +378,7 @@ class ContactMix:
         else:
             self._copy_carriers(contacts, firsts, block_start, frames, work)
         self.moved = moved
-        return self._sum(self._taken, self.starts[:count], self.deltas[:count], out, add)
+        return self._sum(self._taken, self.starts[:count], self.targets[:count], out, add)
 
     def _fill_steady(self, contacts: list[ContactVoice], firsts: list[int]) -> None:
         """Compute the next ``AHEAD_FRAMES`` of every contact's sine from ``firsts`` into
@@ -462,15 +461,15 @@ class ContactMix:
         self,
         carriers: np.ndarray,
         starts: np.ndarray,
-        deltas: np.ndarray,
+        targets: np.ndarray,
         out: np.ndarray,
         add: bool,
     ) -> bool:
-        """``carriers @ starts + ramp * (carriers @ deltas)`` into ``out``; ``carriers``
+        """``carriers @ starts + ramp * (carriers @ (targets - starts))`` into ``out``; ``carriers``
         (frames, contacts), float64; True when ``out`` is finite after it."""
         frames = out.shape[0]
         ramp = self._ramp if frames == self.block_frames else self._ramp_for(frames)
-        return bool(self._add_contacts(out, carriers, starts, deltas, ramp, self.moved, add))
+        return bool(self._add_contacts(out, carriers, starts, targets, ramp, self.moved, add))
 
     @staticmethod
     def _ramp_for(frames: int) -> np.ndarray:
@@ -483,7 +482,7 @@ class ContactMix:
         count = self.count
         rows = np.isfinite(self._taken).all(axis=0)
         rows &= np.isfinite(self.starts[:count]).all(axis=1)
-        rows &= np.isfinite(self.deltas[:count]).all(axis=1)
+        rows &= np.isfinite(self.targets[:count]).all(axis=1)
         return np.asarray(rows)
 
     def add_sum_of(self, rows: np.ndarray, out: np.ndarray) -> None:
@@ -493,7 +492,7 @@ class ContactMix:
         self._sum(
             self._taken[: out.shape[0], rows],
             self.starts[: self.count][rows],
-            self.deltas[: self.count][rows],
+            self.targets[: self.count][rows],
             out,
             True,
         )

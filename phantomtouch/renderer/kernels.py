@@ -142,13 +142,14 @@ def add_contacts(
     out: np.ndarray,
     carriers: np.ndarray,
     starts: np.ndarray,
-    deltas: np.ndarray,
+    targets: np.ndarray,
     ramp: np.ndarray,
     moved: bool,
     add: bool,
 ) -> bool:
     """The contacts' sum, each contact's gains ramped linearly across the block, into
-    ``out``: ``carriers @ starts + ramp * (carriers @ deltas)`` per frame, in float64,
+    ``out``: ``carriers @ starts + ramp * (carriers @ (targets - starts))`` per frame, in
+    float64,
     added to ``out`` when ``add`` (else written), rounded once to float32. True when
     every sample of ``out`` is finite after it.
 
@@ -156,18 +157,23 @@ def add_contacts(
     ----------
     out : ndarray, shape (frames, channels), float32
     carriers : ndarray, shape (frames, contacts), float64
-    starts, deltas : ndarray, shape (contacts, channels), float64, C order
-        Each contact's gains where the last block ended, and how far they move.
+    starts, targets : ndarray, shape (contacts, channels), float64, C order
+        Each contact's gains where the last block ended, and where they ramp to (its
+        gains again when it stays put).
     ramp : ndarray, shape (frames,), float64
         ``(k + 1) / frames``.
     moved : bool
-        Some delta is not 0 (else the ramped sum is left out).
+        Some target is not its start (else the ramped sum is left out).
     add : bool
     """
     frames, channels = out.shape
     contacts = carriers.shape[1]
     total = np.empty(channels)
     ramped = np.empty(channels)
+    deltas = np.empty((contacts, channels))
+    for j in range(contacts):
+        for channel in range(channels):
+            deltas[j, channel] = targets[j, channel] - starts[j, channel]
     finite = True
     for k in range(frames):
         total[:] = 0.0

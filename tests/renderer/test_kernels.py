@@ -1,5 +1,6 @@
 """The compiled loops of the callback's chain (renderer/kernels.py), against the formulas
-they stand for: the contacts' sum is ``c @ s + ramp * (c @ d)`` rounded once to float32;
+they stand for: the contacts' sum is ``c @ s + ramp * (c @ (t - s))`` rounded once to
+float32;
 a block that is not plain leaves the block and the DC state as they were."""
 
 from __future__ import annotations
@@ -20,12 +21,12 @@ def test_the_contacts_sum_is_the_ramped_matrix_products(
 ) -> None:
     carriers = np.sin(rng.uniform(0, 2 * np.pi, (FRAMES, CONTACTS)))
     starts = rng.uniform(0.0, 0.3, (CONTACTS, CHANNELS))
-    deltas = rng.uniform(-0.1, 0.1, (CONTACTS, CHANNELS)) if moved else np.zeros_like(starts)
+    targets = starts + rng.uniform(-0.1, 0.1, starts.shape) if moved else starts.copy()
     ramp = np.arange(1, FRAMES + 1) / FRAMES
     before = rng.uniform(-0.2, 0.2, (FRAMES, CHANNELS)).astype(np.float32)
     out = before.copy() if add else np.full_like(before, np.nan)
-    assert kernels.add_contacts(out, carriers, starts, deltas, ramp, moved, add)
-    expected = carriers @ starts + ramp[:, None] * (carriers @ deltas)
+    assert kernels.add_contacts(out, carriers, starts, targets, ramp, moved, add)
+    expected = carriers @ starts + ramp[:, None] * (carriers @ (targets - starts))
     if add:
         expected = expected + before
     np.testing.assert_allclose(out, expected.astype(np.float32), rtol=1e-6, atol=1e-7)
@@ -37,7 +38,7 @@ def test_the_contacts_sum_says_when_a_sample_is_not_finite(rng: np.random.Genera
     starts = np.full((CONTACTS, CHANNELS), 0.1)
     out = np.zeros((FRAMES, CHANNELS), dtype=np.float32)
     ramp = np.arange(1, FRAMES + 1) / FRAMES
-    assert not kernels.add_contacts(out, carriers, starts, np.zeros_like(starts), ramp, False, True)
+    assert not kernels.add_contacts(out, carriers, starts, starts, ramp, False, True)
 
 
 def plain_pass(blocker: DcBlocker, block: np.ndarray, threshold: float = 0.9) -> float:
