@@ -465,8 +465,8 @@ class ContactMix:
         out: np.ndarray,
         add: bool,
     ) -> bool:
-        """``carriers @ starts + ramp * (carriers @ (targets - starts))`` into ``out``; ``carriers``
-        (frames, contacts), float64; True when ``out`` is finite after it."""
+        """``carriers @ starts + ramp * (carriers @ (targets - starts))`` into ``out``;
+        ``carriers`` (frames, contacts), float64; True when ``out`` is finite after it."""
         frames = out.shape[0]
         ramp = self._ramp if frames == self.block_frames else self._ramp_for(frames)
         return bool(self._add_contacts(out, carriers, starts, targets, ramp, self.moved, add))

@@ -214,13 +214,13 @@ class Scheduler:
 
         Contacts that sound through the block are summed together in one compiled loop
         (:class:`~phantomtouch.engine.contacts.ContactMix`), which also says whether the
-        block came out finite; every other voice renders into
-        a zeroed row of its own, timed against its budget when blocks are due at a clock's
-        pace. The rows are summed in the voices' order (the samples of adding them one by
-        one) after the future-mix ring's slice (the prerendered voices, summed ahead in
-        the order they began), the contacts' sum added, and the mix checked once: only a
-        block that came out not finite is mixed again, leaving out each voice whose samples
-        are not finite, so the others sound as they would without it.
+        block came out finite; every other voice renders into a zeroed row of its own,
+        timed against its budget when blocks are due at a clock's pace. The rows are
+        summed in the voices' order (the samples of adding them one by one) after the
+        future-mix ring's slice (the prerendered voices, summed ahead in the order they
+        began), the contacts' sum added, and the mix checked once: only a block that came
+        out not finite is mixed again, leaving out each voice whose samples are not
+        finite, so the others sound as they would without it.
         """
         voices = self._voices
         frames = out.shape[0]

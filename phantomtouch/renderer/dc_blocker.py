@@ -113,9 +113,8 @@ class DcBlocker:
         <phantomtouch.renderer.kernels.plain_pass>`): the state advanced in closed form,
         the block times ``calibration`` (shape (channels,), float32) in place when
         ``calibrate``, ``levels`` (shape (channels,), float32) its calibrated peaks, their
-        largest returned. -1.0:
-        the block is not plain (not finite, past the dead band's reach, or a calibrated
-        peak over ``threshold``), nothing changed but ``levels``."""
+        largest returned. -1.0: the block is not plain (not finite, past the dead band's
+        reach, or a calibrated peak over ``threshold``), nothing changed but ``levels``."""
         weights, decay, reach = self._closed_form(block.shape[0])
         return float(
             self._kernels.plain_pass(
