@@ -10,7 +10,8 @@ Where to measure). Here each is one compiled loop.
 
 numba compiles them in nopython mode for one signature each (arrays of any layout) when
 this module is first imported, outside the callback (the DC blocker and the contacts' mix
-import it as they are built). The machine code is cached on disk beside this module, or
+import it as they are built), and calls each once there, so that the first call a callback
+makes costs what later ones do. The machine code is cached on disk beside this module, or
 in the user's cache folder where that is not writable, so later processes load it
 instead of compiling it. With a signature given, a call with other types raises
 TypeError instead of compiling in the callback. Without ``fastmath``, each sample is
@@ -196,3 +197,19 @@ def add_contacts(
                 out[k, channel] = total[channel]
             finite = finite and math.isfinite(out[k, channel])
     return finite
+
+
+def _warm() -> None:
+    """Call each loop once on a small block: the first call of a loop in a process sets up
+    what its later calls reuse (about a millisecond), so it is made here, at the import,
+    and never by the callback."""
+    block = np.zeros((4, 2), dtype=np.float32)
+    levels = np.zeros(2, dtype=np.float32)
+    state, gains = np.zeros(2), np.zeros((1, 2))
+    weights, ramp = np.zeros(4), np.zeros(4)
+    advance_dc(state, weights, 1.0, block, 0.0)
+    plain_pass(block, levels, state, weights, 1.0, 0.0, 1.0, 1.0, levels, False, 1.0)
+    add_contacts(block, np.zeros((4, 1)), gains, gains, ramp, False, True)
+
+
+_warm()
