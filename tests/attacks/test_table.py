@@ -53,6 +53,9 @@ class Window:
     channel: tuple[float, float] | None = None
     """Only the channel loudest in this span counts (where another client's touch was
     felt on its own), None: any."""
+    since: dict[str, Any] | None = None
+    """The clock that places the span's start (a stop's own answer: the engine's frame at
+    the stop), None: the row's clock reads."""
 
 
 @dataclass
@@ -261,25 +264,35 @@ def huge_work(stand: Stand, inp: Input, played: Played) -> None:
     )
 
 
-def stop_url(stand: Stand) -> float:
-    """``POST /stop``; the server time it took effect."""
-    return float(httpx.post(f"{stand.url}/stop", timeout=30.0).json()["server_time_s"])
+def stop_url(stand: Stand) -> dict[str, Any]:
+    """``POST /stop``; its answer, a clock: the server time it took effect and the engine's
+    frame then.
+
+    What follows a stop is placed by that frame. A loaded machine may stall the engine
+    between the stop and the next clock read; placed by that read, the stop's release
+    would land a stall later in server time than it was rendered, inside a window the stop
+    has silenced (:mod:`tests.support.clocks`).
+    """
+    answer: dict[str, Any] = httpx.post(f"{stand.url}/stop", timeout=30.0).json()
+    return answer
 
 
 def stop_during_planning(stand: Stand, inp: Input, played: Played) -> None:
     source = inp.source()
     source.plan_big()
     time.sleep(0.1)
-    stop = stop_url(stand)
+    stopped = stop_url(stand)
     mark(stand, played)
     time.sleep(8.5)
     source.close()
+    stop = stopped["server_time_s"]
     played.windows.append(
         Window(
             stop + stand.after_stop_s,
             stop + 8.2,
             False,
             "a touch being planned when the stop came",
+            since=stopped,
         )
     )
 
@@ -289,13 +302,20 @@ def stop_during_score(stand: Stand, inp: Input, played: Played) -> None:
     source.long_score()
     time.sleep(1.0)
     mark(stand, played)
-    stop = stop_url(stand)
+    stopped = stop_url(stand)
     mark(stand, played)
     time.sleep(3.0)
     source.close()
+    stop = stopped["server_time_s"]
     played.windows += [
         Window(stop - 0.6, stop - 0.1, True, "the long score before the stop"),
-        Window(stop + stand.after_stop_s, stop + 3.0, False, "the long score after the stop"),
+        Window(
+            stop + stand.after_stop_s,
+            stop + 3.0,
+            False,
+            "the long score after the stop",
+            since=stopped,
+        ),
     ]
 
 
@@ -386,9 +406,8 @@ def test_attack(table: Table, row: Row, request: pytest.FixtureRequest) -> None:
             alone_block = band.between(*window.channel, *played.placed(*window.channel))
             assert alone_block.size, f"{kind}: the capture holds nothing of the touch alone"
             loudest = int(np.argmax(np.sum(alone_block**2, axis=0)))
-        block = band.between(
-            window.start_s, window.end_s, *played.placed(window.start_s, window.end_s)
-        )
+        began, ended = played.placed(window.start_s, window.end_s)
+        block = band.between(window.start_s, window.end_s, window.since or began, ended)
         if loudest is not None:
             block = block[:, [loudest]]
         if window.felt:
