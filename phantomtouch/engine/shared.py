@@ -65,7 +65,6 @@ class _Rows:
 
     def __init__(self, rows: int, fields: int, raw: SharedBuffer | None, locked: bool | None):
         self.raw = raw if raw is not None else SharedBuffer.allocate(rows * fields, locked)
-        self._rows = np.frombuffer(self.raw.values, dtype=np.float64).reshape(rows, fields)
         self._fields = fields
         self._lock = self.raw.lock
 
@@ -89,23 +88,23 @@ class _Rows:
                 lock.release()
         return True
 
-    def _read(self, wait: bool) -> np.ndarray | None:
-        """The rows (with a lock: a copy; None: lock held), each read through :meth:`_row`."""
+    def _load(self, row: int, wait: bool) -> list[float] | None:
+        """Row ``row``'s values, read through the ctypes array (a few loads, no numpy
+        call: the callback's move slots); None: caught mid-write (its sequence number odd
+        or changed while read) or the lock held."""
+        raw, at = self.raw.values, row * self._fields
+        values: list[float]
         lock = self._lock
-        if lock is None:
-            return self._rows
-        if not lock.acquire(wait):
-            return None
-        try:
-            return self._rows.copy()
-        finally:
-            lock.release()
-
-    @staticmethod
-    def _row(rows: np.ndarray, index: int) -> np.ndarray | None:
-        """A copy of row ``index``; None: caught mid-write (sequence number odd or changed)."""
-        row = rows[index].copy()
-        return row if row[0] % 2.0 == 0.0 and rows[index, 0] == row[0] else None
+        if lock is not None:
+            if not lock.acquire(wait):
+                return None
+            try:
+                values = raw[at : at + self._fields]
+            finally:
+                lock.release()
+            return values
+        values = raw[at : at + self._fields]
+        return values if values[0] % 2.0 == 0.0 and raw[at] == values[0] else None
 
 
 class SharedClock(_Rows, FrameMapping):
@@ -142,9 +141,8 @@ class SharedClock(_Rows, FrameMapping):
         lock)."""
         row = None
         while row is None:
-            rows = self._read(wait=True)
-            row = None if rows is None else self._row(rows, 0)
-        return int(row[1]), float(row[2]), float(row[3])
+            row = self._load(0, wait=True)
+        return int(row[1]), row[2], row[3]
 
 
 class MoveSlots(_Rows):
@@ -235,24 +233,19 @@ class MoveSlots(_Rows):
         the bound slots' rows are read (a few of the ``capacity``, each on cache lines the
         host writes). A row caught mid-write, or every row while the host holds the lock,
         waits for the next block."""
-        if not self._bound:
-            return
-        rows = self._read(wait=False)
-        if rows is None:
-            return
-        seen = self._seen
+        raw, fields, seen = self.raw.values, self._fields, self._seen
         for slot, (contact, generation) in self._bound.items():
-            if rows[slot, 0] == seen[slot]:
+            if raw[slot * fields] == seen[slot]:
                 continue
-            row = self._row(rows, slot)
+            row = self._load(slot, wait=False)
             if row is None:
                 continue
-            seen[slot] = float(row[0])
+            seen[slot] = row[0]
             if row[1] != generation:
                 continue
-            intensity = None if math.isnan(row[2]) else float(row[2])
+            intensity = None if math.isnan(row[2]) else row[2]
             frame = None if math.isnan(row[3]) else int(row[3])
-            post(contact, row[_SLOT_FIELDS:].astype(np.float32), intensity, frame)
+            post(contact, np.array(row[_SLOT_FIELDS:], dtype=np.float32), intensity, frame)
 
 
 STATUS_FIELDS = (
@@ -295,20 +288,22 @@ class StatusBlock:
         self._values = np.frombuffer(self.raw, dtype=np.float64)
 
     def write(self, figures: dict[str, Any]) -> None:
-        """Write figures (the engine process's callback); names not listed are ignored."""
-        values = self._values
+        """Write figures (the engine process's callback; through the ctypes array, no
+        numpy call); names not listed are ignored."""
+        raw = self.raw
         for i, name in enumerate(STATUS_FIELDS):
             value = figures.get(name)
             if value is not None:
-                values[i] = float(value)
+                raw[i] = float(value)
         levels = figures.get("levels")
         if levels is not None:
-            values[len(STATUS_FIELDS) :] = levels
+            raw[len(STATUS_FIELDS) : len(STATUS_FIELDS) + len(levels)] = levels
 
     def beat(self, now_s: float, frames: int) -> None:
         """Mark a block: its time and first frame (the callback, every block)."""
-        self._values[0] = now_s
-        self._values[1] = frames
+        raw = self.raw
+        raw[0] = now_s
+        raw[1] = frames
 
     def read(self) -> dict[str, Any]:
         """Every figure, with ``levels`` a list of floats."""

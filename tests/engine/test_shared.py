@@ -142,7 +142,7 @@ def test_a_row_caught_mid_write_waits_for_the_next_block() -> None:
     slots = MoveSlots(2, CHANNELS, locked=False)
     slot, generation = slots.allocate() or (0, 0)
     slots.bind(slot, generation, 1)
-    row = slots._rows[slot]
+    row = np.frombuffer(slots.raw.values, dtype=np.float64).reshape(2, -1)[slot]
     row[0] += 1.0  # the host has begun to write
     row[2], row[3], row[4], row[5] = math.nan, math.nan, 1.0, 2.0
     assert posted(slots) == []
