@@ -20,7 +20,7 @@ from phantomtouch.engine.clock import SampleClock
 from phantomtouch.engine.core import Core
 from phantomtouch.engine.link import Inbox, ReportBox
 from phantomtouch.engine.local_audio import RENDER_AHEAD_FRAMES, RENDER_AHEAD_RINGS, voice_costs
-from phantomtouch.engine.messages import AudioState, Close, PlanReleased, StartSink, perform
+from phantomtouch.engine.messages import AudioState, Close, Event, PlanReleased, StartSink, perform
 from phantomtouch.engine.messages import prepare as prepare_message
 from phantomtouch.engine.noise import HeldLoops
 from phantomtouch.engine.plan_memory import HeldArrays
@@ -66,6 +66,7 @@ class Intake:
         )
         self._blocks = 0
         self._reported = False
+        self.report_box.chores = self.chores
 
     def run(self) -> None:
         """At the start of each block (real time): the host's messages come from the
@@ -88,8 +89,8 @@ class Intake:
 
     def report(self) -> None:
         """Write a heartbeat, and every ``report_every`` blocks queue the events since for
-        the report box (:meth:`finished` wakes its thread once the block is rendered),
-        unmap what no voice reads any more, and write the figures (real time)."""
+        the report box, whose thread :meth:`finished` wakes once the block is rendered
+        (real time)."""
         core = self.core
         self.status.beat(time.monotonic(), core.scheduler.frames)
         self._blocks += 1
@@ -97,26 +98,34 @@ class Intake:
             return
         self._reported = True
         state = self.state
-        self.loops.collect()
         events = core.events()
-        events.extend(PlanReleased(handle) for handle in self.arrays.collect())
-        if taken := len(state.reports):  # the inbox thread appends too: take what is there
+        if taken := len(state.reports):  # other threads append too: take what is there
             events.extend(state.reports[:taken])
             del state.reports[:taken]
         if events:
             self.report_box.put(events)
-        figures = core.figures(loads=False)  # the render loads: the host's to sum up
-        figures.update(dropped_reports=self.report_box.dropped, refused_commands=state.refused)
-        self.status.write(figures)
 
     def finished(self) -> None:
-        """At the end of the callback (real time): when one of its blocks queued reports,
-        wake the report box's thread, so that no thread wakes to take the interpreter's
-        lock while a block renders, and one is woken at most every ``report_every``
-        blocks."""
+        """At the end of the callback (real time): when one of its blocks reported, wake
+        the report box's thread, so that no thread wakes to take the interpreter's lock
+        while a block renders, and one is woken at most every ``report_every`` blocks."""
         if self._reported:
             self._reported = False
             self.report_box.wake()
+
+    def chores(self) -> list[Event]:
+        """What the callback leaves to the report box's thread, which does it each time a
+        block reported (non real time; :attr:`ReportBox.chores
+        <phantomtouch.engine.link.ReportBox.chores>`): unmap what no voice reads any more
+        (a system call, and for a block still read a raised ``BufferError``) and write
+        the figures (a few dozen reads of the engine's counters). The noise loops freed
+        are reported with the callback's next events; the plans' blocks freed, returned."""
+        self.loops.collect()
+        released: list[Event] = [PlanReleased(handle) for handle in self.arrays.collect()]
+        figures = self.core.figures(loads=False)  # the render loads: the host's to sum up
+        figures.update(dropped_reports=self.report_box.dropped, refused_commands=self.state.refused)
+        self.status.write(figures)
+        return released
 
     def check_mark(self) -> None:
         """Apply a ``stop_all`` the host raised (real time)."""

@@ -80,14 +80,22 @@ class ReportBox:
     ----------
     connection : multiprocessing.connection.Connection
         The write end of the reports' pipe (blocking).
+
+    Attributes
+    ----------
+    chores : callable or None
+        Run by the thread each time it is woken, before it sends (non real time): the
+        callback's housekeeping, off its thread; what it returns, if anything, is sent as
+        one more report. Set before the callback first wakes the thread.
     """
 
     def __init__(self, connection: Any) -> None:
         self._connection = connection
+        self.chores: Callable[[], list[Any]] | None = None
         self._waiting: deque[Any] = deque()
         self._wake = threading.Lock()
-        """Held while nothing waits: the thread waits to acquire it, :meth:`put` releases
-        it (releasing never waits)."""
+        """Held while the thread sleeps: it waits to acquire it, :meth:`wake` releases it
+        (releasing never waits)."""
         self._wake.acquire()
         self.dropped = 0
         threading.Thread(target=self._run, name="phantomtouch-report-box", daemon=True).start()
@@ -101,17 +109,20 @@ class ReportBox:
         self._waiting.append(report)
 
     def wake(self) -> None:
-        """Wake the thread when reports wait (real time: at the end of the callback, so
-        that no thread is woken while it renders; only this method releases the wake
-        lock, so it is held when released)."""
-        if self._waiting and self._wake.locked():
+        """Wake the thread, to do its chores and send what waits (real time: at the end
+        of the callback, so that no thread is woken while it renders; only this method
+        releases the wake lock, so it is held when released)."""
+        if (self._waiting or self.chores is not None) and self._wake.locked():
             self._wake.release()
 
     def _run(self) -> None:
-        """The report box's thread (non real time): send what waits, oldest first."""
+        """The report box's thread (non real time): the chores, then send what waits,
+        oldest first."""
         waiting = self._waiting
         while True:
             self._wake.acquire()
+            if self.chores is not None and (done := self.chores()):
+                waiting.append(done)
             while waiting:
                 # plain pickle, which the host's ``recv`` reads as it reads ``send``'s:
                 # ``Connection.send`` makes a ForkingPickler, copying the whole copyreg
