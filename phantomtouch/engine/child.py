@@ -231,7 +231,6 @@ def serve(
     # ends this process
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    raise_priority(priority)
     try:
         device = DeviceProfile.model_validate_json(device_json)
         clock = SampleClock(
@@ -263,6 +262,11 @@ def serve(
     refuse_building()  # from now on a noise loop is only what the host hands over
     period = (sink.block_frames, sink.period_frames, sink.period_source)
     reports.send(("ready", costs, sink.backend, sink.output_device, period))
+    # Real time from here on, for this thread and those it starts (the report box's, the
+    # inbox's, the render-ahead and the sink's threads): not the start-up above, whose
+    # second of CPU (the compiled loops loaded, the voices' costs measured) would hold
+    # off every other engine at that priority on the machine (docs/engine.md)
+    raise_priority(priority)
     intake = Intake(
         core,
         Inbox(commands, poll_s=device.block_frames / device.sample_rate_hz),
