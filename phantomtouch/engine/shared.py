@@ -231,7 +231,7 @@ class MoveSlots(_Rows):
         """Hand every new position of a bound slot to ``post(contact, unit_gains,
         intensity, frame)`` (``unit_gains`` float32; real time, the audio callback). Only
         the bound slots' rows are read (a few of the ``capacity``, each on cache lines the
-        host writes). A row caught mid-write, or every row while the host holds the lock,
+        host writes). A row caught mid-write, or reached while the host holds the lock,
         waits for the next block."""
         raw, fields, seen = self.raw.values, self._fields, self._seen
         for slot, (contact, generation) in self._bound.items():
@@ -271,9 +271,10 @@ STATUS_FIELDS = (
 
 
 class StatusBlock:
-    """The engine process's figures, written by its audio callback at every block;
-    ``beat_s``, the server time of the last block, tells the host whether audio flows.
-    Read without a lock: each is one aligned float64 (a snapshot may mix two blocks).
+    """The engine process's figures: the heartbeat written by its audio callback at every
+    block (``beat_s``, the server time of the last block, tells the host whether audio
+    flows), the others every few blocks by its report box's thread. Read without a lock:
+    each is one aligned float64 (a snapshot may mix two blocks).
 
     Parameters
     ----------
@@ -288,8 +289,8 @@ class StatusBlock:
         self._values = np.frombuffer(self.raw, dtype=np.float64)
 
     def write(self, figures: dict[str, Any]) -> None:
-        """Write figures (the engine process's callback; through the ctypes array, no
-        numpy call); names not listed are ignored."""
+        """Write figures (the engine process's report box's thread; through the ctypes
+        array, no numpy call); names not listed are ignored."""
         raw = self.raw
         for i, name in enumerate(STATUS_FIELDS):
             value = figures.get(name)
