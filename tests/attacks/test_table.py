@@ -269,9 +269,9 @@ def stop_url(stand: Stand) -> dict[str, Any]:
     frame then.
 
     What follows a stop is placed by that frame. A loaded machine may stall the engine
-    between the stop and the next clock read; placed by that read, the stop's release
-    would land a stall later in server time than it was rendered, inside a window the stop
-    has silenced (:mod:`tests.support.clocks`).
+    between the stop and the next clock read, and placed by that read a window's start
+    falls as many frames too early as the stall lasted: inside the stop's release (40 ms
+    early put 0.07 FS of it in the window; :mod:`tests.support.clocks`).
     """
     answer: dict[str, Any] = httpx.post(f"{stand.url}/stop", timeout=30.0).json()
     return answer
