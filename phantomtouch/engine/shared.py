@@ -269,6 +269,10 @@ STATUS_FIELDS = (
     "dc_blocked_blocks",
 )
 
+_BEAT_FIELDS = 2
+"""The first fields of :data:`STATUS_FIELDS`, ``beat_s`` and ``now_frames``: the
+heartbeat's."""
+
 
 class StatusBlock:
     """The engine process's figures: the heartbeat written by its audio callback at every
@@ -290,10 +294,12 @@ class StatusBlock:
 
     def write(self, figures: dict[str, Any]) -> None:
         """Write figures (the engine process's report box's thread; through the ctypes
-        array, no numpy call); names not listed are ignored."""
+        array, no numpy call); names not listed are ignored, and so are the heartbeat's
+        (``beat_s``, ``now_frames``): those are :meth:`beat`'s alone, since a figure read
+        on another thread a moment before a block would set them back by it."""
         raw = self.raw
-        for i, name in enumerate(STATUS_FIELDS):
-            value = figures.get(name)
+        for i in range(_BEAT_FIELDS, len(STATUS_FIELDS)):
+            value = figures.get(STATUS_FIELDS[i])
             if value is not None:
                 raw[i] = float(value)
         levels = figures.get("levels")

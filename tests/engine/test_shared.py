@@ -24,6 +24,7 @@ from phantomtouch.engine.shared import (
     MoveSlots,
     SharedBuffer,
     SharedClock,
+    StatusBlock,
     sequence_locks_are_safe,
     unlink_block,
     write_block,
@@ -295,3 +296,15 @@ def test_blocks_the_inbox_thread_retires_while_the_callback_collects_are_all_unm
             unlink_block(block)
     assert not errors, f"the inbox thread failed: {errors[0]!r}"
     assert len(freed) == maps - 2
+
+
+def test_the_figures_never_set_the_heartbeat_back() -> None:
+    """The figures are written on another thread than the heartbeat: a frame count they
+    read a moment before the callback's next beat is not written over it."""
+    status = StatusBlock(CHANNELS)
+    status.beat(12.5, 4096)
+    levels = [0.5] * CHANNELS
+    status.write({"now_frames": 3968, "beat_s": 1.0, "active_voices": 3, "levels": levels})
+    figures = status.read()
+    assert (figures["beat_s"], figures["now_frames"]) == (12.5, 4096)
+    assert figures["active_voices"] == 3 and figures["levels"] == levels
