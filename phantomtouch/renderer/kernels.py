@@ -150,9 +150,8 @@ def add_contacts(
 ) -> bool:
     """The contacts' sum, each contact's gains ramped linearly across the block, into
     ``out``: ``carriers @ starts + ramp * (carriers @ (targets - starts))`` per frame, in
-    float64,
-    added to ``out`` when ``add`` (else written), rounded once to float32. True when
-    every sample of ``out`` is finite after it.
+    float64, added to ``out`` when ``add`` (else written), rounded once to float32. True
+    when every sample of ``out`` is finite after it.
 
     Parameters
     ----------
