@@ -45,7 +45,9 @@ of JACK's xruns set beside what the probe saw at that moment: an xrun during a s
 the probe's is the machine's (``realtime_floor.in_stalls``, which also says how many would
 fall in one by chance). The yardstick, measured in this process, is a numpy copy of one
 128 x 8 float32 block (``yardstick.py``: timed 100 copies at a time, so the clock's own cost
-is not counted as the copy's).
+is not counted as the copy's). The machine's speed changes from one second to the next, and
+the copy's with it, so it is timed once a second in each scenario's rest: the callback's
+yardsticks are against the median of those, printed with their range.
 
 Paired mode, ``--pair CHECKOUT``: another checkout, served by the Python of its own
 ``.venv``, runs each scenario right after (or, every other scenario, right before) this

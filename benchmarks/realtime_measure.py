@@ -19,6 +19,7 @@ import numpy as np
 from realtime_floor import LatencyProbe, in_stalls, xrun_causes, xrun_kinds
 from realtime_http import HttpConnection, metrics, sample_health, sample_metrics, timed_request
 from realtime_usage import cpu_seconds
+from yardstick import block_copy_s
 
 if TYPE_CHECKING:
     from tests.support.jack import JackServer, JackXrunCounter
@@ -67,8 +68,9 @@ def callback_us(samples: list[dict[str, Any]]) -> dict[str, float | None]:
     }
 
 
-async def rest(port: int, seconds: float) -> None:
-    """``POST /stop``, wait (10 s at most) until no voice plays, then ``seconds`` more."""
+async def rest(port: int, seconds: float) -> list[float]:
+    """``POST /stop``, wait (10 s at most) until no voice plays, then ``seconds`` more,
+    timing the yardstick meanwhile (:func:`copies_while_resting`, µs)."""
     connection = HttpConnection(port)
     try:
         await timed_request(connection, "POST", "/stop")
@@ -80,7 +82,19 @@ async def rest(port: int, seconds: float) -> None:
             await asyncio.sleep(0.1)
     finally:
         connection.close()
-    await asyncio.sleep(seconds)
+    return await copies_while_resting(seconds)
+
+
+async def copies_while_resting(seconds: float) -> list[float]:
+    """Wait ``seconds``, timing the yardstick's copy (300 timings, a few milliseconds) once a
+    second meanwhile, µs. The machine's speed can change twofold from one second to the next
+    (``yardstick.py``), so each scenario is set beside the copies of its own rest."""
+    copies_us: list[float] = []
+    deadline = time.monotonic() + seconds
+    while (left_s := deadline - time.monotonic()) > 0.0:
+        await asyncio.sleep(min(1.0, left_s))
+        copies_us.append(block_copy_s(timings=300) * 1e6)
+    return copies_us
 
 
 async def measure(
@@ -97,7 +111,7 @@ async def measure(
     rest (``rest_seconds``) and the ``/health`` rate (``health_hz``).
     """
     period_us = jack.period_frames / jack.sample_rate_hz * 1e6
-    await rest(port, args.rest_seconds)
+    copies_us = await rest(port, args.rest_seconds)
     connection = HttpConnection(port)
     try:
         before = await metrics(connection)
@@ -138,6 +152,7 @@ async def measure(
     machine_s, ours_s = (end - start for start, end in zip(cpu_before, cpu_after, strict=True))
     return {
         "seconds": elapsed_s,
+        "rest_copies_us": copies_us,
         "busy_cores": machine_s / elapsed_s,
         "busy_cores_others": max(0.0, machine_s - ours_s) / elapsed_s,
         "underruns": underruns,

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 TITLES = {
     "d": "quiet (no load)",
     "a": "4 hands at 90 Hz + 50 touches/s",
@@ -111,6 +113,21 @@ def callback_text(result: dict[str, Any], yardstick_us: float) -> str:
     return f"{number(p50, 0)} / {p99:.0f} µs ({ratio} / {p99 / yardstick_us:.0f})"
 
 
+def rest_yardstick_us(result: dict[str, Any], default_us: float) -> float:
+    """The median of the copies timed in a scenario's rest (``default_us``, the run's
+    yardstick, for a scenario without them)."""
+    copies = result.get("rest_copies_us") or [default_us]
+    return float(np.median(copies))
+
+
+def rest_copies_text(result: dict[str, Any]) -> str:
+    """``median (min-max)`` of the copies timed in a scenario's rest, µs."""
+    copies = result.get("rest_copies_us")
+    if not copies:
+        return "—"
+    return f"{np.median(copies):.2f} ({min(copies):.2f}-{max(copies):.2f})"
+
+
 def flood_text(result: dict[str, Any]) -> str:
     """``POST /touch accepted/s vs GET /health req/s (ratio)`` of scenario c."""
     touch, health = result.get("wrk"), result.get("health_wrk")
@@ -130,15 +147,17 @@ def pair_table(results: dict[str, Any]) -> str:
         installs.append(("pair", results["pair"]))
     lines = [
         "| scenario | install | underruns | JACK xruns | callback p50 / p99 (yardsticks) "
+        "| yardstick in the rest, µs (range) "
         "| render load p99 | /touch accepted/s vs /health req/s | RT probe late (max) |",
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for key in results["scenarios"]:
         for name, figures in installs:
             r = figures["scenarios"][key]
             lines.append(
                 f"| ({key}) {TITLES[key]} | {name} | {number(r['underruns'], 0)} "
-                f"| {xruns_text(r)} | {callback_text(r, yardstick_us)} "
+                f"| {xruns_text(r)} | {callback_text(r, rest_yardstick_us(r, yardstick_us))} "
+                f"| {rest_copies_text(r)} "
                 f"| {percent(r['render_load_p99'])} | {flood_text(r)} | {floor_text(r)} |"
             )
     return "\n".join(lines)

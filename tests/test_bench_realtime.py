@@ -56,6 +56,8 @@ def test_the_realtime_benchmark_measures_every_figure(tmp_path: Path) -> None:
         scenario = results["scenarios"][key]
         assert scenario["underruns"] >= 0 and scenario["inline_renders"] >= 0
         assert scenario["jack_xruns"] >= 0
+        # the yardstick timed in the scenario's rest (1 s with --quick): at least once
+        assert scenario["rest_copies_us"] and min(scenario["rest_copies_us"]) > 0.0
         assert 0.0 < scenario["render_load_p99"] <= scenario["render_load_max"]
         # the callback's own time, read from /metrics while the scenario ran
         assert 0.0 < scenario["callback_p50_us"] <= scenario["callback_p99_us"]
