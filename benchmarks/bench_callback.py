@@ -13,11 +13,13 @@ callback's own work is timed: ``Scheduler.render`` on one block, wall time
 The moves and taps go through the engine's own front between blocks, as a WebSocket or a
 ``POST /touch`` would; that host work is not timed.
 
-Each scene runs twice: ``hot``, one callback right after the other, and ``paced``, each
-callback a period after the last one began, the thread asleep in between, as a sound
-card calls it. On a machine whose idle cores halt (a virtual machine, a laptop saving
-power) a paced callback can cost several times a hot one, as the core wakes cold: the
-paced figures are the ones the service's ``phantomtouch_callback_seconds`` shows there.
+Each scene runs ``hot``, one callback right after the other, and ``paced``, each callback
+a period after the last one began, the thread asleep in between, as a sound card calls
+it; the ``vr`` scene also ``busy``, paced so but the thread busy in between. On a machine
+whose idle cores halt (a virtual machine, a laptop saving power) a paced callback can cost
+several times a hot one, as the core wakes cold: the paced figures are the ones the
+service's ``phantomtouch_callback_seconds`` shows there, and ``busy`` shows how much of
+that the idle core itself costs.
 
 The yardstick is one numpy copy of a 128 x 8 float32 block (``yardstick.py``: the median
 of 2,000 timings of 100 copies), in the same process: targets are stated in yardsticks so
@@ -52,11 +54,17 @@ CONTACTS = 4
 TAP_EVERY_S = 0.02
 """50 ``vr/tap`` a second, as in the issue's VR load."""
 WARM_BLOCKS = 200
+SCENES = (("idle", "hot"), ("vr", "hot"), ("idle", "paced"), ("vr", "paced"), ("vr", "busy"))
+"""Each scene and how its callbacks come: ``hot``, ``paced`` (asleep between periods) or
+``busy`` (paced, looping between periods)."""
 
 
-def scene_s(scene: str, block_frames: int, blocks: int, paced: bool = False) -> np.ndarray:
+def scene_s(
+    scene: str, block_frames: int, blocks: int, paced: bool = False, busy: bool = False
+) -> np.ndarray:
     """Wall and thread CPU seconds of each of ``blocks`` callbacks after ``WARM_BLOCKS``,
-    shape (blocks, 2); ``paced``: each a period after the last one began."""
+    shape (blocks, 2); ``paced``: each a period after the last one began, the thread
+    asleep in between (``busy``: looping)."""
     device = pt.DeviceProfile.default().model_copy(update={"block_frames": block_frames})
     sink = CaptureSink(device)
     engine = Engine(device, sink)
@@ -81,7 +89,11 @@ def scene_s(scene: str, block_frames: int, blocks: int, paced: bool = False) -> 
                 engine.schedule(tap, owner="taps")
         if paced:
             due_s += period_s
-            time.sleep(max(0.0, due_s - time.perf_counter()))
+            if busy:
+                while time.perf_counter() < due_s:
+                    pass
+            else:
+                time.sleep(max(0.0, due_s - time.perf_counter()))
         began, began_cpu = time.perf_counter(), time.thread_time()
         render(out)
         spent = time.perf_counter() - began, time.thread_time() - began_cpu
@@ -95,11 +107,11 @@ def measure(blocks: int) -> dict[str, Any]:
     stick = block_copy_s()
     rows: dict[str, Any] = {"yardstick_us": stick * 1e6}
     for block_frames in (128, 64):
-        for scene, paced in (("idle", False), ("vr", False), ("idle", True), ("vr", True)):
-            times = scene_s(scene, block_frames, blocks, paced)
+        for scene, wait in SCENES:
+            times = scene_s(scene, block_frames, blocks, wait != "hot", wait == "busy")
             p50, p99 = np.percentile(times[:, 0], [50, 99])
             cpu_p50, cpu_p99 = np.percentile(times[:, 1], [50, 99])
-            rows[f"{scene}@{block_frames}{' paced' if paced else ''}"] = {
+            rows[f"{scene}@{block_frames}{'' if wait == 'hot' else ' ' + wait}"] = {
                 "p50_us": p50 * 1e6,
                 "p99_us": p99 * 1e6,
                 "p50_yardsticks": p50 / stick,
