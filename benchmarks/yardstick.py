@@ -6,10 +6,11 @@ and storing its result take about as long as the copy) is not counted as part of
 the yardstick is the median of 2,000 such timings.
 
 The machine's speed is not steady, and the copy shows it: on one 2-core virtual machine,
-timed 40 times half a second apart while nothing else ran, it took 0.40 µs or 0.68-1.08
-µs as it came, and in a run of 15 back to back, 0.67-0.83 µs for the first 9 and 0.40 µs
-from then on. A figure in yardsticks is therefore only as good as the copy's timing beside
-it: ``bench_realtime.py`` times it in each scenario's rest and prints the range.
+timed 40 times half a second apart while nothing else ran, it took 0.40 µs or 0.68-1.08 µs
+as it came, and in 15 timings back to back, each after half a second of busy looping,
+0.67-0.83 µs for the first 9 and 0.40 µs from then on. A figure in yardsticks is therefore
+only as good as the copy's timing beside it: ``bench_realtime.py`` times it in each
+scenario's rest and prints the range.
 """
 
 from __future__ import annotations
