@@ -4,9 +4,8 @@ it), and the soak's resident memory."""
 
 from __future__ import annotations
 
+import statistics
 from typing import Any
-
-import numpy as np
 
 TITLES = {
     "d": "quiet (no load)",
@@ -117,7 +116,7 @@ def rest_yardstick_us(result: dict[str, Any], default_us: float) -> float:
     """The median of the copies timed in a scenario's rest (``default_us``, the run's
     yardstick, for a scenario without them)."""
     copies = result.get("rest_copies_us") or [default_us]
-    return float(np.median(copies))
+    return statistics.median(copies)
 
 
 def rest_copies_text(result: dict[str, Any]) -> str:
@@ -125,7 +124,7 @@ def rest_copies_text(result: dict[str, Any]) -> str:
     copies = result.get("rest_copies_us")
     if not copies:
         return "—"
-    return f"{np.median(copies):.2f} ({min(copies):.2f}-{max(copies):.2f})"
+    return f"{statistics.median(copies):.2f} ({min(copies):.2f}-{max(copies):.2f})"
 
 
 def flood_text(result: dict[str, Any]) -> str:
