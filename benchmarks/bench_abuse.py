@@ -291,18 +291,22 @@ def transport_abuses(server: LiveServer) -> dict[str, Callable[[], Any]]:
     }
 
 
-def stop_rows(folder: Path) -> dict[str, dict[str, Any]]:
+def stop_rows(folder: Path, kept: Callable[[str], bool]) -> dict[str, dict[str, Any]]:
     """The stop through a crowd, against a server limited to 256 open files (a small
-    machine), once per way of stopping; each row measured as the others are."""
+    machine), once per way of stopping whose row is ``kept``; each row measured as the
+    others are."""
     rows = {}
     for via in ("cli", "http"):
+        name = f"stop {via}, crowd"
+        if not kept(name):
+            continue
         runtime = Path(folder) / f"run-{via}"
         with LimitedServer(
             Path(folder) / f"stop-{via}.db",
             args=("--token", STOP_TOKEN),
             env={"XDG_RUNTIME_DIR": str(runtime)},
         ) as limited:
-            rows[f"stop {via}, crowd"] = measure(
+            rows[name] = measure(
                 limited,
                 functools.partial(stop_through_crowd, limited, runtime, via),
                 auth=STOP_TOKEN,
@@ -313,7 +317,18 @@ def stop_rows(folder: Path) -> dict[str, dict[str, Any]]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="length of the baseline")
+    parser.add_argument(
+        "--rows",
+        default="",
+        help="only the rows whose name holds one of these, comma-separated (the baseline "
+        "'none' always runs), e.g. 'bh huge,osc'",
+    )
     args = parser.parse_args(argv)
+    wanted = [part.strip() for part in args.rows.split(",") if part.strip()]
+
+    def kept(name: str) -> bool:
+        return not wanted or any(part in name for part in wanted)
+
     osc_port = free_udp_port()
     bh_port = free_port()
     bh_url = f"ws://127.0.0.1:{bh_port}/v2/feedbacks"
@@ -338,13 +353,14 @@ def main(argv: list[str] | None = None) -> int:
             **transport_abuses(server),
             **bhaptics_abuses(server, bh_url),
         }
+        abuses = {name: abuse for name, abuse in abuses.items() if name == "none" or kept(name)}
         inputs = set(input_abuses(server, osc_port)) | set(transport_abuses(server))
         print(
             f"{'abuse':<18} {'s':>5} {'n':>6} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} "
             f"underruns {'late':>5} {'late ms':>7}"
         )
         rows = ((name, measure(server, abuse)) for name, abuse in abuses.items())
-        for name, row in itertools.chain(rows, stop_rows(Path(folder)).items()):
+        for name, row in itertools.chain(rows, stop_rows(Path(folder), kept).items()):
             print(
                 f"{name:<18} {row['took_s']:5.2f} {row['answers']:6d} {row['p50_ms']:7.2f} "
                 f"{row['p99_ms']:7.2f} {row['max_ms']:7.1f} {row['underruns']:9.0f} "
