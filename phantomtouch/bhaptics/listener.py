@@ -23,9 +23,10 @@ from the ``bhaptics`` row of the admission's policy table
 - messages up to the row's ``max_message_bytes`` (a ``Register`` can be megabytes): a larger
   one closes the connection with 1009 before it is read; its message rate (close 1008 when
   exceeded for a second on end); at most ``max_work`` submits in one message (a message
-  asking for more is refused whole, answered with a status); large messages are read in a
-  worker thread one at a time, and a message's requests applied in slices, so that no
-  message holds the event loop;
+  asking for more is refused whole, before any is read, answered with a status); large
+  messages are read in a worker thread one at a time, in slices with the garbage collector
+  held off (:mod:`phantomtouch.service.json_slices`), and a message's requests applied in
+  slices, so that no message holds the event loop, nor any other thread of the service;
 - the row's connection slots: when they are full a newcomer is served and the connection
   silent longest yields (closed 1013), so that no idle crowd locks a game out;
 - what it plays ends one ``deadline_s`` after the client's last message (only a message of
@@ -40,6 +41,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import itertools
 import json
 import logging
@@ -63,6 +65,7 @@ from phantomtouch.clips.tact_map import ArmMap
 from phantomtouch.errors import ParameterError
 from phantomtouch.service.admission import Handle, Kind
 from phantomtouch.service.flood import LimitedLog
+from phantomtouch.service.json_slices import without_collection
 from phantomtouch.service.memory import give_back_memory
 from phantomtouch.service.metrics import labelled
 
@@ -246,29 +249,33 @@ class _Connection:
         if arrival is None:
             return
         text = data if isinstance(data, str) else data.decode("utf-8", errors="replace")
+        check_submits = functools.partial(self.handle.check_work, field="Submit")
         try:
             if len(text) <= INLINE_BYTES:
-                prepared: Prepared = prepare(text, self.session.room_points)
+                prepared: Prepared = prepare(text, self.session.room_points, check_submits)
             else:
                 self._read_large = True
                 prepared = await asyncio.get_running_loop().run_in_executor(
-                    self.listener.reader, prepare, text, self.session.room_points
+                    self.listener.reader,
+                    without_collection,
+                    prepare,
+                    text,
+                    self.session.room_points,
+                    check_submits,
                 )
         except BadRequest as exc:
             self.listener.count(exc.reason)
             self.listener.log.warning(exc.reason, f"bhaptics: {owner}: {exc}")
+        except ParameterError as exc:  # more submits than one message may ask for
+            self.listener.count("refused")
+            self.listener.log.warning("refused", f"bhaptics: {owner}: refused {exc}")
         else:
             for skipped in prepared.message.skipped:
                 self.listener.count(skipped.reason)
-            try:
-                refused = await self.session.apply(prepared, arrival)
-            except ParameterError as exc:
+            refused = await self.session.apply(prepared, arrival)
+            self.listener.count("accepted")
+            for _ in range(refused):
                 self.listener.count("refused")
-                self.listener.log.warning("refused", f"bhaptics: {owner}: refused {exc}")
-            else:
-                self.listener.count("accepted")
-                for _ in range(refused):
-                    self.listener.count("refused")
         self.session.expire()
         await self._send(self.session.status())
         self._wake.set()  # something may play now: the ticker looks again

@@ -22,14 +22,14 @@ Pure: no I/O, no engine; every function runs in the caller's thread.
 
 from __future__ import annotations
 
-import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from phantomtouch.clips.tact import DotPoint, position_name
 from phantomtouch.errors import ParameterError
+from phantomtouch.service.json_slices import let_go, read_json
 
 MAX_KEY_CHARS = 256
 """Longest pattern key (or ``altKey``) accepted."""
@@ -149,21 +149,44 @@ class Message:
     skipped: tuple[BadRequest, ...]
 
 
-def parse(text: str) -> Message:
+def parse(text: str, check_submits: Callable[[int], None] | None = None) -> Message:
     """Read one text message.
+
+    Parameters
+    ----------
+    text : str
+    check_submits : callable or None
+        Called with the number of items the ``Submit`` array holds, before any request is
+        read (the admission handle's ``check_work``: it raises to refuse the message
+        whole, so that a message asking for too much work builds none of it).
 
     Raises
     ------
     BadRequest
         The text is not a JSON object (reason ``not_json``) or its ``Register`` or
         ``Submit`` is not an array (``bad_request``).
+    ParameterError
+        ``check_submits`` refused the message.
     """
     fields = folded(json_object(text))
+    arrays = [
+        (name, _array(fields, name), read)
+        for name, read in (("register", _register), ("submit", _submit))
+    ]
+    if check_submits is not None:
+        try:
+            check_submits(len(arrays[-1][1]))
+        except ParameterError:
+            for _, items, _ in arrays:
+                let_go(items)
+            raise
     requests: list[Request] = []
     skipped: list[BadRequest] = []
-    for name, read in (("register", _register), ("submit", _submit)):
-        items = _array(fields, name)
-        for index, item in enumerate(items):
+    for name, items, read in arrays:
+        for index in range(len(items)):
+            # each item let go of as it is read: a large message is freed piece by piece,
+            # not in one cascade that holds every thread (phantomtouch.service.json_slices)
+            item, items[index] = items[index], None
             try:
                 requests.append(read(item))
             except BadRequest as exc:
@@ -180,7 +203,7 @@ def json_object(text: str) -> dict[str, Any]:
         Not JSON, or not an object (reason ``not_json``).
     """
     try:
-        document = json.loads(text.removeprefix("\ufeff"))
+        document = read_json(text.removeprefix("\ufeff"))
     except (ValueError, RecursionError) as exc:
         raise BadRequest("not_json", f"the message is not JSON ({exc})"[:200]) from None
     if not isinstance(document, dict):
@@ -261,7 +284,7 @@ def _register(item: object) -> Register:
     project = fields.get("project")
     if isinstance(project, str):
         try:
-            project = json.loads(project.removeprefix("\ufeff"))
+            project = read_json(project.removeprefix("\ufeff"))
         except (ValueError, RecursionError):
             raise BadRequest(
                 "bad_request", f"project of key={key!r} is a string but not JSON"

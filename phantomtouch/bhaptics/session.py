@@ -90,17 +90,24 @@ class Prepared:
     projects: dict[int, TactProject | BadRequest]
 
 
-def prepare(text: str, room_points: int = MAX_REGISTERED_POINTS) -> Prepared:
+def prepare(
+    text: str,
+    room_points: int = MAX_REGISTERED_POINTS,
+    check_submits: Callable[[int], None] | None = None,
+) -> Prepared:
     """Read a message and parse the projects it registers, as long as their points fit in
     ``room_points`` (a project past it is not parsed: it could not be registered); pure,
-    any thread: a large ``Register`` is read in a worker thread.
+    any thread: a large ``Register`` is read in a worker thread. ``check_submits`` is
+    :func:`~phantomtouch.bhaptics.requests.parse`'s.
 
     Raises
     ------
     BadRequest
         The message is not a JSON object.
+    ParameterError
+        ``check_submits`` refused the message.
     """
-    message = parse(text)
+    message = parse(text, check_submits)
     projects: dict[int, TactProject | BadRequest] = {}
     for index, request in enumerate(message.requests):
         if not isinstance(request, Register):
@@ -248,19 +255,12 @@ class PlayerSession:
         """Apply a message's requests in order, letting the event loop go every
         :data:`SLICE_REQUESTS`; one that is refused (not registered, over a bound, refused
         by the admission or the engine) is logged and the rest still applied. Returns how
-        many were refused.
-
-        Raises
-        ------
-        ParameterError
-            The message asks for more submits than one message may (the handle's
-            ``max_work``); none of them is applied.
+        many were refused. How many submits one message may ask for is checked as it is
+        read (:func:`prepare`'s ``check_submits``, the handle's ``check_work``).
         """
         for skipped in prepared.message.skipped:
             self._log.warning(skipped.reason, f"bhaptics: {self.owner}: skipped {skipped}")
         requests = prepared.message.requests
-        submits = sum(not isinstance(request, Register) for request in requests)
-        self.handle.check_work(submits, field="Submit")
         refused = 0
         for index, request in enumerate(requests):
             if index and index % SLICE_REQUESTS == 0:

@@ -7,6 +7,7 @@ import json
 
 import pytest
 
+import phantomtouch.bhaptics.requests as requests_module
 from phantomtouch.bhaptics.requests import (
     BadRequest,
     PlayFrame,
@@ -17,6 +18,7 @@ from phantomtouch.bhaptics.requests import (
     parse,
 )
 from phantomtouch.bhaptics.status import MOTORS, status_message
+from phantomtouch.errors import ParameterError
 
 
 def test_the_cpp_spelling_integer_position_and_both_arrays() -> None:
@@ -138,3 +140,37 @@ def test_the_status_always_has_every_key_and_integer_levels() -> None:
     assert {k: len(v) for k, v in levels.items()} == MOTORS
     assert levels["ForearmL"] == [100, 100, 0, 0, 0, 0]
     assert levels["Head"] == [2] * 6
+
+
+def test_a_message_over_the_submit_check_is_refused_before_any_request_is_read(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``check_submits`` (the admission's ``check_work``) hears how many items ``Submit``
+    holds, an unreadable one too, before any is read; when it refuses, parse raises its
+    error and has read none."""
+    read: list[object] = []
+    monkeypatch.setattr(requests_module, "_submit", lambda item: read.append(item))
+    heard: list[int] = []
+
+    def refuse(count: int) -> None:
+        heard.append(count)
+        raise ParameterError(f"Submit: {count} in one message; at most 64")
+
+    submits = [{"Type": "turnOffAll"}] * 70 + [{"Type": 3}]
+    text = json.dumps({"Register": [], "submit": submits})
+    with pytest.raises(ParameterError, match="Submit: 71"):
+        parse(text, refuse)
+    assert heard == [71]
+    assert read == []
+
+
+def test_a_message_the_submit_check_lets_through_reads_as_without_it() -> None:
+    heard: list[int] = []
+    text = json.dumps(
+        {"Submit": [{"Type": "turnOff", "Key": "a"}, {"Type": "turnOffAll"}, {"Type": 3}]}
+    )
+    checked, unchecked = parse(text, heard.append), parse(text)
+    assert heard == [3]
+    assert checked.requests == unchecked.requests == (TurnOff("a"), TurnOffAll())
+    assert [str(e) for e in checked.skipped] == [str(e) for e in unchecked.skipped]
+    assert len(checked.skipped) == 1

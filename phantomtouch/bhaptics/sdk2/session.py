@@ -47,6 +47,7 @@ from phantomtouch.clips.deployment import event_score, parse_deployment
 from phantomtouch.clips.tact_score import ScaleOption, frame_score
 from phantomtouch.errors import PhantomTouchError
 from phantomtouch.service.flood import LimitedLog
+from phantomtouch.service.json_slices import without_collection
 from phantomtouch.service.sdk2_workspaces import Workspaces
 
 if TYPE_CHECKING:
@@ -212,7 +213,9 @@ class Sdk2Session:
         Whatever it was, the client hears an answer."""
         try:
             request = (
-                parse(text) if len(text) <= INLINE_BYTES else await asyncio.to_thread(parse, text)
+                parse(text)
+                if len(text) <= INLINE_BYTES
+                else await asyncio.to_thread(without_collection, parse, text)
             )
             await self._apply(request, arrival)
         except BadRequest as exc:
@@ -249,7 +252,7 @@ class Sdk2Session:
     async def _auth(self, request: Auth) -> None:
         haptic = request.haptic
         if haptic is not None and haptic not in ("", [], {}):
-            deployment = await asyncio.to_thread(parse_deployment, haptic)
+            deployment = await asyncio.to_thread(without_collection, parse_deployment, haptic)
             self.workspaces.define(self.workspace, deployment)
             self._events_changed = False  # sent below
             logger.info(

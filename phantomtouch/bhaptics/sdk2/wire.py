@@ -40,6 +40,7 @@ from phantomtouch.bhaptics.requests import (
     number,
     shown,
 )
+from phantomtouch.service.json_slices import read_json
 
 ARM_MOTORS = 6
 """Motor values of one arm in ``SdkPlayDotMode`` (a Tactosy2 sleeve)."""
@@ -182,7 +183,7 @@ def envelope(text: str) -> Envelope:
         stripped = body.strip()
         if stripped.startswith("{"):
             try:
-                body = json.loads(stripped)
+                body = read_json(stripped)
             except (ValueError, RecursionError):
                 raise BadRequest(
                     "bad_request", f"Message={shown(body)} starts as JSON but does not read"

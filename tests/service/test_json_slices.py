@@ -1,0 +1,187 @@
+"""JSON read in slices (phantomtouch/service/json_slices.py): the same document as
+``json.loads`` reads, read so that another thread runs meanwhile, and the collector held
+off while a large message is taken apart."""
+
+from __future__ import annotations
+
+import gc
+import itertools
+import json
+import threading
+import time
+from typing import Any
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from phantomtouch.service.json_slices import (
+    SLICE_BYTES,
+    collector_held,
+    let_go,
+    read_json,
+    without_collection,
+)
+from tests.bhaptics.player_client import frame_submits
+
+LEAVES = (
+    st.none()
+    | st.booleans()
+    | st.integers(min_value=-(2**63), max_value=2**63 - 1)
+    | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(alphabet=st.characters(exclude_categories=("Cs",)), max_size=40)
+)
+VALUES = st.recursive(
+    LEAVES,
+    lambda children: (
+        st.lists(children, max_size=6) | st.dictionaries(st.text(max_size=8), children, max_size=6)
+    ),
+    max_leaves=40,
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(value=VALUES, ascii_only=st.booleans())
+def test_a_large_document_reads_as_json_loads_reads_it(value: Any, ascii_only: bool) -> None:
+    """Any JSON value, made longer than a slice by a long member beside it, reads back
+    equal to what ``json.loads`` makes of the same text (floats to the bit: equal
+    ``repr``)."""
+    document = {"value": value, "padding": "x" * SLICE_BYTES}
+    text = json.dumps(document, ensure_ascii=ascii_only)
+    assert len(text) > SLICE_BYTES
+    read = read_json(text)
+    expected = json.loads(text)
+    assert read == expected
+    assert repr(read) == repr(expected)
+
+
+def test_a_bhaptics_message_of_30000_submits_reads_whole() -> None:
+    text = frame_submits(30_000)
+    read = read_json(text)
+    assert read == json.loads(text)
+    assert len(read["Submit"]) == 30_000
+
+
+PAD = '"padding": "' + "x" * SLICE_BYTES + '"'
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "{" + PAD + '} "trailing"',
+        "{" + PAD + "}]",
+        "{" + PAD + ', "open": [1, 2}',
+        "{" + PAD,
+        "{" + PAD + ', "nan": NaN}',
+        "{" + PAD + ', "big": 1e400}',
+        "{" + PAD + ', "big": 9223372036854775808}',
+    ],
+    ids=[
+        "trailing",
+        "stray bracket",
+        "unclosed array",
+        "cut",
+        "NaN",
+        "beyond a float",
+        "beyond 64 bits",
+    ],
+)
+def test_a_large_text_that_is_not_one_strict_document_is_refused(text: str) -> None:
+    with pytest.raises(ValueError):
+        read_json(text)
+
+
+def test_a_short_text_is_json_loads() -> None:
+    assert read_json('{"a": [1, 2.5, "b"]}') == {"a": [1, 2.5, "b"]}
+    with pytest.raises(ValueError):
+        read_json('{"a": ')
+
+
+def _longest_hold(read: Any, text: str) -> tuple[float, float]:
+    """The longest time a second thread waited between two of its turns while
+    ``read(text)`` ran in this one, and how long that read took (s)."""
+    turns: list[float] = []
+    running = threading.Event()
+    done = threading.Event()
+
+    def other() -> None:
+        running.set()
+        while not done.is_set():
+            turns.append(time.perf_counter())
+            done.wait(0.0005)
+
+    thread = threading.Thread(target=other)
+    thread.start()
+    running.wait()
+    began = time.perf_counter()
+    try:
+        document = read(text)  # kept until the clock is read: its freeing is not the read
+    finally:
+        ended = time.perf_counter()
+        done.set()
+        thread.join()
+    del document
+    during = [began, *(t for t in turns if began < t < ended), ended]
+    return max(b - a for a, b in itertools.pairwise(during)), ended - began
+
+
+def test_another_thread_runs_while_a_large_document_is_read() -> None:
+    """``json.loads`` holds the interpreter for the whole text: another thread waits the
+    whole read. Read in slices, it runs throughout (a switch interval after it asks):
+    its longest wait is a small part of the read, in the same process and run. Both read
+    with the collector held, as the service reads a large message (a collection's
+    callbacks, which some libraries install, would let the other thread in)."""
+    text = frame_submits(20_000)
+    held, took = _longest_hold(lambda text: without_collection(json.loads, text), text)
+    assert held > 0.75 * took, f"json.loads let another thread run ({held:.3f} of {took:.3f} s)"
+    held, took = _longest_hold(lambda text: without_collection(read_json, text), text)
+    assert held < 0.25 * took, f"another thread waited {held:.3f} s of a {took:.3f} s read"
+
+
+def test_the_collector_is_held_while_any_holds_it_and_back_after_the_last() -> None:
+    assert gc.isenabled()
+    entered = threading.Event()
+    leave = threading.Event()
+
+    def hold_in_a_thread() -> None:
+        with collector_held():
+            entered.set()
+            leave.wait(5.0)
+
+    thread = threading.Thread(target=hold_in_a_thread)
+    with collector_held():
+        assert not gc.isenabled()
+        thread.start()
+        assert entered.wait(5.0)
+    assert not gc.isenabled(), "released while another thread still held it"
+    leave.set()
+    thread.join()
+    assert gc.isenabled()
+    assert without_collection(gc.isenabled) is False
+    assert gc.isenabled()
+
+
+def test_the_collector_stays_off_after_a_hold_if_it_was_off_before() -> None:
+    gc.disable()
+    try:
+        with collector_held():
+            pass
+        assert not gc.isenabled()
+    finally:
+        gc.enable()
+
+
+def test_a_hold_ends_when_its_work_raises() -> None:
+    def fail() -> None:
+        raise RuntimeError("refused")
+
+    with pytest.raises(RuntimeError):
+        without_collection(fail)
+    assert gc.isenabled()
+
+
+def test_let_go_empties_a_list_of_any_length() -> None:
+    for count in (0, 1, 1023, 1024, 1025, 30_000):
+        items: list[Any] = [{"k": [k]} for k in range(count)]
+        let_go(items)
+        assert items == []
