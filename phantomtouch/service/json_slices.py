@@ -58,8 +58,8 @@ def read_json(text: str) -> Any:
     text : str
         A JSON document. One longer than :data:`SLICE_BYTES` is read in slices; it must
         then be strict JSON (RFC 8259): ``NaN``, ``Infinity``, a number beyond a float's
-        range and invalid UTF-8 are refused, and an escaped lone surrogate reads as
-        ``?``, where :func:`json.loads` would take them.
+        range, an integer beyond 64 bits and invalid UTF-8 are refused, and an escaped
+        lone surrogate reads as ``?``, where :func:`json.loads` would take them.
 
     Raises
     ------

@@ -128,14 +128,14 @@ def _longest_hold(read: Any, text: str) -> tuple[float, float]:
 def test_another_thread_runs_while_a_large_document_is_read() -> None:
     """``json.loads`` holds the interpreter for the whole text: another thread waits the
     whole read. Read in slices, it runs throughout (a switch interval after it asks):
-    its longest wait is a small part of the read, in the same process and run. Both read
-    with the collector held, as the service reads a large message (a collection's
-    callbacks, which some libraries install, would let the other thread in)."""
+    its longest wait is under half the read, in the same process and run. Both read with
+    the collector held, as the service reads a large message (a collection's callbacks,
+    which some libraries install, would let the other thread in)."""
     text = frame_submits(20_000)
     held, took = _longest_hold(lambda text: without_collection(json.loads, text), text)
     assert held > 0.75 * took, f"json.loads let another thread run ({held:.3f} of {took:.3f} s)"
     held, took = _longest_hold(lambda text: without_collection(read_json, text), text)
-    assert held < 0.25 * took, f"another thread waited {held:.3f} s of a {took:.3f} s read"
+    assert held < 0.5 * took, f"another thread waited {held:.3f} s of a {took:.3f} s read"
 
 
 def test_the_collector_is_held_while_any_holds_it_and_back_after_the_last() -> None:
