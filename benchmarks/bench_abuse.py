@@ -54,19 +54,22 @@ abuse runs in a process of its own, bounded in count and time:
   whether the touch stayed on (``stayed_on``; False is what the stop promises). Its
   probe's keep-alive connection was opened before the crowd.
 
-Each line reports the probe's p50, p99 and slowest answer while the abuse ran, the
-underruns the engine counted meanwhile (``/metrics``) and, beside them, the machine's own
-stalls: ``cyclictest`` (:class:`realtime_floor.LatencyProbe`, one period a block of the
-service) counts its wake-ups at least one block late (``late``) and its latest (``late
-ms``), so an underrun the machine caused is told from one the service caused::
+Each line reports the probe's p50, p99 and slowest answer while the abuse ran (the
+probe's own process collects no garbage meanwhile: a pass of its collector, up to 0.1 s,
+would count as the service's), the underruns the engine counted meanwhile
+(``/metrics``) and, beside them, the machine's own stalls: ``cyclictest``
+(:class:`realtime_floor.LatencyProbe`, one period a block of the service) counts its
+wake-ups at least one block late (``late``) and its latest (``late ms``), so an underrun
+the machine caused is told from one the service caused::
 
-    python benchmarks/bench_abuse.py [--seconds 3]
+    python benchmarks/bench_abuse.py [--seconds 3] [--rows "bh ,osc"]
 """
 
 from __future__ import annotations
 
 import argparse
 import functools
+import gc
 import itertools
 import os
 import re
@@ -132,6 +135,8 @@ def measure(
     block_us = round(1e6 * device["block_frames"] / device["sample_rate_hz"])
     before = underruns(server, auth)
     machine = LatencyProbe(block_us).start()
+    gc.collect()
+    gc.disable()  # a collection in this process would count as the service's latency
     try:
         with HealthProbe(server.url) as probe:
             time.sleep(0.2)
@@ -140,6 +145,7 @@ def measure(
             took_s = time.perf_counter() - started
             time.sleep(0.2)
     finally:
+        gc.enable()
         floor = machine.stop()
     return {
         "machine_late": floor["late_wakeups"],
