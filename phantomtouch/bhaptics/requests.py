@@ -169,20 +169,17 @@ def parse(text: str, check_submits: Callable[[int], None] | None = None) -> Mess
         ``check_submits`` refused the message.
     """
     fields = folded(json_object(text))
-    arrays = [
-        (name, _array(fields, name), read)
-        for name, read in (("register", _register), ("submit", _submit))
-    ]
+    registers, submits = _array(fields, "register"), _array(fields, "submit")
     if check_submits is not None:
         try:
-            check_submits(len(arrays[-1][1]))
+            check_submits(len(submits))
         except ParameterError:
-            for _, items, _ in arrays:
-                let_go(items)
+            let_go(registers)
+            let_go(submits)
             raise
     requests: list[Request] = []
     skipped: list[BadRequest] = []
-    for name, items, read in arrays:
+    for name, items, read in (("register", registers, _register), ("submit", submits, _submit)):
         for index in range(len(items)):
             # each item let go of as it is read: a large message is freed piece by piece,
             # not in one cascade that holds every thread (phantomtouch.service.json_slices)
