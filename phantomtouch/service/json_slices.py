@@ -12,7 +12,9 @@ Taking the document apart builds as many objects again. While that many objects 
 alive, each full pass of the cyclic garbage collector scans all of them, holding every
 thread for up to 0.25 s at 11 MB; the document is a tree, with nothing for it to free.
 :func:`collector_held` holds automatic collection off while a large message is read and
-taken apart (for the process: the collector is one for every thread).
+taken apart (for the process: the collector is one for every thread). What the message
+leaves behind is scanned once when the hold ends, as anything new is (about 0.1 s for
+7 MB kept); a refused message is let go of before (:func:`let_go`), leaving nothing.
 """
 
 from __future__ import annotations
